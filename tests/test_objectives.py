@@ -1,0 +1,176 @@
+"""Every variant's value and slope against SPEC §1, region by region."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fppo_jax import VARIANTS, negative_regions, objective
+
+EPS = 0.2
+LO, HI = 1 - EPS, 1 + EPS
+
+
+def value_and_slope(obj, r, a, kl=0.0):
+    """L(r, A) and ∂L/∂r at one point."""
+    f = lambda r_: obj(r_, jnp.float32(a), jnp.float32(kl))  # noqa: E731
+    value, slope = jax.value_and_grad(f)(jnp.float32(r))
+    return float(value), float(slope)
+
+
+# (variant, hyperparameters, r, A, KL, expected value, expected slope), from SPEC §1.
+alpha, k, rb, delta = 1.3, 0.4, 0.3, 0.035
+CASES = [
+    # PPO: slope A inside, 0 where clipped, A in R± (the min keeps rA).
+    ("ppo", {}, 1.1, 2.0, 0, 2.2, 2.0),
+    ("ppo", {}, 1.5, 2.0, 0, HI * 2.0, 0.0),
+    ("ppo", {}, 0.5, -2.0, 0, LO * -2.0, 0.0),
+    ("ppo", {}, 0.5, 2.0, 0, 1.0, 2.0),  # R+
+    ("ppo", {}, 1.5, -2.0, 0, -3.0, -2.0),  # R-
+    # FPPO-LP: slope αA in R±, as PPO elsewhere.
+    ("fppo-lp", {"alpha": alpha}, 0.5, 2.0, 0, (alpha * 0.5 + (1 - alpha) * LO) * 2.0, alpha * 2.0),
+    ("fppo-lp", {"alpha": alpha}, 1.5, -2.0, 0, (alpha * 1.5 + (1 - alpha) * HI) * -2.0, alpha * -2.0),
+    ("fppo-lp", {"alpha": alpha}, 1.5, 2.0, 0, HI * 2.0, 0.0),
+    ("fppo-lp", {"alpha": alpha}, 0.5, -2.0, 0, LO * -2.0, 0.0),
+    ("fppo-lp", {"alpha": alpha}, 0.9, 2.0, 0, 1.8, 2.0),
+    # FPPO-QP (corrected R+ branch): F = r - k d² in R+, r + k d² in R-, slope (1 + 2kd)A.
+    ("fppo-qp", {"k": k}, 0.5, 2.0, 0, (0.5 - k * (LO - 0.5) ** 2) * 2.0, (1 + 2 * k * (LO - 0.5)) * 2.0),
+    ("fppo-qp", {"k": k}, 1.5, -2.0, 0, (1.5 + k * (1.5 - HI) ** 2) * -2.0, (1 + 2 * k * (1.5 - HI)) * -2.0),
+    ("fppo-qp", {"k": k}, 1.5, 2.0, 0, HI * 2.0, 0.0),
+    ("fppo-qp", {"k": k}, 1.0, -2.0, 0, -2.0, -2.0),
+    # PPO-RB: slope -αA where PPO clips, A in R± (min keeps rA), A inside.
+    ("ppo-rb", {"alpha": rb}, 1.5, 2.0, 0, (-rb * 1.5 + (1 + rb) * HI) * 2.0, -rb * 2.0),
+    ("ppo-rb", {"alpha": rb}, 0.5, -2.0, 0, (-rb * 0.5 + (1 + rb) * LO) * -2.0, -rb * -2.0),
+    ("ppo-rb", {"alpha": rb}, 0.5, 2.0, 0, 1.0, 2.0),
+    ("ppo-rb", {"alpha": rb}, 1.5, -2.0, 0, -3.0, -2.0),
+    ("ppo-rb", {"alpha": rb}, 1.1, 2.0, 0, 2.2, 2.0),
+    # TR-PPO: constant A (slope 0) once KL ≥ δ and rA ≥ A, else rA; no ratio clipping.
+    ("tr-ppo", {"delta": delta}, 1.5, 2.0, 0.1, 2.0, 0.0),
+    ("tr-ppo", {"delta": delta}, 1.5, 2.0, 0.01, 3.0, 2.0),
+    ("tr-ppo", {"delta": delta}, 0.5, 2.0, 0.1, 1.0, 2.0),
+    ("tr-ppo", {"delta": delta}, 0.5, -2.0, 0.1, -2.0, 0.0),
+    ("tr-ppo", {"delta": delta}, 1.5, -2.0, 0.1, -3.0, -2.0),
+    # TR-PPO-RB: value rA and slope -αA once KL ≥ δ and rA > A, else rA.
+    ("tr-ppo-rb", {"alpha": 0.05, "delta": 0.03}, 1.5, 2.0, 0.1, 3.0, -0.05 * 2.0),
+    ("tr-ppo-rb", {"alpha": 0.05, "delta": 0.03}, 0.5, -2.0, 0.1, -1.0, -0.05 * -2.0),
+    ("tr-ppo-rb", {"alpha": 0.05, "delta": 0.03}, 1.5, 2.0, 0.01, 3.0, 2.0),
+    ("tr-ppo-rb", {"alpha": 0.05, "delta": 0.03}, 0.5, 2.0, 0.1, 1.0, 2.0),
+]
+
+
+@pytest.mark.parametrize("variant, params, r, a, kl, value, slope", CASES)
+def test_value_and_slope_match_spec(variant, params, r, a, kl, value, slope):
+    got_value, got_slope = value_and_slope(objective(variant, **params), r, a, kl)
+    assert got_value == pytest.approx(value, rel=1e-5, abs=1e-6)
+    assert got_slope == pytest.approx(slope, rel=1e-5, abs=1e-6)
+
+
+def test_every_variant_is_covered():
+    assert {case[0] for case in CASES} == set(VARIANTS)
+
+
+def test_quadratic_pulling_corrects_the_papers_sign():
+    """As printed, Eq. 22 gives F ≥ r in R+ so nothing is pulled; the corrected F pulls."""
+    qp, ppo = objective("fppo-qp", k=0.4), objective("ppo")
+    r, a = 0.5, 1.0
+    printed_f = 0.4 * (LO - r) ** 2 + r
+    assert min(r * a, printed_f * a) == pytest.approx(value_and_slope(ppo, r, a)[0])
+    qp_value, qp_slope = value_and_slope(qp, r, a)
+    assert qp_value < value_and_slope(ppo, r, a)[0]
+    assert qp_slope > value_and_slope(ppo, r, a)[1]
+
+
+@pytest.mark.parametrize("variant, params", [("fppo-lp", {"alpha": 1.5}), ("fppo-qp", {"k": 0.5})])
+@pytest.mark.parametrize("a", [1.0, -1.0])
+def test_pulling_is_continuous_at_the_bounds(variant, params, a):
+    obj = objective(variant, **params)
+    for bound in (LO, HI):
+        below, _ = value_and_slope(obj, bound - 1e-4, a)
+        above, _ = value_and_slope(obj, bound + 1e-4, a)
+        assert below == pytest.approx(above, abs=5e-4)
+
+
+def test_neutral_pulling_equals_ppo_everywhere():
+    r = jnp.linspace(0.3, 1.7, 57)
+    ppo = objective("ppo")
+    for a in (-1.5, 0.7):
+        adv = jnp.full_like(r, a)
+        reference = jax.vmap(jax.value_and_grad(lambda r_, a_: ppo(r_, a_)))(r, adv)
+        for neutral in (objective("fppo-lp", alpha=1.0), objective("fppo-qp", k=0.0)):
+            got = jax.vmap(jax.value_and_grad(lambda r_, a_, o=neutral: o(r_, a_)))(r, adv)
+            np.testing.assert_array_equal(got[0], reference[0])
+            np.testing.assert_allclose(got[1], reference[1], rtol=0, atol=1e-7)
+
+
+def test_vmap_over_mixed_variants_matches_each_variant():
+    objs = [
+        objective("ppo"),
+        objective("fppo-lp", alpha=1.4),
+        objective("fppo-qp", k=0.3),
+        objective("tr-ppo", delta=0.02),
+        objective("ppo-rb", alpha=0.2),
+        objective("tr-ppo-rb", alpha=0.1, delta=0.02),
+        objective("fppo-lp", alpha=1.1, epsilon=0.1),
+    ]
+    stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *objs)
+    key_r, key_a, key_kl = jax.random.split(jax.random.key(0), 3)
+    r = jax.random.uniform(key_r, (200,), minval=0.4, maxval=1.6)
+    a = jax.random.normal(key_a, (200,))
+    kl = jax.random.uniform(key_kl, (200,), maxval=0.05)
+
+    def loss_and_grad(o):
+        return jax.value_and_grad(lambda r_: jnp.sum(o(r_, a, kl)))(r)
+
+    batched = jax.jit(jax.vmap(loss_and_grad))(stacked)
+    for i, o in enumerate(objs):
+        single = loss_and_grad(o)
+        np.testing.assert_allclose(batched[0][i], single[0], rtol=1e-6)
+        np.testing.assert_allclose(batched[1][i], single[1], rtol=1e-6, atol=1e-7)
+    # Mixed variants really differ: the vmapped batch is not one objective repeated.
+    assert len({round(float(v), 4) for v in batched[0]}) == len(objs)
+
+
+def test_kl_carries_no_gradient():
+    obj = objective("tr-ppo", delta=0.01)
+    grad_kl = jax.grad(lambda kl: jnp.sum(obj(jnp.array([1.5]), jnp.array([2.0]), kl)))(
+        jnp.array([0.1])
+    )
+    assert float(grad_kl[0]) == 0.0
+
+
+def test_negative_regions():
+    r = jnp.array([0.5, 0.5, 1.5, 1.5, 1.0])
+    a = jnp.array([1.0, -1.0, -1.0, 1.0, 1.0])
+    r_plus, r_minus = negative_regions(r, a, EPS)
+    assert r_plus.tolist() == [True, False, False, False, False]
+    assert r_minus.tolist() == [False, False, True, False, False]
+
+
+@pytest.mark.parametrize(
+    "variant, params, match",
+    [
+        ("sppo", {}, "unknown variant 'sppo'; valid variants: ppo, fppo-lp"),
+        ("fppo-lp", {"alpha": 0.9}, "alpha must be >= 1 for fppo-lp"),
+        ("fppo-lp", {"alpha": float("nan")}, "alpha must be >= 1"),
+        ("fppo-qp", {"k": -0.1}, "k must be >= 0"),
+        ("tr-ppo", {"delta": 0.0}, "delta must be > 0"),
+        ("tr-ppo-rb", {"delta": -1.0}, "delta must be > 0"),
+        ("ppo-rb", {"alpha": -0.1}, "rollback coefficient\\) must be >= 0"),
+        ("ppo", {"epsilon": 1.0}, "epsilon must be in \\(0, 1\\)"),
+        ("ppo", {"epsilon": 0.0}, "epsilon must be in \\(0, 1\\)"),
+        ("ppo", {"alpha": 1.3}, "ppo has no hyperparameter alpha"),
+        ("fppo-qp", {"alpha": 1.3}, "fppo-qp has no hyperparameter alpha \\(it takes: epsilon, k\\)"),
+    ],
+)
+def test_bad_hyperparameters_are_named(variant, params, match):
+    with pytest.raises(ValueError, match=match):
+        objective(variant, **params)
+
+
+def test_trust_region_variants_require_kl():
+    with pytest.raises(ValueError, match="tr-ppo gates on the KL"):
+        objective("tr-ppo")(jnp.ones(3), jnp.ones(3))
+
+
+def test_objective_name():
+    assert [objective(v).name for v in VARIANTS] == list(VARIANTS)

@@ -1,0 +1,169 @@
+"""Environments: the interface the trainer steps, the gymnax adapter and the task registry.
+
+An environment is a pair of pure functions on one (unbatched) environment; the trainer vmaps
+them over its parallel environments. ``step`` auto-resets: where an episode ended, `obs` is the
+first observation of the next episode and `final_obs` the observation the step produced, which
+is what a time-limit truncation bootstraps from.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any, NamedTuple, Protocol, runtime_checkable
+
+import gymnax
+import jax
+import jax.numpy as jnp
+from gymnax.environments import spaces
+from gymnax.environments.environment import Environment as GymnaxEnv
+
+
+@dataclasses.dataclass(frozen=True)
+class Discrete:
+    """Actions 0 … n−1."""
+
+    n: int
+
+
+@dataclasses.dataclass(frozen=True)
+class Box:
+    """Real action vectors in [low, high] (element-wise)."""
+
+    low: tuple[float, ...]
+    high: tuple[float, ...]
+
+    @property
+    def size(self) -> int:
+        return len(self.low)
+
+
+class Step(NamedTuple):
+    obs: jax.Array
+    reward: jax.Array
+    terminated: jax.Array
+    truncated: jax.Array
+    final_obs: jax.Array
+
+
+@runtime_checkable
+class Environment(Protocol):
+    """What the trainer needs of an environment."""
+
+    observation_size: int
+    action_space: Discrete | Box
+
+    def reset(self, key: jax.Array) -> tuple[Any, jax.Array]:
+        """(state, first observation)."""
+        ...
+
+    def step(self, key: jax.Array, state: Any, action: jax.Array) -> tuple[Any, Step]:
+        """(next state, the step's outcome), resetting where the episode ended."""
+        ...
+
+
+@dataclasses.dataclass(frozen=True)
+class GymnaxEnvironment:
+    """A gymnax (≥ 1.0) environment with fixed parameters (they set the episode limit)."""
+
+    env: GymnaxEnv
+    params: Any
+
+    @property
+    def observation_size(self) -> int:
+        return int(self.env.observation_space(self.params).shape[0])
+
+    @property
+    def action_space(self) -> Discrete | Box:
+        space = self.env.action_space(self.params)
+        if isinstance(space, spaces.Discrete):
+            return Discrete(int(space.n))
+        low = jnp.broadcast_to(space.low, space.shape)
+        high = jnp.broadcast_to(space.high, space.shape)
+        return Box(tuple(map(float, low)), tuple(map(float, high)))
+
+    def reset(self, key: jax.Array) -> tuple[Any, jax.Array]:
+        obs, state = self.env.reset(key, self.params)
+        return state, obs.astype(jnp.float32)
+
+    def step(self, key: jax.Array, state: Any, action: jax.Array) -> tuple[Any, Step]:
+        obs, state, reward, terminated, truncated, info = self.env.step(
+            key, state, action, self.params
+        )
+        final_obs = info["final_observation"].astype(jnp.float32)
+        step = Step(
+            obs.astype(jnp.float32), reward.astype(jnp.float32), terminated, truncated, final_obs
+        )
+        return state, step
+
+
+def _gymnax(env_id: str, max_steps: int) -> Callable[[], GymnaxEnvironment]:
+    def make() -> GymnaxEnvironment:
+        env, params = gymnax.make(env_id)
+        return GymnaxEnvironment(env, params.replace(max_steps_in_episode=max_steps))
+
+    return make
+
+
+@dataclasses.dataclass(frozen=True)
+class Task:
+    """A named task with the paper's settings for it (SPEC §1, Table 2; SPEC §2)."""
+
+    name: str
+    make: Callable[[], Environment]
+    total_steps: int
+    fppo_lp_alpha: float
+    fppo_qp_k: float
+    description: str
+
+
+TASKS: dict[str, Task] = {
+    task.name: task
+    for task in (
+        Task(
+            "cartpole",
+            _gymnax("CartPole-v1", 200),
+            100_000,
+            1.3,
+            0.4,
+            "CartPole-v0: 200-step episodes, discrete",
+        ),
+        Task(
+            "acrobot",
+            _gymnax("Acrobot-v1", 500),
+            100_000,
+            1.3,
+            0.4,
+            "Acrobot-v1: 500-step episodes, discrete",
+        ),
+        Task(
+            "mountaincar",
+            _gymnax("MountainCar-v0", 200),
+            100_000,
+            1.3,
+            0.4,
+            "MountainCar-v0: 200-step episodes, sparse reward, discrete",
+        ),
+    )
+}
+
+
+def make_env(name: str) -> Environment:
+    """The registered task `name` (see :data:`TASKS`)."""
+    if name not in TASKS:
+        raise ValueError(f"unknown environment {name!r}; registered: {', '.join(TASKS)}")
+    return TASKS[name].make()
+
+
+def as_environment(env: str | Environment | GymnaxEnv) -> Environment:
+    """A registered name, a gymnax environment (default parameters) or an :class:`Environment`."""
+    if isinstance(env, str):
+        return make_env(env)
+    if isinstance(env, GymnaxEnv):
+        return GymnaxEnvironment(env, env.default_params)
+    if isinstance(env, Environment):
+        return env
+    raise TypeError(
+        f"expected a registered environment name ({', '.join(TASKS)}), a gymnax environment or "
+        f"an object with observation_size, action_space, reset and step; got {type(env).__name__}"
+    )

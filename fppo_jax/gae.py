@@ -1,0 +1,42 @@
+"""Generalised advantage estimation with time-limit truncation."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+
+def gae(
+    rewards: jax.Array,
+    values: jax.Array,
+    next_values: jax.Array,
+    terminated: jax.Array,
+    truncated: jax.Array,
+    gamma: jax.Array | float,
+    gae_lambda: jax.Array | float,
+) -> tuple[jax.Array, jax.Array]:
+    """Advantages and value targets of a rollout, time on the leading axis.
+
+    `next_values[t]` is V of the observation step t produced *before any auto-reset*, so a
+    time-limit truncation bootstraps from the true last state while a termination does not:
+
+        δ_t = r_t + γ (1 − term_t) V(s'_t) − V(s_t)
+        A_t = δ_t + γ λ (1 − done_t) A_{t+1},   done = term ∨ trunc,   A_T = 0
+
+    Returns ``(A, A + V)``.
+    """
+    not_terminated = 1.0 - terminated.astype(values.dtype)
+    not_done = 1.0 - jnp.logical_or(terminated, truncated).astype(values.dtype)
+    deltas = rewards + gamma * not_terminated * next_values - values
+
+    def backward(
+        carry: jax.Array, step: tuple[jax.Array, jax.Array]
+    ) -> tuple[jax.Array, jax.Array]:
+        delta, keep = step
+        advantage = delta + gamma * gae_lambda * keep * carry
+        return advantage, advantage
+
+    _, advantages = jax.lax.scan(
+        backward, jnp.zeros_like(values[0]), (deltas, not_done), reverse=True
+    )
+    return advantages, advantages + values

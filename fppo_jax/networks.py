@@ -1,0 +1,92 @@
+"""Separate policy and value MLPs (baselines' ``value_network='copy'``), built with flax.
+
+Orthogonal initialisation as in baselines: gain √2 on hidden layers, 0.01 on the policy head
+(so the initial policy is near uniform / near zero-mean), 1 on the value head; biases 0.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+from fppo_jax.distributions import Categorical, DiagonalGaussian, Distribution
+from fppo_jax.envs import Box, Discrete
+
+
+class MLP(nn.Module):
+    """tanh hidden layers, then a linear head of `out_size` units."""
+
+    hidden_sizes: Sequence[int]
+    out_size: int
+    out_scale: float
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        for size in self.hidden_sizes:
+            x = nn.tanh(nn.Dense(size, kernel_init=nn.initializers.orthogonal(math.sqrt(2)))(x))
+        return nn.Dense(self.out_size, kernel_init=nn.initializers.orthogonal(self.out_scale))(x)
+
+
+class CategoricalPolicy(nn.Module):
+    hidden_sizes: Sequence[int]
+    num_actions: int
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> Categorical:
+        return Categorical(MLP(self.hidden_sizes, self.num_actions, 0.01)(obs))
+
+
+class GaussianPolicy(nn.Module):
+    """Diagonal Gaussian with a state-independent log-std, initialised to 0."""
+
+    hidden_sizes: Sequence[int]
+    action_size: int
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> DiagonalGaussian:
+        mean = MLP(self.hidden_sizes, self.action_size, 0.01)(obs)
+        log_std = self.param("log_std", nn.initializers.zeros, (self.action_size,))
+        return DiagonalGaussian(mean, jnp.broadcast_to(log_std, mean.shape))
+
+
+class ValueFunction(nn.Module):
+    hidden_sizes: Sequence[int]
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> jax.Array:
+        return MLP(self.hidden_sizes, 1, 1.0)(obs)[..., 0]
+
+
+@dataclasses.dataclass(frozen=True)
+class Networks:
+    policy: nn.Module
+    value: nn.Module
+
+    def init(self, key: jax.Array, observation_size: int) -> dict:
+        policy_key, value_key = jax.random.split(key)
+        dummy = jnp.zeros((1, observation_size))
+        return {
+            "policy": self.policy.init(policy_key, dummy),
+            "value": self.value.init(value_key, dummy),
+        }
+
+    def distribution(self, params: dict, obs: jax.Array) -> Distribution:
+        return self.policy.apply(params["policy"], obs)
+
+    def values(self, params: dict, obs: jax.Array) -> jax.Array:
+        return self.value.apply(params["value"], obs)
+
+
+def make_networks(action_space: Discrete | Box, hidden_sizes: Sequence[int]) -> Networks:
+    """The policy for `action_space` (categorical or Gaussian) and the value function."""
+    hidden_sizes = tuple(hidden_sizes)
+    if isinstance(action_space, Discrete):
+        policy = CategoricalPolicy(hidden_sizes, action_space.n)
+    else:
+        policy = GaussianPolicy(hidden_sizes, action_space.size)
+    return Networks(policy, ValueFunction(hidden_sizes))

@@ -1,0 +1,345 @@
+"""The training program: ``make_train(config, env)`` returns a pure ``train_fn(key, hp)``.
+
+One update is: a rollout (``lax.scan`` over steps, environments vmapped and auto-reset), GAE,
+then epochs × shuffled minibatches of the variant's loss. The whole run is a ``lax.scan`` of
+updates, so ``jax.jit(train_fn)`` compiles it once and ``jax.vmap`` over keys and
+:class:`Hyperparameters` trains seeds and settings side by side. :meth:`Trainer.run` runs a
+chunk of updates from a state, for progress reporting between compiled calls.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import optax
+
+from fppo_jax.config import Hyperparameters, TrainConfig
+from fppo_jax.distributions import Distribution
+from fppo_jax.envs import Box, Environment
+from fppo_jax.gae import gae
+from fppo_jax.losses import Batch, LossInfo, ppo_loss
+from fppo_jax.networks import Networks, make_networks
+from fppo_jax.normalization import RunningStats
+from fppo_jax.objectives import distance_past_bound, negative_regions
+
+RETURN_WINDOW = 100  # episodes in `average_return` (SPEC §2)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class TrainState:
+    """Everything a run carries from one update to the next."""
+
+    params: dict
+    opt_state: optax.OptState
+    obs_stats: RunningStats
+    return_stats: RunningStats
+    env_state: Any
+    obs: jax.Array  # raw observation of each environment, to act on next
+    episode_return: jax.Array  # undiscounted return of each environment's current episode
+    discounted_return: jax.Array  # for reward scaling, reset at episode ends
+    recent_returns: jax.Array  # ring buffer of the last RETURN_WINDOW finished episodes
+    num_episodes: jax.Array
+    update: jax.Array
+    nonfinite_update: jax.Array  # first update whose loss or parameters were not finite, or -1
+    key: jax.Array
+
+
+class Metrics(NamedTuple):
+    """One row per update."""
+
+    env_steps: jax.Array
+    average_return: jax.Array  # mean return of the last 100 finished episodes (NaN before any)
+    policy_loss: jax.Array
+    value_loss: jax.Array
+    entropy: jax.Array
+    approx_kl: jax.Array
+    clip_fraction: jax.Array
+    # SPEC §3, escape speed: the fraction of the batch in R+ ∪ R-, as each minibatch of the
+    # first epoch meets it, and under the parameters after the last epoch; and how far past the
+    # bound the latter sit on average.
+    negative_fraction_before: jax.Array
+    negative_fraction_after: jax.Array
+    negative_distance_after: jax.Array
+
+
+METRICS: tuple[str, ...] = Metrics._fields
+
+
+class Transition(NamedTuple):
+    obs: jax.Array  # as the policy saw it (normalised)
+    raw_obs: jax.Array
+    action: jax.Array
+    log_prob: jax.Array
+    distribution: Distribution
+    reward: jax.Array
+    terminated: jax.Array
+    truncated: jax.Array
+    final_obs: jax.Array  # raw, before any auto-reset
+    discounted_return: jax.Array
+    episode_return: jax.Array
+
+
+def make_optimizer(hp: Hyperparameters, config: TrainConfig) -> optax.GradientTransformation:
+    """Global-norm clipping then Adam (ε = 1e-5), one optimiser for policy and value."""
+    learning_rate: Any = hp.learning_rate
+    if config.anneal_learning_rate:
+        steps_per_update = config.num_epochs * config.num_minibatches
+
+        def learning_rate(count: jax.Array) -> jax.Array:
+            return hp.learning_rate * (1.0 - (count // steps_per_update) / config.num_updates)
+
+    return optax.chain(
+        optax.clip_by_global_norm(hp.max_grad_norm), optax.adam(learning_rate, eps=1e-5)
+    )
+
+
+def _push_returns(
+    recent: jax.Array, num_episodes: jax.Array, done: jax.Array, returns: jax.Array
+) -> tuple[jax.Array, jax.Array]:
+    """Append the returns of finished episodes (time-major order) to the ring buffer."""
+    done, returns = done.reshape(-1), returns.reshape(-1)
+    rank = jnp.cumsum(done)
+    finished = rank[-1]
+    # Only the newest RETURN_WINDOW of this rollout, so that no two writes share a slot.
+    keep = done & (rank > finished - RETURN_WINDOW)
+    slot = jnp.where(keep, (num_episodes + rank - 1) % RETURN_WINDOW, RETURN_WINDOW)
+    return recent.at[slot].set(returns, mode="drop"), num_episodes + finished
+
+
+def _average_return(recent: jax.Array, num_episodes: jax.Array) -> jax.Array:
+    filled = jnp.minimum(num_episodes, RETURN_WINDOW)
+    total = jnp.sum(jnp.where(jnp.arange(RETURN_WINDOW) < filled, recent, 0.0))
+    return jnp.where(filled > 0, total / jnp.maximum(filled, 1), jnp.nan)
+
+
+@dataclasses.dataclass(frozen=True)
+class Trainer:
+    """``trainer(key, hp)`` trains a whole run; ``init`` and ``run`` train it in chunks."""
+
+    config: TrainConfig
+    env: Environment
+    networks: Networks
+
+    def __call__(self, key: jax.Array, hp: Hyperparameters) -> tuple[TrainState, Metrics]:
+        return self.run(self.init(key, hp), hp, self.config.num_updates)
+
+    def init(self, key: jax.Array, hp: Hyperparameters) -> TrainState:
+        config, env = self.config, self.env
+        key, net_key, env_key = jax.random.split(key, 3)
+        params = self.networks.init(net_key, env.observation_size)
+        env_state, obs = jax.vmap(env.reset)(jax.random.split(env_key, config.num_envs))
+        zeros = jnp.zeros(config.num_envs)
+        return TrainState(
+            params=params,
+            opt_state=make_optimizer(hp, config).init(params),
+            obs_stats=RunningStats.create((env.observation_size,)),
+            return_stats=RunningStats.create(),
+            env_state=env_state,
+            obs=obs,
+            episode_return=zeros,
+            discounted_return=zeros,
+            recent_returns=jnp.zeros(RETURN_WINDOW),
+            num_episodes=jnp.asarray(0, jnp.int32),
+            update=jnp.asarray(0, jnp.int32),
+            nonfinite_update=jnp.asarray(-1, jnp.int32),
+            key=key,
+        )
+
+    def run(
+        self, state: TrainState, hp: Hyperparameters, num_updates: int
+    ) -> tuple[TrainState, Metrics]:
+        """`num_updates` updates from `state`; those past the run's end leave it unchanged
+        (their metrics are NaN), so equal chunks reuse one compiled program."""
+
+        def step(state: TrainState, _: None) -> tuple[TrainState, Metrics]:
+            return jax.lax.cond(
+                state.update < self.config.num_updates, self.update, self._skip, state, hp
+            )
+
+        return jax.lax.scan(step, state, None, length=num_updates)
+
+    def _skip(self, state: TrainState, hp: Hyperparameters) -> tuple[TrainState, Metrics]:
+        nan = jnp.asarray(jnp.nan, jnp.float32)
+        steps = jnp.asarray(-1, jnp.int32)
+        return state, Metrics(steps, *[nan] * (len(METRICS) - 1))
+
+    def update(self, state: TrainState, hp: Hyperparameters) -> tuple[TrainState, Metrics]:
+        """One rollout and one PPO update; a non-finite result keeps the state it started from."""
+        config = self.config
+        key, rollout_key, epochs_key = jax.random.split(state.key, 3)
+        traj, carry = self._rollout(state, hp, rollout_key)
+        env_state, obs, episode_return, discounted_return = carry
+
+        obs_stats, return_stats = state.obs_stats, state.return_stats
+        if config.normalize_observations:
+            obs_stats = obs_stats.update(traj.raw_obs)
+        rewards = traj.reward
+        if config.normalize_rewards:
+            return_stats = return_stats.update(traj.discounted_return)
+            rewards = return_stats.scale(rewards)
+
+        # The value to bootstrap from is always that of the observation a step produced, before
+        # any reset: V(obs_{t+1}) mid-episode, V(last state) at truncation, and 0 at termination.
+        # Computing every value here in one batch keeps the critic out of the sequential rollout.
+        final_obs = (
+            state.obs_stats.normalize(traj.final_obs)
+            if config.normalize_observations
+            else traj.final_obs
+        )
+        values, next_values = jnp.split(
+            self.networks.values(state.params, jnp.concatenate([traj.obs, final_obs])), 2
+        )
+        advantages, targets = gae(
+            rewards, values, next_values, traj.terminated, traj.truncated, hp.gamma, hp.gae_lambda
+        )
+        # Normalised over the whole batch (baselines does it per minibatch) so that each
+        # sample's sign, and so its region R+ or R-, is fixed for the update.
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+
+        flat = lambda x: x.reshape((config.samples_per_update, *x.shape[2:]))  # noqa: E731
+        batch = jax.tree.map(
+            flat,
+            Batch(
+                traj.obs, traj.action, traj.log_prob, values, advantages, targets, traj.distribution
+            ),
+        )
+        (params, opt_state), losses, infos = self._epochs(state, hp, batch, epochs_key)
+
+        ratio = jnp.exp(
+            self.networks.distribution(params, batch.obs).log_prob(batch.action) - batch.log_prob
+        )
+        r_plus, r_minus = negative_regions(ratio, batch.advantage, hp.objective.epsilon)
+        negative = r_plus | r_minus
+        num_negative = jnp.sum(negative)
+        distance = jnp.sum(
+            jnp.where(negative, distance_past_bound(ratio, hp.objective.epsilon), 0.0)
+        )
+
+        done = traj.terminated | traj.truncated
+        recent_returns, num_episodes = _push_returns(
+            state.recent_returns, state.num_episodes, done, traj.episode_return
+        )
+        new_state = TrainState(
+            params=params,
+            opt_state=opt_state,
+            obs_stats=obs_stats,
+            return_stats=return_stats,
+            env_state=env_state,
+            obs=obs,
+            episode_return=episode_return,
+            discounted_return=discounted_return,
+            recent_returns=recent_returns,
+            num_episodes=num_episodes,
+            update=state.update + 1,
+            nonfinite_update=state.nonfinite_update,
+            key=key,
+        )
+        finite = jnp.all(jnp.isfinite(losses)) & jnp.all(
+            jnp.stack([jnp.all(jnp.isfinite(p)) for p in jax.tree.leaves(params)])
+        )
+        kept = jax.tree.map(lambda new, old: jnp.where(finite, new, old), new_state, state)
+        first_bad = jnp.where(
+            (state.nonfinite_update < 0) & ~finite, state.update, state.nonfinite_update
+        )
+        state = dataclasses.replace(kept, update=state.update + 1, nonfinite_update=first_bad)
+
+        mean = lambda x: jnp.mean(x)  # noqa: E731
+        metrics = Metrics(
+            env_steps=(new_state.update * config.samples_per_update).astype(jnp.int32),
+            average_return=_average_return(recent_returns, num_episodes),
+            policy_loss=mean(infos.policy_loss),
+            value_loss=mean(infos.value_loss),
+            entropy=mean(infos.entropy),
+            approx_kl=mean(infos.approx_kl),
+            clip_fraction=mean(infos.clip_fraction),
+            negative_fraction_before=mean(infos.negative_fraction[0]),
+            negative_fraction_after=jnp.mean(negative),
+            negative_distance_after=distance / jnp.maximum(num_negative, 1),
+        )
+        return state, metrics
+
+    def _rollout(
+        self, state: TrainState, hp: Hyperparameters, key: jax.Array
+    ) -> tuple[Transition, tuple]:
+        config, env, networks = self.config, self.env, self.networks
+        action_space = env.action_space
+        step_env = jax.vmap(env.step)
+
+        def step(carry: tuple, step_key: jax.Array) -> tuple[tuple, Transition]:
+            env_state, obs, episode_return, discounted_return = carry
+            action_key, env_key = jax.random.split(step_key)
+            seen = state.obs_stats.normalize(obs) if config.normalize_observations else obs
+            dist = networks.distribution(state.params, seen)
+            action = dist.sample(action_key)
+            env_action = action
+            if isinstance(action_space, Box):
+                # The log-probability stays that of the unclipped sample.
+                env_action = jnp.clip(
+                    action, jnp.asarray(action_space.low), jnp.asarray(action_space.high)
+                )
+            env_state, out = step_env(
+                jax.random.split(env_key, config.num_envs), env_state, env_action
+            )
+            episode_return = episode_return + out.reward
+            discounted_return = discounted_return * hp.gamma + out.reward
+            transition = Transition(
+                obs=seen,
+                raw_obs=obs,
+                action=action,
+                log_prob=dist.log_prob(action),
+                distribution=dist,
+                reward=out.reward,
+                terminated=out.terminated,
+                truncated=out.truncated,
+                final_obs=out.final_obs,
+                discounted_return=discounted_return,
+                episode_return=episode_return,
+            )
+            done = out.terminated | out.truncated
+            carry = (
+                env_state,
+                out.obs,
+                jnp.where(done, 0.0, episode_return),
+                jnp.where(done, 0.0, discounted_return),
+            )
+            return carry, transition
+
+        carry = (state.env_state, state.obs, state.episode_return, state.discounted_return)
+        carry, traj = jax.lax.scan(step, carry, jax.random.split(key, config.num_steps))
+        return traj, carry
+
+    def _epochs(
+        self, state: TrainState, hp: Hyperparameters, batch: Batch, key: jax.Array
+    ) -> tuple[tuple, jax.Array, LossInfo]:
+        config = self.config
+        optimizer = make_optimizer(hp, config)
+        value_and_grad = jax.value_and_grad(ppo_loss, has_aux=True)
+
+        def minibatch_step(carry: tuple, minibatch: Batch) -> tuple[tuple, tuple]:
+            params, opt_state = carry
+            (loss, info), grads = value_and_grad(
+                params, minibatch, hp, self.networks, config.clip_value_loss
+            )
+            updates, opt_state = optimizer.update(grads, opt_state, params)
+            return (optax.apply_updates(params, updates), opt_state), (loss, info)
+
+        def epoch(carry: tuple, epoch_key: jax.Array) -> tuple[tuple, tuple]:
+            order = jax.random.permutation(epoch_key, config.samples_per_update)
+            shape = (config.num_minibatches, config.minibatch_size)
+            minibatches = jax.tree.map(lambda x: x[order].reshape(shape + x.shape[1:]), batch)
+            return jax.lax.scan(minibatch_step, carry, minibatches)
+
+        carry = (state.params, state.opt_state)
+        carry, (losses, infos) = jax.lax.scan(
+            epoch, carry, jax.random.split(key, config.num_epochs)
+        )
+        return carry, losses, infos
+
+
+def make_train(config: TrainConfig, env: Environment) -> Trainer:
+    """The training program for `config` on `env`: a pure function of (key, hyperparameters)."""
+    return Trainer(config, env, make_networks(env.action_space, config.hidden_sizes))

@@ -1,0 +1,34 @@
+"""fppo-jax: PPO and its fast variants (FPPO-LP, FPPO-QP, TR-PPO, PPO-RB, TR-PPO-RB) in JAX.
+
+The surrogate objective is a pure function of traced data (:func:`objective`), and the whole
+training run is one compiled function of its key and hyperparameters (:func:`make_train`), so
+seeds, variants and their hyperparameters vmap into one program. :func:`train` runs one policy.
+"""
+
+from fppo_jax.api import Progress, TrainingDiverged, TrainResult, train
+from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters
+from fppo_jax.envs import TASKS, Environment, make_env
+from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective
+from fppo_jax.trainer import METRICS, Metrics, Trainer, TrainState, make_train
+
+__all__ = [
+    "METRICS",
+    "TASKS",
+    "VARIANTS",
+    "Environment",
+    "Hyperparameters",
+    "Metrics",
+    "Objective",
+    "Progress",
+    "TrainConfig",
+    "TrainResult",
+    "TrainState",
+    "Trainer",
+    "TrainingDiverged",
+    "hyperparameters",
+    "make_env",
+    "make_train",
+    "negative_regions",
+    "objective",
+    "train",
+]

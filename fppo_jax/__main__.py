@@ -1,0 +1,5 @@
+import sys
+
+from fppo_jax.cli import main
+
+sys.exit(main())

@@ -1,0 +1,287 @@
+"""``train(env, variant, alpha)``: one run, checked before compiling, with progress and results."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fppo_jax.config import HYPERPARAMETER_DEFAULTS, Hyperparameters, TrainConfig, hyperparameters
+from fppo_jax.envs import TASKS, Environment, as_environment
+from fppo_jax.networks import Networks
+from fppo_jax.normalization import RunningStats
+from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
+from fppo_jax.objectives import VARIANTS
+from fppo_jax.trainer import METRICS, TrainState, make_train
+
+CONFIG_FIELDS = tuple(field.name for field in dataclasses.fields(TrainConfig))
+
+
+class TrainingDiverged(FloatingPointError):
+    """The loss or the parameters became NaN or infinite."""
+
+    def __init__(self, update: int, env_steps: int):
+        """`update` counts from 1, as the progress lines do."""
+        self.update, self.env_steps = update, env_steps
+        super().__init__(
+            f"training diverged at update {update} (after {env_steps:,} env steps): the loss or "
+            "the parameters became NaN or infinite. The state before that update was kept. "
+            "Lower the learning rate, or check the environment's observations and rewards."
+        )
+
+
+class Progress(NamedTuple):
+    """What a progress callback receives: once compiled (update 0), then after each chunk."""
+
+    update: int
+    num_updates: int
+    env_steps: int
+    total_steps: int
+    average_return: float
+    steps_per_second: float
+    elapsed: float
+    compile_seconds: float
+
+
+@dataclasses.dataclass
+class TrainResult:
+    """The outcome of :func:`train`.
+
+    `metrics` maps each name of :data:`fppo_jax.trainer.METRICS` to one value per update.
+    `policy(obs, key=None)` acts on raw observations (one or a batch): the most likely action
+    without a key, a sample with one.
+    """
+
+    metrics: dict[str, np.ndarray]
+    params: dict
+    config: dict[str, Any]
+    state: TrainState
+    policy: Callable[..., jax.Array]
+    compile_seconds: float
+    train_seconds: float
+
+    def summary(self) -> str:
+        """A few lines: the run, its speed, its returns and its escape-speed diagnostic."""
+        m, c = self.metrics, self.config
+        steps = int(m["env_steps"][-1])
+        returns = m["average_return"]
+        settings = ", ".join(f"{k} = {c[k]:g}" for k in ("alpha", "k", "delta") if k in c)
+        settings = ", ".join(filter(None, [settings, f"epsilon = {c['epsilon']:g}"]))
+        samples = c["num_envs"] * c["num_steps"]
+        speed = steps / max(self.train_seconds, 1e-9)
+        lines = [
+            f"{c['variant']} on {c['env']} ({settings}), seed {c['seed']}",
+            f"  updates   {len(returns)} × {samples:,} samples = {steps:,} env steps",
+            f"  time      compile {self.compile_seconds:.1f} s, train {self.train_seconds:.1f} s "
+            f"({speed:,.0f} env steps/s)",
+        ]
+        if np.isfinite(returns).any():
+            best = int(np.nanargmax(returns))
+            lines.append(
+                f"  return    final {returns[-1]:.1f}, max {returns[best]:.1f} at "
+                f"{int(m['env_steps'][best]):,} steps (mean of the last 100 episodes)"
+            )
+        else:
+            lines.append("  return    no episode finished")
+        lines += [
+            f"  escape    in R+ ∪ R- after the update: {np.mean(m['negative_fraction_after']):.2%}"
+            f" of samples (first epoch: {np.mean(m['negative_fraction_before']):.2%}), mean "
+            f"distance past the bound {np.mean(m['negative_distance_after']):.3f}",
+            f"  last      policy loss {m['policy_loss'][-1]:.4f}, value loss "
+            f"{m['value_loss'][-1]:.4f}, entropy {m['entropy'][-1]:.3f}, approx KL "
+            f"{m['approx_kl'][-1]:.4f}, clip fraction {m['clip_fraction'][-1]:.3f}",
+        ]
+        return "\n".join(lines)
+
+
+def print_progress(p: Progress) -> None:
+    """The default progress line, on stderr."""
+    if p.update == 0:
+        print(f"compiled in {p.compile_seconds:.1f} s", file=sys.stderr, flush=True)
+        return
+    avg = "-" if math.isnan(p.average_return) else f"{p.average_return:.1f}"
+    print(
+        f"update {p.update:>5}/{p.num_updates}  steps {p.env_steps:>10,}/{p.total_steps:,}  "
+        f"{p.steps_per_second:>9,.0f} steps/s  average return {avg:>8}  ({p.elapsed:.1f} s)",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def train(
+    env: str | Environment | Any = "cartpole",
+    variant: str = "fppo-lp",
+    alpha: float | None = None,
+    *,
+    k: float | None = None,
+    delta: float | None = None,
+    epsilon: float = 0.2,
+    seed: int = 0,
+    total_steps: int | None = None,
+    progress: bool | Callable[[Progress], None] = False,
+    **overrides: Any,
+) -> TrainResult:
+    """Train one policy with `variant` on `env` and return its metrics, parameters and policy.
+
+    `env` is a registered name (:data:`fppo_jax.envs.TASKS`), a gymnax environment or an
+    :class:`~fppo_jax.envs.Environment`. For a registered task, FPPO-LP's α and FPPO-QP's k
+    default to the paper's Table 2 and `total_steps` to the paper's budget. `overrides` are
+    :class:`TrainConfig` fields (``num_envs``, ``num_steps``, ``num_minibatches``, …) and
+    optimisation settings (``learning_rate``, ``gamma``, ``gae_lambda``, ``entropy_coef``,
+    ``value_coef``, ``max_grad_norm``). Everything is checked before compiling.
+
+    `progress`: ``True`` prints a line per chunk of updates on stderr; a callable receives a
+    :class:`Progress`; ``False`` runs the whole training as one compiled call.
+    Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite.
+    """
+    config, hp, settings = _resolve(env, variant, alpha, k, delta, epsilon, total_steps, overrides)
+    environment = as_environment(env)
+    trainer = make_train(config, environment)
+    report = print_progress if progress is True else (progress or None)
+    chunks = min(config.num_updates, 20) if report else 1
+    chunk = -(-config.num_updates // chunks)
+
+    if progress is True:
+        print(
+            f"{variant} on {_env_name(env, environment)}: {config.num_updates} updates × "
+            f"{config.samples_per_update:,} samples ({config.num_envs} envs × {config.num_steps} "
+            f"steps), {config.num_minibatches} minibatches × {config.num_epochs} epochs; "
+            "compiling…",
+            file=sys.stderr,
+            flush=True,
+        )
+    key = jax.random.key(seed)
+    start = time.perf_counter()
+    state = jax.jit(trainer.init)(key, hp)
+    run = jax.jit(trainer.run, static_argnums=2).lower(state, hp, chunk).compile()
+    compile_seconds = time.perf_counter() - start
+    total = config.num_updates * config.samples_per_update
+    if report:
+        report(Progress(0, config.num_updates, 0, total, math.nan, 0.0, 0.0, compile_seconds))
+
+    rows, start = [], time.perf_counter()
+    while int(state.update) < config.num_updates:
+        state, metrics = run(state, hp)
+        rows.append(jax.device_get(metrics))
+        _raise_if_diverged(state, config)
+        if report:
+            elapsed = time.perf_counter() - start
+            done = min(int(state.update), config.num_updates)
+            steps = done * config.samples_per_update
+            latest = rows[-1].average_return[rows[-1].env_steps >= 0][-1]
+            report(
+                Progress(
+                    done,
+                    config.num_updates,
+                    steps,
+                    total,
+                    float(latest),
+                    steps / max(elapsed, 1e-9),
+                    elapsed,
+                    compile_seconds,
+                )
+            )
+    train_seconds = time.perf_counter() - start
+
+    stacked = {name: np.concatenate([getattr(r, name) for r in rows]) for name in METRICS}
+    ran = stacked["env_steps"] >= 0
+    metrics = {name: values[ran] for name, values in stacked.items()}
+    return TrainResult(
+        metrics=metrics,
+        params=state.params,
+        config={
+            **settings,
+            "env": _env_name(env, environment),
+            "seed": seed,
+            **dataclasses.asdict(config),
+        },
+        state=state,
+        policy=make_policy(
+            trainer.networks, state.params, state.obs_stats, config.normalize_observations
+        ),
+        compile_seconds=compile_seconds,
+        train_seconds=train_seconds,
+    )
+
+
+def _resolve(
+    env: Any,
+    variant: str,
+    alpha: float | None,
+    k: float | None,
+    delta: float | None,
+    epsilon: float,
+    total_steps: int | None,
+    overrides: dict[str, Any],
+) -> tuple[TrainConfig, Hyperparameters, dict[str, Any]]:
+    """Defaults from the task table, then every check, before anything is compiled."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown variant {variant!r}; valid variants: {', '.join(VARIANTS)}")
+    if isinstance(env, str) and env not in TASKS:
+        raise ValueError(f"unknown environment {env!r}; registered: {', '.join(TASKS)}")
+    unknown = sorted(set(overrides) - set(CONFIG_FIELDS) - set(HYPERPARAMETER_DEFAULTS))
+    if unknown:
+        raise ValueError(
+            f"unknown setting {', '.join(unknown)}; valid: "
+            + ", ".join([*CONFIG_FIELDS, *HYPERPARAMETER_DEFAULTS])
+        )
+    task = TASKS.get(env) if isinstance(env, str) else None
+    if task and variant == "fppo-lp" and alpha is None:
+        alpha = task.fppo_lp_alpha
+    if task and variant == "fppo-qp" and k is None:
+        k = task.fppo_qp_k
+    if total_steps is None and "total_steps" not in overrides:
+        total_steps = task.total_steps if task else TrainConfig.total_steps
+    config_values = {name: overrides[name] for name in CONFIG_FIELDS if name in overrides}
+    if total_steps is not None:
+        config_values["total_steps"] = total_steps
+    optimisation = {name: overrides[name] for name in HYPERPARAMETER_DEFAULTS if name in overrides}
+    config = TrainConfig(**config_values)
+    hp = hyperparameters(variant, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **optimisation)
+    o = hp.objective
+    settings: dict[str, Any] = {"variant": variant, "epsilon": _as_float(o.epsilon)}
+    settings.update({name: _as_float(getattr(o, name)) for name in VARIANT_DEFAULTS[variant]})
+    settings.update({name: _as_float(getattr(hp, name)) for name in HYPERPARAMETER_DEFAULTS})
+    return config, hp, settings
+
+
+def _as_float(x: jax.Array) -> float:
+    # The shortest decimal that round-trips the float32, so that 1.3 is reported as 1.3.
+    return float(str(np.asarray(x)[()]))
+
+
+def _raise_if_diverged(state: TrainState, config: TrainConfig) -> None:
+    index = int(state.nonfinite_update)
+    if index >= 0:
+        raise TrainingDiverged(index + 1, (index + 1) * config.samples_per_update)
+
+
+def _env_name(env: Any, environment: Environment) -> str:
+    return env if isinstance(env, str) else type(getattr(environment, "env", environment)).__name__
+
+
+def make_policy(
+    networks: Networks, params: dict, obs_stats: RunningStats, normalize_observations: bool
+) -> Callable[..., jax.Array]:
+    """An action function of raw observations: the mode without a key, a sample with one."""
+
+    def distribution(obs: jax.Array) -> Any:
+        obs = jnp.asarray(obs, jnp.float32)
+        return networks.distribution(
+            params, obs_stats.normalize(obs) if normalize_observations else obs
+        )
+
+    mode = jax.jit(lambda obs: distribution(obs).mode())
+    sample = jax.jit(lambda obs, key: distribution(obs).sample(key))
+
+    def policy(obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
+        return mode(obs) if key is None else sample(obs, key)
+
+    return policy

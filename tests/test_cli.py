@@ -1,0 +1,50 @@
+import csv
+import json
+import subprocess
+import sys
+
+import pytest
+
+from fppo_jax.cli import build_parser, main
+
+TINY_FLAGS = ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+
+
+def test_train_writes_metrics_config_and_summary(tmp_path, capsys):
+    code = main(["train", "--env", "cartpole", "--variant", "fppo-qp", "--k", "0.3", "--steps", "384",
+                 "--seed", "1", "--output", str(tmp_path), *TINY_FLAGS])
+    assert code == 0
+    out, err = capsys.readouterr()
+    assert "fppo-qp on cartpole (k = 0.3, epsilon = 0.2), seed 1" in out
+    assert "compiling" in err and "update     3/3" in err and "steps/s" in err
+    rows = list(csv.DictReader(open(tmp_path / "metrics.csv")))
+    assert [int(r["env_steps"]) for r in rows] == [128, 256, 384]
+    config = json.loads((tmp_path / "config.json").read_text())
+    assert config["variant"] == "fppo-qp" and config["k"] == 0.3 and config["num_envs"] == 4
+    assert (tmp_path / "summary.txt").read_text().startswith("fppo-qp on cartpole")
+
+
+def test_out_of_range_hyperparameter_is_an_error_not_a_traceback(capsys):
+    assert main(["train", "--variant", "fppo-lp", "--alpha", "0.5"]) == 2
+    assert "error: alpha must be >= 1 for fppo-lp" in capsys.readouterr().err
+
+
+def test_unknown_variant_is_rejected_by_the_parser(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "--variant", "sppo"])
+    assert exit_info.value.code == 2
+    assert "invalid choice: 'sppo'" in capsys.readouterr().err
+
+
+def test_help_documents_every_flag():
+    text = build_parser()._subparsers._group_actions[0].choices["train"].format_help()
+    for flag in ["--env", "--variant", "--alpha", "--k", "--delta", "--epsilon", "--steps", "--seed",
+                 "--num-envs", "--num-steps", "--minibatches", "--epochs", "--hidden", "--learning-rate",
+                 "--gamma", "--gae-lambda", "--entropy-coef", "--value-coef", "--max-grad-norm",
+                 "--no-obs-norm", "--no-reward-norm", "--no-value-clip", "--anneal-lr", "--output", "--quiet"]:
+        assert flag in text
+
+
+def test_console_entry_point_lists_tasks_and_variants():
+    out = subprocess.run([sys.executable, "-m", "fppo_jax", "list"], capture_output=True, text=True, check=True)
+    assert "cartpole" in out.stdout and "tr-ppo-rb" in out.stdout and "alpha 1.3" in out.stdout

@@ -1,0 +1,139 @@
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from gymnax.environments.classic_control import CartPole
+
+import fppo_jax
+from fppo_jax import METRICS, TrainConfig, TrainingDiverged, hyperparameters, make_env, make_train, train
+from fppo_jax.envs import Step
+from fppo_jax.trainer import RETURN_WINDOW, _average_return, _push_returns
+
+
+def test_same_seed_gives_identical_metrics(tiny):
+    first = train("cartpole", "fppo-lp", seed=3, total_steps=512, **tiny)
+    second = train("cartpole", "fppo-lp", seed=3, total_steps=512, **tiny)
+    other = train("cartpole", "fppo-lp", seed=4, total_steps=512, **tiny)
+    assert set(first.metrics) == set(METRICS)
+    for name in METRICS:
+        np.testing.assert_array_equal(first.metrics[name], second.metrics[name])
+    assert not np.array_equal(first.metrics["policy_loss"], other.metrics["policy_loss"])
+
+
+def test_one_row_per_update_and_chunks_change_nothing(tiny):
+    whole = train("cartpole", "tr-ppo", total_steps=5 * 128, **tiny)
+    reports = []
+    chunked = train("cartpole", "tr-ppo", total_steps=5 * 128, progress=reports.append, **tiny)
+    assert len(whole.metrics["env_steps"]) == 5
+    assert whole.metrics["env_steps"].tolist() == [128, 256, 384, 512, 640]
+    for name in METRICS:
+        np.testing.assert_array_equal(whole.metrics[name], chunked.metrics[name])
+    assert [r.update for r in reports] == [0, 1, 2, 3, 4, 5]
+    assert reports[-1].env_steps == 640 and reports[-1].total_steps == 640
+
+
+def test_cartpole_learns_with_ppo():
+    result = train("cartpole", "ppo", total_steps=40_960)
+    assert np.nanmax(result.metrics["average_return"]) > 120
+    # The policy acts on raw observations; deterministic without a key.
+    obs = jnp.zeros((3, 4))
+    assert result.policy(obs).shape == (3,)
+    np.testing.assert_array_equal(result.policy(obs), result.policy(obs))
+    assert result.policy(obs[0], jax.random.key(0)).shape == ()
+
+
+def test_metrics_are_in_range(tiny):
+    m = train("cartpole", "fppo-qp", total_steps=4 * 128, **tiny).metrics
+    for name in ("clip_fraction", "negative_fraction_before", "negative_fraction_after"):
+        assert np.all((m[name] >= 0) & (m[name] <= 1))
+    assert np.all(m["entropy"] > 0) and np.all(m["entropy"] <= np.log(2) + 1e-6)
+    assert np.all(m["approx_kl"] >= 0)
+    # The first update starts from the rollout policy itself: ratio 1, so nothing in R±.
+    assert m["negative_fraction_before"][0] == 0.0
+
+
+def test_a_gymnax_environment_object_is_accepted(tiny):
+    result = train(CartPole(), "ppo", total_steps=256, **tiny)
+    assert result.config["env"] == "CartPole"
+    assert len(result.metrics["env_steps"]) == 2
+
+
+def test_vmapped_seeds_and_variants_match_single_runs(tiny):
+    config = TrainConfig(total_steps=256, **tiny)
+    trainer = make_train(config, make_env("cartpole"))
+    hps = [hyperparameters("ppo"), hyperparameters("fppo-lp", alpha=1.5)]
+    keys = jax.random.split(jax.random.key(0), 2)
+    stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *hps)
+    _, batched = jax.jit(jax.vmap(trainer))(keys, stacked)
+    for i, hp in enumerate(hps):
+        _, single = jax.jit(trainer)(keys[i], hp)
+        for name in METRICS:
+            np.testing.assert_allclose(getattr(batched, name)[i], getattr(single, name), rtol=2e-4, atol=1e-5)
+
+
+def test_divergence_stops_with_the_update(tiny):
+    with pytest.raises(TrainingDiverged, match="diverged at update 1 \\(after 128 env steps\\)"):
+        train("cartpole", "ppo", total_steps=512, learning_rate=1e30, **tiny)
+
+
+@dataclasses.dataclass(frozen=True)
+class NaNRewardAfter:
+    """CartPole whose reward turns NaN after `start` steps of an episode."""
+
+    start: int
+    inner: object = dataclasses.field(default_factory=lambda: make_env("cartpole"))
+    observation_size = 4
+
+    @property
+    def action_space(self):
+        return self.inner.action_space
+
+    def reset(self, key):
+        return self.inner.reset(key)
+
+    def step(self, key, state, action):
+        state, out = self.inner.step(key, state, action)
+        reward = jnp.where(state.time >= self.start, jnp.nan, out.reward)
+        return state, Step(out.obs, reward, out.terminated, out.truncated, out.final_obs)
+
+
+def test_nan_rewards_stop_training_with_the_update(tiny):
+    with pytest.raises(TrainingDiverged, match="at update 1 "):
+        train(NaNRewardAfter(5), "fppo-lp", total_steps=512, **tiny)
+
+
+def test_ring_buffer_keeps_the_last_100_episodes_in_order():
+    recent, count = jnp.zeros(RETURN_WINDOW), jnp.asarray(0, jnp.int32)
+    returns = jnp.arange(1.0, 251.0).reshape(50, 5)
+    every_other = jnp.arange(250).reshape(50, 5) % 2 == 0  # 125 finished episodes
+    recent, count = _push_returns(recent, count, every_other, returns)
+    assert int(count) == 125
+    finished = np.asarray(returns)[np.asarray(every_other)]
+    assert float(_average_return(recent, count)) == pytest.approx(finished[-100:].mean())
+    assert np.isnan(float(_average_return(jnp.zeros(RETURN_WINDOW), jnp.asarray(0))))
+
+
+def test_bad_settings_fail_before_compiling():
+    with pytest.raises(ValueError, match="unknown environment 'hoper'"):
+        train("hoper")
+    with pytest.raises(ValueError, match="unknown variant 'ppo2'"):
+        train("cartpole", "ppo2")
+    with pytest.raises(ValueError, match="unknown setting lr; valid: total_steps"):
+        train("cartpole", lr=1e-3)
+    with pytest.raises(ValueError, match="learning_rate must be > 0"):
+        train("cartpole", learning_rate=-1.0)
+    with pytest.raises(ValueError, match="gamma must be in \\(0, 1\\]"):
+        train("cartpole", gamma=1.5)
+    with pytest.raises(ValueError, match="num_minibatches \\(3\\) must divide"):
+        train("cartpole", num_minibatches=3)
+    with pytest.raises(ValueError, match="less than one update's samples"):
+        train("cartpole", total_steps=100)
+    with pytest.raises(ValueError, match="alpha must be >= 1 for fppo-lp"):
+        fppo_jax.train("cartpole", "fppo-lp", 0.8)
+
+
+def test_task_defaults_follow_table_2(tiny):
+    assert train("cartpole", "fppo-lp", total_steps=128, **tiny).config["alpha"] == 1.3
+    assert train("cartpole", "fppo-qp", total_steps=128, **tiny).config["k"] == 0.4

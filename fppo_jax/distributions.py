@@ -1,7 +1,9 @@
 """Action distributions of the policy: categorical and diagonal Gaussian.
 
 Each is a pytree of its parameters, so the parameters of the rollout policy are stored with the
-batch and the exact KL(π_old ‖ π_θ) can be recomputed at every minibatch step.
+batch and the exact KL(π_old ‖ π_θ) can be recomputed at every minibatch step. Sampling is a
+deterministic function of standard noise (``sample_from``), so a rollout can draw all its noise
+at once, outside its sequential loop.
 """
 
 from __future__ import annotations
@@ -20,15 +22,27 @@ class Categorical:
 
     logits: jax.Array
 
+    @staticmethod
+    def noise(key: jax.Array, shape: tuple[int, ...]) -> jax.Array:
+        """Standard Gumbel noise, from which :meth:`sample_from` draws."""
+        return jax.random.gumbel(key, shape)
+
+    def sample_from(self, noise: jax.Array) -> jax.Array:
+        """argmax(logits + g), g ~ Gumbel: an exact sample (the Gumbel-max trick)."""
+        return jnp.argmax(self.logits + noise, axis=-1)
+
     def sample(self, key: jax.Array) -> jax.Array:
-        return jax.random.categorical(key, self.logits)
+        return self.sample_from(self.noise(key, self.logits.shape))
 
     def mode(self) -> jax.Array:
         return jnp.argmax(self.logits, axis=-1)
 
     def log_prob(self, action: jax.Array) -> jax.Array:
         log_p = jax.nn.log_softmax(self.logits)
-        return jnp.take_along_axis(log_p, action[..., None].astype(jnp.int32), axis=-1)[..., 0]
+        # A one-hot contraction rather than a gather: element-wise, so it fuses (and its
+        # gradient is no scatter).
+        one_hot = jax.nn.one_hot(action, self.logits.shape[-1], dtype=log_p.dtype)
+        return jnp.sum(log_p * one_hot, axis=-1)
 
     def entropy(self) -> jax.Array:
         log_p = jax.nn.log_softmax(self.logits)
@@ -49,8 +63,16 @@ class DiagonalGaussian:
     mean: jax.Array
     log_std: jax.Array
 
+    @staticmethod
+    def noise(key: jax.Array, shape: tuple[int, ...]) -> jax.Array:
+        """Standard normal noise, from which :meth:`sample_from` draws."""
+        return jax.random.normal(key, shape)
+
+    def sample_from(self, noise: jax.Array) -> jax.Array:
+        return self.mean + jnp.exp(self.log_std) * noise
+
     def sample(self, key: jax.Array) -> jax.Array:
-        return self.mean + jnp.exp(self.log_std) * jax.random.normal(key, self.mean.shape)
+        return self.sample_from(self.noise(key, self.mean.shape))
 
     def mode(self) -> jax.Array:
         return self.mean

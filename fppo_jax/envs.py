@@ -1,9 +1,8 @@
 """Environments: the interface the trainer steps, the gymnax adapter and the task registry.
 
 An environment is a pair of pure functions on one (unbatched) environment; the trainer vmaps
-them over its parallel environments. ``step`` auto-resets: where an episode ended, `obs` is the
-first observation of the next episode and `final_obs` the observation the step produced, which
-is what a time-limit truncation bootstraps from.
+them over its parallel environments and resets the environments whose episode ended (it draws
+the reset states for a whole rollout in one vectorised batch, outside the sequential loop).
 """
 
 from __future__ import annotations
@@ -39,11 +38,12 @@ class Box:
 
 
 class Step(NamedTuple):
+    """The outcome of one step: `obs` is the observation it produced (before any reset)."""
+
     obs: jax.Array
     reward: jax.Array
     terminated: jax.Array
     truncated: jax.Array
-    final_obs: jax.Array
 
 
 @runtime_checkable
@@ -58,7 +58,7 @@ class Environment(Protocol):
         ...
 
     def step(self, key: jax.Array, state: Any, action: jax.Array) -> tuple[Any, Step]:
-        """(next state, the step's outcome), resetting where the episode ended."""
+        """(next state, the step's outcome); no reset: the trainer resets ended episodes."""
         ...
 
 
@@ -87,14 +87,30 @@ class GymnaxEnvironment:
         return state, obs.astype(jnp.float32)
 
     def step(self, key: jax.Array, state: Any, action: jax.Array) -> tuple[Any, Step]:
-        obs, state, reward, terminated, truncated, info = self.env.step(
-            key, state, action, self.params
+        # gymnax's own `step` also computes a reset at every step; the trainer does that for
+        # a whole rollout at once, so only the transition is taken here.
+        obs, state, reward, terminated, _ = self.env.step_env(key, state, action, self.params)
+        truncated = self.env.is_truncated(state, self.params)
+        return state, Step(
+            obs.astype(jnp.float32), reward.astype(jnp.float32), terminated, truncated
         )
-        final_obs = info["final_observation"].astype(jnp.float32)
-        step = Step(
-            obs.astype(jnp.float32), reward.astype(jnp.float32), terminated, truncated, final_obs
-        )
-        return state, step
+
+
+def draw_resets(env: Environment, key: jax.Array, shape: tuple[int, ...]) -> tuple[Any, jax.Array]:
+    """A fresh reset (state, obs) for every index of `shape`, drawn in one vectorised batch."""
+    reset = env.reset
+    for _ in shape:
+        reset = jax.vmap(reset)
+    return reset(jax.random.split(key, shape))
+
+
+def where_done(done: jax.Array, reset: Any, stepped: Any) -> Any:
+    """Per environment (the leading axis of every leaf): `reset` where done, else `stepped`."""
+
+    def select(r: jax.Array, x: jax.Array) -> jax.Array:
+        return jnp.where(done.reshape(done.shape + (1,) * (x.ndim - 1)), r, x)
+
+    return jax.tree.map(select, reset, stepped)
 
 
 def _gymnax(env_id: str, max_steps: int) -> Callable[[], GymnaxEnvironment]:

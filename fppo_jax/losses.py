@@ -65,12 +65,12 @@ def ppo_loss(
     loss = policy_loss + hp.value_coef * value_loss - hp.entropy_coef * entropy
 
     r_plus, r_minus = negative_regions(ratio, batch.advantage, o.epsilon)
-    info = LossInfo(
-        policy_loss=policy_loss,
-        value_loss=value_loss,
-        entropy=entropy,
-        approx_kl=jnp.mean((ratio - 1) - log_ratio),
-        clip_fraction=jnp.mean(jnp.abs(ratio - 1) > o.epsilon),
-        negative_fraction=jnp.mean(r_plus | r_minus),
+    # One stacked reduction instead of one per diagnostic: fewer kernels per minibatch step.
+    diagnostics = jnp.mean(
+        jax.lax.stop_gradient(
+            jnp.stack([(ratio - 1) - log_ratio, jnp.abs(ratio - 1) > o.epsilon, r_plus | r_minus])
+        ),
+        axis=1,
     )
+    info = LossInfo(policy_loss, value_loss, entropy, *diagnostics)
     return loss, jax.tree.map(jax.lax.stop_gradient, info)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import flax.linen as nn
 import jax
@@ -16,6 +17,21 @@ import jax.numpy as jnp
 
 from fppo_jax.distributions import Categorical, DiagonalGaussian, Distribution
 from fppo_jax.envs import Box, Discrete
+
+
+def orthogonal(scale: float) -> nn.initializers.Initializer:
+    """Orthogonal initialisation whose QR stays unbatched under ``vmap``.
+
+    Vmapping training over seeds would batch the QR, and jaxlib's CPU kernel for batched QR
+    parallelises over the batch on the thread pool it runs on, which was seen to deadlock
+    (every thread parked) on a 2-core machine. A sequential vmap does one QR per seed.
+    """
+    base = nn.initializers.orthogonal(scale)
+
+    def init(key: jax.Array, shape: tuple[int, ...], dtype: Any = jnp.float32) -> jax.Array:
+        return jax.custom_batching.sequential_vmap(lambda k: base(k, shape, dtype))(key)
+
+    return init
 
 
 class MLP(nn.Module):
@@ -28,8 +44,8 @@ class MLP(nn.Module):
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         for size in self.hidden_sizes:
-            x = nn.tanh(nn.Dense(size, kernel_init=nn.initializers.orthogonal(math.sqrt(2)))(x))
-        return nn.Dense(self.out_size, kernel_init=nn.initializers.orthogonal(self.out_scale))(x)
+            x = nn.tanh(nn.Dense(size, kernel_init=orthogonal(math.sqrt(2)))(x))
+        return nn.Dense(self.out_size, kernel_init=orthogonal(self.out_scale))(x)
 
 
 class CategoricalPolicy(nn.Module):
@@ -66,6 +82,7 @@ class ValueFunction(nn.Module):
 class Networks:
     policy: nn.Module
     value: nn.Module
+    action_space: Discrete | Box
 
     def init(self, key: jax.Array, observation_size: int) -> dict:
         policy_key, value_key = jax.random.split(key)
@@ -81,6 +98,12 @@ class Networks:
     def values(self, params: dict, obs: jax.Array) -> jax.Array:
         return self.value.apply(params["value"], obs)
 
+    def action_noise(self, key: jax.Array, batch_shape: tuple[int, ...]) -> jax.Array:
+        """Standard noise for `batch_shape` samples of the policy (see ``sample_from``)."""
+        if isinstance(self.action_space, Discrete):
+            return Categorical.noise(key, (*batch_shape, self.action_space.n))
+        return DiagonalGaussian.noise(key, (*batch_shape, self.action_space.size))
+
 
 def make_networks(action_space: Discrete | Box, hidden_sizes: Sequence[int]) -> Networks:
     """The policy for `action_space` (categorical or Gaussian) and the value function."""
@@ -89,4 +112,4 @@ def make_networks(action_space: Discrete | Box, hidden_sizes: Sequence[int]) -> 
         policy = CategoricalPolicy(hidden_sizes, action_space.n)
     else:
         policy = GaussianPolicy(hidden_sizes, action_space.size)
-    return Networks(policy, ValueFunction(hidden_sizes))
+    return Networks(policy, ValueFunction(hidden_sizes), action_space)

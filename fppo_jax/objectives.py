@@ -204,7 +204,12 @@ _SURROGATES: tuple[Surrogate, ...] = (_ppo, _fppo_lp, _fppo_qp, _tr_ppo, _ppo_rb
 def surrogate(o: Objective, ratio: jax.Array, advantage: jax.Array, kl: jax.Array) -> jax.Array:
     """Per-sample objective of `o` (to maximise); `kl` only gates and carries no gradient.
 
-    A ``lax.switch`` on the variant: a real branch for one objective, and under ``vmap`` over
-    objectives a select, so that every objective in the batch gets its own surrogate.
+    Every variant's surrogate is computed and the one of `o.variant` selected, element-wise:
+    the same program for any variant, and under ``vmap`` over objectives each gets its own.
     """
-    return jax.lax.switch(o.variant, _SURROGATES, o, ratio, advantage, kl)
+    # A select rather than lax.switch: the surrogates are a few element-wise operations that
+    # XLA fuses into one kernel, while a conditional (in the loss and again in its gradient)
+    # costs more than all of them at minibatch sizes. Only the selected branch gets gradient,
+    # and every branch is finite, so the others contribute exact zeros.
+    candidates = [f(o, ratio, advantage, kl) for f in _SURROGATES]
+    return jnp.choose(o.variant, candidates, mode="clip")

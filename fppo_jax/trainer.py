@@ -18,7 +18,7 @@ import optax
 
 from fppo_jax.config import Hyperparameters, TrainConfig
 from fppo_jax.distributions import Distribution
-from fppo_jax.envs import Box, Environment
+from fppo_jax.envs import Box, Environment, draw_resets, where_done
 from fppo_jax.gae import gae
 from fppo_jax.losses import Batch, LossInfo, ppo_loss
 from fppo_jax.networks import Networks, make_networks
@@ -78,13 +78,17 @@ class Transition(NamedTuple):
     reward: jax.Array
     terminated: jax.Array
     truncated: jax.Array
-    final_obs: jax.Array  # raw, before any auto-reset
+    final_obs: jax.Array  # raw, the observation the step produced, before any reset
     discounted_return: jax.Array
     episode_return: jax.Array
 
 
 def make_optimizer(hp: Hyperparameters, config: TrainConfig) -> optax.GradientTransformation:
-    """Global-norm clipping then Adam (ε = 1e-5), one optimiser for policy and value."""
+    """Global-norm clipping then Adam (ε = 1e-5), one optimiser for policy and value.
+
+    It runs on the parameters flattened into one vector: a handful of kernels per step instead
+    of several per parameter array, which is most of a small network's optimiser cost.
+    """
     learning_rate: Any = hp.learning_rate
     if config.anneal_learning_rate:
         steps_per_update = config.num_epochs * config.num_minibatches
@@ -92,8 +96,10 @@ def make_optimizer(hp: Hyperparameters, config: TrainConfig) -> optax.GradientTr
         def learning_rate(count: jax.Array) -> jax.Array:
             return hp.learning_rate * (1.0 - (count // steps_per_update) / config.num_updates)
 
-    return optax.chain(
-        optax.clip_by_global_norm(hp.max_grad_norm), optax.adam(learning_rate, eps=1e-5)
+    return optax.flatten(
+        optax.chain(
+            optax.clip_by_global_norm(hp.max_grad_norm), optax.adam(learning_rate, eps=1e-5)
+        )
     )
 
 
@@ -267,25 +273,33 @@ class Trainer:
     ) -> tuple[Transition, tuple]:
         config, env, networks = self.config, self.env, self.networks
         action_space = env.action_space
+        noise_key, step_key, reset_key = jax.random.split(key, 3)
+        # Everything random in the rollout is drawn here, in vectorised batches: the action
+        # noise, the step keys and a fresh reset state for every (step, environment), taken
+        # where that environment's episode ends. In the sequential loop, per-step random draws
+        # and resets would cost more than the environment's own dynamics.
+        shape = (config.num_steps, config.num_envs)
+        action_noise = networks.action_noise(noise_key, shape)
+        step_keys = jax.random.split(step_key, shape)
+        reset_states, reset_obs = draw_resets(env, reset_key, shape)
         step_env = jax.vmap(env.step)
 
-        def step(carry: tuple, step_key: jax.Array) -> tuple[tuple, Transition]:
+        def step(carry: tuple, inputs: tuple) -> tuple[tuple, Transition]:
             env_state, obs, episode_return, discounted_return = carry
-            action_key, env_key = jax.random.split(step_key)
+            noise, keys, reset_state, first_obs = inputs
             seen = state.obs_stats.normalize(obs) if config.normalize_observations else obs
             dist = networks.distribution(state.params, seen)
-            action = dist.sample(action_key)
+            action = dist.sample_from(noise)
             env_action = action
             if isinstance(action_space, Box):
                 # The log-probability stays that of the unclipped sample.
                 env_action = jnp.clip(
                     action, jnp.asarray(action_space.low), jnp.asarray(action_space.high)
                 )
-            env_state, out = step_env(
-                jax.random.split(env_key, config.num_envs), env_state, env_action
-            )
+            env_state, out = step_env(keys, env_state, env_action)
             episode_return = episode_return + out.reward
             discounted_return = discounted_return * hp.gamma + out.reward
+            done = out.terminated | out.truncated
             transition = Transition(
                 obs=seen,
                 raw_obs=obs,
@@ -295,21 +309,21 @@ class Trainer:
                 reward=out.reward,
                 terminated=out.terminated,
                 truncated=out.truncated,
-                final_obs=out.final_obs,
+                final_obs=out.obs,
                 discounted_return=discounted_return,
                 episode_return=episode_return,
             )
-            done = out.terminated | out.truncated
             carry = (
-                env_state,
-                out.obs,
+                where_done(done, reset_state, env_state),
+                where_done(done, first_obs, out.obs),
                 jnp.where(done, 0.0, episode_return),
                 jnp.where(done, 0.0, discounted_return),
             )
             return carry, transition
 
         carry = (state.env_state, state.obs, state.episode_return, state.discounted_return)
-        carry, traj = jax.lax.scan(step, carry, jax.random.split(key, config.num_steps))
+        inputs = (action_noise, step_keys, reset_states, reset_obs)
+        carry, traj = jax.lax.scan(step, carry, inputs)
         return traj, carry
 
     def _epochs(

@@ -2,7 +2,7 @@ import jax
 import jax.numpy as jnp
 import pytest
 
-from fppo_jax.envs import TASKS, Discrete, as_environment, make_env
+from fppo_jax.envs import TASKS, Discrete, as_environment, draw_resets, make_env, where_done
 
 
 def run_until_done(env, policy, limit=1000):
@@ -17,13 +17,31 @@ def run_until_done(env, policy, limit=1000):
     raise AssertionError("episode did not end")
 
 
+def balance(o):
+    return (o[2] + 0.5 * o[3] + 0.01 * o[0] + 0.1 * o[1] > 0).astype(jnp.int32)
+
+
 def test_cartpole_is_truncated_at_200_steps():
-    balance = lambda o: (o[2] + 0.5 * o[3] + 0.01 * o[0] + 0.1 * o[1] > 0).astype(jnp.int32)  # noqa: E731
     steps, out = run_until_done(make_env("cartpole"), balance)
     assert steps == 200
     assert bool(out.truncated) and not bool(out.terminated)
-    # The final observation is the last state, not the reset one that `obs` holds.
-    assert abs(float(out.final_obs[2])) > 0 and not jnp.allclose(out.final_obs, out.obs)
+
+
+def test_draw_resets_gives_distinct_fresh_states():
+    env = make_env("cartpole")
+    states, obs = draw_resets(env, jax.random.key(0), (3, 5))
+    assert obs.shape == (3, 5, 4) and states.time.shape == (3, 5)
+    assert bool(jnp.all(jnp.abs(obs) <= 0.05)) and bool(jnp.all(states.time == 0))
+    assert len({tuple(o) for o in obs.reshape(-1, 4).tolist()}) == 15
+
+
+def test_where_done_selects_per_environment():
+    done = jnp.array([True, False])
+    reset = {"a": jnp.zeros((2, 3)), "b": jnp.zeros(2)}
+    stepped = {"a": jnp.ones((2, 3)), "b": jnp.ones(2)}
+    chosen = where_done(done, reset, stepped)
+    assert chosen["a"].tolist() == [[0, 0, 0], [1, 1, 1]]
+    assert chosen["b"].tolist() == [0, 1]
 
 
 def test_mountaincar_random_policy_is_truncated_at_200():

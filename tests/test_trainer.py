@@ -8,7 +8,7 @@ from gymnax.environments.classic_control import CartPole
 
 import fppo_jax
 from fppo_jax import METRICS, TrainConfig, TrainingDiverged, hyperparameters, make_env, make_train, train
-from fppo_jax.envs import Step
+from fppo_jax.envs import Discrete, Step
 from fppo_jax.trainer import RETURN_WINDOW, _average_return, _push_returns
 
 
@@ -96,7 +96,7 @@ class NaNRewardAfter:
     def step(self, key, state, action):
         state, out = self.inner.step(key, state, action)
         reward = jnp.where(state.time >= self.start, jnp.nan, out.reward)
-        return state, Step(out.obs, reward, out.terminated, out.truncated, out.final_obs)
+        return state, Step(out.obs, reward, out.terminated, out.truncated)
 
 
 def test_nan_rewards_stop_training_with_the_update(tiny):
@@ -137,3 +137,29 @@ def test_bad_settings_fail_before_compiling():
 def test_task_defaults_follow_table_2(tiny):
     assert train("cartpole", "fppo-lp", total_steps=128, **tiny).config["alpha"] == 1.3
     assert train("cartpole", "fppo-qp", total_steps=128, **tiny).config["k"] == 0.4
+
+
+@dataclasses.dataclass(frozen=True)
+class Countdown:
+    """Reward 1 per step; the episode ends after `length` steps (terminated or truncated)."""
+
+    length: int
+    truncate: bool
+    observation_size = 1
+    action_space = Discrete(2)
+
+    def reset(self, key):
+        return jnp.asarray(0), jnp.zeros(1)
+
+    def step(self, key, t, action):
+        t = t + 1
+        ended = t >= self.length
+        obs = jnp.asarray([t / self.length], jnp.float32)
+        return t, Step(obs, jnp.float32(1.0), ended & (not self.truncate), ended & self.truncate)
+
+
+@pytest.mark.parametrize("truncate", [False, True])
+def test_auto_reset_and_episode_returns(tiny, truncate):
+    # 4 envs × 32 steps per update: each env finishes an episode every 3 steps.
+    m = train(Countdown(3, truncate), "ppo", total_steps=256, **tiny).metrics
+    assert m["average_return"].tolist() == [3.0, 3.0]

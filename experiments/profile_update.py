@@ -8,12 +8,15 @@ Settings: PureJaxRL's CartPole (see purejaxrl_settings.py).
 """
 
 import argparse
+import os
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
-
 import purejaxrl_settings as pjr
+from bench_cartpole import cpu_model, env_alone
+
 from fppo_jax import make_train
 
 
@@ -39,38 +42,65 @@ def main() -> None:
     trainer = make_train(config, env)
     state = jax.jit(trainer.init)(jax.random.key(0), hp)
 
-    def env_alone(key):
-        def step(carry, k):
-            env_state = carry
-            action_key, step_key = jax.random.split(k)
-            actions = jax.random.randint(action_key, (config.num_envs,), 0, 2)
-            env_state, out = jax.vmap(env.step)(jax.random.split(step_key, config.num_envs), env_state, actions)
-            return env_state, out.reward
-        return jax.lax.scan(step, state.env_state, jax.random.split(key, config.num_steps))[1].sum()
-
     rollout = jax.jit(lambda s, k: trainer._rollout(s, hp, k)[0])
     traj = rollout(state, jax.random.key(1))
     update = jax.jit(trainer.update)
 
     # The batch the epochs consume, built the way `update` builds it.
     from fppo_jax.losses import Batch
+
     flat = lambda x: x.reshape((config.samples_per_update, *x.shape[2:]))  # noqa: E731
     n = traj.reward.shape
-    batch = jax.tree.map(flat, Batch(traj.obs, traj.action, traj.log_prob, jnp.zeros(n), jnp.ones(n),
-                                     jnp.ones(n), traj.distribution))
+    batch = jax.tree.map(
+        flat,
+        Batch(
+            traj.obs,
+            traj.action,
+            traj.log_prob,
+            jnp.zeros(n),
+            jnp.ones(n),
+            jnp.ones(n),
+            traj.distribution,
+        ),
+    )
     epochs = jax.jit(lambda s, b, k: trainer._epochs(s, hp, b, k))
 
     parts = {
-        "environment alone": seconds_per_call(jax.jit(env_alone), jax.random.key(2), repeats=args.repeats),
-        "rollout (policy + env)": seconds_per_call(rollout, state, jax.random.key(1), repeats=args.repeats),
-        "epochs (minibatch updates)": seconds_per_call(epochs, state, batch, jax.random.key(3), repeats=args.repeats),
+        "environment alone": seconds_per_call(
+            jax.jit(env_alone(env, config.num_envs, config.num_steps, 1)),
+            jax.random.key(2),
+            repeats=args.repeats,
+        ),
+        "rollout (policy + env)": seconds_per_call(
+            rollout, state, jax.random.key(1), repeats=args.repeats
+        ),
+        "epochs (minibatch updates)": seconds_per_call(
+            epochs, state, batch, jax.random.key(3), repeats=args.repeats
+        ),
         "whole update": seconds_per_call(update, state, hp, repeats=args.repeats),
     }
     whole = parts["whole update"]
-    print(f"{config.samples_per_update} samples per update; {jax.devices()[0].device_kind}")
-    for name, seconds in parts.items():
-        print(f"{name:<28} {seconds * 1e3:8.3f} ms  {seconds / whole:6.1%} of an update")
-    print(f"update throughput: {config.samples_per_update / whole:,.0f} env steps/s")
+    lines = [
+        "# Where one update's time goes (CartPole, PureJaxRL's settings)",
+        "",
+        f"Command: `python experiments/profile_update.py --repeats {args.repeats}`; "
+        f"{cpu_model()}, {os.cpu_count()} cores; jax {jax.__version__}.",
+        "",
+        f"Each part compiled and timed alone (best of 7 blocks of {args.repeats} calls); one "
+        f"update is {config.samples_per_update} env steps. Parts timed alone include a call's "
+        "dispatch, so they add up to more than the whole.",
+        "",
+        "| part | ms | share of an update |",
+        "|---|---|---|",
+        *[f"| {name} | {s * 1e3:.3f} | {s / whole:.0%} |" for name, s in parts.items()],
+        "",
+        f"Update throughput called one update at a time: {config.samples_per_update / whole:,.0f} "
+        "env steps/s (a whole run in one compiled call is faster: see bench_cartpole.md).",
+    ]
+    print("\n".join(lines))
+    output = Path(__file__).parent / "results" / "profile_update.md"
+    output.write_text("\n".join(lines) + "\n")
+    print(f"wrote {output}")
 
 
 if __name__ == "__main__":

@@ -30,4 +30,3 @@ def config(total_steps: int = 500_000) -> TrainConfig:
 
 def hp():
     return hyperparameters("ppo", learning_rate=2.5e-4, entropy_coef=0.01, max_grad_norm=0.5)
-

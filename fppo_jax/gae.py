@@ -28,15 +28,15 @@ def gae(
     not_terminated = 1.0 - terminated.astype(values.dtype)
     not_done = 1.0 - jnp.logical_or(terminated, truncated).astype(values.dtype)
     deltas = rewards + gamma * not_terminated * next_values - values
+    decay = gamma * gae_lambda * not_done
 
-    def backward(
-        carry: jax.Array, step: tuple[jax.Array, jax.Array]
-    ) -> tuple[jax.Array, jax.Array]:
-        delta, keep = step
-        advantage = delta + gamma * gae_lambda * keep * carry
-        return advantage, advantage
+    # A_t = δ_t + c_t A_{t+1} is the affine map x ↦ δ_t + c_t x applied backwards in time.
+    # Composing affine maps is associative, so a log-depth associative scan replaces a
+    # sequential loop over the rollout's steps.
+    def compose(later: tuple, earlier: tuple) -> tuple:
+        c_later, d_later = later
+        c_earlier, d_earlier = earlier
+        return c_earlier * c_later, d_earlier + c_earlier * d_later
 
-    _, advantages = jax.lax.scan(
-        backward, jnp.zeros_like(values[0]), (deltas, not_done), reverse=True
-    )
+    _, advantages = jax.lax.associative_scan(compose, (decay, deltas), reverse=True)
     return advantages, advantages + values

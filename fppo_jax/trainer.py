@@ -341,16 +341,16 @@ class Trainer:
             updates, opt_state = optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), (loss, info)
 
-        def epoch(carry: tuple, epoch_key: jax.Array) -> tuple[tuple, tuple]:
-            order = jax.random.permutation(epoch_key, config.samples_per_update)
+        def epoch(carry: tuple, order: jax.Array) -> tuple[tuple, tuple]:
             shape = (config.num_minibatches, config.minibatch_size)
             minibatches = jax.tree.map(lambda x: x[order].reshape(shape + x.shape[1:]), batch)
             return jax.lax.scan(minibatch_step, carry, minibatches)
 
+        # Every epoch's shuffle in one batched draw, outside the loop.
+        keys = jax.random.split(key, config.num_epochs)
+        orders = jax.vmap(jax.random.permutation, (0, None))(keys, config.samples_per_update)
         carry = (state.params, state.opt_state)
-        carry, (losses, infos) = jax.lax.scan(
-            epoch, carry, jax.random.split(key, config.num_epochs)
-        )
+        carry, (losses, infos) = jax.lax.scan(epoch, carry, orders)
         return carry, losses, infos
 
 

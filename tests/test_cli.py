@@ -11,8 +11,24 @@ TINY_FLAGS = ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--e
 
 
 def test_train_writes_metrics_config_and_summary(tmp_path, capsys):
-    code = main(["train", "--env", "cartpole", "--variant", "fppo-qp", "--k", "0.3", "--steps", "384",
-                 "--seed", "1", "--output", str(tmp_path), *TINY_FLAGS])
+    code = main(
+        [
+            "train",
+            "--env",
+            "cartpole",
+            "--variant",
+            "fppo-qp",
+            "--k",
+            "0.3",
+            "--steps",
+            "384",
+            "--seed",
+            "1",
+            "--output",
+            str(tmp_path),
+            *TINY_FLAGS,
+        ]
+    )
     assert code == 0
     out, err = capsys.readouterr()
     assert "fppo-qp on cartpole (k = 0.3, epsilon = 0.2), seed 1" in out
@@ -38,13 +54,38 @@ def test_unknown_variant_is_rejected_by_the_parser(capsys):
 
 def test_help_documents_every_flag():
     text = build_parser()._subparsers._group_actions[0].choices["train"].format_help()
-    for flag in ["--env", "--variant", "--alpha", "--k", "--delta", "--epsilon", "--steps", "--seed",
-                 "--num-envs", "--num-steps", "--minibatches", "--epochs", "--hidden", "--learning-rate",
-                 "--gamma", "--gae-lambda", "--entropy-coef", "--value-coef", "--max-grad-norm",
-                 "--no-obs-norm", "--no-reward-norm", "--no-value-clip", "--anneal-lr", "--output", "--quiet"]:
+    for flag in [
+        "--env",
+        "--variant",
+        "--alpha",
+        "--k",
+        "--delta",
+        "--epsilon",
+        "--steps",
+        "--seed",
+        "--num-envs",
+        "--num-steps",
+        "--minibatches",
+        "--epochs",
+        "--hidden",
+        "--learning-rate",
+        "--gamma",
+        "--gae-lambda",
+        "--entropy-coef",
+        "--value-coef",
+        "--max-grad-norm",
+        "--no-obs-norm",
+        "--no-reward-norm",
+        "--no-value-clip",
+        "--anneal-lr",
+        "--output",
+        "--quiet",
+    ]:
         assert flag in text
 
 
 def test_console_entry_point_lists_tasks_and_variants():
-    out = subprocess.run([sys.executable, "-m", "fppo_jax", "list"], capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-m", "fppo_jax", "list"], capture_output=True, text=True, check=True
+    )
     assert "cartpole" in out.stdout and "tr-ppo-rb" in out.stdout and "alpha 1.3" in out.stdout

@@ -32,4 +32,6 @@ def test_gaussian_log_prob_and_entropy():
     sigma = np.array([0.5, 2.0])
     expected = np.sum(-0.5 * ((x - dist.mean) / sigma) ** 2 - np.log(sigma * np.sqrt(2 * np.pi)))
     np.testing.assert_allclose(dist.log_prob(x), expected, rtol=1e-6)
-    np.testing.assert_allclose(dist.entropy(), np.sum(np.log(sigma * np.sqrt(2 * np.pi * np.e))), rtol=1e-6)
+    np.testing.assert_allclose(
+        dist.entropy(), np.sum(np.log(sigma * np.sqrt(2 * np.pi * np.e))), rtol=1e-6
+    )

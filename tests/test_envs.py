@@ -54,12 +54,14 @@ def test_cartpole_terminates_when_the_pole_falls():
     assert steps < 50 and bool(out.terminated)
 
 
-@pytest.mark.parametrize("name, obs_size, actions", [("cartpole", 4, 2), ("acrobot", 6, 3), ("mountaincar", 2, 3)])
+@pytest.mark.parametrize(
+    "name, obs_size, actions", [("cartpole", 4, 2), ("acrobot", 6, 3), ("mountaincar", 2, 3)]
+)
 def test_registered_tasks(name, obs_size, actions):
     env = make_env(name)
     assert env.observation_size == obs_size
     assert env.action_space == Discrete(actions)
-    state, obs = env.reset(jax.random.key(1))
+    state, _ = env.reset(jax.random.key(1))
     state, out = env.step(jax.random.key(2), state, jnp.int32(0))
     assert out.obs.shape == (obs_size,) and out.obs.dtype == jnp.float32
     assert TASKS[name].total_steps == 100_000
@@ -70,7 +72,9 @@ def test_acrobot_episode_limit_is_500():
 
 
 def test_unknown_environment_lists_the_registered_ones():
-    with pytest.raises(ValueError, match="unknown environment 'cartpol'; registered: cartpole, acrobot"):
+    with pytest.raises(
+        ValueError, match="unknown environment 'cartpol'; registered: cartpole, acrobot"
+    ):
         make_env("cartpol")
     with pytest.raises(TypeError, match="expected a registered environment name"):
         as_environment(42)

@@ -9,7 +9,9 @@ from fppo_jax.networks import make_networks, orthogonal
 def test_orthogonal_matches_flax_and_stays_unbatched_under_vmap():
     init = orthogonal(1.0)
     key = jax.random.key(0)
-    np.testing.assert_array_equal(init(key, (64, 64)), nn.initializers.orthogonal(1.0)(key, (64, 64)))
+    np.testing.assert_array_equal(
+        init(key, (64, 64)), nn.initializers.orthogonal(1.0)(key, (64, 64))
+    )
     keys = jax.random.split(key, 3)
     batched = jax.vmap(lambda k: init(k, (8, 8)))(keys)
     np.testing.assert_array_equal(batched[2], init(keys[2], (8, 8)))

@@ -29,13 +29,37 @@ CASES = [
     ("ppo", {}, 1.5, -2.0, 0, -3.0, -2.0),  # R-
     # FPPO-LP: slope αA in R±, as PPO elsewhere.
     ("fppo-lp", {"alpha": alpha}, 0.5, 2.0, 0, (alpha * 0.5 + (1 - alpha) * LO) * 2.0, alpha * 2.0),
-    ("fppo-lp", {"alpha": alpha}, 1.5, -2.0, 0, (alpha * 1.5 + (1 - alpha) * HI) * -2.0, alpha * -2.0),
+    (
+        "fppo-lp",
+        {"alpha": alpha},
+        1.5,
+        -2.0,
+        0,
+        (alpha * 1.5 + (1 - alpha) * HI) * -2.0,
+        alpha * -2.0,
+    ),
     ("fppo-lp", {"alpha": alpha}, 1.5, 2.0, 0, HI * 2.0, 0.0),
     ("fppo-lp", {"alpha": alpha}, 0.5, -2.0, 0, LO * -2.0, 0.0),
     ("fppo-lp", {"alpha": alpha}, 0.9, 2.0, 0, 1.8, 2.0),
     # FPPO-QP (corrected R+ branch): F = r - k d² in R+, r + k d² in R-, slope (1 + 2kd)A.
-    ("fppo-qp", {"k": k}, 0.5, 2.0, 0, (0.5 - k * (LO - 0.5) ** 2) * 2.0, (1 + 2 * k * (LO - 0.5)) * 2.0),
-    ("fppo-qp", {"k": k}, 1.5, -2.0, 0, (1.5 + k * (1.5 - HI) ** 2) * -2.0, (1 + 2 * k * (1.5 - HI)) * -2.0),
+    (
+        "fppo-qp",
+        {"k": k},
+        0.5,
+        2.0,
+        0,
+        (0.5 - k * (LO - 0.5) ** 2) * 2.0,
+        (1 + 2 * k * (LO - 0.5)) * 2.0,
+    ),
+    (
+        "fppo-qp",
+        {"k": k},
+        1.5,
+        -2.0,
+        0,
+        (1.5 + k * (1.5 - HI) ** 2) * -2.0,
+        (1 + 2 * k * (1.5 - HI)) * -2.0,
+    ),
     ("fppo-qp", {"k": k}, 1.5, 2.0, 0, HI * 2.0, 0.0),
     ("fppo-qp", {"k": k}, 1.0, -2.0, 0, -2.0, -2.0),
     # PPO-RB: slope -αA where PPO clips, A in R± (min keeps rA), A inside.
@@ -159,7 +183,11 @@ def test_negative_regions():
         ("ppo", {"epsilon": 1.0}, "epsilon must be in \\(0, 1\\)"),
         ("ppo", {"epsilon": 0.0}, "epsilon must be in \\(0, 1\\)"),
         ("ppo", {"alpha": 1.3}, "ppo has no hyperparameter alpha"),
-        ("fppo-qp", {"alpha": 1.3}, "fppo-qp has no hyperparameter alpha \\(it takes: epsilon, k\\)"),
+        (
+            "fppo-qp",
+            {"alpha": 1.3},
+            "fppo-qp has no hyperparameter alpha \\(it takes: epsilon, k\\)",
+        ),
     ],
 )
 def test_bad_hyperparameters_are_named(variant, params, match):

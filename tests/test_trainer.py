@@ -7,7 +7,15 @@ import pytest
 from gymnax.environments.classic_control import CartPole
 
 import fppo_jax
-from fppo_jax import METRICS, TrainConfig, TrainingDiverged, hyperparameters, make_env, make_train, train
+from fppo_jax import (
+    METRICS,
+    TrainConfig,
+    TrainingDiverged,
+    hyperparameters,
+    make_env,
+    make_train,
+    train,
+)
 from fppo_jax.envs import Discrete, Step
 from fppo_jax.trainer import RETURN_WINDOW, _average_return, _push_returns
 
@@ -70,7 +78,9 @@ def test_vmapped_seeds_and_variants_match_single_runs(tiny):
     for i, hp in enumerate(hps):
         _, single = jax.jit(trainer)(keys[i], hp)
         for name in METRICS:
-            np.testing.assert_allclose(getattr(batched, name)[i], getattr(single, name), rtol=2e-4, atol=1e-5)
+            np.testing.assert_allclose(
+                getattr(batched, name)[i], getattr(single, name), rtol=2e-4, atol=1e-5
+            )
 
 
 def test_divergence_stops_with_the_update(tiny):

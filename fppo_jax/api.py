@@ -15,11 +15,9 @@ import numpy as np
 
 from fppo_jax.config import HYPERPARAMETER_DEFAULTS, Hyperparameters, TrainConfig, hyperparameters
 from fppo_jax.envs import TASKS, Environment, as_environment
-from fppo_jax.networks import Networks
-from fppo_jax.normalization import RunningStats
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import VARIANTS
-from fppo_jax.trainer import METRICS, TrainState, make_train
+from fppo_jax.trainer import METRICS, Trainer, TrainState, make_train
 
 CONFIG_FIELDS = tuple(field.name for field in dataclasses.fields(TrainConfig))
 
@@ -203,9 +201,7 @@ def train(
             **dataclasses.asdict(config),
         },
         state=state,
-        policy=make_policy(
-            trainer.networks, state.params, state.obs_stats, config.normalize_observations
-        ),
+        policy=make_policy(trainer, state),
         compile_seconds=compile_seconds,
         train_seconds=train_seconds,
     )
@@ -267,16 +263,12 @@ def _env_name(env: Any, environment: Environment) -> str:
     return env if isinstance(env, str) else type(getattr(environment, "env", environment)).__name__
 
 
-def make_policy(
-    networks: Networks, params: dict, obs_stats: RunningStats, normalize_observations: bool
-) -> Callable[..., jax.Array]:
+def make_policy(trainer: Trainer, state: TrainState) -> Callable[..., jax.Array]:
     """An action function of raw observations: the mode without a key, a sample with one."""
 
     def distribution(obs: jax.Array) -> Any:
-        obs = jnp.asarray(obs, jnp.float32)
-        return networks.distribution(
-            params, obs_stats.normalize(obs) if normalize_observations else obs
-        )
+        obs = trainer.network_input(state.obs_stats, jnp.asarray(obs, jnp.float32))
+        return trainer.networks.distribution(state.params, obs)
 
     mode = jax.jit(lambda obs: distribution(obs).mode())
     sample = jax.jit(lambda obs, key: distribution(obs).sample(key))

@@ -116,6 +116,17 @@ def _push_returns(
     return recent.at[slot].set(returns, mode="drop"), num_episodes + finished
 
 
+def _keep_if_finite(new: TrainState, old: TrainState, losses: jax.Array) -> TrainState:
+    """`new`; but if a loss or a parameter is not finite, `old`, with the update counted and the
+    first such update recorded."""
+    finite = jnp.all(jnp.isfinite(losses)) & jnp.all(
+        jnp.stack([jnp.all(jnp.isfinite(p)) for p in jax.tree.leaves(new.params)])
+    )
+    kept = jax.tree.map(lambda n, o: jnp.where(finite, n, o), new, old)
+    first_bad = jnp.where((old.nonfinite_update < 0) & ~finite, old.update, old.nonfinite_update)
+    return dataclasses.replace(kept, update=new.update, nonfinite_update=first_bad)
+
+
 def _average_return(recent: jax.Array, num_episodes: jax.Array) -> jax.Array:
     filled = jnp.minimum(num_episodes, RETURN_WINDOW)
     total = jnp.sum(jnp.where(jnp.arange(RETURN_WINDOW) < filled, recent, 0.0))
@@ -191,11 +202,7 @@ class Trainer:
         # The value to bootstrap from is always that of the observation a step produced, before
         # any reset: V(obs_{t+1}) mid-episode, V(last state) at truncation, and 0 at termination.
         # Computing every value here in one batch keeps the critic out of the sequential rollout.
-        final_obs = (
-            state.obs_stats.normalize(traj.final_obs)
-            if config.normalize_observations
-            else traj.final_obs
-        )
+        final_obs = self.network_input(state.obs_stats, traj.final_obs)
         values, next_values = jnp.split(
             self.networks.values(state.params, jnp.concatenate([traj.obs, final_obs])), 2
         )
@@ -215,15 +222,7 @@ class Trainer:
         )
         (params, opt_state), losses, infos = self._epochs(state, hp, batch, epochs_key)
 
-        ratio = jnp.exp(
-            self.networks.distribution(params, batch.obs).log_prob(batch.action) - batch.log_prob
-        )
-        r_plus, r_minus = negative_regions(ratio, batch.advantage, hp.objective.epsilon)
-        negative = r_plus | r_minus
-        num_negative = jnp.sum(negative)
-        distance = jnp.sum(
-            jnp.where(negative, distance_past_bound(ratio, hp.objective.epsilon), 0.0)
-        )
+        negative_fraction, negative_distance = self._escape(params, batch, hp.objective.epsilon)
 
         done = traj.terminated | traj.truncated
         recent_returns, num_episodes = _push_returns(
@@ -244,29 +243,35 @@ class Trainer:
             nonfinite_update=state.nonfinite_update,
             key=key,
         )
-        finite = jnp.all(jnp.isfinite(losses)) & jnp.all(
-            jnp.stack([jnp.all(jnp.isfinite(p)) for p in jax.tree.leaves(params)])
-        )
-        kept = jax.tree.map(lambda new, old: jnp.where(finite, new, old), new_state, state)
-        first_bad = jnp.where(
-            (state.nonfinite_update < 0) & ~finite, state.update, state.nonfinite_update
-        )
-        state = dataclasses.replace(kept, update=state.update + 1, nonfinite_update=first_bad)
-
-        mean = lambda x: jnp.mean(x)  # noqa: E731
         metrics = Metrics(
             env_steps=(new_state.update * config.samples_per_update).astype(jnp.int32),
             average_return=_average_return(recent_returns, num_episodes),
-            policy_loss=mean(infos.policy_loss),
-            value_loss=mean(infos.value_loss),
-            entropy=mean(infos.entropy),
-            approx_kl=mean(infos.approx_kl),
-            clip_fraction=mean(infos.clip_fraction),
-            negative_fraction_before=mean(infos.negative_fraction[0]),
-            negative_fraction_after=jnp.mean(negative),
-            negative_distance_after=distance / jnp.maximum(num_negative, 1),
+            policy_loss=jnp.mean(infos.policy_loss),
+            value_loss=jnp.mean(infos.value_loss),
+            entropy=jnp.mean(infos.entropy),
+            approx_kl=jnp.mean(infos.approx_kl),
+            clip_fraction=jnp.mean(infos.clip_fraction),
+            negative_fraction_before=jnp.mean(infos.negative_fraction[0]),
+            negative_fraction_after=negative_fraction,
+            negative_distance_after=negative_distance,
         )
-        return state, metrics
+        return _keep_if_finite(new_state, state, losses), metrics
+
+    def network_input(self, stats: RunningStats, obs: jax.Array) -> jax.Array:
+        """Raw observations as the networks see them (normalised with `stats` if configured)."""
+        return stats.normalize(obs) if self.config.normalize_observations else obs
+
+    def _escape(
+        self, params: dict, batch: Batch, epsilon: jax.Array
+    ) -> tuple[jax.Array, jax.Array]:
+        """The fraction of the batch in R+ ∪ R- under `params`, and how far past the bound those
+        samples sit on average (SPEC §3)."""
+        dist = self.networks.distribution(params, batch.obs)
+        ratio = jnp.exp(dist.log_prob(batch.action) - batch.log_prob)
+        r_plus, r_minus = negative_regions(ratio, batch.advantage, epsilon)
+        negative = r_plus | r_minus
+        distance = jnp.sum(jnp.where(negative, distance_past_bound(ratio, epsilon), 0.0))
+        return jnp.mean(negative), distance / jnp.maximum(jnp.sum(negative), 1)
 
     def _rollout(
         self, state: TrainState, hp: Hyperparameters, key: jax.Array
@@ -287,7 +292,7 @@ class Trainer:
         def step(carry: tuple, inputs: tuple) -> tuple[tuple, Transition]:
             env_state, obs, episode_return, discounted_return = carry
             noise, keys, reset_state, first_obs = inputs
-            seen = state.obs_stats.normalize(obs) if config.normalize_observations else obs
+            seen = self.network_input(state.obs_stats, obs)
             dist = networks.distribution(state.params, seen)
             action = dist.sample_from(noise)
             env_action = action

@@ -2,13 +2,16 @@
 
 The surrogate objective is a pure function of traced data (:func:`objective`), and the whole
 training run is one compiled function of its key and hyperparameters (:func:`make_train`), so
-seeds, variants and their hyperparameters vmap into one program. :func:`train` runs one policy.
+seeds, variants and their hyperparameters vmap into one program. :func:`train` runs one
+policy; :func:`sweep` runs a grid of settings × seeds as one program.
 """
 
-from fppo_jax.api import Progress, TrainingDiverged, TrainResult, train
+from fppo_jax.api import TrainingDiverged, TrainResult, train
 from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters
 from fppo_jax.envs import TASKS, Environment, make_env
+from fppo_jax.execution import Progress
 from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective
+from fppo_jax.sweep import SweepResult, expand_grid, sweep
 from fppo_jax.trainer import METRICS, Metrics, Trainer, TrainState, make_train
 
 __all__ = [
@@ -20,15 +23,18 @@ __all__ = [
     "Metrics",
     "Objective",
     "Progress",
+    "SweepResult",
     "TrainConfig",
     "TrainResult",
     "TrainState",
     "Trainer",
     "TrainingDiverged",
+    "expand_grid",
     "hyperparameters",
     "make_env",
     "make_train",
     "negative_regions",
     "objective",
+    "sweep",
     "train",
 ]

@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 import sys
-import time
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -15,9 +13,10 @@ import numpy as np
 
 from fppo_jax.config import HYPERPARAMETER_DEFAULTS, Hyperparameters, TrainConfig, hyperparameters
 from fppo_jax.envs import TASKS, Environment, as_environment
+from fppo_jax.execution import PROGRESS_LINES, Progress, compile_program, execute, print_progress
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import VARIANTS
-from fppo_jax.trainer import METRICS, Trainer, TrainState, make_train
+from fppo_jax.trainer import Trainer, TrainState, make_train
 
 CONFIG_FIELDS = tuple(field.name for field in dataclasses.fields(TrainConfig))
 
@@ -33,19 +32,6 @@ class TrainingDiverged(FloatingPointError):
             "the parameters became NaN or infinite. The state before that update was kept. "
             "Lower the learning rate, or check the environment's observations and rewards."
         )
-
-
-class Progress(NamedTuple):
-    """What a progress callback receives: once compiled (update 0), then after each chunk."""
-
-    update: int
-    num_updates: int
-    env_steps: int
-    total_steps: int
-    average_return: float
-    steps_per_second: float
-    elapsed: float
-    compile_seconds: float
 
 
 @dataclasses.dataclass
@@ -99,20 +85,6 @@ class TrainResult:
         return "\n".join(lines)
 
 
-def print_progress(p: Progress) -> None:
-    """The default progress line, on stderr."""
-    if p.update == 0:
-        print(f"compiled in {p.compile_seconds:.1f} s", file=sys.stderr, flush=True)
-        return
-    avg = "-" if math.isnan(p.average_return) else f"{p.average_return:.1f}"
-    print(
-        f"update {p.update:>5}/{p.num_updates}  steps {p.env_steps:>10,}/{p.total_steps:,}  "
-        f"{p.steps_per_second:>9,.0f} steps/s  average return {avg:>8}  ({p.elapsed:.1f} s)",
-        file=sys.stderr,
-        flush=True,
-    )
-
-
 def train(
     env: str | Environment | Any = "cartpole",
     variant: str = "fppo-lp",
@@ -143,66 +115,33 @@ def train(
     environment = as_environment(env)
     trainer = make_train(config, environment)
     report = print_progress if progress is True else (progress or None)
-    chunks = min(config.num_updates, 20) if report else 1
-    chunk = -(-config.num_updates // chunks)
-
     if progress is True:
         print(
-            f"{variant} on {_env_name(env, environment)}: {config.num_updates} updates × "
-            f"{config.samples_per_update:,} samples ({config.num_envs} envs × {config.num_steps} "
-            f"steps), {config.num_minibatches} minibatches × {config.num_epochs} epochs; "
-            "compiling…",
+            f"{variant} on {env_name(env, environment)}: {describe(config)}; compiling…",
             file=sys.stderr,
             flush=True,
         )
     key = jax.random.key(seed)
-    start = time.perf_counter()
-    state = jax.jit(trainer.init)(key, hp)
-    run = jax.jit(trainer.run, static_argnums=2).lower(state, hp, chunk).compile()
-    compile_seconds = time.perf_counter() - start
-    total = config.num_updates * config.samples_per_update
-    if report:
-        report(Progress(0, config.num_updates, 0, total, math.nan, 0.0, 0.0, compile_seconds))
+    program = compile_program(trainer, key, hp, chunks=PROGRESS_LINES if report else 1)
 
-    rows, start = [], time.perf_counter()
-    while int(state.update) < config.num_updates:
-        state, metrics = run(state, hp)
-        rows.append(jax.device_get(metrics))
-        _raise_if_diverged(state, config)
-        if report:
-            elapsed = time.perf_counter() - start
-            done = min(int(state.update), config.num_updates)
-            steps = done * config.samples_per_update
-            latest = rows[-1].average_return[rows[-1].env_steps >= 0][-1]
-            report(
-                Progress(
-                    done,
-                    config.num_updates,
-                    steps,
-                    total,
-                    float(latest),
-                    steps / max(elapsed, 1e-9),
-                    elapsed,
-                    compile_seconds,
-                )
-            )
-    train_seconds = time.perf_counter() - start
+    def check(state: TrainState) -> None:
+        index = int(state.nonfinite_update)
+        if index >= 0:
+            raise TrainingDiverged(index + 1, (index + 1) * config.samples_per_update)
 
-    stacked = {name: np.concatenate([getattr(r, name) for r in rows]) for name in METRICS}
-    ran = stacked["env_steps"] >= 0
-    metrics = {name: values[ran] for name, values in stacked.items()}
+    state, metrics, train_seconds = execute(program, key, hp, report, check)
     return TrainResult(
         metrics=metrics,
         params=state.params,
         config={
             **settings,
-            "env": _env_name(env, environment),
+            "env": env_name(env, environment),
             "seed": seed,
             **dataclasses.asdict(config),
         },
         state=state,
         policy=make_policy(trainer, state),
-        compile_seconds=compile_seconds,
+        compile_seconds=program.compile_seconds,
         train_seconds=train_seconds,
     )
 
@@ -220,26 +159,15 @@ def _resolve(
     """Defaults from the task table, then every check, before anything is compiled."""
     if variant not in VARIANTS:
         raise ValueError(f"unknown variant {variant!r}; valid variants: {', '.join(VARIANTS)}")
-    if isinstance(env, str) and env not in TASKS:
-        raise ValueError(f"unknown environment {env!r}; registered: {', '.join(TASKS)}")
-    unknown = sorted(set(overrides) - set(CONFIG_FIELDS) - set(HYPERPARAMETER_DEFAULTS))
-    if unknown:
-        raise ValueError(
-            f"unknown setting {', '.join(unknown)}; valid: "
-            + ", ".join([*CONFIG_FIELDS, *HYPERPARAMETER_DEFAULTS])
-        )
+    optimisation = {
+        name: overrides.pop(name) for name in HYPERPARAMETER_DEFAULTS if name in overrides
+    }
+    config = resolve_config(env, total_steps, overrides, also_valid=tuple(HYPERPARAMETER_DEFAULTS))
     task = TASKS.get(env) if isinstance(env, str) else None
     if task and variant == "fppo-lp" and alpha is None:
         alpha = task.fppo_lp_alpha
     if task and variant == "fppo-qp" and k is None:
         k = task.fppo_qp_k
-    if total_steps is None and "total_steps" not in overrides:
-        total_steps = task.total_steps if task else TrainConfig.total_steps
-    config_values = {name: overrides[name] for name in CONFIG_FIELDS if name in overrides}
-    if total_steps is not None:
-        config_values["total_steps"] = total_steps
-    optimisation = {name: overrides[name] for name in HYPERPARAMETER_DEFAULTS if name in overrides}
-    config = TrainConfig(**config_values)
     hp = hyperparameters(variant, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **optimisation)
     o = hp.objective
     settings: dict[str, Any] = {"variant": variant, "epsilon": _as_float(o.epsilon)}
@@ -248,18 +176,42 @@ def _resolve(
     return config, hp, settings
 
 
+def resolve_config(
+    env: Any, total_steps: int | None, overrides: dict[str, Any], also_valid: tuple[str, ...] = ()
+) -> TrainConfig:
+    """The checked TrainConfig of `overrides`, with the task's step budget by default."""
+    if isinstance(env, str) and env not in TASKS:
+        raise ValueError(f"unknown environment {env!r}; registered: {', '.join(TASKS)}")
+    unknown = sorted(set(overrides) - set(CONFIG_FIELDS))
+    if unknown:
+        raise ValueError(
+            f"unknown setting {', '.join(unknown)}; valid: "
+            + ", ".join([*CONFIG_FIELDS, *also_valid])
+        )
+    values = dict(overrides)
+    if total_steps is not None:
+        values["total_steps"] = total_steps
+    elif "total_steps" not in values:
+        task = TASKS.get(env) if isinstance(env, str) else None
+        values["total_steps"] = task.total_steps if task else TrainConfig.total_steps
+    return TrainConfig(**values)
+
+
 def _as_float(x: jax.Array) -> float:
     # The shortest decimal that round-trips the float32, so that 1.3 is reported as 1.3.
     return float(str(np.asarray(x)[()]))
 
 
-def _raise_if_diverged(state: TrainState, config: TrainConfig) -> None:
-    index = int(state.nonfinite_update)
-    if index >= 0:
-        raise TrainingDiverged(index + 1, (index + 1) * config.samples_per_update)
+def describe(config: TrainConfig) -> str:
+    """One run's shape, in words."""
+    return (
+        f"{config.num_updates} updates × {config.samples_per_update:,} samples "
+        f"({config.num_envs} envs × {config.num_steps} steps), {config.num_minibatches} "
+        f"minibatches × {config.num_epochs} epochs"
+    )
 
 
-def _env_name(env: Any, environment: Environment) -> str:
+def env_name(env: Any, environment: Environment) -> str:
     return env if isinstance(env, str) else type(getattr(environment, "env", environment)).__name__
 
 

@@ -1,4 +1,5 @@
-"""The ``fppo-jax`` command line: ``train`` one policy, ``list`` the tasks and variants."""
+"""The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``table`` and ``plot``
+a sweep's results, ``list`` the tasks and variants."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from fppo_jax.api import TrainingDiverged, TrainResult, train
 from fppo_jax.config import HYPERPARAMETER_DEFAULTS, TrainConfig
 from fppo_jax.envs import TASKS
 from fppo_jax.objectives import DEFAULTS, VARIANTS
+from fppo_jax.sweep import SweepResult, sweep
 
 
 def _positive_int(text: str) -> int:
@@ -32,6 +34,85 @@ def _sizes(text: str) -> tuple[int, ...]:
     return sizes
 
 
+def _values(text: str) -> list[float]:
+    """``1.1:1.5:0.1`` (inclusive) or ``0.1,0.2,0.4``."""
+    try:
+        if ":" in text:
+            start, stop, step = (float(x) for x in text.split(":"))
+            if step <= 0 or stop < start:
+                raise ValueError
+            count = round((stop - start) / step) + 1
+            return [round(start + i * step, 10) for i in range(count)]
+        return [float(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected start:stop:step (stop >= start, step > 0) or a comma list, got {text!r}"
+        ) from None
+
+
+def _names(text: str) -> list[str]:
+    names = [name.strip() for name in text.split(",")]
+    bad = [name for name in names if name not in VARIANTS]
+    if bad:
+        raise argparse.ArgumentTypeError(
+            f"unknown variant {bad[0]!r}; valid variants: {', '.join(VARIANTS)}"
+        )
+    return names
+
+
+def _add_run_flags(command: argparse.ArgumentParser) -> None:
+    """The task, the budget and the static shape of a run, shared by train and sweep."""
+    defaults = TrainConfig()
+    command.add_argument("--env", default="cartpole", choices=list(TASKS), help="task")
+    command.add_argument(
+        "--steps", type=_positive_int, help="env steps per run (default: the paper's budget)"
+    )
+    command.add_argument(
+        "--num-envs", type=_positive_int, default=defaults.num_envs, help="parallel environments"
+    )
+    command.add_argument(
+        "--num-steps",
+        type=_positive_int,
+        default=defaults.num_steps,
+        help="steps per environment per update",
+    )
+    command.add_argument(
+        "--minibatches",
+        type=_positive_int,
+        default=defaults.num_minibatches,
+        help="minibatches per epoch",
+    )
+    command.add_argument(
+        "--epochs", type=_positive_int, default=defaults.num_epochs, help="epochs per update"
+    )
+    command.add_argument(
+        "--hidden",
+        type=_sizes,
+        default=defaults.hidden_sizes,
+        help="hidden layer widths, e.g. 64,64",
+    )
+    command.add_argument("--no-obs-norm", action="store_true", help="do not normalise observations")
+    command.add_argument("--no-reward-norm", action="store_true", help="do not scale rewards")
+    command.add_argument("--no-value-clip", action="store_true", help="do not clip the value loss")
+    command.add_argument(
+        "--anneal-lr", action="store_true", help="decay the learning rate linearly to 0"
+    )
+    command.add_argument("--output", type=Path, help="directory to write the results to")
+    command.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+HYPERPARAMETER_HELP = {
+    "alpha": "FPPO-LP pulling factor (>= 1), or the RB variants' rollback coefficient (>= 0)",
+    "k": "FPPO-QP quadratic coefficient (>= 0)",
+    "delta": "TR variants' KL bound (> 0)",
+    "epsilon": "clip range, 0 < epsilon < 1 (default 0.2)",
+    **{
+        name: name.replace("_", " ") + f" (default {v:g})"
+        for name, v in HYPERPARAMETER_DEFAULTS.items()
+    },
+}
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fppo-jax",
@@ -39,75 +120,67 @@ def build_parser() -> argparse.ArgumentParser:
         "with a fully jitted JAX trainer.",
     )
     commands = parser.add_subparsers(dest="command", required=True)
+    formatter = argparse.ArgumentDefaultsHelpFormatter
 
     run = commands.add_parser(
         "train",
         help="train one policy",
         description="Train one policy and print progress and a summary. FPPO-LP's alpha and "
         "FPPO-QP's k default to the paper's Table 2 for the task; other variants' "
-        "hyperparameters to the paper's values.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        "hyperparameters to the paper's values. --output DIR writes metrics.csv, config.json "
+        "and summary.txt.",
+        formatter_class=formatter,
     )
-    run.add_argument("--env", default="cartpole", choices=list(TASKS), help="task")
-    run.add_argument(
-        "--variant", default="fppo-lp", choices=list(VARIANTS), help="surrogate objective"
-    )
-    run.add_argument(
-        "--alpha",
-        type=float,
-        help="FPPO-LP pulling factor (>= 1), or the RB variants' rollback coefficient (>= 0)",
-    )
-    run.add_argument("--k", type=float, help="FPPO-QP quadratic coefficient (>= 0)")
-    run.add_argument("--delta", type=float, help="TR variants' KL bound (> 0)")
-    run.add_argument("--epsilon", type=float, default=0.2, help="clip range, 0 < epsilon < 1")
-    run.add_argument(
-        "--steps",
-        type=_positive_int,
-        help="total env steps (default: the task's budget in the paper)",
-    )
+    run.add_argument("--variant", default="fppo-lp", choices=list(VARIANTS), help="surrogate")
+    for name, text in HYPERPARAMETER_HELP.items():
+        run.add_argument(f"--{name.replace('_', '-')}", type=float, help=text)
     run.add_argument("--seed", type=int, default=0, help="random seed")
-    defaults = TrainConfig()
-    run.add_argument(
-        "--num-envs", type=_positive_int, default=defaults.num_envs, help="parallel environments"
+    _add_run_flags(run)
+
+    grid = commands.add_parser(
+        "sweep",
+        help="train a grid of settings × seeds as one compiled program",
+        description="Train every combination of the given values, times the seeds, as one "
+        "vmapped program. Values are start:stop:step (inclusive) or comma lists; alpha, k and "
+        "delta apply to the variants that take them. --output DIR writes curves.csv and "
+        "sweep.json, which `fppo-jax table` and `fppo-jax plot` read.",
+        formatter_class=formatter,
     )
-    run.add_argument(
-        "--num-steps",
-        type=_positive_int,
-        default=defaults.num_steps,
-        help="steps per environment per update",
+    grid.add_argument(
+        "--variant", type=_names, default=["fppo-lp"], help="variants, e.g. ppo,fppo-lp,fppo-qp"
     )
-    run.add_argument(
-        "--minibatches",
-        type=_positive_int,
-        default=defaults.num_minibatches,
-        help="minibatches per epoch",
+    for name, text in HYPERPARAMETER_HELP.items():
+        grid.add_argument(f"--{name.replace('_', '-')}", type=_values, help=text)
+    grid.add_argument("--seeds", type=_positive_int, default=5, help="seeds 0 … N−1 per setting")
+    grid.add_argument(
+        "--chunk", type=_positive_int, help="runs per compiled call (default: what fits in memory)"
     )
-    run.add_argument(
-        "--epochs", type=_positive_int, default=defaults.num_epochs, help="epochs per update"
+    _add_run_flags(grid)
+
+    table = commands.add_parser("table", help="print a sweep's Table-1-style summary (Markdown)")
+    table.add_argument("directory", type=Path, help="a sweep's --output directory")
+    plot = commands.add_parser(
+        "plot", help="write a sweep's learning curves (and α/k chart) as PNG"
     )
-    run.add_argument(
-        "--hidden",
-        type=_sizes,
-        default=defaults.hidden_sizes,
-        help="hidden layer widths, e.g. 64,64",
-    )
-    for name, default in HYPERPARAMETER_DEFAULTS.items():
-        run.add_argument(
-            f"--{name.replace('_', '-')}", type=float, default=default, help=name.replace("_", " ")
-        )
-    run.add_argument("--no-obs-norm", action="store_true", help="do not normalise observations")
-    run.add_argument("--no-reward-norm", action="store_true", help="do not scale rewards")
-    run.add_argument("--no-value-clip", action="store_true", help="do not clip the value loss")
-    run.add_argument(
-        "--anneal-lr", action="store_true", help="decay the learning rate linearly to 0"
-    )
-    run.add_argument(
-        "--output", type=Path, help="directory for metrics.csv, config.json and summary.txt"
-    )
-    run.add_argument("--quiet", action="store_true", help="no progress lines (one compiled call)")
+    plot.add_argument("directory", type=Path, help="a sweep's --output directory")
 
     commands.add_parser("list", help="list the tasks and the variants")
     return parser
+
+
+def _config_overrides(args: argparse.Namespace) -> dict:
+    return {
+        "total_steps": args.steps,
+        "num_envs": args.num_envs,
+        "num_steps": args.num_steps,
+        "num_minibatches": args.minibatches,
+        "num_epochs": args.epochs,
+        "hidden_sizes": args.hidden,
+        "normalize_observations": not args.no_obs_norm,
+        "normalize_rewards": not args.no_reward_norm,
+        "clip_value_loss": not args.no_value_clip,
+        "anneal_learning_rate": args.anneal_lr,
+    }
 
 
 def write_run(result: TrainResult, directory: Path) -> None:
@@ -129,32 +202,58 @@ def write_run(result: TrainResult, directory: Path) -> None:
 
 
 def _train(args: argparse.Namespace) -> int:
-    overrides = {name: getattr(args, name) for name in HYPERPARAMETER_DEFAULTS}
+    optimisation = {
+        name: getattr(args, name)
+        for name in HYPERPARAMETER_DEFAULTS
+        if getattr(args, name) is not None
+    }
     result = train(
         args.env,
         args.variant,
         args.alpha,
         k=args.k,
         delta=args.delta,
-        epsilon=args.epsilon,
+        epsilon=0.2 if args.epsilon is None else args.epsilon,
         seed=args.seed,
-        total_steps=args.steps,
         progress=not args.quiet,
-        num_envs=args.num_envs,
-        num_steps=args.num_steps,
-        num_minibatches=args.minibatches,
-        num_epochs=args.epochs,
-        hidden_sizes=args.hidden,
-        normalize_observations=not args.no_obs_norm,
-        normalize_rewards=not args.no_reward_norm,
-        clip_value_loss=not args.no_value_clip,
-        anneal_learning_rate=args.anneal_lr,
-        **overrides,
+        **_config_overrides(args),
+        **optimisation,
     )
     print(result.summary())
     if args.output:
         write_run(result, args.output)
         print(f"wrote {args.output}/metrics.csv, config.json, summary.txt")
+    return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    grid = {"variant": args.variant}
+    grid.update({name: getattr(args, name) for name in HYPERPARAMETER_HELP if getattr(args, name)})
+    result = sweep(
+        args.env,
+        grid,
+        seeds=args.seeds,
+        chunk=args.chunk,
+        progress=not args.quiet,
+        **_config_overrides(args),
+    )
+    runs = len(result.runs)
+    print(
+        f"{runs} runs on {result.config['env']} in {result.train_seconds:.1f} s "
+        f"(+{result.compile_seconds:.1f} s compiling), {result.config['runs_per_call']} per call"
+    )
+    print(result.table())
+    if args.output:
+        result.write(args.output)
+        print(f"wrote {args.output}/curves.csv, sweep.json")
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from fppo_jax.plots import plot_sweep
+
+    for path in plot_sweep(SweepResult.read(args.directory), args.directory):
+        print(f"wrote {path}")
     return 0
 
 
@@ -174,9 +273,16 @@ def _list() -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    commands = {
+        "train": _train,
+        "sweep": _sweep,
+        "table": lambda a: print(SweepResult.read(a.directory).table()) or 0,
+        "plot": _plot,
+        "list": lambda a: _list(),
+    }
     try:
-        return _train(args) if args.command == "train" else _list()
-    except (ValueError, TrainingDiverged) as error:
+        return commands[args.command](args)
+    except (ValueError, FileNotFoundError, TrainingDiverged) as error:
         print(f"fppo-jax: error: {error}", file=sys.stderr)
         return 2
 

@@ -89,3 +89,47 @@ def test_console_entry_point_lists_tasks_and_variants():
         [sys.executable, "-m", "fppo_jax", "list"], capture_output=True, text=True, check=True
     )
     assert "cartpole" in out.stdout and "tr-ppo-rb" in out.stdout and "alpha 1.3" in out.stdout
+
+
+def test_sweep_then_table_then_plot(tmp_path, capsys):
+    code = main(
+        [
+            "sweep",
+            "--env",
+            "cartpole",
+            "--variant",
+            "ppo,fppo-lp",
+            "--alpha",
+            "1.1:1.5:0.2",
+            "--seeds",
+            "2",
+            "--steps",
+            "256",
+            "--quiet",
+            "--output",
+            str(tmp_path),
+            *TINY_FLAGS,
+        ]
+    )
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "8 runs on cartpole" in out and "| fppo-lp α=1.3 |" in out
+    rows = list(csv.DictReader(open(tmp_path / "curves.csv")))
+    assert len(rows) == 8 * 2 and {r["variant"] for r in rows} == {"ppo", "fppo-lp"}
+    assert main(["table", str(tmp_path)]) == 0
+    assert len(capsys.readouterr().out.strip().splitlines()) == 2 + 4  # header, rule, 4 settings
+    assert main(["plot", str(tmp_path)]) == 0
+    for name in ("curves.png", "ablation.png"):
+        assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_sweep_value_ranges_and_errors(tmp_path, capsys):
+    from fppo_jax.cli import _values
+
+    assert _values("1.1:1.5:0.1") == [1.1, 1.2, 1.3, 1.4, 1.5]
+    assert _values("0.1,0.4") == [0.1, 0.4]
+    with pytest.raises(SystemExit):
+        main(["sweep", "--alpha", "1.5:1.1:0.1"])
+    assert "expected start:stop:step" in capsys.readouterr().err
+    assert main(["table", str(tmp_path / "nothing")]) == 2
+    assert "not a sweep's output" in capsys.readouterr().err

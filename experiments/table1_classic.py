@@ -1,25 +1,24 @@
-"""Learning on the classic-control tasks: 5 variants × 5 seeds, 100k steps, the paper's protocol.
+"""The paper's Table 1, classic-control rows: 5 variants × 5 seeds × 100k steps per task.
 
-    python experiments/learning_classic.py [--tasks cartpole acrobot mountaincar] [--seeds 5]
+    python experiments/table1_classic.py [--tasks cartpole acrobot mountaincar] [--seeds 5]
 
-Each task's 25 runs (variants × seeds) are one vmapped, compiled program. "Max average
-return" follows SPEC §2: per seed, the mean return of the last 100 finished episodes after
-every update; averaged over seeds; the maximum of that curve, ± the standard deviation across
-seeds at that update. Writes experiments/results/learning_classic.md.
+Each task's 25 runs (variants × seeds) are one sweep: one vmapped, compiled program. "Max
+average return" follows SPEC §2: per seed, the mean return of the last 100 finished episodes
+after every update; averaged over seeds; the maximum of that curve, ± the standard deviation
+across seeds at that update. Writes experiments/results/table1_classic.md, with the escape-
+speed comparison (SPEC §3) beside it.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
-import warnings
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax import TASKS, TrainConfig, hyperparameters, make_env, make_train
+from fppo_jax import TrainConfig, sweep
+from fppo_jax.sweep import max_average_return
 
 VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
 PAPER = {  # SPEC §2, Table 1
@@ -29,43 +28,13 @@ PAPER = {  # SPEC §2, Table 1
 }
 
 
-def run_task(task: str, seeds: int, total_steps: int) -> dict[str, dict[str, np.ndarray]]:
-    """Metrics of every (variant, seed), as arrays [seed, update], from one compiled program."""
-    spec = TASKS[task]
-    settings = {"fppo-lp": {"alpha": spec.fppo_lp_alpha}, "fppo-qp": {"k": spec.fppo_qp_k}}
-    hps = [hyperparameters(v, **settings.get(v, {})) for v in VARIANTS for _ in range(seeds)]
-    stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *hps)
-    keys = jnp.stack([jax.random.key(seed) for seed in range(seeds)] * len(VARIANTS))
-    trainer = make_train(TrainConfig(total_steps=total_steps), make_env(task))
-    _, metrics = jax.jit(jax.vmap(trainer))(keys, stacked)
-    metrics = jax.device_get(metrics)
-    return {
-        v: {
-            name: np.asarray(values)[i * seeds : (i + 1) * seeds]
-            for name, values in metrics._asdict().items()
-        }
-        for i, v in enumerate(VARIANTS)
-    }
-
-
-def max_average_return(average_return: np.ndarray) -> tuple[float, float, int]:
-    """(max over updates of the seed-mean curve, std across seeds there, that update's index)."""
-    with warnings.catch_warnings():
-        # Updates before any episode finished are NaN for every seed (a 500-step Acrobot
-        # episode outlasts the first rollout): their mean is NaN, which is what is meant.
-        warnings.simplefilter("ignore", RuntimeWarning)
-        curve = np.nanmean(average_return, axis=0)
-    best = int(np.nanargmax(curve))
-    return float(curve[best]), float(np.nanstd(average_return[:, best])), best
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tasks", nargs="+", default=list(PAPER), choices=list(PAPER))
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=100_000)
     parser.add_argument(
-        "--output", type=Path, default=Path(__file__).parent / "results" / "learning_classic.md"
+        "--output", type=Path, default=Path(__file__).parent / "results" / "table1_classic.md"
     )
     args = parser.parse_args()
 
@@ -74,7 +43,7 @@ def main() -> None:
     lines = [
         "# Learning on the classic-control tasks",
         "",
-        "Command: `python experiments/learning_classic.py "
+        "Command: `python experiments/table1_classic.py "
         f"--tasks {' '.join(args.tasks)} --seeds {args.seeds} --steps {args.steps}`",
         "",
         f"Protocol (SPEC §2): {config.num_updates} updates × {config.samples_per_update} samples "
@@ -82,7 +51,7 @@ def main() -> None:
         f"{config.num_updates * config.samples_per_update:,} env steps per run, "
         f"{config.num_minibatches} minibatches, {config.num_epochs} epochs, Adam 3e-4, γ 0.99, "
         "λ 0.95, entropy 0, observation and reward normalisation; α and k from Table 2; "
-        f"seeds 0–{args.seeds - 1}. Each task's {runs} runs are one vmapped program.",
+        f"seeds 0–{args.seeds - 1}. Each task's {runs} runs are one sweep (one compiled program).",
         "",
         "Max average return: the maximum over updates of the seed-mean of the last-100-episode "
         "average return, ± the std across seeds at that update (the update's env steps in "
@@ -93,7 +62,7 @@ def main() -> None:
     ]
     for task in args.tasks:
         start = time.perf_counter()
-        results = run_task(task, args.seeds, args.steps)
+        result = sweep(task, {"variant": list(VARIANTS)}, seeds=args.seeds, total_steps=args.steps)
         seconds = time.perf_counter() - start
         lines += [
             f"## {task}",
@@ -105,7 +74,7 @@ def main() -> None:
             "|---|---|---|---|---|",
         ]
         for variant, paper in zip(VARIANTS, PAPER[task], strict=True):
-            m = results[variant]
+            m = result.setting_metrics(VARIANTS.index(variant))
             best, std, index = max_average_return(m["average_return"])
             steps = int(m["env_steps"][0, index])
             final = np.nanmean(m["average_return"][:, -1])

@@ -6,6 +6,14 @@ seeds, variants and their hyperparameters vmap into one program. :func:`train` r
 policy; :func:`sweep` runs a grid of settings × seeds as one program.
 """
 
+import os
+import sys
+
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+    # MuJoCo picks its OpenGL backend once, when first imported; without a display only an
+    # off-screen one (EGL) can render. A backend the user chose is kept.
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
 from fppo_jax.api import TrainingDiverged, TrainResult, train
 from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters
 from fppo_jax.envs import TASKS, Environment, make_env

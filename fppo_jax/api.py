@@ -5,14 +5,21 @@ from __future__ import annotations
 import dataclasses
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.config import HYPERPARAMETER_DEFAULTS, Hyperparameters, TrainConfig, hyperparameters
-from fppo_jax.envs import TASKS, Environment, as_environment
+from fppo_jax.config import (
+    HYPERPARAMETER_DEFAULTS,
+    Hyperparameters,
+    TrainConfig,
+    hyperparameters,
+    preset_config,
+)
+from fppo_jax.envs import TASKS, Box, Environment, as_environment
 from fppo_jax.execution import PROGRESS_LINES, Progress, compile_program, execute, print_progress
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import VARIANTS
@@ -50,6 +57,14 @@ class TrainResult:
     policy: Callable[..., jax.Array]
     compile_seconds: float
     train_seconds: float
+    env: Environment
+
+    def render(self, path: str | Path, *, seed: int = 0, max_steps: int = 1000) -> Path:
+        """Save one episode of the trained policy (the most likely actions) on a MuJoCo task
+        as a ``.png`` image strip or a ``.gif``; see :mod:`fppo_jax.render`."""
+        from fppo_jax.render import render_policy
+
+        return render_policy(self.env, self.policy, path, seed=seed, max_steps=max_steps)
 
     def summary(self) -> str:
         """A few lines: the run, its speed, its returns and its escape-speed diagnostic."""
@@ -62,7 +77,8 @@ class TrainResult:
         speed = steps / max(self.train_seconds, 1e-9)
         lines = [
             f"{c['variant']} on {c['env']} ({settings}), seed {c['seed']}",
-            f"  updates   {len(returns)} × {samples:,} samples = {steps:,} env steps",
+            f"  updates   {len(returns)} × {samples:,} samples = {steps:,} env steps "
+            f"(preset {c.get('preset', 'paper')})",
             f"  time      compile {self.compile_seconds:.1f} s, train {self.train_seconds:.1f} s "
             f"({speed:,.0f} env steps/s)",
         ]
@@ -95,6 +111,7 @@ def train(
     epsilon: float = 0.2,
     seed: int = 0,
     total_steps: int | None = None,
+    preset: str = "paper",
     progress: bool | Callable[[Progress], None] = False,
     **overrides: Any,
 ) -> TrainResult:
@@ -102,7 +119,9 @@ def train(
 
     `env` is a registered name (:data:`fppo_jax.envs.TASKS`), a gymnax environment or an
     :class:`~fppo_jax.envs.Environment`. For a registered task, FPPO-LP's α and FPPO-QP's k
-    default to the paper's Table 2 and `total_steps` to the paper's budget. `overrides` are
+    default to the paper's Table 2 and `total_steps` to the paper's budget. `preset` names the
+    run's shape (:data:`fppo_jax.config.PRESETS`): ``"paper"`` (SPEC §2: 8 environments × 256
+    steps) or ``"massive"`` (2048 environments × 16 steps, for a GPU). `overrides` are
     :class:`TrainConfig` fields (``num_envs``, ``num_steps``, ``num_minibatches``, …) and
     optimisation settings (``learning_rate``, ``gamma``, ``gae_lambda``, ``entropy_coef``,
     ``value_coef``, ``max_grad_norm``). Everything is checked before compiling.
@@ -111,13 +130,15 @@ def train(
     :class:`Progress`; ``False`` runs the whole training as one compiled call.
     Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite.
     """
-    config, hp, settings = _resolve(env, variant, alpha, k, delta, epsilon, total_steps, overrides)
+    config, hp, settings = _resolve(
+        env, variant, alpha, k, delta, epsilon, total_steps, preset, overrides
+    )
     environment = as_environment(env)
     trainer = make_train(config, environment)
     report = print_progress if progress is True else (progress or None)
     if progress is True:
         print(
-            f"{variant} on {env_name(env, environment)}: {describe(config)}; compiling…",
+            f"{variant} on {env_name(env, environment)}: {describe(config, preset)}; compiling…",
             file=sys.stderr,
             flush=True,
         )
@@ -137,12 +158,14 @@ def train(
             **settings,
             "env": env_name(env, environment),
             "seed": seed,
+            "preset": preset,
             **dataclasses.asdict(config),
         },
         state=state,
         policy=make_policy(trainer, state),
         compile_seconds=program.compile_seconds,
         train_seconds=train_seconds,
+        env=environment,
     )
 
 
@@ -154,6 +177,7 @@ def _resolve(
     delta: float | None,
     epsilon: float,
     total_steps: int | None,
+    preset: str,
     overrides: dict[str, Any],
 ) -> tuple[TrainConfig, Hyperparameters, dict[str, Any]]:
     """Defaults from the task table, then every check, before anything is compiled."""
@@ -162,7 +186,9 @@ def _resolve(
     optimisation = {
         name: overrides.pop(name) for name in HYPERPARAMETER_DEFAULTS if name in overrides
     }
-    config = resolve_config(env, total_steps, overrides, also_valid=tuple(HYPERPARAMETER_DEFAULTS))
+    config = resolve_config(
+        env, total_steps, overrides, also_valid=tuple(HYPERPARAMETER_DEFAULTS), preset=preset
+    )
     task = TASKS.get(env) if isinstance(env, str) else None
     if task and variant == "fppo-lp" and alpha is None:
         alpha = task.fppo_lp_alpha
@@ -177,9 +203,14 @@ def _resolve(
 
 
 def resolve_config(
-    env: Any, total_steps: int | None, overrides: dict[str, Any], also_valid: tuple[str, ...] = ()
+    env: Any,
+    total_steps: int | None,
+    overrides: dict[str, Any],
+    also_valid: tuple[str, ...] = (),
+    preset: str = "paper",
 ) -> TrainConfig:
-    """The checked TrainConfig of `overrides`, with the task's step budget by default."""
+    """The checked TrainConfig of `preset` and `overrides`, with the task's step budget by
+    default."""
     if isinstance(env, str) and env not in TASKS:
         raise ValueError(f"unknown environment {env!r}; registered: {', '.join(TASKS)}")
     unknown = sorted(set(overrides) - set(CONFIG_FIELDS))
@@ -194,7 +225,7 @@ def resolve_config(
     elif "total_steps" not in values:
         task = TASKS.get(env) if isinstance(env, str) else None
         values["total_steps"] = task.total_steps if task else TrainConfig.total_steps
-    return TrainConfig(**values)
+    return preset_config(preset, **values)
 
 
 def _as_float(x: jax.Array) -> float:
@@ -202,12 +233,17 @@ def _as_float(x: jax.Array) -> float:
     return float(str(np.asarray(x)[()]))
 
 
-def describe(config: TrainConfig) -> str:
-    """One run's shape, in words."""
+def describe(config: TrainConfig, preset: str | None = None) -> str:
+    """One run's length and shape, in words."""
+    prefix = "" if preset is None else f"preset {preset}, "
+    return f"{prefix}{config.num_updates} updates × {describe_update(config)}"
+
+
+def describe_update(config: TrainConfig) -> str:
+    """One update's shape, in words."""
     return (
-        f"{config.num_updates} updates × {config.samples_per_update:,} samples "
-        f"({config.num_envs} envs × {config.num_steps} steps), {config.num_minibatches} "
-        f"minibatches × {config.num_epochs} epochs"
+        f"{config.samples_per_update:,} samples ({config.num_envs} envs × {config.num_steps} "
+        f"steps), {config.num_minibatches} minibatches × {config.num_epochs} epochs"
     )
 
 
@@ -216,14 +252,20 @@ def env_name(env: Any, environment: Environment) -> str:
 
 
 def make_policy(trainer: Trainer, state: TrainState) -> Callable[..., jax.Array]:
-    """An action function of raw observations: the mode without a key, a sample with one."""
+    """An action function of raw observations: the mode without a key, a sample with one;
+    continuous actions are clipped to the action bounds, as in training."""
+    space = trainer.env.action_space
 
-    def distribution(obs: jax.Array) -> Any:
+    def act(obs: jax.Array, key: jax.Array | None) -> jax.Array:
         obs = trainer.network_input(state.obs_stats, jnp.asarray(obs, jnp.float32))
-        return trainer.networks.distribution(state.params, obs)
+        dist = trainer.networks.distribution(state.params, obs)
+        action = dist.mode() if key is None else dist.sample(key)
+        if isinstance(space, Box):
+            action = jnp.clip(action, jnp.asarray(space.low), jnp.asarray(space.high))
+        return action
 
-    mode = jax.jit(lambda obs: distribution(obs).mode())
-    sample = jax.jit(lambda obs, key: distribution(obs).sample(key))
+    mode = jax.jit(lambda obs: act(obs, None))
+    sample = jax.jit(act)
 
     def policy(obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
         return mode(obs) if key is None else sample(obs, key)

@@ -10,8 +10,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from fppo_jax.api import TrainingDiverged, TrainResult, train
-from fppo_jax.config import HYPERPARAMETER_DEFAULTS, TrainConfig
+from fppo_jax.api import TrainingDiverged, TrainResult, describe_update, train
+from fppo_jax.config import HYPERPARAMETER_DEFAULTS, PRESETS, preset_config
 from fppo_jax.envs import TASKS
 from fppo_jax.objectives import DEFAULTS, VARIANTS
 from fppo_jax.sweep import SweepResult, sweep
@@ -62,35 +62,29 @@ def _names(text: str) -> list[str]:
 
 def _add_run_flags(command: argparse.ArgumentParser) -> None:
     """The task, the budget and the static shape of a run, shared by train and sweep."""
-    defaults = TrainConfig()
     command.add_argument("--env", default="cartpole", choices=list(TASKS), help="task")
     command.add_argument(
         "--steps", type=_positive_int, help="env steps per run (default: the paper's budget)"
     )
     command.add_argument(
-        "--num-envs", type=_positive_int, default=defaults.num_envs, help="parallel environments"
+        "--preset",
+        default="paper",
+        choices=list(PRESETS),
+        help="run shape: paper (8 envs × 256 steps, 32 minibatches × 10 epochs) or massive "
+        "(2048 envs × 16 steps, 16 minibatches × 4 epochs, for a GPU); the flags below "
+        "override it",
     )
-    command.add_argument(
-        "--num-steps",
-        type=_positive_int,
-        default=defaults.num_steps,
-        help="steps per environment per update",
-    )
-    command.add_argument(
-        "--minibatches",
-        type=_positive_int,
-        default=defaults.num_minibatches,
-        help="minibatches per epoch",
-    )
-    command.add_argument(
-        "--epochs", type=_positive_int, default=defaults.num_epochs, help="epochs per update"
-    )
-    command.add_argument(
-        "--hidden",
-        type=_sizes,
-        default=defaults.hidden_sizes,
-        help="hidden layer widths, e.g. 64,64",
-    )
+    shape = {
+        "--num-envs": "parallel environments",
+        "--num-steps": "steps per environment per update",
+        "--minibatches": "minibatches per epoch",
+        "--epochs": "epochs per update",
+        "--resets-per-rollout": "reset states drawn per environment per rollout (default: "
+        "one per step, so every episode starts fresh)",
+    }
+    for flag, text in shape.items():
+        command.add_argument(flag, type=_positive_int, help=text + " (default: the preset's)")
+    command.add_argument("--hidden", type=_sizes, help="hidden layer widths (default 64,64)")
     command.add_argument("--no-obs-norm", action="store_true", help="do not normalise observations")
     command.add_argument("--no-reward-norm", action="store_true", help="do not scale rewards")
     command.add_argument("--no-value-clip", action="store_true", help="do not clip the value loss")
@@ -135,6 +129,12 @@ def build_parser() -> argparse.ArgumentParser:
     for name, text in HYPERPARAMETER_HELP.items():
         run.add_argument(f"--{name.replace('_', '-')}", type=float, help=text)
     run.add_argument("--seed", type=int, default=0, help="random seed")
+    run.add_argument(
+        "--render",
+        type=Path,
+        metavar="PATH",
+        help="MuJoCo tasks: save an episode of the trained policy as a .png strip or a .gif",
+    )
     _add_run_flags(run)
 
     grid = commands.add_parser(
@@ -169,13 +169,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _config_overrides(args: argparse.Namespace) -> dict:
-    return {
-        "total_steps": args.steps,
+    """The run flags given, as :class:`TrainConfig` fields over the preset's."""
+    given = {
         "num_envs": args.num_envs,
         "num_steps": args.num_steps,
         "num_minibatches": args.minibatches,
         "num_epochs": args.epochs,
+        "resets_per_rollout": args.resets_per_rollout,
         "hidden_sizes": args.hidden,
+    }
+    return {
+        "total_steps": args.steps,
+        "preset": args.preset,
+        **{name: value for name, value in given.items() if value is not None},
         "normalize_observations": not args.no_obs_norm,
         "normalize_rewards": not args.no_reward_norm,
         "clip_value_loss": not args.no_value_clip,
@@ -202,6 +208,8 @@ def write_run(result: TrainResult, directory: Path) -> None:
 
 
 def _train(args: argparse.Namespace) -> int:
+    if args.render and args.render.suffix not in (".png", ".gif"):
+        raise ValueError(f"--render takes a .png or .gif path, not {args.render}")
     optimisation = {
         name: getattr(args, name)
         for name in HYPERPARAMETER_DEFAULTS
@@ -223,6 +231,14 @@ def _train(args: argparse.Namespace) -> int:
     if args.output:
         write_run(result, args.output)
         print(f"wrote {args.output}/metrics.csv, config.json, summary.txt")
+    if args.render:
+        from fppo_jax.render import RenderingUnavailable
+
+        try:
+            print(f"wrote {result.render(args.render)}")
+        except (RenderingUnavailable, TypeError) as error:
+            print(f"fppo-jax: not rendered: {error}", file=sys.stderr)
+            return 2
     return 0
 
 
@@ -264,6 +280,10 @@ def _list() -> int:
             f"  {task.name:<12} {task.description}; {task.total_steps:,} steps, "
             f"fppo-lp alpha {task.fppo_lp_alpha}, fppo-qp k {task.fppo_qp_k}"
         )
+    print("presets:")
+    for name in PRESETS:
+        config = preset_config(name, total_steps=10**9)
+        print(f"  {name:<10} {describe_update(config)} per update")
     print("variants:")
     for name in VARIANTS:
         params = ", ".join(f"{k} {v}" for k, v in DEFAULTS[name].items()) or "-"

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -31,6 +32,11 @@ class TrainConfig:
     normalize_rewards: bool = True
     clip_value_loss: bool = True
     anneal_learning_rate: bool = False
+    # Reset states drawn per environment per rollout. None: one per step, so every episode
+    # starts from a fresh draw. A small pool (MuJoCo with thousands of environments, where a
+    # reset costs a fifth of a step) is cycled by environments that end several episodes in
+    # one rollout.
+    resets_per_rollout: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden_sizes", tuple(int(h) for h in self.hidden_sizes))
@@ -38,6 +44,9 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        pool = self.resets_per_rollout
+        if pool is not None and (isinstance(pool, bool) or not isinstance(pool, int) or pool < 1):
+            raise ValueError(f"resets_per_rollout must be a positive integer or None, got {pool!r}")
         if not self.hidden_sizes or min(self.hidden_sizes) < 1:
             raise ValueError(f"hidden_sizes must be positive layer widths, got {self.hidden_sizes}")
         if self.samples_per_update % self.num_minibatches:
@@ -63,6 +72,29 @@ class TrainConfig:
     def num_updates(self) -> int:
         """Whole updates that fit in `total_steps` (the budget is never exceeded)."""
         return self.total_steps // self.samples_per_update
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # SPEC §2, baselines' ppo2: 2048 samples per update from 8 environments × 256 steps.
+    "paper": {"num_envs": 8, "num_steps": 256, "num_minibatches": 32, "num_epochs": 10},
+    # Thousands of environments in lockstep with short unrolls and large minibatches (as Brax
+    # and MuJoCo Playground train), for throughput on a GPU: 32,768 samples per update, one
+    # gradient step per 512 of them. Meant for budgets of several million steps.
+    "massive": {
+        "num_envs": 2048,
+        "num_steps": 16,
+        "num_minibatches": 16,
+        "num_epochs": 4,
+        "resets_per_rollout": 1,
+    },
+}
+
+
+def preset_config(preset: str, **overrides: Any) -> TrainConfig:
+    """The :class:`TrainConfig` of preset `preset` ("paper" or "massive"), with `overrides`."""
+    if preset not in PRESETS:
+        raise ValueError(f"unknown preset {preset!r}; valid presets: {', '.join(PRESETS)}")
+    return TrainConfig(**{**PRESETS[preset], **overrides})
 
 
 @jax.tree_util.register_dataclass

@@ -113,6 +113,17 @@ def where_done(done: jax.Array, reset: Any, stepped: Any) -> Any:
     return jax.tree.map(select, reset, stepped)
 
 
+def _mujoco(name: str, episode_length: int) -> Callable[[], Environment]:
+    def make() -> Environment:
+        from fppo_jax import mujoco_envs
+
+        if name == "swimmer":
+            return mujoco_envs.Swimmer(episode_length=episode_length)
+        return mujoco_envs.brax_environment(name, episode_length)
+
+    return make
+
+
 def _gymnax(env_id: str, max_steps: int) -> Callable[[], GymnaxEnvironment]:
     def make() -> GymnaxEnvironment:
         env, params = gymnax.make(env_id)
@@ -160,8 +171,21 @@ TASKS: dict[str, Task] = {
             0.4,
             "MountainCar-v0: 200-step episodes, sparse reward, discrete",
         ),
+        *(
+            Task(name, _mujoco(name, limit), 1_000_000, alpha, k, f"{title} on MJX: {text}")
+            for name, title, limit, alpha, k, text in (
+                ("hopper", "Hopper", 1000, 1.3, 0.2, "1000-step episodes, 3 actions"),
+                ("walker2d", "Walker2d", 1000, 1.3, 0.1, "1000-step episodes, 6 actions"),
+                ("halfcheetah", "HalfCheetah", 1000, 1.3, 0.4, "1000-step episodes, 6 actions"),
+                ("ant", "Ant", 1000, 1.3, 0.4, "1000-step episodes, 8 actions"),
+                ("reacher", "Reacher", 50, 1.1, 0.4, "50-step episodes, 2 actions"),
+                ("swimmer", "Swimmer", 1000, 1.1, 0.1, "1000-step episodes, 2 actions"),
+            )
+        ),
     )
 }
+
+MUJOCO_TASKS: tuple[str, ...] = ("hopper", "walker2d", "halfcheetah", "ant", "reacher", "swimmer")
 
 
 def make_env(name: str) -> Environment:
@@ -171,15 +195,21 @@ def make_env(name: str) -> Environment:
     return TASKS[name].make()
 
 
-def as_environment(env: str | Environment | GymnaxEnv) -> Environment:
-    """A registered name, a gymnax environment (default parameters) or an :class:`Environment`."""
+def as_environment(env: str | Environment | Any) -> Environment:
+    """A registered name, a gymnax environment (default parameters), a Brax ``Env``
+    (1000-step episodes) or an :class:`Environment`."""
     if isinstance(env, str):
         return make_env(env)
     if isinstance(env, GymnaxEnv):
         return GymnaxEnvironment(env, env.default_params)
+    from fppo_jax import mujoco_envs
+
+    if mujoco_envs.is_brax_env(env):
+        return mujoco_envs.BraxEnvironment(env)
     if isinstance(env, Environment):
         return env
     raise TypeError(
-        f"expected a registered environment name ({', '.join(TASKS)}), a gymnax environment or "
-        f"an object with observation_size, action_space, reset and step; got {type(env).__name__}"
+        f"expected a registered environment name ({', '.join(TASKS)}), a gymnax or Brax "
+        "environment, or an object with observation_size, action_space, reset and step; got "
+        + type(env).__name__
     )

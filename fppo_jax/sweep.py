@@ -207,6 +207,7 @@ def sweep(
     *,
     chunk: int | None = None,
     total_steps: int | None = None,
+    preset: str = "paper",
     progress: bool | Callable[[Progress], None] = False,
     **overrides: Any,
 ) -> SweepResult:
@@ -214,7 +215,8 @@ def sweep(
 
     `seeds` is a count (0 … n−1) or a list; run (setting, seed) starts from
     ``jax.random.key(seed)``, as ``train(..., seed=seed)`` does, and matches that run.
-    `overrides` are :class:`~fppo_jax.config.TrainConfig` fields and fixed values of sweepable
+    `preset` and `overrides` are as in :func:`~fppo_jax.train`: a preset's
+    :class:`~fppo_jax.config.TrainConfig`, its fields, and fixed values of sweepable
     hyperparameters. `chunk` is the number of runs per compiled call (default: as many as fit
     in half the free memory). A run that diverges is reported and recorded in
     ``SweepResult.diverged``; the others go on.
@@ -223,7 +225,7 @@ def sweep(
     clash = sorted(set(fixed) & set(grid))
     if clash:
         raise ValueError(f"{', '.join(clash)} given both in the grid and as a fixed value")
-    config = resolve_config(env, total_steps, overrides, also_valid=SWEEPABLE)
+    config = resolve_config(env, total_steps, overrides, also_valid=SWEEPABLE, preset=preset)
     settings = expand_grid({**grid, **fixed}, env if isinstance(env, str) else None)
     hps = [hyperparameters(**setting) for setting in settings]  # checks every setting first
     seeds = list(range(seeds)) if isinstance(seeds, int) else [int(s) for s in seeds]
@@ -246,7 +248,7 @@ def sweep(
     if progress is True:
         print(
             f"sweep on {env_name(env, environment)}: {len(settings)} settings × {len(seeds)} "
-            f"seeds = {len(runs)} runs, {size} per compiled call; each {describe(config)}",
+            f"seeds = {len(runs)} runs, {size} per compiled call; each {describe(config, preset)}",
             file=sys.stderr,
             flush=True,
         )
@@ -283,6 +285,7 @@ def sweep(
             "env": env_name(env, environment),
             "grid": {name: _as_list(name, v) for name, v in {**grid, **fixed}.items()},
             "runs_per_call": size,
+            "preset": preset,
             **dataclasses.asdict(config),
         },
         compile_seconds=program.compile_seconds,

@@ -280,18 +280,27 @@ class Trainer:
         action_space = env.action_space
         noise_key, step_key, reset_key = jax.random.split(key, 3)
         # Everything random in the rollout is drawn here, in vectorised batches: the action
-        # noise, the step keys and a fresh reset state for every (step, environment), taken
-        # where that environment's episode ends. In the sequential loop, per-step random draws
-        # and resets would cost more than the environment's own dynamics.
+        # noise, the step keys and the reset states taken where an episode ends. In the
+        # sequential loop, per-step random draws and resets would cost more than the
+        # environment's own dynamics.
         shape = (config.num_steps, config.num_envs)
         action_noise = networks.action_noise(noise_key, shape)
         step_keys = jax.random.split(step_key, shape)
-        reset_states, reset_obs = draw_resets(env, reset_key, shape)
+        pool = config.resets_per_rollout or config.num_steps
+        reset_states, reset_obs = draw_resets(env, reset_key, (pool, config.num_envs))
+        env_index = jnp.arange(config.num_envs)
         step_env = jax.vmap(env.step)
 
         def step(carry: tuple, inputs: tuple) -> tuple[tuple, Transition]:
-            env_state, obs, episode_return, discounted_return = carry
-            noise, keys, reset_state, first_obs = inputs
+            env_state, obs, episode_return, discounted_return, episodes_ended = carry
+            noise, keys, t = inputs
+            # Without a pool, an environment ending at step t takes row t, so every reset is
+            # fresh; with one, its episodes take the pool's rows in turn.
+            if config.resets_per_rollout is None:
+                take = lambda x: x[t]  # noqa: E731
+            else:
+                take = lambda x: x[episodes_ended % pool, env_index]  # noqa: E731
+            reset_state, first_obs = jax.tree.map(take, (reset_states, reset_obs))
             seen = self.network_input(state.obs_stats, obs)
             dist = networks.distribution(state.params, seen)
             action = dist.sample_from(noise)
@@ -323,13 +332,15 @@ class Trainer:
                 where_done(done, first_obs, out.obs),
                 jnp.where(done, 0.0, episode_return),
                 jnp.where(done, 0.0, discounted_return),
+                episodes_ended + done,
             )
             return carry, transition
 
-        carry = (state.env_state, state.obs, state.episode_return, state.discounted_return)
-        inputs = (action_noise, step_keys, reset_states, reset_obs)
+        ended = jnp.zeros(config.num_envs, jnp.int32)
+        carry = (state.env_state, state.obs, state.episode_return, state.discounted_return, ended)
+        inputs = (action_noise, step_keys, jnp.arange(config.num_steps))
         carry, traj = jax.lax.scan(step, carry, inputs)
-        return traj, carry
+        return traj, carry[:4]
 
     def _epochs(
         self, state: TrainState, hp: Hyperparameters, batch: Batch, key: jax.Array

@@ -1,0 +1,202 @@
+"""MuJoCo tasks on MJX: an adapter for Brax environments, and Swimmer built on MJX itself.
+
+Both keep gym's episode limit in their state and report it as truncation, separately from
+the environment's own termination, so that the trainer bootstraps the one and not the other.
+Brax and MJX are imported on first use: the classic tasks never pay for them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import warnings
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+
+from fppo_jax.envs import Box, Step
+
+
+class Timed(NamedTuple):
+    """An environment's own state and the steps taken in its episode."""
+
+    inner: Any
+    steps: jax.Array
+
+
+def _import_quietly() -> None:
+    """Import Brax and MJX without their import-time chatter.
+
+    MJX prints that its optional Warp backend is missing, and Brax warns that its own
+    pipelines are unmaintained; neither concerns MJX environments, and both would otherwise
+    interleave with a run's progress lines.
+    """
+    chatter = io.StringIO()
+    with (
+        contextlib.redirect_stdout(chatter),
+        contextlib.redirect_stderr(chatter),
+        warnings.catch_warnings(),
+    ):
+        warnings.simplefilter("ignore")
+        import brax.envs
+        import brax.io.mjcf  # noqa: F401
+        from mujoco import mjx  # noqa: F401
+
+
+def is_brax_env(env: Any) -> bool:
+    """Whether `env` is a Brax ``Env`` (checked without importing Brax if it is not loaded)."""
+    module = type(env).__module__
+    if not module.startswith("brax"):
+        return False
+    _import_quietly()
+    from brax.envs.base import Env
+
+    return isinstance(env, Env)
+
+
+def _action_box(ctrl_range: Any, action_size: int) -> Box:
+    """The actuators' control range, or [-1, 1] where the model leaves it unlimited."""
+    low = [-1.0] * action_size
+    high = [1.0] * action_size
+    for i, (lo, hi) in enumerate(ctrl_range[:action_size]):
+        if lo < hi:
+            low[i], high[i] = float(lo), float(hi)
+    return Box(tuple(low), tuple(high))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class BraxEnvironment:
+    """A Brax ``Env`` (any backend; the registered tasks use ``mjx``) with an episode limit.
+
+    Brax's ``done`` is the environment's termination (a fallen Hopper, say); reaching
+    `episode_length` steps is truncation.
+    """
+
+    env: Any
+    episode_length: int = 1000
+
+    @property
+    def observation_size(self) -> int:
+        return int(self.env.observation_size)
+
+    @property
+    def action_space(self) -> Box:
+        return _action_box(self.mj_model.actuator_ctrlrange, int(self.env.action_size))
+
+    @property
+    def mj_model(self) -> mujoco.MjModel:
+        return self.env.sys.mj_model
+
+    @property
+    def dt(self) -> float:
+        return float(self.env.dt)
+
+    def qpos(self, state: Timed) -> jax.Array:
+        """Generalised positions, for rendering."""
+        return state.inner.pipeline_state.q
+
+    def reset(self, key: jax.Array) -> tuple[Timed, jax.Array]:
+        state = self.env.reset(key)
+        return Timed(state, jnp.zeros((), jnp.int32)), state.obs.astype(jnp.float32)
+
+    def step(self, key: jax.Array, state: Timed, action: jax.Array) -> tuple[Timed, Step]:
+        inner = self.env.step(state.inner, action)
+        steps = state.steps + 1
+        terminated = inner.done > 0
+        return Timed(inner, steps), Step(
+            obs=inner.obs.astype(jnp.float32),
+            reward=inner.reward.astype(jnp.float32),
+            terminated=terminated,
+            truncated=(steps >= self.episode_length) & ~terminated,
+        )
+
+
+def brax_environment(name: str, episode_length: int = 1000, **kwargs: Any) -> BraxEnvironment:
+    """Brax's environment `name` on the MJX backend."""
+    _import_quietly()
+    from brax import envs
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        env = envs.get_environment(name, backend="mjx", **kwargs)
+    return BraxEnvironment(env, episode_length)
+
+
+def swimmer_model() -> mujoco.MjModel:
+    """gym's Swimmer model (as shipped with Brax): three capsules in a viscous fluid."""
+    _import_quietly()
+    from etils import epath
+
+    path = epath.resource_path("brax") / "envs/assets/swimmer.xml"
+    return mujoco.MjModel.from_xml_path(str(path))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Swimmer:
+    """gym's Swimmer (v2–v4 dynamics and reward) stepped by MJX.
+
+    Brax's own Swimmer runs only on its ``generalized`` pipeline; MJX runs the MuJoCo model
+    directly, fluid forces included. Reward: forward velocity of the front tip minus
+    ``ctrl_cost_weight`` · ‖a‖²; observation: joint angles (positions excluded) and all
+    velocities; no termination, truncation at `episode_length`.
+    """
+
+    mj_model: mujoco.MjModel = dataclasses.field(default_factory=swimmer_model)
+    episode_length: int = 1000
+    frame_skip: int = 4
+    ctrl_cost_weight: float = 1e-4
+    reset_noise_scale: float = 0.1
+
+    def __post_init__(self) -> None:
+        _import_quietly()
+        from mujoco import mjx
+
+        object.__setattr__(self, "_model", mjx.put_model(self.mj_model))
+
+    @property
+    def observation_size(self) -> int:
+        return int(self.mj_model.nq - 2 + self.mj_model.nv)
+
+    @property
+    def action_space(self) -> Box:
+        return _action_box(self.mj_model.actuator_ctrlrange, int(self.mj_model.nu))
+
+    @property
+    def dt(self) -> float:
+        return float(self.mj_model.opt.timestep) * self.frame_skip
+
+    def qpos(self, state: Timed) -> jax.Array:
+        return state.inner.qpos
+
+    def reset(self, key: jax.Array) -> tuple[Timed, jax.Array]:
+        from mujoco import mjx
+
+        qpos_key, qvel_key = jax.random.split(key)
+        m, scale = self.mj_model, self.reset_noise_scale
+        noise = lambda key, n: jax.random.uniform(key, (n,), minval=-scale, maxval=scale)  # noqa: E731
+        qpos = jnp.asarray(m.qpos0) + noise(qpos_key, m.nq)
+        qvel = noise(qvel_key, m.nv)
+        data = mjx.make_data(self._model).replace(qpos=qpos, qvel=qvel)
+        return Timed(data, jnp.zeros((), jnp.int32)), self._observation(data)
+
+    def step(self, key: jax.Array, state: Timed, action: jax.Array) -> tuple[Timed, Step]:
+        from mujoco import mjx
+
+        before = state.inner.qpos[0]
+        data = state.inner.replace(ctrl=action)
+        data = jax.lax.fori_loop(0, self.frame_skip, lambda _, d: mjx.step(self._model, d), data)
+        velocity = (data.qpos[0] - before) / self.dt
+        reward = velocity - self.ctrl_cost_weight * jnp.sum(jnp.square(action))
+        steps = state.steps + 1
+        return Timed(data, steps), Step(
+            obs=self._observation(data),
+            reward=reward.astype(jnp.float32),
+            terminated=jnp.zeros((), bool),
+            truncated=steps >= self.episode_length,
+        )
+
+    def _observation(self, data: Any) -> jax.Array:
+        return jnp.concatenate([data.qpos[2:], data.qvel]).astype(jnp.float32)

@@ -89,6 +89,17 @@ def test_console_entry_point_lists_tasks_and_variants():
         [sys.executable, "-m", "fppo_jax", "list"], capture_output=True, text=True, check=True
     )
     assert "cartpole" in out.stdout and "tr-ppo-rb" in out.stdout and "alpha 1.3" in out.stdout
+    assert "swimmer      Swimmer on MJX" in out.stdout and "fppo-qp k 0.1" in out.stdout
+    assert "massive    32,768 samples (2048 envs × 16 steps)" in out.stdout
+    assert "Failed to import" not in out.stdout + out.stderr
+
+
+def test_render_needs_a_picture_format_and_a_mujoco_task(tmp_path, capsys):
+    args = ["train", "--env", "cartpole", "--steps", "2048", "--quiet"]
+    assert main([*args, "--render", str(tmp_path / "x.mp4")]) == 2
+    assert "--render takes a .png or .gif path" in capsys.readouterr().err
+    assert main([*args, "--render", str(tmp_path / "x.png")]) == 2
+    assert "not rendered: GymnaxEnvironment is not a MuJoCo environment" in capsys.readouterr().err
 
 
 def test_sweep_then_table_then_plot(tmp_path, capsys):

@@ -16,6 +16,7 @@ from fppo_jax import (
     make_train,
     train,
 )
+from fppo_jax.config import preset_config
 from fppo_jax.envs import Discrete, Step
 from fppo_jax.trainer import RETURN_WINDOW, _average_return, _push_returns
 
@@ -210,3 +211,25 @@ def test_reset_pool_is_cycled_and_default_resets_are_fresh(pool):
         assert np.all(starts[0] != starts[1])
     with pytest.raises(ValueError, match="resets_per_rollout must be a positive integer"):
         TrainConfig(resets_per_rollout=0)
+
+
+def test_presets_set_the_shape_and_overrides_win():
+    massive = preset_config("massive", total_steps=10**7)
+    assert (massive.num_envs, massive.num_steps, massive.samples_per_update) == (2048, 16, 32768)
+    assert massive.resets_per_rollout == 1
+    assert preset_config("paper", total_steps=10**6) == TrainConfig(total_steps=10**6)
+    with pytest.raises(ValueError, match="unknown preset 'huge'; valid presets: paper, massive"):
+        train("cartpole", preset="huge")
+    result = train(
+        "cartpole",
+        "ppo",
+        preset="massive",
+        total_steps=256,
+        num_envs=8,
+        num_steps=16,
+        num_minibatches=2,
+        num_epochs=1,
+    )
+    assert result.config["preset"] == "massive" and result.config["resets_per_rollout"] == 1
+    assert result.config["num_envs"] == 8
+    assert "(preset massive)" in result.summary()

@@ -1,0 +1,223 @@
+"""Training throughput on a MuJoCo task (MJX): the environment alone, this trainer, Brax's PPO.
+
+    python experiments/bench_mujoco.py --env hopper --num-envs 128          # CPU
+    python experiments/bench_mujoco.py --env ant --preset massive            # GPU
+
+Measured side by side in one run, on the same task, environment count and samples per update:
+(a) the environment alone: random actions in a jitted scan, vmapped over the environments,
+    restarting ended episodes from one reset state per environment per rollout, as (b) does;
+(b) this trainer (`fppo_jax.train`, PPO), the whole run one compiled call, compile timed apart;
+(c) Brax's own trainer, `brax.training.agents.ppo.train`, with the same environments, unroll
+    length, minibatches, epochs and 64×64 networks; its figure is its own ``training/sps``
+    for the last of its three training epochs, evaluation off (the first two epochs both
+    compile: under JAX 0.10 Brax's epoch function is compiled again for the second call).
+Writes experiments/results/bench_mujoco_<env>_<N>envs_<platform>.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import functools
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+
+import fppo_jax
+from fppo_jax.api import describe
+from fppo_jax.config import preset_config
+from fppo_jax.envs import draw_resets, make_env, where_done
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def env_alone(env, num_envs: int, num_steps: int, num_rollouts: int):
+    """(a): random actions for num_rollouts × num_steps steps of num_envs environments."""
+    space = env.action_space
+    low, high = jnp.asarray(space.low), jnp.asarray(space.high)
+
+    def run(key: jax.Array) -> jax.Array:
+        init_key, key = jax.random.split(key)
+        state, _ = draw_resets(env, init_key, (num_envs,))
+
+        def rollout(state, key):
+            action_key, step_key, reset_key = jax.random.split(key, 3)
+            shape = (num_steps, num_envs)
+            actions = jax.random.uniform(action_key, (*shape, space.size), minval=low, maxval=high)
+            resets, _ = draw_resets(env, reset_key, (num_envs,))
+
+            def step(state, inputs):
+                keys, action = inputs
+                state, out = jax.vmap(env.step)(keys, state, action)
+                return where_done(out.terminated | out.truncated, resets, state), out.reward
+
+            keys = jax.random.split(step_key, shape)
+            state, rewards = jax.lax.scan(step, state, (keys, actions))
+            return state, rewards.sum()
+
+        return jax.lax.scan(rollout, state, jax.random.split(key, num_rollouts))[1].sum()
+
+    return run
+
+
+def timed(fn, *args) -> tuple[float, float]:
+    """(compile seconds, run seconds) of jax.jit(fn)(*args)."""
+    start = time.perf_counter()
+    compiled = jax.jit(fn).lower(*args).compile()
+    compile_seconds = time.perf_counter() - start
+    start = time.perf_counter()
+    jax.block_until_ready(compiled(*args))
+    return compile_seconds, time.perf_counter() - start
+
+
+def brax_ppo(env_name: str, config, total_steps: int) -> tuple[float, float]:
+    """(c): Brax's PPO trainer on the same task and shape; (its third epoch's sps, wall s)."""
+    from brax.training.agents.ppo import networks as ppo_networks
+    from brax.training.agents.ppo import train as ppo
+
+    if not hasattr(jax, "device_put_replicated"):
+        # Brax 0.14 calls this, which JAX 0.10 removed; one device is all it is given here.
+        def device_put_replicated(x, devices):
+            return jax.tree.map(
+                lambda a: jax.device_put(jnp.stack([a] * len(devices)), devices[0]), x
+            )
+
+        jax.device_put_replicated = device_put_replicated
+
+    reports = []
+    start = time.perf_counter()
+    ppo.train(
+        environment=make_env(env_name).env,
+        num_timesteps=total_steps,
+        episode_length=1000,
+        num_envs=config.num_envs,
+        unroll_length=config.num_steps,
+        batch_size=config.num_envs // config.num_minibatches,
+        num_minibatches=config.num_minibatches,
+        num_updates_per_batch=config.num_epochs,
+        learning_rate=3e-4,
+        entropy_cost=0.0,
+        discounting=0.99,
+        gae_lambda=0.95,
+        clipping_epsilon=0.2,
+        max_grad_norm=0.5,
+        normalize_observations=True,
+        # Its `bootstrap_on_timeout=True` needs an info key its own wrappers do not set in
+        # 0.14; bootstrapping or not costs the same, so the default is timed.
+        network_factory=functools.partial(
+            ppo_networks.make_ppo_networks,
+            policy_hidden_layer_sizes=(64, 64),
+            value_hidden_layer_sizes=(64, 64),
+        ),
+        num_evals=4,
+        run_evals=False,
+        progress_fn=lambda step, metrics: reports.append(dict(metrics)),
+    )
+    wall = time.perf_counter() - start
+    rates = [float(m["training/sps"]) for m in reports if "training/sps" in m]
+    return rates[-1], wall
+
+
+def machine() -> str:
+    device = jax.devices()[0]
+    name = "" if device.platform == "cpu" else f" {device.device_kind}"
+    return (
+        f"{device.platform.upper()}{name}, {os.cpu_count()} CPU cores "
+        f"({platform.processor() or platform.machine()}), jax {jax.__version__}"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="hopper")
+    parser.add_argument("--preset", default="paper", choices=["paper", "massive"])
+    parser.add_argument("--num-envs", type=int, help="default: the preset's")
+    parser.add_argument("--num-steps", type=int, default=16, help="unroll length per update")
+    parser.add_argument("--minibatches", type=int, default=4)
+    parser.add_argument("--epochs", type=int, default=4)
+    parser.add_argument("--updates", type=int, default=40, help="updates timed per trainer")
+    parser.add_argument("--skip-brax", action="store_true", help="leave out (c)")
+    args = parser.parse_args()
+
+    shape = {"num_steps": args.num_steps, "num_minibatches": args.minibatches}
+    shape["num_epochs"] = args.epochs
+    if args.preset == "massive":
+        shape = {}  # the preset's own shape
+    if args.num_envs:
+        shape["num_envs"] = args.num_envs
+    probe = preset_config(args.preset, **shape)
+    total_steps = args.updates * probe.samples_per_update
+    config = preset_config(args.preset, total_steps=total_steps, resets_per_rollout=1, **shape)
+    env = make_env(args.env)
+    print(f"{args.env}: {describe(config, args.preset)} on {machine()}", flush=True)
+
+    alone = env_alone(env, config.num_envs, config.num_steps, config.num_updates)
+    alone_compile, alone_seconds = timed(alone, jax.random.key(0))
+    alone_rate = total_steps / alone_seconds
+    print(f"(a) env alone: {alone_rate:,.0f} steps/s (compile {alone_compile:.1f} s)", flush=True)
+
+    fields = ("num_envs", "num_steps", "num_minibatches", "num_epochs", "resets_per_rollout")
+    ours = fppo_jax.train(
+        args.env,
+        "ppo",
+        total_steps=total_steps,
+        preset=args.preset,
+        **{name: getattr(config, name) for name in fields},
+    )
+    ours_rate = total_steps / ours.train_seconds
+    print(
+        f"(b) fppo-jax: {ours_rate:,.0f} steps/s (compile {ours.compile_seconds:.1f} s)",
+        flush=True,
+    )
+
+    rows = [
+        ("(a) environment alone, random actions", alone_rate, alone_compile, "—"),
+        (
+            "(b) fppo-jax `train` (PPO)",
+            ours_rate,
+            ours.compile_seconds,
+            f"(b)/(a) = {ours_rate / alone_rate:.2f}",
+        ),
+    ]
+    if not args.skip_brax:
+        brax_rate, brax_wall = brax_ppo(args.env, config, total_steps)
+        print(f"(c) Brax PPO: {brax_rate:,.0f} steps/s ({brax_wall:.1f} s in all)", flush=True)
+        rows.append(
+            (
+                "(c) Brax `ppo.train`",
+                brax_rate,
+                None,
+                f"(b)/(c) = {ours_rate / brax_rate:.2f}",
+            )
+        )
+
+    command = " ".join(["python experiments/bench_mujoco.py", *sys.argv[1:]])
+    platform_name = jax.devices()[0].platform
+    path = RESULTS / f"bench_mujoco_{args.env}_{config.num_envs}envs_{platform_name}.md"
+    lines = [
+        f"# Training throughput on {args.env} (MJX), {config.num_envs} environments",
+        "",
+        f"- Machine: {machine()}",
+        f"- Command: `{command}`",
+        f"- Date: {datetime.date.today()}",
+        f"- Shape: {describe(config, args.preset)}, {total_steps:,} env steps per "
+        "trainer; one reset state per environment per rollout in (a) and (b), Brax's "
+        "auto-reset in (c)",
+        "",
+        "| | env steps/s | compile (s) | ratio |",
+        "|---|---|---|---|",
+    ]
+    for name, rate, compile_seconds, ratio in rows:
+        shown = "in epochs 1–2" if compile_seconds is None else f"{compile_seconds:.1f}"
+        lines.append(f"| {name} | {rate:,.0f} | {shown} | {ratio} |")
+    path.write_text("\n".join(lines) + "\n")
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -31,10 +31,10 @@ def episode_positions(
     `max_steps`; `policy` maps one observation to one action."""
     if not hasattr(env, "qpos"):
         raise TypeError(f"{type(env).__name__} is not a MuJoCo environment: nothing to render")
-    reset_key, *_ = jax.random.split(key)
+    reset_key, steps_key = jax.random.split(key)
 
     @jax.jit
-    def run(key: jax.Array) -> tuple[jax.Array, jax.Array]:
+    def run() -> tuple[jax.Array, jax.Array]:
         state, obs = env.reset(reset_key)
 
         def step(carry: tuple, key: jax.Array) -> tuple[tuple, tuple]:
@@ -46,10 +46,10 @@ def episode_positions(
             )
 
         carry = (state, obs, jnp.zeros((), bool))
-        _, (qpos, ended) = jax.lax.scan(step, carry, jax.random.split(key, max_steps))
+        _, (qpos, ended) = jax.lax.scan(step, carry, jax.random.split(steps_key, max_steps))
         return jnp.concatenate([env.qpos(state)[None], qpos]), ended
 
-    qpos, ended = run(key)
+    qpos, ended = run()
     length = int(np.argmax(np.asarray(ended))) if bool(np.any(ended)) else max_steps
     return np.asarray(qpos[: length + 1])
 

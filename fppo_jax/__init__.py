@@ -3,7 +3,8 @@
 The surrogate objective is a pure function of traced data (:func:`objective`), and the whole
 training run is one compiled function of its key and hyperparameters (:func:`make_train`), so
 seeds, variants and their hyperparameters vmap into one program. :func:`train` runs one
-policy; :func:`sweep` runs a grid of settings × seeds as one program.
+policy, checkpointed and resumable; :func:`sweep` runs a grid of settings × seeds as one
+program; :func:`load_policy` reads a trained policy back from its checkpoints.
 """
 
 import os
@@ -15,10 +16,13 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")
 
 from fppo_jax.api import TrainingDiverged, TrainResult, train
+from fppo_jax.checkpoint import ConfigMismatch, DamagedCheckpoint, load_policy
 from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters
 from fppo_jax.envs import TASKS, Environment, make_env
+from fppo_jax.evaluation import evaluate
 from fppo_jax.execution import Progress
 from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective
+from fppo_jax.policy import Policy
 from fppo_jax.sweep import SweepResult, expand_grid, sweep
 from fppo_jax.trainer import METRICS, Metrics, Trainer, TrainState, make_train
 
@@ -26,10 +30,13 @@ __all__ = [
     "METRICS",
     "TASKS",
     "VARIANTS",
+    "ConfigMismatch",
+    "DamagedCheckpoint",
     "Environment",
     "Hyperparameters",
     "Metrics",
     "Objective",
+    "Policy",
     "Progress",
     "SweepResult",
     "TrainConfig",
@@ -37,8 +44,10 @@ __all__ = [
     "TrainState",
     "Trainer",
     "TrainingDiverged",
+    "evaluate",
     "expand_grid",
     "hyperparameters",
+    "load_policy",
     "make_env",
     "make_train",
     "negative_regions",

@@ -9,9 +9,9 @@ from pathlib import Path
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
+from fppo_jax.checkpoint import Checkpoints, ConfigMismatch, check_same_run
 from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
     Hyperparameters,
@@ -19,10 +19,20 @@ from fppo_jax.config import (
     hyperparameters,
     preset_config,
 )
-from fppo_jax.envs import TASKS, Box, Environment, as_environment
-from fppo_jax.execution import PROGRESS_LINES, Progress, compile_program, execute, print_progress
+from fppo_jax.envs import TASKS, Environment, as_environment
+from fppo_jax.execution import (
+    PROGRESS_LINES,
+    Program,
+    Progress,
+    compile_program,
+    execute,
+    reporter,
+    updates_per_call,
+)
+from fppo_jax.metric_log import MetricLog
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import VARIANTS
+from fppo_jax.policy import Policy
 from fppo_jax.trainer import Trainer, TrainState, make_train
 
 CONFIG_FIELDS = tuple(field.name for field in dataclasses.fields(TrainConfig))
@@ -31,13 +41,15 @@ CONFIG_FIELDS = tuple(field.name for field in dataclasses.fields(TrainConfig))
 class TrainingDiverged(FloatingPointError):
     """The loss or the parameters became NaN or infinite."""
 
-    def __init__(self, update: int, env_steps: int):
-        """`update` counts from 1, as the progress lines do."""
+    def __init__(self, update: int, env_steps: int, checkpoint: str | None = None):
+        """`update` counts from 1, as the progress lines do; `checkpoint` says where the last
+        good checkpoint is, if any."""
         self.update, self.env_steps = update, env_steps
+        kept = f" {checkpoint}." if checkpoint else ""
         super().__init__(
             f"training diverged at update {update} (after {env_steps:,} env steps): the loss or "
-            "the parameters became NaN or infinite. The state before that update was kept. "
-            "Lower the learning rate, or check the environment's observations and rewards."
+            f"the parameters became NaN or infinite.{kept} Lower the learning rate, or check the "
+            "environment's observations and rewards."
         )
 
 
@@ -54,10 +66,11 @@ class TrainResult:
     params: dict
     config: dict[str, Any]
     state: TrainState
-    policy: Callable[..., jax.Array]
+    policy: Policy
     compile_seconds: float
     train_seconds: float
     env: Environment
+    resumed_from: int = 0  # the update a resumed run started from its checkpoint
 
     def render(self, path: str | Path, *, seed: int = 0, max_steps: int = 1000) -> Path:
         """Save one episode of the trained policy (the most likely actions) on a MuJoCo task
@@ -74,13 +87,15 @@ class TrainResult:
         settings = ", ".join(f"{k} = {c[k]:g}" for k in ("alpha", "k", "delta") if k in c)
         settings = ", ".join(filter(None, [settings, f"epsilon = {c['epsilon']:g}"]))
         samples = c["num_envs"] * c["num_steps"]
-        speed = steps / max(self.train_seconds, 1e-9)
+        trained = steps - self.resumed_from * samples
+        speed = f"{trained / self.train_seconds:,.0f} env steps/s" if trained else "nothing left"
+        resumed = f", resumed at update {self.resumed_from}" if self.resumed_from else ""
         lines = [
             f"{c['variant']} on {c['env']} ({settings}), seed {c['seed']}",
             f"  updates   {len(returns)} × {samples:,} samples = {steps:,} env steps "
-            f"(preset {c.get('preset', 'paper')})",
+            f"(preset {c.get('preset', 'paper')}){resumed}",
             f"  time      compile {self.compile_seconds:.1f} s, train {self.train_seconds:.1f} s "
-            f"({speed:,.0f} env steps/s)",
+            f"({speed})",
         ]
         if np.isfinite(returns).any():
             best = int(np.nanargmax(returns))
@@ -113,6 +128,11 @@ def train(
     total_steps: int | None = None,
     preset: str = "paper",
     progress: bool | Callable[[Progress], None] = False,
+    checkpoint_dir: str | Path | None = None,
+    resume: bool = False,
+    checkpoint_every: int | None = None,
+    keep: int = 3,
+    log_dir: str | Path | None = None,
     **overrides: Any,
 ) -> TrainResult:
     """Train one policy with `variant` on `env` and return its metrics, parameters and policy.
@@ -126,47 +146,150 @@ def train(
     optimisation settings (``learning_rate``, ``gamma``, ``gae_lambda``, ``entropy_coef``,
     ``value_coef``, ``max_grad_norm``). Everything is checked before compiling.
 
-    `progress`: ``True`` prints a line per chunk of updates on stderr; a callable receives a
-    :class:`Progress`; ``False`` runs the whole training as one compiled call.
-    Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite.
+    `progress`: ``True`` shows a progress bar on a terminal, or prints a line per chunk of
+    updates on stderr otherwise; a callable receives a :class:`Progress`; ``False`` (with no
+    checkpoints and no log) runs the whole training as one compiled call.
+
+    `checkpoint_dir`: save the full training state there every `checkpoint_every` updates
+    (default: a twentieth of the run), keeping the newest `keep` (see
+    :mod:`fppo_jax.checkpoint`). With ``resume=True`` the run continues from the newest intact
+    checkpoint there, if any, and ends exactly as if it had never stopped; a checkpoint of a
+    differently configured run is refused with the differing fields named. Without `resume`,
+    a directory that already holds checkpoints is refused, so that none is overwritten.
+    `log_dir`: write ``metrics.csv`` and TensorBoard event files there as training goes.
+
+    Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite (the last
+    good checkpoint stays on disk).
     """
     config, hp, settings = _resolve(
         env, variant, alpha, k, delta, epsilon, total_steps, preset, overrides
     )
     environment = as_environment(env)
+    name = env_name(env, environment)
+    run_config = {**settings, "env": name, "seed": seed, "preset": preset}
+    run_config.update(dataclasses.asdict(config))
+    checkpoints, _ = open_checkpoints(checkpoint_dir, resume, keep, "train", run_config)
+    if checkpoints:
+        per_call = checkpoint_every_updates(checkpoint_every, config)
+    else:
+        chunked = progress or log_dir is not None
+        per_call = updates_per_call(config.num_updates, PROGRESS_LINES if chunked else 1)
     trainer = make_train(config, environment)
-    report = print_progress if progress is True else (progress or None)
-    if progress is True:
-        print(
-            f"{variant} on {env_name(env, environment)}: {describe(config, preset)}; compiling…",
-            file=sys.stderr,
-            flush=True,
-        )
     key = jax.random.key(seed)
-    program = compile_program(trainer, key, hp, chunks=PROGRESS_LINES if report else 1)
-
-    def check(state: TrainState) -> None:
-        index = int(state.nonfinite_update)
-        if index >= 0:
-            raise TrainingDiverged(index + 1, (index + 1) * config.samples_per_update)
-
-    state, metrics, train_seconds = execute(program, key, hp, report, check)
+    start = None
+    if checkpoints and resume:
+        restored = checkpoints.restore(jax.eval_shape(trainer.init, key, hp))
+        if restored is not None:
+            check_same_run(restored.record["config"], run_config, checkpoints.directory)
+            start = (restored.state, restored.curves)
+    if progress is True:
+        print(f"{variant} on {name}: {describe(config, preset)}; compiling…", file=sys.stderr)
+    try:
+        program = compile_program(trainer, key, hp, per_call)
+        with reporter(progress, f"{variant} on {name}") as report:
+            state, metrics, train_seconds = _run_one(
+                program, key, hp, start, report, checkpoints, run_config, log_dir
+            )
+    finally:
+        if checkpoints:
+            checkpoints.close()
     return TrainResult(
         metrics=metrics,
         params=state.params,
-        config={
-            **settings,
-            "env": env_name(env, environment),
-            "seed": seed,
-            "preset": preset,
-            **dataclasses.asdict(config),
-        },
+        config=run_config,
         state=state,
         policy=make_policy(trainer, state),
         compile_seconds=program.compile_seconds,
         train_seconds=train_seconds,
         env=environment,
+        resumed_from=int(start[0].update) if start else 0,
     )
+
+
+def open_checkpoints(
+    directory: str | Path | None, resume: bool, keep: int, kind: str, run_config: dict[str, Any]
+) -> tuple[Checkpoints | None, dict[str, Any] | None]:
+    """The checkpoints of a `kind` ("train" or "sweep") and the newest one's record, checked
+    against this run before anything is compiled."""
+    if directory is None:
+        if resume:
+            raise ValueError("resume=True needs a checkpoint directory to resume from")
+        return None, None
+    checkpoints = Checkpoints(directory, keep)
+    record = checkpoints.latest_record()
+    try:
+        if record is not None and not resume:
+            raise ValueError(
+                f"{checkpoints.directory} already holds checkpoints; pass resume=True (--resume) "
+                "to continue that run, or choose another directory"
+            )
+        if record is not None and record.get("kind") != kind:
+            raise ConfigMismatch(
+                f"{checkpoints.directory} holds the checkpoints of a {record.get('kind')}, "
+                f"not of a {kind}"
+            )
+        if record is not None:
+            check_same_run(record["config"], run_config, checkpoints.directory)
+    except ValueError:
+        checkpoints.close()
+        raise
+    return checkpoints, record
+
+
+def checkpoint_every_updates(every: int | None, config: TrainConfig) -> int:
+    """Updates between checkpoints (and so per compiled call): `every`, checked, or a
+    twentieth of the run."""
+    if every is None:
+        return updates_per_call(config.num_updates, PROGRESS_LINES)
+    if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+        raise ValueError(f"checkpoint_every must be a positive number of updates, got {every!r}")
+    return min(every, config.num_updates)
+
+
+def _run_one(
+    program: Program,
+    key: jax.Array,
+    hp: Hyperparameters,
+    start: tuple[TrainState, dict[str, np.ndarray]] | None,
+    report: Callable[[Progress], None] | None,
+    checkpoints: Checkpoints | None,
+    run_config: dict[str, Any],
+    log_dir: str | Path | None,
+) -> tuple[TrainState, dict[str, np.ndarray], float]:
+    """Execute `program`, checking, checkpointing and logging after every chunk."""
+    trainer = program.trainer
+    samples = trainer.config.samples_per_update
+    log = MetricLog(log_dir, start[1] if start else None) if log_dir is not None else None
+    saved: list[int] = []
+
+    def after_chunk(state: TrainState, metrics: dict[str, np.ndarray]) -> None:
+        index = int(state.nonfinite_update)
+        if index >= 0:
+            where = None
+            if checkpoints:
+                checkpoints.wait()
+                where = (
+                    f"The last good checkpoint, at update {saved[-1]}, is in "
+                    f"{checkpoints.directory}"
+                    if saved or start
+                    else "No checkpoint was written before it"
+                )
+            raise TrainingDiverged(index + 1, (index + 1) * samples, where)
+        if checkpoints:
+            update = int(state.update)
+            record = {"kind": "train", "config": run_config, "update": update}
+            checkpoints.save(update, state, metrics, record, make_policy(trainer, state))
+            saved.append(update)
+        if log:
+            log.write(metrics)
+
+    if start is not None:
+        saved.append(int(start[0].update))
+    try:
+        return execute(program, key, hp, start=start, report=report, after_chunk=after_chunk)
+    finally:
+        if log:
+            log.close()
 
 
 def _resolve(
@@ -251,23 +374,12 @@ def env_name(env: Any, environment: Environment) -> str:
     return env if isinstance(env, str) else type(getattr(environment, "env", environment)).__name__
 
 
-def make_policy(trainer: Trainer, state: TrainState) -> Callable[..., jax.Array]:
-    """An action function of raw observations: the mode without a key, a sample with one;
-    continuous actions are clipped to the action bounds, as in training."""
-    space = trainer.env.action_space
-
-    def act(obs: jax.Array, key: jax.Array | None) -> jax.Array:
-        obs = trainer.network_input(state.obs_stats, jnp.asarray(obs, jnp.float32))
-        dist = trainer.networks.distribution(state.params, obs)
-        action = dist.mode() if key is None else dist.sample(key)
-        if isinstance(space, Box):
-            action = jnp.clip(action, jnp.asarray(space.low), jnp.asarray(space.high))
-        return action
-
-    mode = jax.jit(lambda obs: act(obs, None))
-    sample = jax.jit(act)
-
-    def policy(obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
-        return mode(obs) if key is None else sample(obs, key)
-
-    return policy
+def make_policy(trainer: Trainer, state: TrainState) -> Policy:
+    """The policy of `state`, on its own (see :class:`~fppo_jax.policy.Policy`)."""
+    config = trainer.config
+    return Policy(
+        params=state.params["policy"],
+        obs_stats=state.obs_stats if config.normalize_observations else None,
+        action_space=trainer.env.action_space,
+        hidden_sizes=config.hidden_sizes,
+    )

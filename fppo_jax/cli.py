@@ -1,10 +1,9 @@
-"""The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``table`` and ``plot``
-a sweep's results, ``list`` the tasks and variants."""
+"""The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``eval`` a checkpointed
+policy, ``table`` and ``plot`` a sweep's results, ``list`` the tasks and variants."""
 
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import sys
 from collections.abc import Sequence
@@ -12,7 +11,7 @@ from pathlib import Path
 
 from fppo_jax.api import TrainingDiverged, TrainResult, describe_update, train
 from fppo_jax.config import HYPERPARAMETER_DEFAULTS, PRESETS, preset_config
-from fppo_jax.envs import TASKS
+from fppo_jax.envs import TASKS, make_env
 from fppo_jax.objectives import DEFAULTS, VARIANTS
 from fppo_jax.sweep import SweepResult, sweep
 
@@ -92,7 +91,36 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
         "--anneal-lr", action="store_true", help="decay the learning rate linearly to 0"
     )
     command.add_argument("--output", type=Path, help="directory to write the results to")
-    command.add_argument("--quiet", action="store_true", help="no progress lines")
+    command.add_argument("--quiet", action="store_true", help="no progress bar or lines")
+    command.add_argument(
+        "--checkpoint-dir",
+        type=Path,
+        metavar="DIR",
+        help="save the full training state in DIR every --checkpoint-every updates",
+    )
+    command.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue from the newest intact checkpoint in --checkpoint-dir (if there is one)",
+    )
+    command.add_argument(
+        "--checkpoint-every",
+        type=_positive_int,
+        metavar="N",
+        help="updates between checkpoints (default: a twentieth of the run)",
+    )
+    command.add_argument(
+        "--keep", type=_positive_int, default=3, help="checkpoints kept (the newest)"
+    )
+
+
+def _checkpoint_options(args: argparse.Namespace) -> dict:
+    return {
+        "checkpoint_dir": args.checkpoint_dir,
+        "resume": args.resume,
+        "checkpoint_every": args.checkpoint_every,
+        "keep": args.keep,
+    }
 
 
 HYPERPARAMETER_HELP = {
@@ -121,8 +149,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="train one policy",
         description="Train one policy and print progress and a summary. FPPO-LP's alpha and "
         "FPPO-QP's k default to the paper's Table 2 for the task; other variants' "
-        "hyperparameters to the paper's values. --output DIR writes metrics.csv, config.json "
-        "and summary.txt.",
+        "hyperparameters to the paper's values. --output DIR gets metrics.csv and TensorBoard "
+        "event files (tensorboard/) as training goes, then config.json and summary.txt. "
+        "--checkpoint-dir DIR saves the full state as it goes; run the same command with "
+        "--resume to continue a stopped run exactly where its last checkpoint left it.",
         formatter_class=formatter,
     )
     run.add_argument("--variant", default="fppo-lp", choices=list(VARIANTS), help="surrogate")
@@ -164,6 +194,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     plot.add_argument("directory", type=Path, help="a sweep's --output directory")
 
+    evaluation = commands.add_parser(
+        "eval",
+        help="report a checkpointed policy's return",
+        description="Run the policy of the newest checkpoint in DIR (of `fppo-jax train "
+        "--checkpoint-dir DIR`) for whole episodes on its task, with its most likely actions "
+        "(deterministic) and with sampled ones (stochastic), and report the returns.",
+        formatter_class=formatter,
+    )
+    evaluation.add_argument(
+        "--checkpoint", type=Path, required=True, metavar="DIR", help="checkpoint directory"
+    )
+    evaluation.add_argument("--episodes", type=_positive_int, default=10, help="episodes each")
+    evaluation.add_argument("--seed", type=int, default=0, help="random seed of the episodes")
+
     commands.add_parser("list", help="list the tasks and the variants")
     return parser
 
@@ -190,14 +234,8 @@ def _config_overrides(args: argparse.Namespace) -> dict:
 
 
 def write_run(result: TrainResult, directory: Path) -> None:
-    """metrics.csv (one row per update), config.json and summary.txt in `directory`."""
+    """config.json and summary.txt in `directory` (metrics.csv is written during training)."""
     directory.mkdir(parents=True, exist_ok=True)
-    names = list(result.metrics)
-    with open(directory / "metrics.csv", "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(names)
-        for row in zip(*(result.metrics[name].tolist() for name in names), strict=True):
-            writer.writerow(row)
     config = {
         **result.config,
         "compile_seconds": result.compile_seconds,
@@ -224,13 +262,15 @@ def _train(args: argparse.Namespace) -> int:
         epsilon=0.2 if args.epsilon is None else args.epsilon,
         seed=args.seed,
         progress=not args.quiet,
+        log_dir=args.output,
+        **_checkpoint_options(args),
         **_config_overrides(args),
         **optimisation,
     )
     print(result.summary())
     if args.output:
         write_run(result, args.output)
-        print(f"wrote {args.output}/metrics.csv, config.json, summary.txt")
+        print(f"wrote {args.output}/metrics.csv, tensorboard/, config.json, summary.txt")
     if args.render:
         from fppo_jax.render import RenderingUnavailable
 
@@ -251,6 +291,7 @@ def _sweep(args: argparse.Namespace) -> int:
         seeds=args.seeds,
         chunk=args.chunk,
         progress=not args.quiet,
+        **_checkpoint_options(args),
         **_config_overrides(args),
     )
     runs = len(result.runs)
@@ -262,6 +303,32 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.output:
         result.write(args.output)
         print(f"wrote {args.output}/curves.csv, sweep.json")
+    return 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from fppo_jax.checkpoint import read_policy
+    from fppo_jax.evaluation import evaluate
+
+    policy, record = read_policy(args.checkpoint)
+    config = record["config"]
+    if config["env"] not in TASKS:
+        raise ValueError(
+            f"the checkpoint's environment {config['env']!r} is not a registered task; load the "
+            "policy with fppo_jax.load_policy and evaluate it on your environment"
+        )
+    env = make_env(config["env"])
+    steps = record["update"] * config["num_envs"] * config["num_steps"]
+    print(
+        f"{config['variant']} on {config['env']}, seed {config['seed']}: checkpoint at update "
+        f"{record['update']} ({steps:,} env steps); {args.episodes} episodes each"
+    )
+    for name, deterministic in (("deterministic", True), ("stochastic", False)):
+        returns = evaluate(env, policy, args.episodes, seed=args.seed, deterministic=deterministic)
+        print(
+            f"  {name:<13} return {returns.mean():.1f} ± {returns.std():.1f} "
+            f"(min {returns.min():.1f}, max {returns.max():.1f})"
+        )
     return 0
 
 
@@ -298,6 +365,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "sweep": _sweep,
         "table": lambda a: print(SweepResult.read(a.directory).table()) or 0,
         "plot": _plot,
+        "eval": _eval,
         "list": lambda a: _list(),
     }
     try:

@@ -22,7 +22,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.api import describe, env_name, resolve_config
+from fppo_jax.api import (
+    checkpoint_every_updates,
+    describe,
+    env_name,
+    open_checkpoints,
+    resolve_config,
+)
+from fppo_jax.checkpoint import Checkpoints, ConfigMismatch, Restored
 from fppo_jax.config import HYPERPARAMETER_DEFAULTS, Hyperparameters, hyperparameters
 from fppo_jax.envs import TASKS, Environment, as_environment
 from fppo_jax.execution import (
@@ -31,11 +38,12 @@ from fppo_jax.execution import (
     Progress,
     compile_program,
     execute,
-    print_progress,
+    reporter,
+    updates_per_call,
 )
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import VARIANTS
-from fppo_jax.trainer import METRICS, Trainer, make_train
+from fppo_jax.trainer import METRICS, Trainer, TrainState, make_train
 
 SWEEPABLE: tuple[str, ...] = ("variant", "epsilon", "alpha", "k", "delta", *HYPERPARAMETER_DEFAULTS)
 _VARIANT_SPECIFIC = ("alpha", "k", "delta")
@@ -209,6 +217,10 @@ def sweep(
     total_steps: int | None = None,
     preset: str = "paper",
     progress: bool | Callable[[Progress], None] = False,
+    checkpoint_dir: str | Path | None = None,
+    resume: bool = False,
+    checkpoint_every: int | None = None,
+    keep: int = 3,
     **overrides: Any,
 ) -> SweepResult:
     """Train every setting of `grid` (see :func:`expand_grid`) with every seed, as one program.
@@ -220,6 +232,11 @@ def sweep(
     hyperparameters. `chunk` is the number of runs per compiled call (default: as many as fit
     in half the free memory). A run that diverges is reported and recorded in
     ``SweepResult.diverged``; the others go on.
+
+    `checkpoint_dir`, `resume`, `checkpoint_every` and `keep` are as in
+    :func:`~fppo_jax.train`: the state of the group of runs in training is saved every
+    `checkpoint_every` updates, with the metrics of the groups already done, and a resumed
+    sweep goes on from the group and update where it stopped (with the same runs per call).
     """
     fixed = {name: overrides.pop(name) for name in list(overrides) if name in SWEEPABLE}
     clash = sorted(set(fixed) & set(grid))
@@ -236,38 +253,52 @@ def sweep(
         raise ValueError(f"chunk must be a positive number of runs, got {chunk}")
 
     environment = as_environment(env)
-    trainer = make_train(config, environment)
-    all_keys = jnp.stack([jax.random.key(run["seed"]) for run in runs])
-    all_hps = _stack([hps[run["setting"]] for run in runs])
-    report = print_progress if progress is True else (progress or None)
-    size = min(chunk or len(runs), len(runs))
-    chunks = PROGRESS_LINES if report else 1
-    program = compile_program(trainer, all_keys[:size], _take(all_hps, slice(0, size)), chunks)
-    if chunk is None:
-        program, size = _fit_in_memory(program, trainer, all_keys, all_hps, size, chunks)
-    if progress is True:
-        print(
-            f"sweep on {env_name(env, environment)}: {len(settings)} settings × {len(seeds)} "
-            f"seeds = {len(runs)} runs, {size} per compiled call; each {describe(config, preset)}",
-            file=sys.stderr,
-            flush=True,
+    name = env_name(env, environment)
+    grid_values = {name: _as_list(name, v) for name, v in {**grid, **fixed}.items()}
+    sweep_config = {"env": name, "grid": grid_values, "seeds": seeds, "preset": preset}
+    sweep_config.update(dataclasses.asdict(config))
+    checkpoints, record = open_checkpoints(checkpoint_dir, resume, keep, "sweep", sweep_config)
+    try:
+        if record is not None:
+            if chunk is not None and chunk != record["runs_per_call"]:
+                raise ConfigMismatch(
+                    f"{checkpoints.directory} holds a sweep of {record['runs_per_call']} runs "
+                    f"per compiled call, not {chunk}; resume without chunk, or with that"
+                )
+            chunk = record["runs_per_call"]
+        trainer = make_train(config, environment)
+        all_keys = jnp.stack([jax.random.key(run["seed"]) for run in runs])
+        all_hps = _stack([hps[run["setting"]] for run in runs])
+        size = min(chunk or len(runs), len(runs))
+        if checkpoints:
+            per_call = checkpoint_every_updates(checkpoint_every, config)
+        else:
+            per_call = updates_per_call(config.num_updates, PROGRESS_LINES if progress else 1)
+        restored = None
+        if record is not None:
+            init = jax.vmap(trainer.init)
+            like = jax.eval_shape(init, all_keys[:size], _take(all_hps, slice(0, size)))
+            restored = checkpoints.restore(like)
+        program = compile_program(
+            trainer, all_keys[:size], _take(all_hps, slice(0, size)), per_call
         )
-
-    parts, diverged, seconds = [], [], 0.0
-    for start in range(0, len(runs), size):
-        # The last chunk is padded with repeats of its last run, so every call has one shape.
-        index = np.minimum(np.arange(start, start + size), len(runs) - 1)
-        if report and len(runs) > size:
+        if chunk is None:
+            program, size = _fit_in_memory(program, trainer, all_keys, all_hps, size, per_call)
+        if progress is True:
             print(
-                f"runs {start + 1}–{min(start + size, len(runs))} of {len(runs)}", file=sys.stderr
+                f"sweep on {name}: {len(settings)} settings × {len(seeds)} seeds = {len(runs)} "
+                f"runs, {size} per compiled call; each {describe(config, preset)}",
+                file=sys.stderr,
+                flush=True,
             )
-        state, metrics, secs = execute(program, all_keys[index], _take(all_hps, index), report)
-        keep = slice(0, min(size, len(runs) - start))
-        parts.append({name: values[keep] for name, values in metrics.items()})
-        diverged.append(np.asarray(state.nonfinite_update)[keep] + 1)
-        seconds += secs
-    metrics = {name: np.concatenate([p[name] for p in parts]) for name in METRICS}
-    diverged = np.concatenate(diverged)
+        with reporter(progress, f"sweep on {name}") as report:
+            parts, diverged, seconds = _run_groups(
+                program, all_keys, all_hps, len(runs), report, checkpoints, sweep_config, restored
+            )
+    finally:
+        if checkpoints:
+            checkpoints.close()
+    metrics = _join(parts)
     names = labels(settings)
     for i in np.flatnonzero(diverged):
         print(
@@ -281,16 +312,84 @@ def sweep(
         runs=runs,
         metrics=metrics,
         diverged=diverged,
-        config={
-            "env": env_name(env, environment),
-            "grid": {name: _as_list(name, v) for name, v in {**grid, **fixed}.items()},
-            "runs_per_call": size,
-            "preset": preset,
-            **dataclasses.asdict(config),
-        },
+        config={**sweep_config, "runs_per_call": size},
         compile_seconds=program.compile_seconds,
         train_seconds=seconds,
     )
+
+
+def _run_groups(
+    program: Program,
+    keys: jax.Array,
+    hps: Hyperparameters,
+    num_runs: int,
+    report: Callable[[Progress], None] | None,
+    checkpoints: Checkpoints | None,
+    sweep_config: dict[str, Any],
+    restored: Restored | None,
+) -> tuple[list[dict[str, np.ndarray]], np.ndarray, float]:
+    """Train the runs in groups of the program's size, from a checkpoint if one is given:
+    (each group's metrics, the update each run diverged at or 0, seconds)."""
+    size = program.runs
+    num_updates = program.trainer.config.num_updates
+    parts: list[dict[str, np.ndarray]] = []
+    diverged = np.zeros(0, np.int32)
+    first, start = 0, None
+    if restored is not None:
+        curves = restored.curves
+        if "finished" in curves:
+            parts.append({name: np.asarray(v) for name, v in curves["finished"].items()})
+            diverged = np.asarray(curves["finished_diverged"])
+        first = restored.record["group"]
+        start = (restored.state, {name: np.asarray(v) for name, v in curves["current"].items()})
+    seconds = 0.0
+    for group in range(first, -(-num_runs // size)):
+        begin = group * size
+        # The last group is padded with repeats of its last run, so every call has one shape.
+        index = np.minimum(np.arange(begin, begin + size), num_runs - 1)
+        keep = slice(0, min(size, num_runs - begin))
+        if report and num_runs > size:
+            print(f"runs {begin + 1}–{begin + keep.stop} of {num_runs}", file=sys.stderr)
+
+        save = None
+        if checkpoints:
+            finished = {"finished": _join(parts), "finished_diverged": diverged} if parts else {}
+            save = _saver(checkpoints, sweep_config, group, num_updates, finished)
+        state, metrics, secs = execute(
+            program,
+            keys[index],
+            _take(hps, index),
+            start=start if group == first else None,
+            report=report,
+            after_chunk=save,
+        )
+        parts.append({name: values[keep] for name, values in metrics.items()})
+        diverged = np.concatenate([diverged, np.asarray(state.nonfinite_update)[keep] + 1])
+        seconds += secs
+    return parts, diverged, seconds
+
+
+def _saver(
+    checkpoints: Checkpoints,
+    sweep_config: dict[str, Any],
+    group: int,
+    num_updates: int,
+    finished: dict[str, Any],
+) -> Callable[[TrainState, dict[str, np.ndarray]], None]:
+    """Checkpoints a group's state and metrics, with `finished`, the groups before it."""
+
+    def save(state: TrainState, metrics: dict[str, np.ndarray]) -> None:
+        update = int(np.max(state.update))
+        record = {"kind": "sweep", "config": sweep_config, "group": group, "update": update}
+        record["runs_per_call"] = state.update.shape[0]
+        curves = {"current": metrics, **finished}
+        checkpoints.save(group * num_updates + update, state, curves, record)
+
+    return save
+
+
+def _join(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    return {name: np.concatenate([p[name] for p in parts]) for name in METRICS}
 
 
 def _stack(hps: list[Hyperparameters]) -> Hyperparameters:
@@ -307,7 +406,7 @@ def _fit_in_memory(
     keys: jax.Array,
     hps: Hyperparameters,
     size: int,
-    chunks: int,
+    per_call: int,
 ) -> tuple[Program, int]:
     """Halve the runs per call until the compiled program fits in half the free memory."""
     budget = _free_memory() / 2
@@ -317,7 +416,7 @@ def _fit_in_memory(
         if need <= budget:
             break
         size = (size + 1) // 2
-        program = compile_program(trainer, keys[:size], _take(hps, slice(0, size)), chunks)
+        program = compile_program(trainer, keys[:size], _take(hps, slice(0, size)), per_call)
     return program, size
 
 

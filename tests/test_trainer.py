@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from gymnax.environments.classic_control import CartPole
+from helpers import NaNRewardAfter
 
 import fppo_jax
 from fppo_jax import (
@@ -87,27 +88,6 @@ def test_vmapped_seeds_and_variants_match_single_runs(tiny):
 def test_divergence_stops_with_the_update(tiny):
     with pytest.raises(TrainingDiverged, match="diverged at update 1 \\(after 128 env steps\\)"):
         train("cartpole", "ppo", total_steps=512, learning_rate=1e30, **tiny)
-
-
-@dataclasses.dataclass(frozen=True)
-class NaNRewardAfter:
-    """CartPole whose reward turns NaN after `start` steps of an episode."""
-
-    start: int
-    inner: object = dataclasses.field(default_factory=lambda: make_env("cartpole"))
-    observation_size = 4
-
-    @property
-    def action_space(self):
-        return self.inner.action_space
-
-    def reset(self, key):
-        return self.inner.reset(key)
-
-    def step(self, key, state, action):
-        state, out = self.inner.step(key, state, action)
-        reward = jnp.where(state.time >= self.start, jnp.nan, out.reward)
-        return state, Step(out.obs, reward, out.terminated, out.truncated)
 
 
 def test_nan_rewards_stop_training_with_the_update(tiny):

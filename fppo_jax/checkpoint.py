@@ -1,0 +1,283 @@
+"""Checkpoints of a run: everything it carries, its metrics so far and its record, written by
+orbax atomically and in the background, and verified when read back.
+
+``<directory>/<step>/`` holds four items: ``state`` (every array of the training state, PRNG
+keys as their raw data), ``curves`` (the metrics of every update so far), ``policy`` (what
+:func:`load_policy` needs) and ``record`` (JSON: the run's configuration, the policy's
+description and a SHA-256 digest of each array item). Orbax writes a step into a
+temporary directory and renames it once complete, so a killed process leaves whole checkpoints
+only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
+checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old
+checkpoints are deleted only after a newer one is complete.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import shutil
+import warnings
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+import orbax.checkpoint as ocp
+
+from fppo_jax.policy import Policy
+
+# Orbax reports every save and restore through absl logging at INFO and WARNING.
+logging.getLogger("absl").setLevel(logging.ERROR)
+
+
+class DamagedCheckpoint(UserWarning):
+    """A checkpoint could not be read back intact and was set aside."""
+
+
+class ConfigMismatch(ValueError):
+    """A checkpoint belongs to a run with a different configuration."""
+
+
+@dataclasses.dataclass
+class Restored:
+    """A checkpoint read back: its step, the state (in the structure asked for), the metrics
+    so far and the record."""
+
+    step: int
+    state: Any
+    curves: dict[str, Any]
+    record: dict[str, Any]
+
+
+def check_same_run(saved: dict[str, Any], current: dict[str, Any], directory: Path) -> None:
+    """Raise :class:`ConfigMismatch` naming every field whose value differs."""
+    saved, current = _jsonable(saved), _jsonable(current)
+    differing = [
+        f"{name} (checkpoint {saved.get(name, '-')!r}, now {current.get(name, '-')!r})"
+        for name in sorted(set(saved) | set(current))
+        if saved.get(name) != current.get(name)
+    ]
+    if differing:
+        raise ConfigMismatch(
+            f"{directory} holds a run with a different configuration; differing: "
+            + "; ".join(differing)
+            + ". Resume with the checkpoint's settings, or use another checkpoint directory."
+        )
+
+
+def load_policy(directory: str | Path) -> Policy:
+    """The trained policy in checkpoint directory `directory` (of :func:`fppo_jax.train` with
+    ``checkpoint_dir``), as a :class:`~fppo_jax.policy.Policy`: an inference function of raw
+    observations that needs neither the trainer nor the environment."""
+    return read_policy(directory)[0]
+
+
+def read_policy(directory: str | Path) -> tuple[Policy, dict[str, Any]]:
+    """The policy in `directory` and the record of its run (configuration, step)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise FileNotFoundError(f"checkpoint directory {directory} not found")
+    checkpoints = Checkpoints(directory)
+    try:
+        return checkpoints.policy()
+    finally:
+        checkpoints.close()
+
+
+class Checkpoints:
+    """The checkpoints of one run (or one sweep) in `directory`, keeping the newest `keep`."""
+
+    def __init__(self, directory: str | Path, keep: int = 3):
+        if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
+            raise ValueError(f"keep must be a positive number of checkpoints, got {keep!r}")
+        self.directory = Path(directory).absolute()
+        if self.directory.exists() and not self.directory.is_dir():
+            raise ValueError(f"checkpoint directory {self.directory} is a file")
+        self.keep = keep
+        self._manager = ocp.CheckpointManager(
+            self.directory,
+            options=ocp.CheckpointManagerOptions(create=True, enable_async_checkpointing=True),
+        )
+
+    def steps(self) -> list[int]:
+        """Steps of the complete checkpoints, oldest first."""
+        self._manager.reload()
+        return sorted(self._manager.all_steps())
+
+    def latest_record(self) -> dict[str, Any] | None:
+        """The record of the newest checkpoint whose record can be read (no arrays are read:
+        for checks before compiling); None if there is none."""
+        for step in reversed(self.steps()):
+            try:
+                return self._read(step, record=ocp.args.JsonRestore()).record
+            except Exception:  # a damaged record; restore() reports it
+                continue
+        return None
+
+    def restore(self, like: Any) -> Restored | None:
+        """The newest intact checkpoint, its state in the structure of `like` (arrays or
+        ``jax.ShapeDtypeStruct``\\ s); damaged ones are reported and set aside. None if no
+        checkpoint is intact."""
+        leaves, treedef = jax.tree.flatten(like)
+        abstract = {_name(i): _storable_shape(leaf) for i, leaf in enumerate(leaves)}
+        for step in reversed(self.steps()):
+            try:
+                record = self._read(step, record=ocp.args.JsonRestore()).record
+                names = ["state", "curves"] + (["policy"] if record["policy"] else [])
+                restore = {name: ocp.args.StandardRestore() for name in names}
+                restore["state"] = ocp.args.StandardRestore(abstract)
+                items = self._read(step, **restore)
+                for name in names:
+                    _verify(name, items[name], record)
+            except Exception as error:  # any failure to read back is damage
+                self._set_aside(step, error)
+                continue
+            state = [_from_storable(items.state[_name(i)], leaf) for i, leaf in enumerate(leaves)]
+            return Restored(step, jax.tree.unflatten(treedef, state), items.curves, record)
+        return None
+
+    def save(
+        self,
+        step: int,
+        state: Any,
+        curves: dict[str, Any],
+        record: dict[str, Any],
+        policy: Policy | None = None,
+    ) -> None:
+        """Start writing checkpoint `step` (it completes in the background); then delete the
+        checkpoints beyond the newest `keep` complete ones."""
+        host = jax.device_get(
+            {_name(i): _storable(leaf) for i, leaf in enumerate(jax.tree.leaves(state))}
+        )
+        arrays = {"state": host, "curves": jax.device_get(curves)}
+        if policy is not None:
+            arrays["policy"] = jax.device_get(policy.arrays())
+        record = {
+            **record,
+            "policy": policy.describe() if policy is not None else None,
+            "digests": {name: _digest(value) for name, value in arrays.items()},
+        }
+        # Orbax waits for the previous save to finish before it starts this one.
+        items = {name: ocp.args.StandardSave(value) for name, value in arrays.items()}
+        started = self._manager.save(
+            step, args=_args(**items, record=ocp.args.JsonSave(_jsonable(record)))
+        )
+        if not started:
+            raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
+        self._prune(writing=step)
+
+    def policy(self) -> tuple[Policy, dict[str, Any]]:
+        """The policy of the newest readable checkpoint, and its record."""
+        for step in reversed(self.steps()):
+            try:
+                record = self._read(step, record=ocp.args.JsonRestore()).record
+                if record.get("policy") is not None:
+                    arrays = self._read(step, policy=ocp.args.StandardRestore()).policy
+                    _verify("policy", arrays, record)
+            except Exception as error:  # try the previous one
+                warnings.warn(
+                    f"checkpoint at step {step} in {self.directory} could not be read "
+                    f"({type(error).__name__}: {_first_line(error)}); trying the previous one",
+                    DamagedCheckpoint,
+                    stacklevel=2,
+                )
+                continue
+            if record.get("policy") is None:
+                raise ValueError(
+                    f"{self.directory} holds the checkpoints of a {record.get('kind')}, not of "
+                    "one policy: load_policy reads the checkpoints of train()"
+                )
+            return Policy.from_parts(record["policy"], arrays), record
+        raise FileNotFoundError(f"no readable checkpoint in {self.directory}")
+
+    def _read(self, step: int, **items: Any) -> Any:
+        return self._manager.restore(step, args=_args(**items))
+
+    def wait(self) -> None:
+        """Block until the checkpoint being written is complete."""
+        self._manager.wait_until_finished()
+
+    def close(self) -> None:
+        """Finish writing, then delete checkpoints beyond the newest `keep`."""
+        self._manager.wait_until_finished()
+        self._prune()
+        self._manager.close()
+
+    def _prune(self, writing: int | None = None) -> None:
+        # The checkpoint being written does not count among the `keep`: nothing is deleted in
+        # its favour before it is complete.
+        complete = [s for s in self.steps() if s != writing]
+        for step in complete[: max(0, len(complete) - self.keep)]:
+            self._manager.delete(step)
+
+    def _set_aside(self, step: int, error: Exception) -> None:
+        damaged = self.directory / "damaged"
+        damaged.mkdir(exist_ok=True)
+        target = damaged / str(step)
+        shutil.rmtree(target, ignore_errors=True)
+        shutil.move(self.directory / str(step), target)
+        self._manager.reload()
+        warnings.warn(
+            f"checkpoint at step {step} in {self.directory} is damaged "
+            f"({type(error).__name__}: {_first_line(error)}); moved to {target}, trying the "
+            "previous one",
+            DamagedCheckpoint,
+            stacklevel=3,
+        )
+
+
+def _args(**items: Any) -> ocp.args.Composite:
+    return ocp.args.Composite(**items)
+
+
+def _name(index: int) -> str:
+    return f"leaf_{index:05d}"
+
+
+def _is_key(x: Any) -> bool:
+    return jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)
+
+
+def _storable(x: Any) -> Any:
+    return jax.random.key_data(x) if _is_key(x) else x
+
+
+def _storable_shape(x: Any) -> jax.ShapeDtypeStruct:
+    if _is_key(x):
+        return jax.eval_shape(jax.random.key_data, x)
+    return jax.ShapeDtypeStruct(np.shape(x), x.dtype)
+
+
+def _from_storable(x: np.ndarray, like: Any) -> Any:
+    return jax.random.wrap_key_data(x) if _is_key(like) else x
+
+
+def _verify(name: str, arrays: Any, record: dict[str, Any]) -> None:
+    if _digest(arrays) != record["digests"][name]:
+        raise ValueError(f"its {name} arrays do not match the digest written with them")
+
+
+def _digest(arrays: Any) -> str:
+    sha = hashlib.sha256()
+    for path, leaf in jax.tree_util.tree_flatten_with_path(arrays)[0]:
+        leaf = np.ascontiguousarray(leaf)
+        sha.update(f"{jax.tree_util.keystr(path)} {leaf.dtype} {leaf.shape}".encode())
+        sha.update(leaf.tobytes())
+    return sha.hexdigest()
+
+
+def _jsonable(value: Any) -> Any:
+    return json.loads(json.dumps(value, default=_to_json))
+
+
+def _to_json(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
+
+
+def _first_line(error: Exception) -> str:
+    text = str(error).strip()
+    return text.splitlines()[0][:200] if text else "no message"

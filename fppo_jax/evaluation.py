@@ -1,0 +1,51 @@
+"""The return of a policy over whole episodes, run side by side in one compiled loop."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fppo_jax.envs import Environment
+from fppo_jax.policy import Policy
+
+
+def evaluate(
+    env: Environment,
+    policy: Policy,
+    episodes: int = 10,
+    *,
+    seed: int = 0,
+    deterministic: bool = True,
+    max_steps: int = 10_000,
+) -> np.ndarray:
+    """The undiscounted return of each of `episodes` episodes of `policy` on `env`: the most
+    likely actions if `deterministic`, sampled ones otherwise. Episodes run in lockstep until
+    each ends (terminated or truncated) or `max_steps` have passed."""
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    reset_key, run_key = jax.random.split(jax.random.key(seed))
+
+    @jax.jit
+    def run(policy: Policy) -> jax.Array:
+        state, obs = jax.vmap(env.reset)(jax.random.split(reset_key, episodes))
+        ended = jnp.zeros(episodes, bool)
+        returns = jnp.zeros(episodes)
+
+        def going(carry: tuple) -> jax.Array:
+            t, *_, ended, _ = carry
+            return (t < max_steps) & ~jnp.all(ended)
+
+        def step(carry: tuple) -> tuple:
+            t, key, state, obs, ended, returns = carry
+            key, act_key, step_key = jax.random.split(key, 3)
+            action = policy.act(obs, None if deterministic else act_key)
+            state, out = jax.vmap(env.step)(jax.random.split(step_key, episodes), state, action)
+            returns = returns + jnp.where(ended, 0.0, out.reward)
+            ended = ended | out.terminated | out.truncated
+            return t + 1, key, state, out.obs, ended, returns
+
+        carry = (jnp.asarray(0), run_key, state, obs, ended, returns)
+        return jax.lax.while_loop(going, step, carry)[-1]
+
+    return np.asarray(run(policy))

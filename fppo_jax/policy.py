@@ -1,0 +1,81 @@
+"""A trained policy on its own: parameters, observation statistics and action space, with no
+trainer and no environment, so that it can be saved, loaded and run anywhere."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fppo_jax.envs import Box, Discrete
+from fppo_jax.networks import make_networks
+from fppo_jax.normalization import RunningStats
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Policy:
+    """``policy(obs)`` is the most likely action for raw observations (one or a batch);
+    ``policy(obs, key)`` samples. Observations are normalised with the statistics training
+    ended with (when it normalised them); continuous actions are clipped to the action bounds,
+    as in training. :meth:`act` is the same function, pure, to use inside ``jit``."""
+
+    params: dict  # the policy network's
+    obs_stats: RunningStats | None  # None: observations are used raw
+    action_space: Discrete | Box = dataclasses.field(metadata={"static": True})
+    hidden_sizes: tuple[int, ...] = dataclasses.field(metadata={"static": True})
+
+    def act(self, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
+        obs = jnp.asarray(obs, jnp.float32)
+        if self.obs_stats is not None:
+            obs = self.obs_stats.normalize(obs)
+        networks = make_networks(self.action_space, self.hidden_sizes)
+        dist = networks.policy.apply(self.params, obs)
+        action = dist.mode() if key is None else dist.sample(key)
+        if isinstance(self.action_space, Box):
+            action = jnp.clip(
+                action, jnp.asarray(self.action_space.low), jnp.asarray(self.action_space.high)
+            )
+        return action
+
+    def __call__(self, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
+        return _act(self, obs, key)
+
+    def describe(self) -> dict[str, Any]:
+        """Everything but the arrays, as JSON-ready values (see :meth:`from_parts`)."""
+        space = self.action_space
+        return {
+            "action_space": {"discrete": space.n}
+            if isinstance(space, Discrete)
+            else {"low": list(space.low), "high": list(space.high)},
+            "hidden_sizes": list(self.hidden_sizes),
+            "normalize_observations": self.obs_stats is not None,
+        }
+
+    def arrays(self) -> dict[str, Any]:
+        """The arrays (see :meth:`from_parts`)."""
+        arrays: dict[str, Any] = {"params": self.params}
+        if self.obs_stats is not None:
+            arrays["obs_stats"] = dataclasses.asdict(self.obs_stats)
+        return arrays
+
+    @classmethod
+    def from_parts(cls, description: dict[str, Any], arrays: dict[str, Any]) -> Policy:
+        """The policy that :meth:`describe` and :meth:`arrays` describe."""
+        space = description["action_space"]
+        action_space = (
+            Discrete(int(space["discrete"]))
+            if "discrete" in space
+            else Box(tuple(map(float, space["low"])), tuple(map(float, space["high"])))
+        )
+        stats = None
+        if description["normalize_observations"]:
+            stats = RunningStats(**{k: jnp.asarray(v) for k, v in arrays["obs_stats"].items()})
+        params = jax.tree.map(lambda x: jnp.asarray(np.asarray(x)), arrays["params"])
+        return cls(params, stats, action_space, tuple(description["hidden_sizes"]))
+
+
+_act = jax.jit(Policy.act)

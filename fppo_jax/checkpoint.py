@@ -95,10 +95,13 @@ class Checkpoints:
         self.directory = Path(directory).absolute()
         if self.directory.exists() and not self.directory.is_dir():
             raise ValueError(f"checkpoint directory {self.directory} is a file")
-        self.keep = keep
+        # Orbax deletes the checkpoints beyond `keep` only after a new one is committed, in the
+        # background thread that finishes the save.
         self._manager = ocp.CheckpointManager(
             self.directory,
-            options=ocp.CheckpointManagerOptions(create=True, enable_async_checkpointing=True),
+            options=ocp.CheckpointManagerOptions(
+                max_to_keep=keep, create=True, enable_async_checkpointing=True
+            ),
         )
 
     def steps(self) -> list[int]:
@@ -146,8 +149,8 @@ class Checkpoints:
         record: dict[str, Any],
         policy: Policy | None = None,
     ) -> None:
-        """Start writing checkpoint `step` (it completes in the background); then delete the
-        checkpoints beyond the newest `keep` complete ones."""
+        """Start writing checkpoint `step`; it completes in the background, and then the
+        checkpoints beyond the newest `keep` are deleted."""
         host = jax.device_get(
             {_name(i): _storable(leaf) for i, leaf in enumerate(jax.tree.leaves(state))}
         )
@@ -166,7 +169,6 @@ class Checkpoints:
         )
         if not started:
             raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
-        self._prune(writing=step)
 
     def policy(self) -> tuple[Policy, dict[str, Any]]:
         """The policy of the newest readable checkpoint, and its record."""
@@ -200,17 +202,8 @@ class Checkpoints:
         self._manager.wait_until_finished()
 
     def close(self) -> None:
-        """Finish writing, then delete checkpoints beyond the newest `keep`."""
-        self._manager.wait_until_finished()
-        self._prune()
+        """Finish writing."""
         self._manager.close()
-
-    def _prune(self, writing: int | None = None) -> None:
-        # The checkpoint being written does not count among the `keep`: nothing is deleted in
-        # its favour before it is complete.
-        complete = [s for s in self.steps() if s != writing]
-        for step in complete[: max(0, len(complete) - self.keep)]:
-            self._manager.delete(step)
 
     def _set_aside(self, step: int, error: Exception) -> None:
         damaged = self.directory / "damaged"

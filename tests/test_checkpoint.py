@@ -113,15 +113,27 @@ def test_damaged_latest_checkpoint_is_reported_and_the_previous_one_used(tmp_pat
 
 
 def test_a_checkpoint_is_deleted_only_once_a_newer_one_is_complete(tmp_path):
-    state = {"x": jnp.arange(3.0), "key": jax.random.key(0)}
+    state = {"x": jnp.arange(100_000.0), "key": jax.random.key(0)}
     curves = {"env_steps": np.arange(1, dtype=np.int32)}
     checkpoints = Checkpoints(tmp_path, keep=1)
     checkpoints.save(1, state, curves, {"kind": "test"})
     checkpoints.wait()
+    seen = []
     checkpoints.save(2, state, curves, {"kind": "test"})
-    # Step 2 may still be in writing: step 1, complete, must still be there.
-    assert 1 in steps_on_disk(tmp_path)
+    # While step 2 is being written, and until step 1 is deleted, a complete one is on disk.
+    while len(seen) < 10_000 and (not seen or seen[-1] != [2]):
+        seen.append(steps_on_disk(tmp_path))
     checkpoints.close()
+    assert (
+        all(seen)
+        and seen[0] in ([1], [1, 2], [2])
+        and set(map(tuple, seen))
+        <= {
+            (1,),
+            (1, 2),
+            (2,),
+        }
+    )
     assert steps_on_disk(tmp_path) == [2]
     restored = Checkpoints(tmp_path).restore(state)
     assert restored.step == 2

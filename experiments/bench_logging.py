@@ -86,6 +86,9 @@ def main() -> None:
         for p in params.values()
     )
     baseline = best["(a) one compiled call"]
+    with_log, with_checkpoints = list(best.values())[2:]
+    checkpoints = -(-num_updates // per_call)
+    per_checkpoint = (args.steps / with_checkpoints - args.steps / with_log) / checkpoints
     lines = [
         "# What feedback costs: progress, logging and checkpoints",
         "",
@@ -107,6 +110,9 @@ def main() -> None:
         *[f"| {name} | {rate:,.0f} | {rate / baseline:.3f} |" for name, rate in best.items()],
         "",
         f"Final parameters bit-identical across the four: {'yes' if identical else 'NO'}.",
+        "",
+        f"Cost of one checkpoint, (d) − (c) over its {checkpoints} checkpoints: "
+        f"{per_checkpoint * 1000:.0f} ms of training time.",
         "",
         "After each call the host fetches that call's metrics, writes the CSV rows and "
         "TensorBoard scalars, prints the line and (d) copies the state to the host and starts "

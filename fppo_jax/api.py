@@ -168,7 +168,9 @@ def train(
     name = env_name(env, environment)
     run_config = {**settings, "env": name, "seed": seed, "preset": preset}
     run_config.update(dataclasses.asdict(config))
-    checkpoints, _ = open_checkpoints(checkpoint_dir, resume, keep, "train", run_config)
+    checkpoints, _ = open_checkpoints(
+        checkpoint_dir, resume, checkpoint_every, keep, "train", run_config
+    )
     if checkpoints:
         per_call = checkpoint_every_updates(checkpoint_every, config)
     else:
@@ -207,13 +209,20 @@ def train(
 
 
 def open_checkpoints(
-    directory: str | Path | None, resume: bool, keep: int, kind: str, run_config: dict[str, Any]
+    directory: str | Path | None,
+    resume: bool,
+    every: int | None,
+    keep: int,
+    kind: str,
+    run_config: dict[str, Any],
 ) -> tuple[Checkpoints | None, dict[str, Any] | None]:
     """The checkpoints of a `kind` ("train" or "sweep") and the newest one's record, checked
     against this run before anything is compiled."""
     if directory is None:
-        if resume:
-            raise ValueError("resume=True needs a checkpoint directory to resume from")
+        if resume or every is not None:
+            raise ValueError(
+                f"{'resume' if resume else 'checkpoint_every'} needs a checkpoint directory"
+            )
         return None, None
     checkpoints = Checkpoints(directory, keep)
     record = checkpoints.latest_record()
@@ -271,7 +280,7 @@ def _run_one(
                 where = (
                     f"The last good checkpoint, at update {saved[-1]}, is in "
                     f"{checkpoints.directory}"
-                    if saved or start
+                    if saved
                     else "No checkpoint was written before it"
                 )
             raise TrainingDiverged(index + 1, (index + 1) * samples, where)

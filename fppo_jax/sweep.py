@@ -257,7 +257,9 @@ def sweep(
     grid_values = {name: _as_list(name, v) for name, v in {**grid, **fixed}.items()}
     sweep_config = {"env": name, "grid": grid_values, "seeds": seeds, "preset": preset}
     sweep_config.update(dataclasses.asdict(config))
-    checkpoints, record = open_checkpoints(checkpoint_dir, resume, keep, "sweep", sweep_config)
+    checkpoints, record = open_checkpoints(
+        checkpoint_dir, resume, checkpoint_every, keep, "sweep", sweep_config
+    )
     try:
         if record is not None:
             if chunk is not None and chunk != record["runs_per_call"]:

@@ -304,3 +304,21 @@ def test_progress_reports_an_eta_and_a_bar_only_on_a_terminal(monkeypatch):
     assert np.isnan(seen[0].eta)  # before any update has run
     etas = np.array([p.eta for p in seen[1:]])
     assert (etas[:-1] > 0).all() and np.isfinite(etas).all() and etas[-1] == 0
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"resume": True}, "resume needs a checkpoint directory"),
+        ({"checkpoint_every": 3}, "checkpoint_every needs a checkpoint directory"),
+        ({"checkpoint_dir": "unused", "keep": 0}, "keep must be a positive number"),
+        ({"checkpoint_dir": "unused", "checkpoint_every": 0}, "checkpoint_every must be"),
+    ],
+)
+def test_bad_checkpoint_options_are_refused_before_compiling(tmp_path, options, message):
+    if "checkpoint_dir" in options:
+        options = {**options, "checkpoint_dir": tmp_path / "ckpt"}
+    with pytest.raises(ValueError, match=message):
+        train(**RUN, **options)
+    with pytest.raises(ValueError, match=message):
+        fppo_jax.sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=512, **TINY, **options)

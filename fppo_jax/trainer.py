@@ -188,39 +188,9 @@ class Trainer:
         """One rollout and one PPO update; a non-finite result keeps the state it started from."""
         config = self.config
         key, rollout_key, epochs_key = jax.random.split(state.key, 3)
-        traj, carry = self._rollout(state, hp, rollout_key)
+        batch, traj, carry, obs_stats, return_stats = self._collect(state, hp, rollout_key)
         env_state, obs, episode_return, discounted_return = carry
-
-        obs_stats, return_stats = state.obs_stats, state.return_stats
-        if config.normalize_observations:
-            obs_stats = obs_stats.update(traj.raw_obs)
-        rewards = traj.reward
-        if config.normalize_rewards:
-            return_stats = return_stats.update(traj.discounted_return)
-            rewards = return_stats.scale(rewards)
-
-        # The value to bootstrap from is always that of the observation a step produced, before
-        # any reset: V(obs_{t+1}) mid-episode, V(last state) at truncation, and 0 at termination.
-        # Computing every value here in one batch keeps the critic out of the sequential rollout.
-        final_obs = self.network_input(state.obs_stats, traj.final_obs)
-        values, next_values = jnp.split(
-            self.networks.values(state.params, jnp.concatenate([traj.obs, final_obs])), 2
-        )
-        advantages, targets = gae(
-            rewards, values, next_values, traj.terminated, traj.truncated, hp.gamma, hp.gae_lambda
-        )
-        # Normalised over the whole batch (baselines does it per minibatch) so that each
-        # sample's sign, and so its region R+ or R-, is fixed for the update.
-        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
-
-        flat = lambda x: x.reshape((config.samples_per_update, *x.shape[2:]))  # noqa: E731
-        batch = jax.tree.map(
-            flat,
-            Batch(
-                traj.obs, traj.action, traj.log_prob, values, advantages, targets, traj.distribution
-            ),
-        )
-        (params, opt_state), losses, infos = self._epochs(state, hp, batch, epochs_key)
+        (params, opt_state), losses, infos, _ = self._epochs(state, hp, batch, epochs_key)
 
         negative_fraction, negative_distance = self._escape(params, batch, hp.objective.epsilon)
 
@@ -256,6 +226,53 @@ class Trainer:
             negative_distance_after=negative_distance,
         )
         return _keep_if_finite(new_state, state, losses), metrics
+
+    def _collect(
+        self, state: TrainState, hp: Hyperparameters, key: jax.Array
+    ) -> tuple[Batch, Transition, tuple, RunningStats, RunningStats]:
+        """A rollout and its batch (advantages, targets), with the rollout's end and the
+        updated normaliser statistics."""
+        config = self.config
+        traj, carry = self._rollout(state, hp, key)
+        obs_stats, return_stats = state.obs_stats, state.return_stats
+        if config.normalize_observations:
+            obs_stats = obs_stats.update(traj.raw_obs)
+        rewards = traj.reward
+        if config.normalize_rewards:
+            return_stats = return_stats.update(traj.discounted_return)
+            rewards = return_stats.scale(rewards)
+
+        # The value to bootstrap from is always that of the observation a step produced, before
+        # any reset: V(obs_{t+1}) mid-episode, V(last state) at truncation, and 0 at termination.
+        # Computing every value here in one batch keeps the critic out of the sequential rollout.
+        final_obs = self.network_input(state.obs_stats, traj.final_obs)
+        values, next_values = jnp.split(
+            self.networks.values(state.params, jnp.concatenate([traj.obs, final_obs])), 2
+        )
+        advantages, targets = gae(
+            rewards, values, next_values, traj.terminated, traj.truncated, hp.gamma, hp.gae_lambda
+        )
+        # Normalised over the whole batch (baselines does it per minibatch) so that each
+        # sample's sign, and so its region R+ or R-, is fixed for the update.
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+
+        flat = lambda x: x.reshape((config.samples_per_update, *x.shape[2:]))  # noqa: E731
+        batch = jax.tree.map(
+            flat,
+            Batch(
+                traj.obs, traj.action, traj.log_prob, values, advantages, targets, traj.distribution
+            ),
+        )
+        return batch, traj, carry, obs_stats, return_stats
+
+    def escape_by_epoch(self, state: TrainState, hp: Hyperparameters) -> jax.Array:
+        """SPEC §3 for the next update from `state`: the fraction of its batch in R+ ∪ R- after
+        each of its epochs, [num_epochs] (before the first, every ratio is 1 and none is).
+        The batch and the minibatch order are those :meth:`update` would use, so variants
+        given the same state are compared on the same samples."""
+        _, rollout_key, epochs_key = jax.random.split(state.key, 3)
+        batch, *_ = self._collect(state, hp, rollout_key)
+        return self._epochs(state, hp, batch, epochs_key, track_escape=True)[3]
 
     def network_input(self, stats: RunningStats, obs: jax.Array) -> jax.Array:
         """Raw observations as the networks see them (normalised with `stats` if configured)."""
@@ -343,8 +360,15 @@ class Trainer:
         return traj, carry[:4]
 
     def _epochs(
-        self, state: TrainState, hp: Hyperparameters, batch: Batch, key: jax.Array
-    ) -> tuple[tuple, jax.Array, LossInfo]:
+        self,
+        state: TrainState,
+        hp: Hyperparameters,
+        batch: Batch,
+        key: jax.Array,
+        track_escape: bool = False,
+    ) -> tuple[tuple, jax.Array, LossInfo, jax.Array | None]:
+        """Epochs × shuffled minibatches: (parameters and optimiser state, losses, infos, and
+        with `track_escape` the fraction of the batch in R+ ∪ R- after each epoch)."""
         config = self.config
         optimizer = make_optimizer(hp, config)
         value_and_grad = jax.value_and_grad(ppo_loss, has_aux=True)
@@ -360,14 +384,17 @@ class Trainer:
         def epoch(carry: tuple, order: jax.Array) -> tuple[tuple, tuple]:
             shape = (config.num_minibatches, config.minibatch_size)
             minibatches = jax.tree.map(lambda x: x[order].reshape(shape + x.shape[1:]), batch)
-            return jax.lax.scan(minibatch_step, carry, minibatches)
+            carry, out = jax.lax.scan(minibatch_step, carry, minibatches)
+            if track_escape:
+                out = (*out, self._escape(carry[0], batch, hp.objective.epsilon)[0])
+            return carry, out
 
         # Every epoch's shuffle in one batched draw, outside the loop.
         keys = jax.random.split(key, config.num_epochs)
         orders = jax.vmap(jax.random.permutation, (0, None))(keys, config.samples_per_update)
         carry = (state.params, state.opt_state)
-        carry, (losses, infos) = jax.lax.scan(epoch, carry, orders)
-        return carry, losses, infos
+        carry, (losses, infos, *escape) = jax.lax.scan(epoch, carry, orders)
+        return carry, losses, infos, escape[0] if escape else None
 
 
 def make_train(config: TrainConfig, env: Environment) -> Trainer:

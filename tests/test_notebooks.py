@@ -1,0 +1,42 @@
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbclient import NotebookClient
+
+NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
+
+
+def test_the_four_notebooks_are_there():
+    names = {path.stem for path in NOTEBOOKS}
+    assert names == {"quickstart", "objectives", "sweeps", "escape_speed"}
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.stem)
+def test_notebook_is_committed_without_outputs(path):
+    cells = nbformat.read(path, as_version=4).cells
+    stale = [i for i, c in enumerate(cells) if c.cell_type == "code" and c.outputs]
+    counts = [i for i, c in enumerate(cells) if c.cell_type == "code" and c.execution_count]
+    assert not stale and not counts, (
+        f"cells {stale or counts} of {path.name} have outputs: "
+        "run python notebooks/strip_outputs.py"
+    )
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.stem)
+def test_notebook_runs_top_to_bottom_with_a_small_budget(path, tmp_path, monkeypatch):
+    monkeypatch.setenv("FPPO_JAX_NOTEBOOK_BUDGET", "small")
+    notebook = nbformat.read(path, as_version=4)
+    client = NotebookClient(
+        notebook,
+        timeout=600,
+        kernel_name="python3",
+        resources={"metadata": {"path": str(tmp_path)}},
+    )
+    client.execute()  # raises CellExecutionError, with the cell and its traceback, on an error
+    outputs = [o for c in notebook.cells if c.cell_type == "code" for o in c.outputs]
+    assert not [o for o in outputs if o.output_type == "error"]
+    # Every figure was drawn.
+    figures = sum(o.output_type == "display_data" and "image/png" in o.data for o in outputs)
+    plotted = sum("plt.show()" in c.source for c in notebook.cells if c.cell_type == "code")
+    assert figures >= plotted

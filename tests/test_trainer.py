@@ -213,3 +213,17 @@ def test_presets_set_the_shape_and_overrides_win():
     assert result.config["preset"] == "massive" and result.config["resets_per_rollout"] == 1
     assert result.config["num_envs"] == 8
     assert "(preset massive)" in result.summary()
+
+
+def test_escape_by_epoch_ends_where_the_update_does(tiny):
+    # Eight epochs at a high learning rate, so that samples do leave the trust region.
+    config = fppo_jax.TrainConfig(total_steps=128 * 3, **{**tiny, "num_epochs": 8})
+    trainer = make_train(config, make_env("cartpole"))
+    hp = hyperparameters("fppo-lp", alpha=1.3, learning_rate=3e-3)
+    state, _ = jax.jit(lambda k: trainer.run(trainer.init(k, hp), hp, 2))(jax.random.key(0))
+    by_epoch = np.asarray(jax.jit(trainer.escape_by_epoch)(state, hp))
+    _, metrics = jax.jit(trainer.update)(state, hp)
+    assert by_epoch.shape == (config.num_epochs,)
+    assert ((by_epoch >= 0) & (by_epoch <= 1)).all() and by_epoch.max() > 0.05
+    # The same batch and minibatch order as the update: its last epoch is the update's result.
+    np.testing.assert_allclose(by_epoch[-1], metrics.negative_fraction_after, atol=1e-6)

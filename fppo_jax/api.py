@@ -19,6 +19,7 @@ from fppo_jax.config import (
     hyperparameters,
     preset_config,
 )
+from fppo_jax.distributed import is_main_process, make_mesh
 from fppo_jax.envs import TASKS, Environment, as_environment
 from fppo_jax.execution import (
     PROGRESS_LINES,
@@ -133,6 +134,7 @@ def train(
     checkpoint_every: int | None = None,
     keep: int = 3,
     log_dir: str | Path | None = None,
+    devices: int | None = None,
     **overrides: Any,
 ) -> TrainResult:
     """Train one policy with `variant` on `env` and return its metrics, parameters and policy.
@@ -158,12 +160,19 @@ def train(
     a directory that already holds checkpoints is refused, so that none is overwritten.
     `log_dir`: write ``metrics.csv`` and TensorBoard event files there as training goes.
 
+    `devices`: how many of the devices JAX sees (default: all) share the run; its environments
+    are split across them and the parameters replicated (see :mod:`fppo_jax.distributed`). In a
+    multi-process run only process 0 reports progress and writes the log.
+
     Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite (the last
     good checkpoint stays on disk).
     """
     config, hp, settings = _resolve(
         env, variant, alpha, k, delta, epsilon, total_steps, preset, overrides
     )
+    mesh = make_mesh(devices, config.num_envs)
+    if checkpoint_dir is not None and jax.process_count() > 1:
+        raise ValueError("checkpoints are written by single-process runs only")
     environment = as_environment(env)
     name = env_name(env, environment)
     run_config = {**settings, "env": name, "seed": seed, "preset": preset}
@@ -176,6 +185,9 @@ def train(
     else:
         chunked = progress or log_dir is not None
         per_call = updates_per_call(config.num_updates, PROGRESS_LINES if chunked else 1)
+    if not is_main_process():
+        # The same program on every process (so the same chunks), but one voice.
+        progress, log_dir = False, None
     trainer = make_train(config, environment)
     key = jax.random.key(seed)
     start = None
@@ -185,9 +197,10 @@ def train(
             check_same_run(restored.record["config"], run_config, checkpoints.directory)
             start = (restored.state, restored.curves)
     if progress is True:
-        print(f"{variant} on {name}: {describe(config, preset)}; compiling…", file=sys.stderr)
+        shape = describe(config, preset) + (f" on {mesh.size} devices" if mesh else "")
+        print(f"{variant} on {name}: {shape}; compiling…", file=sys.stderr)
     try:
-        program = compile_program(trainer, key, hp, per_call)
+        program = compile_program(trainer, key, hp, per_call, mesh)
         with reporter(progress, f"{variant} on {name}") as report:
             state, metrics, train_seconds = _run_one(
                 program, key, hp, start, report, checkpoints, run_config, log_dir

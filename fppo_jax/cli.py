@@ -11,6 +11,7 @@ from pathlib import Path
 
 from fppo_jax.api import TrainingDiverged, TrainResult, describe_update, train
 from fppo_jax.config import HYPERPARAMETER_DEFAULTS, PRESETS, preset_config
+from fppo_jax.distributed import initialize, is_main_process
 from fppo_jax.envs import TASKS, make_env
 from fppo_jax.objectives import DEFAULTS, VARIANTS
 from fppo_jax.sweep import SweepResult, sweep
@@ -112,6 +113,19 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
     command.add_argument(
         "--keep", type=_positive_int, default=3, help="checkpoints kept (the newest)"
     )
+    command.add_argument(
+        "--devices",
+        type=_positive_int,
+        metavar="N",
+        help="devices to train on (default: all that JAX sees, every process's in a "
+        "multi-process run)",
+    )
+    command.add_argument(
+        "--distributed",
+        action="store_true",
+        help="join a multi-process run (jax.distributed): JAX_COORDINATOR_ADDRESS, "
+        "JAX_NUM_PROCESSES and JAX_PROCESS_ID, or detected from SLURM / Open MPI",
+    )
 
 
 def _checkpoint_options(args: argparse.Namespace) -> dict:
@@ -184,6 +198,13 @@ def build_parser() -> argparse.ArgumentParser:
     grid.add_argument("--seeds", type=_positive_int, default=5, help="seeds 0 … N−1 per setting")
     grid.add_argument(
         "--chunk", type=_positive_int, help="runs per compiled call (default: what fits in memory)"
+    )
+    grid.add_argument(
+        "--data-parallel",
+        type=_positive_int,
+        metavar="N",
+        help="devices each run's environments are split over (default 1: the devices share "
+        "the runs)",
     )
     _add_run_flags(grid)
 
@@ -263,10 +284,13 @@ def _train(args: argparse.Namespace) -> int:
         seed=args.seed,
         progress=not args.quiet,
         log_dir=args.output,
+        devices=args.devices,
         **_checkpoint_options(args),
         **_config_overrides(args),
         **optimisation,
     )
+    if not is_main_process():
+        return 0
     print(result.summary())
     if args.output:
         write_run(result, args.output)
@@ -291,9 +315,13 @@ def _sweep(args: argparse.Namespace) -> int:
         seeds=args.seeds,
         chunk=args.chunk,
         progress=not args.quiet,
+        devices=args.devices,
+        data_parallel=args.data_parallel,
         **_checkpoint_options(args),
         **_config_overrides(args),
     )
+    if not is_main_process():
+        return 0
     runs = len(result.runs)
     print(
         f"{runs} runs on {result.config['env']} in {result.train_seconds:.1f} s "
@@ -360,6 +388,8 @@ def _list() -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if getattr(args, "distributed", False):
+        initialize()
     commands = {
         "train": _train,
         "sweep": _sweep,

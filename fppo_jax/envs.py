@@ -8,14 +8,12 @@ the reset states for a whole rollout in one vectorised batch, outside the sequen
 from __future__ import annotations
 
 import dataclasses
+import sys
 from collections.abc import Callable
 from typing import Any, NamedTuple, Protocol, runtime_checkable
 
-import gymnax
 import jax
 import jax.numpy as jnp
-from gymnax.environments import spaces
-from gymnax.environments.environment import Environment as GymnaxEnv
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,7 +64,7 @@ class Environment(Protocol):
 class GymnaxEnvironment:
     """A gymnax (≥ 1.0) environment with fixed parameters (they set the episode limit)."""
 
-    env: GymnaxEnv
+    env: Any  # gymnax.environments.environment.Environment
     params: Any
 
     @property
@@ -75,6 +73,8 @@ class GymnaxEnvironment:
 
     @property
     def action_space(self) -> Discrete | Box:
+        from gymnax.environments import spaces
+
         space = self.env.action_space(self.params)
         if isinstance(space, spaces.Discrete):
             return Discrete(int(space.n))
@@ -126,6 +126,8 @@ def _mujoco(name: str, episode_length: int) -> Callable[[], Environment]:
 
 def _gymnax(env_id: str, max_steps: int) -> Callable[[], GymnaxEnvironment]:
     def make() -> GymnaxEnvironment:
+        import gymnax
+
         env, params = gymnax.make(env_id)
         return GymnaxEnvironment(env, params.replace(max_steps_in_episode=max_steps))
 
@@ -195,12 +197,22 @@ def make_env(name: str) -> Environment:
     return TASKS[name].make()
 
 
+def _is_gymnax_env(env: Any) -> bool:
+    # gymnax is imported only when needed: importing it runs JAX computations, which would
+    # start JAX's backends before a multi-process run can join (fppo_jax.distributed).
+    if "gymnax" not in sys.modules:
+        return False
+    from gymnax.environments.environment import Environment as GymnaxEnv
+
+    return isinstance(env, GymnaxEnv)
+
+
 def as_environment(env: str | Environment | Any) -> Environment:
     """A registered name, a gymnax environment (default parameters), a Brax ``Env``
     (1000-step episodes) or an :class:`Environment`."""
     if isinstance(env, str):
         return make_env(env)
-    if isinstance(env, GymnaxEnv):
+    if _is_gymnax_env(env):
         return GymnaxEnvironment(env, env.default_params)
     from fppo_jax import mujoco_envs
 

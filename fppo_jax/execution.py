@@ -17,8 +17,10 @@ from typing import Any, NamedTuple
 
 import jax
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from fppo_jax.config import Hyperparameters
+from fppo_jax.distributed import input_sharding, place, state_shardings
 from fppo_jax.trainer import METRICS, Trainer, TrainState
 
 PROGRESS_LINES = 20  # chunks of updates a run is split into when progress is reported
@@ -147,10 +149,15 @@ class Program:
 
 
 def compile_program(
-    trainer: Trainer, keys: jax.Array, hps: Hyperparameters, updates_per_call: int
+    trainer: Trainer,
+    keys: jax.Array,
+    hps: Hyperparameters,
+    updates_per_call: int,
+    mesh: Mesh | None = None,
 ) -> Program:
     """Compile `trainer` for these keys and hyperparameters (a leading run axis if `keys` has
-    one), running `updates_per_call` updates per call."""
+    one), running `updates_per_call` updates per call, on `mesh` if given (see
+    :mod:`fppo_jax.distributed`) or on the default device."""
     init = trainer.init
 
     def run(state: TrainState, hp: Hyperparameters) -> tuple[TrainState, Any]:
@@ -163,10 +170,44 @@ def compile_program(
     # training time.
     start = time.perf_counter()
     state = jax.eval_shape(init, keys, hps)
-    compiled_init = jax.jit(init).lower(keys, hps).compile()
-    compiled_run = jax.jit(run).lower(state, hps).compile()
+    if mesh is None:
+        compiled_init = jax.jit(init).lower(keys, hps).compile()
+        compiled_run = jax.jit(run).lower(state, hps).compile()
+    else:
+        inputs = input_sharding(mesh, runs is not None)
+        placed = state_shardings(mesh, state, runs is not None)
+        compiled_init = _Placed(
+            jax.jit(init, in_shardings=(inputs, inputs), out_shardings=placed)
+            .lower(keys, hps)
+            .compile(),
+            (inputs, inputs),
+        )
+        # Metrics are small: replicated, so that every process of a multi-process run can read
+        # them all.
+        metrics = NamedSharding(mesh, PartitionSpec())
+        compiled_run = _Placed(
+            jax.jit(run, in_shardings=(placed, inputs), out_shardings=(placed, metrics))
+            .lower(state, hps)
+            .compile(),
+            (placed, inputs),
+        )
     seconds = time.perf_counter() - start
     return Program(trainer, compiled_init, compiled_run, runs, updates_per_call, seconds)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Placed:
+    """A compiled program whose arguments are first laid out as it expects (a no-op for arrays
+    already so, such as the state it returned)."""
+
+    compiled: Any
+    shardings: tuple
+
+    def __call__(self, *args: Any) -> Any:
+        return self.compiled(*(place(a, s) for a, s in zip(args, self.shardings, strict=True)))
+
+    def memory_analysis(self) -> Any:
+        return self.compiled.memory_analysis()
 
 
 def execute(

@@ -21,6 +21,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh
 
 from fppo_jax.api import (
     checkpoint_every_updates,
@@ -31,6 +32,7 @@ from fppo_jax.api import (
 )
 from fppo_jax.checkpoint import Checkpoints, ConfigMismatch, Restored
 from fppo_jax.config import HYPERPARAMETER_DEFAULTS, Hyperparameters, hyperparameters
+from fppo_jax.distributed import fetch, is_main_process, make_mesh
 from fppo_jax.envs import TASKS, Environment, as_environment
 from fppo_jax.execution import (
     PROGRESS_LINES,
@@ -221,6 +223,8 @@ def sweep(
     resume: bool = False,
     checkpoint_every: int | None = None,
     keep: int = 3,
+    devices: int | None = None,
+    data_parallel: int | None = None,
     **overrides: Any,
 ) -> SweepResult:
     """Train every setting of `grid` (see :func:`expand_grid`) with every seed, as one program.
@@ -237,6 +241,10 @@ def sweep(
     :func:`~fppo_jax.train`: the state of the group of runs in training is saved every
     `checkpoint_every` updates, with the metrics of the groups already done, and a resumed
     sweep goes on from the group and update where it stopped (with the same runs per call).
+
+    `devices` (default: all JAX sees) share the runs of each group, `data_parallel` of them
+    (default 1) per run, splitting its environments (see :mod:`fppo_jax.distributed`); runs
+    per call are rounded up to a multiple of ``devices / data_parallel``.
     """
     fixed = {name: overrides.pop(name) for name in list(overrides) if name in SWEEPABLE}
     clash = sorted(set(fixed) & set(grid))
@@ -257,6 +265,8 @@ def sweep(
     grid_values = {name: _as_list(name, v) for name, v in {**grid, **fixed}.items()}
     sweep_config = {"env": name, "grid": grid_values, "seeds": seeds, "preset": preset}
     sweep_config.update(dataclasses.asdict(config))
+    if checkpoint_dir is not None and jax.process_count() > 1:
+        raise ValueError("checkpoints are written by single-process runs only")
     checkpoints, record = open_checkpoints(
         checkpoint_dir, resume, checkpoint_every, keep, "sweep", sweep_config
     )
@@ -271,21 +281,33 @@ def sweep(
         trainer = make_train(config, environment)
         all_keys = jnp.stack([jax.random.key(run["seed"]) for run in runs])
         all_hps = _stack([hps[run["setting"]] for run in runs])
-        size = min(chunk or len(runs), len(runs))
+        mesh = make_mesh(devices, config.num_envs, runs=len(runs), data_parallel=data_parallel)
+        across = mesh.shape["runs"] if mesh else 1  # every group splits evenly over these
+        size = _multiple(min(chunk or len(runs), len(runs)), across)
+        if record is not None and size != record["runs_per_call"]:
+            raise ConfigMismatch(
+                f"{checkpoints.directory} holds a sweep of {record['runs_per_call']} runs per "
+                f"call, which does not split evenly over {across} devices; resume with devices "
+                "that divide it"
+            )
         if checkpoints:
             per_call = checkpoint_every_updates(checkpoint_every, config)
         else:
             per_call = updates_per_call(config.num_updates, PROGRESS_LINES if progress else 1)
+        if not is_main_process():
+            progress = False  # after the chunks are chosen: every process runs one program
         restored = None
         if record is not None:
             init = jax.vmap(trainer.init)
-            like = jax.eval_shape(init, all_keys[:size], _take(all_hps, slice(0, size)))
+            first = _padded(0, size, len(runs))
+            like = jax.eval_shape(init, all_keys[first], _take(all_hps, first))
             restored = checkpoints.restore(like)
-        program = compile_program(
-            trainer, all_keys[:size], _take(all_hps, slice(0, size)), per_call
-        )
+        first = _padded(0, size, len(runs))
+        program = compile_program(trainer, all_keys[first], _take(all_hps, first), per_call, mesh)
         if chunk is None:
-            program, size = _fit_in_memory(program, trainer, all_keys, all_hps, size, per_call)
+            program, size = _fit_in_memory(
+                program, trainer, all_keys, all_hps, size, per_call, mesh, across
+            )
         if progress is True:
             print(
                 f"sweep on {name}: {len(settings)} settings × {len(seeds)} seeds = {len(runs)} "
@@ -348,7 +370,7 @@ def _run_groups(
     for group in range(first, -(-num_runs // size)):
         begin = group * size
         # The last group is padded with repeats of its last run, so every call has one shape.
-        index = np.minimum(np.arange(begin, begin + size), num_runs - 1)
+        index = _padded(begin, size, num_runs)
         keep = slice(0, min(size, num_runs - begin))
         if report and num_runs > size:
             print(f"runs {begin + 1}–{begin + keep.stop} of {num_runs}", file=sys.stderr)
@@ -366,7 +388,7 @@ def _run_groups(
             after_chunk=save,
         )
         parts.append({name: values[keep] for name, values in metrics.items()})
-        diverged = np.concatenate([diverged, np.asarray(state.nonfinite_update)[keep] + 1])
+        diverged = np.concatenate([diverged, fetch(state.nonfinite_update)[keep] + 1])
         seconds += secs
     return parts, diverged, seconds
 
@@ -409,17 +431,31 @@ def _fit_in_memory(
     hps: Hyperparameters,
     size: int,
     per_call: int,
+    mesh: Mesh | None,
+    across: int,
 ) -> tuple[Program, int]:
     """Halve the runs per call until the compiled program fits in half the free memory."""
     budget = _free_memory() / 2
-    while size > 1:
+    while size > across:
         analysis = program.run.memory_analysis()
         need = analysis.temp_size_in_bytes + 2 * analysis.argument_size_in_bytes
         if need <= budget:
             break
-        size = (size + 1) // 2
-        program = compile_program(trainer, keys[:size], _take(hps, slice(0, size)), per_call)
+        size = _multiple((size + 1) // 2, across)
+        first = _padded(0, size, keys.shape[0])
+        program = compile_program(trainer, keys[first], _take(hps, first), per_call, mesh)
     return program, size
+
+
+def _multiple(size: int, of: int) -> int:
+    """`size` rounded up to a multiple of `of`."""
+    return -(-size // of) * of
+
+
+def _padded(begin: int, size: int, num_runs: int) -> np.ndarray:
+    """Runs begin … begin + size − 1, the last repeated past the end, so that every group has
+    one shape."""
+    return np.minimum(np.arange(begin, begin + size), num_runs - 1)
 
 
 def _free_memory() -> float:

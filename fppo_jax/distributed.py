@@ -1,0 +1,127 @@
+"""Several devices, and several hosts, with JAX's own sharding and distributed runtime.
+
+A run's program is the same on one device or many: its inputs and state are laid out on a
+:class:`jax.sharding.Mesh` with two axes, ``runs`` (the runs of a sweep) and ``data`` (the
+environments of one run), and XLA partitions the computation. Each device steps its share of
+the environments and computes its share of the batch; the means over the batch (the gradient,
+the normaliser statistics, the advantage normalisation) become sums across devices, and the
+parameters stay replicated. A sweep's runs are independent, so sharding the ``runs`` axis
+needs no communication at all.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import Any
+
+import jax
+import numpy as np
+from jax.experimental import multihost_utils
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from fppo_jax.trainer import TrainState
+
+# TrainState fields with a leading environment axis: split across the `data` axis.
+PER_ENVIRONMENT = ("env_state", "obs", "episode_return", "discounted_return")
+
+
+def make_mesh(
+    devices: int | None, num_envs: int, runs: int | None = None, data_parallel: int | None = None
+) -> Mesh | None:
+    """The mesh of `devices` devices (default: all JAX sees), or None for a single device.
+
+    One run (`runs` None) splits its environments over all of them. A sweep splits its runs
+    over ``devices / data_parallel`` devices and each run's environments over `data_parallel`
+    (default 1). Raises ValueError, before anything is compiled, for a count that JAX does not
+    have or that does not divide the environments.
+    """
+    available = jax.devices()
+    count = len(available) if devices is None else devices
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise ValueError(f"devices must be a positive integer, got {devices!r}")
+    if count > len(available):
+        raise ValueError(
+            f"devices={count}, but JAX sees {len(available)} {available[0].platform} "
+            f"device{'s' if len(available) > 1 else ''}"
+        )
+    data = count if runs is None else (1 if data_parallel is None else data_parallel)
+    if isinstance(data, bool) or not isinstance(data, int) or data < 1 or count % data:
+        raise ValueError(
+            f"data_parallel must be a positive divisor of the devices ({count}), got {data!r}"
+        )
+    if num_envs % data:
+        raise ValueError(
+            f"num_envs ({num_envs}) must be divisible by the devices each run is split over "
+            f"({data})"
+        )
+    if count == 1:
+        return None
+    grid = np.asarray(available[:count]).reshape(count // data, data)
+    return Mesh(grid, ("runs", "data"))
+
+
+def state_shardings(mesh: Mesh, state: TrainState, batched: bool) -> TrainState:
+    """Where each leaf of a (batched, for a sweep) training state lives on `mesh`."""
+    runs = ("runs",) if batched else ()
+
+    def field(name: str) -> Any:
+        spec = P(*runs, "data") if name in PER_ENVIRONMENT else P(*runs)
+        return jax.tree.map(lambda _: NamedSharding(mesh, spec), getattr(state, name))
+
+    return TrainState(**{f.name: field(f.name) for f in dataclasses.fields(TrainState)})
+
+
+def input_sharding(mesh: Mesh, batched: bool) -> NamedSharding:
+    """Keys, hyperparameters and metrics: split over runs in a sweep, else replicated."""
+    return NamedSharding(mesh, P("runs") if batched else P())
+
+
+def initialize() -> None:
+    """Join a multi-process run with ``jax.distributed.initialize``, before anything else uses
+    JAX.
+
+    The coordinator is ``JAX_COORDINATOR_ADDRESS`` (host:port of process 0), the process count
+    ``JAX_NUM_PROCESSES`` and this process's rank ``JAX_PROCESS_ID``; any that is unset is
+    detected by JAX from the cluster (SLURM, Open MPI, Kubernetes). CPU devices talk through
+    gloo.
+    """
+    variables = {"num_processes": "JAX_NUM_PROCESSES", "process_id": "JAX_PROCESS_ID"}
+    options = {name: int(os.environ[v]) for name, v in variables.items() if v in os.environ}
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    jax.distributed.initialize(**options)
+
+
+def place(tree: Any, shardings: Any) -> Any:
+    """`tree` laid out as `shardings` (a matching tree, or one sharding for every leaf).
+
+    In one process this is ``jax.device_put``. In a multi-process run a sharding spans other
+    processes' devices too; an array not yet laid out so is assembled from this process's host
+    copy, which every process holds alike (keys, hyperparameters, a restored state)."""
+    if isinstance(shardings, NamedSharding):
+        shardings = jax.tree.map(lambda _: shardings, tree)
+
+    def one(x: Any, sharding: NamedSharding) -> jax.Array:
+        if isinstance(x, jax.Array) and x.sharding == sharding:
+            return x
+        if sharding.is_fully_addressable:
+            return jax.device_put(x, sharding)
+        if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
+            return jax.random.wrap_key_data(one(jax.random.key_data(x), sharding))
+        host = np.asarray(x)
+        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
+
+    return jax.tree.map(one, tree, shardings)
+
+
+def fetch(x: jax.Array) -> np.ndarray:
+    """`x` on the host, whole, even where its shards live on other processes' devices."""
+    if x.is_fully_addressable:
+        return np.asarray(x)
+    return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+
+
+def is_main_process() -> bool:
+    """Whether this process reports and writes files (process 0 of a multi-process run)."""
+    return jax.process_index() == 0

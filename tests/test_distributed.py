@@ -1,0 +1,110 @@
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+from distributed_workers import SMALL, flat
+
+import fppo_jax
+from fppo_jax.cli import main
+
+WORKERS = Path(__file__).parent / "distributed_workers.py"
+
+
+def run_worker(mode: str, out: Path, **env: str) -> subprocess.Popen:
+    variables = {**os.environ, **env}
+    return subprocess.Popen(
+        [sys.executable, str(WORKERS), mode, str(out)],
+        env=variables,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+
+
+def finish(worker: subprocess.Popen, timeout: float = 600) -> None:
+    output, _ = worker.communicate(timeout=timeout)
+    assert worker.returncode == 0, output[-3000:]
+
+
+@pytest.fixture(scope="module")
+def four_devices(tmp_path_factory) -> dict[str, np.ndarray]:
+    out = tmp_path_factory.mktemp("devices") / "results.npz"
+    flags = "--xla_force_host_platform_device_count=4"
+    finish(run_worker("devices", out, XLA_FLAGS=flags))
+    return dict(np.load(out))
+
+
+def test_four_devices_learn_as_one_does(four_devices):
+    r = four_devices
+    assert "spec=P('data',)" in str(r["train4_obs_sharding"])  # environments split
+    assert "'data': 4" in str(r["train4_obs_sharding"])
+    # Not bit for bit: the batch means (gradient, statistics) are summed in another order when
+    # each device holds a quarter of the batch. Within float32 rounding otherwise.
+    np.testing.assert_allclose(r["train4_loss"], r["train1_loss"], rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(r["train4_return"], r["train1_return"], rtol=1e-5)
+    params = sorted(k for k in r if k.startswith("train1_param"))
+    for key in params:
+        np.testing.assert_allclose(r[key.replace("train1", "train4")], r[key], rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize("sharded", ["sweep4", "sweep2x2"])
+def test_a_sharded_sweep_equals_the_unsharded_one(four_devices, sharded):
+    r = four_devices
+    # 6 runs: padded to 8 per call over 4 devices, or to 6 over 2 (each run on 2 devices).
+    assert int(r[f"{sharded}_runs_per_call"]) == {"sweep4": 8, "sweep2x2": 6}[sharded]
+    for metric in fppo_jax.METRICS:
+        a, b = r[f"sweep1_{metric}"], r[f"{sharded}_{metric}"]
+        assert a.shape == b.shape == (6, 4)
+        np.testing.assert_allclose(b, a, rtol=1e-4, atol=1e-6, err_msg=metric)
+
+
+def test_bad_device_counts_are_refused_with_the_reason(four_devices):
+    errors = [str(e) for e in four_devices["errors"]]
+    assert errors[0] == "devices=5, but JAX sees 4 cpu devices"
+    assert errors[1] == "num_envs (8) must be divisible by the devices each run is split over (3)"
+    assert errors[2] == "data_parallel must be a positive divisor of the devices (4), got 3"
+
+
+def test_more_devices_than_there_are_is_an_error_here_too(capsys):
+    count = len(jax.devices())
+    with pytest.raises(ValueError, match=f"devices={count + 1}, but JAX sees {count} "):
+        fppo_jax.train("cartpole", total_steps=4096, devices=count + 1)
+    assert main(["train", "--devices", str(count + 1), "--steps", "4096"]) == 2
+    assert f"but JAX sees {count}" in capsys.readouterr().err
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_two_processes_train_one_run_to_identical_parameters(tmp_path):
+    env = {
+        "JAX_COORDINATOR_ADDRESS": f"127.0.0.1:{free_port()}",
+        "JAX_NUM_PROCESSES": "2",
+        "XLA_FLAGS": "--xla_force_host_platform_device_count=1",
+    }
+    outs = [tmp_path / f"process{i}.npz" for i in range(2)]
+    workers = [
+        run_worker("process", out, JAX_PROCESS_ID=str(i), **env) for i, out in enumerate(outs)
+    ]
+    for worker in workers:
+        finish(worker)
+    first, second = (dict(np.load(out)) for out in outs)
+    assert (int(first["process"]), int(second["process"])) == (0, 1)
+    assert int(first["devices"]) == int(second["devices"]) == 2  # one per process
+    assert first.keys() == second.keys()
+    for key in first:
+        if key != "process":
+            np.testing.assert_array_equal(first[key], second[key], err_msg=key)
+    # And the same learning as one process on one device, to float32 rounding.
+    alone = fppo_jax.train("cartpole", "fppo-lp", total_steps=256 * 4, **SMALL)
+    np.testing.assert_allclose(first["policy_loss"], alone.metrics["policy_loss"], atol=1e-6)
+    for i, leaf in enumerate(flat(alone.params)):
+        np.testing.assert_allclose(first[f"arr_{i}"], leaf, rtol=1e-4, atol=1e-6)

@@ -262,7 +262,7 @@ def sweep(
 
     environment = as_environment(env)
     name = env_name(env, environment)
-    grid_values = {name: _as_list(name, v) for name, v in {**grid, **fixed}.items()}
+    grid_values = {key: _as_list(key, v) for key, v in {**grid, **fixed}.items()}
     sweep_config = {"env": name, "grid": grid_values, "seeds": seeds, "preset": preset}
     sweep_config.update(dataclasses.asdict(config))
     if checkpoint_dir is not None and jax.process_count() > 1:
@@ -296,13 +296,11 @@ def sweep(
             per_call = updates_per_call(config.num_updates, PROGRESS_LINES if progress else 1)
         if not is_main_process():
             progress = False  # after the chunks are chosen: every process runs one program
+        first = _padded(0, size, len(runs))
         restored = None
         if record is not None:
-            init = jax.vmap(trainer.init)
-            first = _padded(0, size, len(runs))
-            like = jax.eval_shape(init, all_keys[first], _take(all_hps, first))
+            like = jax.eval_shape(jax.vmap(trainer.init), all_keys[first], _take(all_hps, first))
             restored = checkpoints.restore(like)
-        first = _padded(0, size, len(runs))
         program = compile_program(trainer, all_keys[first], _take(all_hps, first), per_call, mesh)
         if chunk is None:
             program, size = _fit_in_memory(

@@ -194,7 +194,6 @@ def train(
     if checkpoints and resume:
         restored = checkpoints.restore(jax.eval_shape(trainer.init, key, hp))
         if restored is not None:
-            check_same_run(restored.record["config"], run_config, checkpoints.directory)
             start = (restored.state, restored.curves)
     if progress is True:
         shape = describe(config, preset) + (f" on {mesh.size} devices" if mesh else "")

@@ -27,15 +27,12 @@ from fppo_jax.trainer import TrainState
 PER_ENVIRONMENT = ("env_state", "obs", "episode_return", "discounted_return")
 
 
-def make_mesh(
-    devices: int | None, num_envs: int, runs: int | None = None, data_parallel: int | None = None
-) -> Mesh | None:
+def make_mesh(devices: int | None, num_envs: int, data_parallel: int | None = None) -> Mesh | None:
     """The mesh of `devices` devices (default: all JAX sees), or None for a single device.
 
-    One run (`runs` None) splits its environments over all of them. A sweep splits its runs
-    over ``devices / data_parallel`` devices and each run's environments over `data_parallel`
-    (default 1). Raises ValueError, before anything is compiled, for a count that JAX does not
-    have or that does not divide the environments.
+    Each run's environments are split over `data_parallel` of them (default: all, which is one
+    run's case) and the runs of a sweep over the rest. Raises ValueError, before anything is
+    compiled, for a count that JAX does not have or that does not divide the environments.
     """
     available = jax.devices()
     count = len(available) if devices is None else devices
@@ -46,7 +43,7 @@ def make_mesh(
             f"devices={count}, but JAX sees {len(available)} {available[0].platform} "
             f"device{'s' if len(available) > 1 else ''}"
         )
-    data = count if runs is None else (1 if data_parallel is None else data_parallel)
+    data = count if data_parallel is None else data_parallel
     if isinstance(data, bool) or not isinstance(data, int) or data < 1 or count % data:
         raise ValueError(
             f"data_parallel must be a positive divisor of the devices ({count}), got {data!r}"

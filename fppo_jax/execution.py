@@ -79,6 +79,7 @@ class ProgressBar:
     A context manager; call it with each :class:`Progress`."""
 
     def __init__(self, description: str):
+        from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, TextColumn
         from rich.progress import Progress as RichProgress
 
@@ -91,7 +92,7 @@ class ProgressBar:
                 "ETA {task.fields[eta]}"
             ),
             transient=False,
-            console=_stderr_console(),
+            console=Console(stderr=True),
         )
         self._task = self._bar.add_task(description, total=None, speed="-", ret="-", eta="-")
 
@@ -111,12 +112,6 @@ class ProgressBar:
             ret="-" if math.isnan(p.average_return) else f"{p.average_return:.1f}",
             eta=format_seconds(p.eta),
         )
-
-
-def _stderr_console() -> Any:
-    from rich.console import Console
-
-    return Console(stderr=True)
 
 
 def reporter(progress: bool | Callable[[Progress], None], description: str) -> Any:

@@ -281,7 +281,7 @@ def sweep(
         trainer = make_train(config, environment)
         all_keys = jnp.stack([jax.random.key(run["seed"]) for run in runs])
         all_hps = _stack([hps[run["setting"]] for run in runs])
-        mesh = make_mesh(devices, config.num_envs, runs=len(runs), data_parallel=data_parallel)
+        mesh = make_mesh(devices, config.num_envs, 1 if data_parallel is None else data_parallel)
         across = mesh.shape["runs"] if mesh else 1  # every group splits evenly over these
         size = _multiple(min(chunk or len(runs), len(runs)), across)
         if record is not None and size != record["runs_per_call"]:

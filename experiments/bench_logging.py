@@ -25,7 +25,7 @@ import jax
 import numpy as np
 
 import fppo_jax
-from fppo_jax.execution import print_progress
+from fppo_jax.progress import print_progress
 
 RESULTS = Path(__file__).parent / "results"
 

@@ -29,8 +29,7 @@ import jax
 import jax.numpy as jnp
 
 import fppo_jax
-from fppo_jax.api import describe
-from fppo_jax.config import preset_config
+from fppo_jax.config import describe, preset_config
 from fppo_jax.envs import draw_resets, make_env, where_done
 
 RESULTS = Path(__file__).resolve().parent / "results"

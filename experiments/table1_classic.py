@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from fppo_jax import TrainConfig, sweep
-from fppo_jax.sweep import max_average_return
+from fppo_jax.results import max_average_return
 
 VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
 PAPER = {  # SPEC §2, Table 1

@@ -24,10 +24,9 @@ import jax
 import numpy as np
 
 from fppo_jax import sweep
-from fppo_jax.api import describe
-from fppo_jax.config import preset_config
+from fppo_jax.config import describe, preset_config
 from fppo_jax.envs import MUJOCO_TASKS
-from fppo_jax.sweep import max_average_return
+from fppo_jax.results import max_average_return
 
 PAPER = {  # SPEC §2, Table 1: FPPO-LP, FPPO-QP, PPO, TR-PPO, PPO-RB
     "walker2d": (4030.4, 3893.4, 3368.5, 3279.8, 2858.4),

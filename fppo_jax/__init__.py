@@ -15,15 +15,17 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
     # off-screen one (EGL) can render. A backend the user chose is kept.
     os.environ.setdefault("MUJOCO_GL", "egl")
 
-from fppo_jax.api import TrainingDiverged, TrainResult, train
+from fppo_jax.api import train
 from fppo_jax.checkpoint import ConfigMismatch, DamagedCheckpoint, load_policy
 from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters
+from fppo_jax.driver import Snapshot
 from fppo_jax.envs import TASKS, Environment, make_env
 from fppo_jax.evaluation import evaluate
-from fppo_jax.execution import Progress
 from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective
 from fppo_jax.policy import Policy
-from fppo_jax.sweep import SweepResult, expand_grid, sweep
+from fppo_jax.progress import Progress
+from fppo_jax.results import SweepResult, TrainingDiverged, TrainResult
+from fppo_jax.sweep import expand_grid, sweep
 from fppo_jax.trainer import METRICS, Metrics, Trainer, TrainState, make_train
 
 __all__ = [
@@ -38,6 +40,7 @@ __all__ = [
     "Objective",
     "Policy",
     "Progress",
+    "Snapshot",
     "SweepResult",
     "TrainConfig",
     "TrainResult",

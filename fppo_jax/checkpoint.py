@@ -19,6 +19,7 @@ import json
 import logging
 import shutil
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -51,9 +52,58 @@ class Restored:
     record: dict[str, Any]
 
 
-def check_same_run(saved: dict[str, Any], current: dict[str, Any], directory: Path) -> None:
-    """Raise :class:`ConfigMismatch` naming every field whose value differs."""
-    saved, current = _jsonable(saved), _jsonable(current)
+def open_checkpoints(
+    directory: str | Path | None,
+    resume: bool,
+    keep: int,
+    kind: str,
+    run_config: dict[str, Any],
+) -> tuple[Checkpoints | None, dict[str, Any] | None]:
+    """The checkpoints of a `kind` of run ("train" or "sweep") in `directory`, and the newest
+    one's record, checked against this run before anything is compiled (None, None without a
+    directory)."""
+    if directory is None:
+        return None, None
+    checkpoints = Checkpoints(directory, keep)
+    try:
+        record = checkpoints.latest_record()
+        if record is not None and not resume:
+            raise ValueError(
+                f"{checkpoints.directory} already holds checkpoints; pass resume=True (--resume) "
+                "to continue that run, or choose another directory"
+            )
+        if record is not None:
+            check_same_run(record, kind, run_config, checkpoints.directory)
+    except ValueError:
+        checkpoints.close()
+        raise
+    return checkpoints, record
+
+
+def check_same_run(
+    record: dict[str, Any], kind: str, current: dict[str, Any], directory: Path
+) -> None:
+    """Raise :class:`ConfigMismatch` unless checkpoint `record` belongs to a `kind` of run
+    configured as `current`, naming every field whose value differs.
+
+    A run trained to its end may go on for more steps (a larger ``total_steps``) when nothing
+    it did depends on the budget: not when its learning rate anneals over the run, and not
+    for a sweep, whose finished groups would stay short.
+    """
+    if record.get("kind") != kind:
+        raise ConfigMismatch(
+            f"{directory} holds the checkpoints of a {record.get('kind')}, not of a {kind}"
+        )
+    saved, current = _jsonable(record["config"]), _jsonable(current)
+    longer = current.get("total_steps", 0) > saved.get("total_steps", 0)
+    if longer and kind == "train" and not current.get("anneal_learning_rate"):
+        saved = {**saved, "total_steps": current["total_steps"]}
+    elif longer:
+        why = "its learning rate anneals over the run" if kind == "train" else "it is a sweep"
+        raise ConfigMismatch(
+            f"{directory} holds a run of {saved['total_steps']:,} steps, which cannot go on to "
+            f"{current['total_steps']:,}: {why}. Use another checkpoint directory."
+        )
     differing = [
         f"{name} (checkpoint {saved.get(name, '-')!r}, now {current.get(name, '-')!r})"
         for name in sorted(set(saved) | set(current))
@@ -119,9 +169,12 @@ class Checkpoints:
                 continue
         return None
 
-    def restore(self, like: Any) -> Restored | None:
+    def restore(
+        self, like: Any, check: Callable[[dict[str, Any]], None] | None = None
+    ) -> Restored | None:
         """The newest intact checkpoint, its state in the structure of `like` (arrays or
-        ``jax.ShapeDtypeStruct``\\ s); damaged ones are reported and set aside. None if no
+        ``jax.ShapeDtypeStruct``\\ s); damaged ones are reported and set aside. `check` sees
+        the record of the one chosen, fallbacks included, and may raise. None if no
         checkpoint is intact."""
         leaves, treedef = jax.tree.flatten(like)
         abstract = {_name(i): _storable_shape(leaf) for i, leaf in enumerate(leaves)}
@@ -137,6 +190,8 @@ class Checkpoints:
             except Exception as error:  # any failure to read back is damage
                 self._set_aside(step, error)
                 continue
+            if check is not None:
+                check(record)
             state = [_from_storable(items.state[_name(i)], leaf) for i, leaf in enumerate(leaves)]
             return Restored(step, jax.tree.unflatten(treedef, state), items.curves, record)
         return None

@@ -4,17 +4,25 @@ policy, ``table`` and ``plot`` a sweep's results, ``list`` the tasks and variant
 from __future__ import annotations
 
 import argparse
-import json
+import dataclasses
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from fppo_jax.api import TrainingDiverged, TrainResult, describe_update, train
-from fppo_jax.config import HYPERPARAMETER_DEFAULTS, PRESETS, preset_config
+from fppo_jax.api import train
+from fppo_jax.config import (
+    HYPERPARAMETER_DEFAULTS,
+    PRESETS,
+    TABLE2,
+    TrainConfig,
+    describe_update,
+    preset_config,
+)
 from fppo_jax.distributed import initialize, is_main_process
 from fppo_jax.envs import TASKS, make_env
-from fppo_jax.objectives import DEFAULTS, VARIANTS
-from fppo_jax.sweep import SweepResult, sweep
+from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
+from fppo_jax.results import SweepResult, TrainingDiverged
+from fppo_jax.sweep import sweep
 
 
 def _positive_int(text: str) -> int:
@@ -60,38 +68,69 @@ def _names(text: str) -> list[str]:
     return names
 
 
+# Today's short flags, kept as aliases of the flags named after TrainConfig's fields.
+ALIASES = {
+    "total_steps": "--steps",
+    "num_minibatches": "--minibatches",
+    "num_epochs": "--epochs",
+    "hidden_sizes": "--hidden",
+    "normalize_observations": "--no-obs-norm",
+    "normalize_rewards": "--no-reward-norm",
+    "clip_value_loss": "--no-value-clip",
+    "anneal_learning_rate": "--anneal-lr",
+}
+_PARSERS = {"int": _positive_int, "int | None": _positive_int, "tuple[int, ...]": _sizes}
+
+
+def _add_config_flags(command: argparse.ArgumentParser) -> None:
+    """A flag per :class:`TrainConfig` field, named after it, over the preset's value."""
+    group = command.add_argument_group(
+        "run shape", "TrainConfig's fields; each defaults to the preset's value"
+    )
+    for field in dataclasses.fields(TrainConfig):
+        flag, alias = "--" + field.name.replace("_", "-"), ALIASES.get(field.name)
+        text = field.metadata["help"]
+        if field.type == "bool":
+            group.add_argument(
+                flag, dest=field.name, action=argparse.BooleanOptionalAction, help=text
+            )
+            if alias:  # --no-obs-norm turns a default-on field off; --anneal-lr one on
+                on = alias.startswith("--no-")
+                same = ("--no-" + flag[2:]) if on else flag
+                group.add_argument(
+                    alias,
+                    dest=field.name,
+                    action="store_false" if on else "store_true",
+                    default=None,
+                    help=f"same as {same}",
+                )
+            continue
+        flags = [flag, alias] if alias else [flag]
+        group.add_argument(*flags, dest=field.name, type=_PARSERS[field.type], help=text)
+
+
 def _add_run_flags(command: argparse.ArgumentParser) -> None:
-    """The task, the budget and the static shape of a run, shared by train and sweep."""
-    command.add_argument("--env", default="cartpole", choices=list(TASKS), help="task")
+    """The task, the preset, the run's shape and how it is driven, shared by train and sweep."""
     command.add_argument(
-        "--steps", type=_positive_int, help="env steps per run (default: the paper's budget)"
+        "--env",
+        default="cartpole",
+        help="a registered task (fppo-jax list) or a namespaced id such as gymnax/Pendulum-v1",
     )
     command.add_argument(
         "--preset",
         default="paper",
         choices=list(PRESETS),
         help="run shape: paper (8 envs × 256 steps, 32 minibatches × 10 epochs) or massive "
-        "(2048 envs × 16 steps, 16 minibatches × 4 epochs, for a GPU); the flags below "
+        "(2048 envs × 16 steps, 16 minibatches × 4 epochs, for a GPU); the run-shape flags "
         "override it",
     )
-    shape = {
-        "--num-envs": "parallel environments",
-        "--num-steps": "steps per environment per update",
-        "--minibatches": "minibatches per epoch",
-        "--epochs": "epochs per update",
-        "--resets-per-rollout": "reset states drawn per environment per rollout (default: "
-        "one per step, so every episode starts fresh)",
-    }
-    for flag, text in shape.items():
-        command.add_argument(flag, type=_positive_int, help=text + " (default: the preset's)")
-    command.add_argument("--hidden", type=_sizes, help="hidden layer widths (default 64,64)")
-    command.add_argument("--no-obs-norm", action="store_true", help="do not normalise observations")
-    command.add_argument("--no-reward-norm", action="store_true", help="do not scale rewards")
-    command.add_argument("--no-value-clip", action="store_true", help="do not clip the value loss")
+    _add_config_flags(command)
     command.add_argument(
-        "--anneal-lr", action="store_true", help="decay the learning rate linearly to 0"
+        "--output",
+        type=Path,
+        help="directory for config.json (at once), metrics.csv and TensorBoard files (as "
+        "training goes) and the results",
     )
-    command.add_argument("--output", type=Path, help="directory to write the results to")
     command.add_argument("--quiet", action="store_true", help="no progress bar or lines")
     command.add_argument(
         "--checkpoint-dir",
@@ -102,7 +141,8 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
     command.add_argument(
         "--resume",
         action="store_true",
-        help="continue from the newest intact checkpoint in --checkpoint-dir (if there is one)",
+        help="continue from the newest intact checkpoint in --checkpoint-dir (if there is "
+        "one); with a larger --steps, a finished run goes on",
     )
     command.add_argument(
         "--checkpoint-every",
@@ -112,6 +152,22 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
     )
     command.add_argument(
         "--keep", type=_positive_int, default=3, help="checkpoints kept (the newest)"
+    )
+    command.add_argument(
+        "--eval-every",
+        type=_positive_int,
+        metavar="N",
+        help="every N updates and at the end, record eval_return: the deterministic "
+        "policy's mean return over --eval-episodes episodes",
+    )
+    command.add_argument(
+        "--eval-episodes", type=_positive_int, default=10, help="episodes per evaluation"
+    )
+    command.add_argument(
+        "--wandb-project",
+        metavar="NAME",
+        help="also log to this Weights & Biases project (pip install 'fppo-jax[wandb]'; "
+        "WANDB_MODE=offline works without an account)",
     )
     command.add_argument(
         "--devices",
@@ -128,13 +184,26 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
     )
 
 
-def _checkpoint_options(args: argparse.Namespace) -> dict:
+def _driver_options(args: argparse.Namespace) -> dict:
+    """The flags of how a run is driven, as train's and sweep's arguments."""
     return {
+        "progress": not args.quiet,
+        "log_dir": args.output,
         "checkpoint_dir": args.checkpoint_dir,
         "resume": args.resume,
         "checkpoint_every": args.checkpoint_every,
         "keep": args.keep,
+        "eval_every": args.eval_every,
+        "eval_episodes": args.eval_episodes,
+        "wandb_project": args.wandb_project,
+        "devices": args.devices,
     }
+
+
+def _config_overrides(args: argparse.Namespace) -> dict:
+    """The preset and the run-shape flags given, as :class:`TrainConfig` fields."""
+    given = {field.name: getattr(args, field.name) for field in dataclasses.fields(TrainConfig)}
+    return {"preset": args.preset, **{k: v for k, v in given.items() if v is not None}}
 
 
 HYPERPARAMETER_HELP = {
@@ -149,6 +218,15 @@ HYPERPARAMETER_HELP = {
 }
 
 
+class _Defaults(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows a flag's default where it has one worth reading (not None, not off)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        if action.default in (None, False):
+            return action.help or ""
+        return super()._get_help_string(action)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fppo-jax",
@@ -156,7 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
         "with a fully jitted JAX trainer.",
     )
     commands = parser.add_subparsers(dest="command", required=True)
-    formatter = argparse.ArgumentDefaultsHelpFormatter
+    formatter = _Defaults
 
     run = commands.add_parser(
         "train",
@@ -233,39 +311,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _config_overrides(args: argparse.Namespace) -> dict:
-    """The run flags given, as :class:`TrainConfig` fields over the preset's."""
-    given = {
-        "num_envs": args.num_envs,
-        "num_steps": args.num_steps,
-        "num_minibatches": args.minibatches,
-        "num_epochs": args.epochs,
-        "resets_per_rollout": args.resets_per_rollout,
-        "hidden_sizes": args.hidden,
-    }
-    return {
-        "total_steps": args.steps,
-        "preset": args.preset,
-        **{name: value for name, value in given.items() if value is not None},
-        "normalize_observations": not args.no_obs_norm,
-        "normalize_rewards": not args.no_reward_norm,
-        "clip_value_loss": not args.no_value_clip,
-        "anneal_learning_rate": args.anneal_lr,
-    }
-
-
-def write_run(result: TrainResult, directory: Path) -> None:
-    """config.json and summary.txt in `directory` (metrics.csv is written during training)."""
-    directory.mkdir(parents=True, exist_ok=True)
-    config = {
-        **result.config,
-        "compile_seconds": result.compile_seconds,
-        "train_seconds": result.train_seconds,
-    }
-    (directory / "config.json").write_text(json.dumps(config, indent=2) + "\n")
-    (directory / "summary.txt").write_text(result.summary() + "\n")
-
-
 def _train(args: argparse.Namespace) -> int:
     if args.render and args.render.suffix not in (".png", ".gif"):
         raise ValueError(f"--render takes a .png or .gif path, not {args.render}")
@@ -280,12 +325,9 @@ def _train(args: argparse.Namespace) -> int:
         args.alpha,
         k=args.k,
         delta=args.delta,
-        epsilon=0.2 if args.epsilon is None else args.epsilon,
+        epsilon=EPSILON if args.epsilon is None else args.epsilon,
         seed=args.seed,
-        progress=not args.quiet,
-        log_dir=args.output,
-        devices=args.devices,
-        **_checkpoint_options(args),
+        **_driver_options(args),
         **_config_overrides(args),
         **optimisation,
     )
@@ -293,8 +335,8 @@ def _train(args: argparse.Namespace) -> int:
         return 0
     print(result.summary())
     if args.output:
-        write_run(result, args.output)
-        print(f"wrote {args.output}/metrics.csv, tensorboard/, config.json, summary.txt")
+        result.write(args.output)
+        print(f"wrote {args.output}/config.json, metrics.csv, tensorboard/, summary.txt")
     if args.render:
         from fppo_jax.render import RenderingUnavailable
 
@@ -314,10 +356,8 @@ def _sweep(args: argparse.Namespace) -> int:
         grid,
         seeds=args.seeds,
         chunk=args.chunk,
-        progress=not args.quiet,
-        devices=args.devices,
         data_parallel=args.data_parallel,
-        **_checkpoint_options(args),
+        **_driver_options(args),
         **_config_overrides(args),
     )
     if not is_main_process():
@@ -373,7 +413,7 @@ def _list() -> int:
     for task in TASKS.values():
         print(
             f"  {task.name:<12} {task.description}; {task.total_steps:,} steps, "
-            f"fppo-lp alpha {task.fppo_lp_alpha}, fppo-qp k {task.fppo_qp_k}"
+            f"fppo-lp alpha {TABLE2[task.name]['alpha']}, fppo-qp k {TABLE2[task.name]['k']}"
         )
     print("presets:")
     for name in PRESETS:
@@ -382,7 +422,7 @@ def _list() -> int:
     print("variants:")
     for name in VARIANTS:
         params = ", ".join(f"{k} {v}" for k, v in DEFAULTS[name].items()) or "-"
-        print(f"  {name:<10} defaults: epsilon 0.2; {params}")
+        print(f"  {name:<10} defaults: epsilon {EPSILON}; {params}")
     return 0
 
 

@@ -3,7 +3,9 @@
 :class:`TrainConfig` fixes array shapes and program structure; changing it recompiles.
 :class:`Hyperparameters` is a pytree of arrays passed into the compiled program, so seeds and
 hyperparameters (variants included) can be vmapped without recompiling.
-Defaults follow the paper's protocol, OpenAI baselines' ppo2 (SPEC §2).
+Defaults follow the paper's protocol, OpenAI baselines' ppo2 (SPEC §2), and the paper's Table 2
+(:data:`TABLE2`). Every default and every check of a run's settings lives here, so that
+``train``, ``sweep`` and the command line resolve them alike.
 """
 
 from __future__ import annotations
@@ -14,41 +16,104 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from fppo_jax.objectives import Objective, objective
+from fppo_jax.envs import TASKS
+from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
+from fppo_jax.objectives import EPSILON, VARIANTS, Objective, objective
+
+# The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task (SPEC §1).
+TABLE2: dict[str, dict[str, float]] = {
+    **{task: {"alpha": 1.3, "k": 0.4} for task in ("cartpole", "acrobot", "mountaincar")},
+    "hopper": {"alpha": 1.3, "k": 0.2},
+    "walker2d": {"alpha": 1.3, "k": 0.1},
+    "halfcheetah": {"alpha": 1.3, "k": 0.4},
+    "ant": {"alpha": 1.3, "k": 0.4},
+    "reacher": {"alpha": 1.1, "k": 0.4},
+    "swimmer": {"alpha": 1.1, "k": 0.1},
+}
+_TABLE2_VARIANTS = {"fppo-lp": "alpha", "fppo-qp": "k"}
+
+VARIANT_SPECIFIC: tuple[str, ...] = ("alpha", "k", "delta")
+SYMBOLS = {"alpha": "α", "k": "k", "delta": "δ", "epsilon": "ε"}
+
+
+def positive_int(name: str, value: object) -> int:
+    """`value` if it is a positive integer (numpy integers included, booleans not)."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer) or value < 1:
+        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return int(value)
+
+
+def check_seed(seed: object) -> int:
+    """`seed` if it is an integer that ``jax.random.key`` takes (numpy integers included)."""
+    if isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer):
+        raise ValueError(f"a seed must be an integer, got {seed!r}")
+    if not -(2**63) <= seed < 2**64:
+        raise ValueError(f"a seed must fit in 64 bits, got {seed}")
+    return int(seed)
+
+
+def check_variant(variant: object) -> str:
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown variant {variant!r}; valid variants: {', '.join(VARIANTS)}")
+    return str(variant)
+
+
+def table2(task: str | None, variant: str) -> dict[str, float]:
+    """The paper's Table 2 value of `variant`'s own hyperparameter on `task` ({} if none)."""
+    name = _TABLE2_VARIANTS.get(variant)
+    if task not in TABLE2 or name is None:
+        return {}
+    return {name: TABLE2[task][name]}
+
+
+def _field(default: Any, help: str) -> Any:
+    """A :class:`TrainConfig` field and its help text (which the command line shows)."""
+    return dataclasses.field(default=default, metadata={"help": help})
 
 
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """Static settings. Samples per update = `num_envs` × `num_steps`."""
 
-    total_steps: int = 100_000
-    num_envs: int = 8
-    num_steps: int = 256
-    num_minibatches: int = 32
-    num_epochs: int = 10
-    hidden_sizes: tuple[int, ...] = (64, 64)
-    normalize_observations: bool = True
-    normalize_rewards: bool = True
-    clip_value_loss: bool = True
-    anneal_learning_rate: bool = False
-    # Reset states drawn per environment per rollout. None: one per step, so every episode
-    # starts from a fresh draw. A small pool (MuJoCo with thousands of environments, where a
-    # reset costs a fifth of a step) is cycled by environments that end several episodes in
-    # one rollout.
-    resets_per_rollout: int | None = None
+    total_steps: int = _field(100_000, "env steps per run (default: the task's budget)")
+    num_envs: int = _field(8, "parallel environments")
+    num_steps: int = _field(256, "steps per environment per update")
+    num_minibatches: int = _field(32, "minibatches per epoch")
+    num_epochs: int = _field(10, "epochs per update")
+    hidden_sizes: tuple[int, ...] = _field((64, 64), "hidden layer widths of both MLPs")
+    normalize_observations: bool = _field(True, "normalise observations (running statistics)")
+    normalize_rewards: bool = _field(True, "scale rewards by the std of discounted returns")
+    clip_value_loss: bool = _field(True, "clip the value loss with range epsilon")
+    anneal_learning_rate: bool = _field(False, "decay the learning rate linearly to 0")
+    # A small pool (MuJoCo with thousands of environments, where a reset costs a fifth of a
+    # step) is cycled by environments that end several episodes in one rollout.
+    resets_per_rollout: int | None = _field(
+        None,
+        "reset states drawn per environment per rollout (default: one per step, so every "
+        "episode starts fresh)",
+    )
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "hidden_sizes", tuple(int(h) for h in self.hidden_sizes))
         for name in ("total_steps", "num_envs", "num_steps", "num_minibatches", "num_epochs"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        pool = self.resets_per_rollout
-        if pool is not None and (isinstance(pool, bool) or not isinstance(pool, int) or pool < 1):
-            raise ValueError(f"resets_per_rollout must be a positive integer or None, got {pool!r}")
-        if not self.hidden_sizes or min(self.hidden_sizes) < 1:
-            raise ValueError(f"hidden_sizes must be positive layer widths, got {self.hidden_sizes}")
+            object.__setattr__(self, name, positive_int(name, getattr(self, name)))
+        if self.resets_per_rollout is not None:
+            pool = positive_int("resets_per_rollout", self.resets_per_rollout)
+            object.__setattr__(self, "resets_per_rollout", pool)
+        sizes = self.hidden_sizes
+        if isinstance(sizes, str) or not sizes:
+            raise ValueError(f"hidden_sizes must be positive layer widths, got {sizes!r}")
+        widths = tuple(positive_int("each of hidden_sizes", h) for h in sizes)
+        object.__setattr__(self, "hidden_sizes", widths)
+        for name in (
+            "normalize_observations",
+            "normalize_rewards",
+            "clip_value_loss",
+            "anneal_learning_rate",
+        ):
+            if not isinstance(getattr(self, name), bool | np.bool_):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.samples_per_update % self.num_minibatches:
             raise ValueError(
                 f"num_minibatches ({self.num_minibatches}) must divide the samples per update "
@@ -133,7 +198,7 @@ _RANGES: dict[str, tuple[str, object]] = {
 def hyperparameters(
     variant: str = "ppo",
     *,
-    epsilon: float = 0.2,
+    epsilon: float = EPSILON,
     alpha: float | None = None,
     k: float | None = None,
     delta: float | None = None,
@@ -158,4 +223,74 @@ def hyperparameters(
     return Hyperparameters(
         objective=objective(variant, epsilon=epsilon, alpha=alpha, k=k, delta=delta),
         **{name: jnp.asarray(value, jnp.float32) for name, value in settings.items()},
+    )
+
+
+CONFIG_FIELDS: tuple[str, ...] = tuple(field.name for field in dataclasses.fields(TrainConfig))
+SWEEPABLE: tuple[str, ...] = ("variant", "epsilon", *VARIANT_SPECIFIC, *HYPERPARAMETER_DEFAULTS)
+
+
+def resolve_config(
+    env: Any,
+    total_steps: int | None,
+    overrides: dict[str, Any],
+    also_valid: tuple[str, ...] = (),
+    preset: str = "paper",
+) -> TrainConfig:
+    """The checked TrainConfig of `preset` and `overrides`, with the task's step budget by
+    default."""
+    if isinstance(env, str) and env not in TASKS:
+        raise ValueError(f"unknown environment {env!r}; registered: {', '.join(TASKS)}")
+    unknown = sorted(set(overrides) - set(CONFIG_FIELDS))
+    if unknown:
+        raise ValueError(
+            f"unknown setting {', '.join(unknown)}; valid: "
+            + ", ".join([*CONFIG_FIELDS, *also_valid])
+        )
+    values = dict(overrides)
+    if total_steps is not None:
+        values["total_steps"] = total_steps
+    elif "total_steps" not in values:
+        task = TASKS.get(env) if isinstance(env, str) else None
+        values["total_steps"] = task.total_steps if task else TrainConfig.total_steps
+    return preset_config(preset, **values)
+
+
+def resolve_hyperparameters(
+    variant: str, task: str | None, **values: Any
+) -> tuple[Hyperparameters, dict[str, Any]]:
+    """Checked hyperparameters of one setting, with Table 2's α or k for a registered `task`,
+    and the setting as plain values (the variant, ε, its own α, k, δ, the optimisation
+    settings), as records and tables show it."""
+    check_variant(variant)
+    given = {name: value for name, value in values.items() if value is not None}
+    hp = hyperparameters(variant, **{**table2(task, variant), **given})
+    o = hp.objective
+    settings: dict[str, Any] = {"variant": variant, "epsilon": as_float(o.epsilon)}
+    settings.update({name: as_float(getattr(o, name)) for name in VARIANT_DEFAULTS[variant]})
+    settings.update({name: as_float(getattr(hp, name)) for name in HYPERPARAMETER_DEFAULTS})
+    return hp, settings
+
+
+def environment_name(env: Any, environment: Any) -> str:
+    """The name a run records for its environment: the task's, or the adapter's class."""
+    return env if isinstance(env, str) else type(getattr(environment, "env", environment)).__name__
+
+
+def as_float(x: jax.Array) -> float:
+    """The shortest decimal that round-trips the float32, so that 1.3 is reported as 1.3."""
+    return float(str(np.asarray(x)[()]))
+
+
+def describe(config: TrainConfig, preset: str | None = None) -> str:
+    """One run's length and shape, in words."""
+    prefix = "" if preset is None else f"preset {preset}, "
+    return f"{prefix}{config.num_updates} updates × {describe_update(config)}"
+
+
+def describe_update(config: TrainConfig) -> str:
+    """One update's shape, in words."""
+    return (
+        f"{config.samples_per_update:,} samples ({config.num_envs} envs × {config.num_steps} "
+        f"steps), {config.num_minibatches} minibatches × {config.num_epochs} epochs"
     )

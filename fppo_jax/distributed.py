@@ -113,8 +113,9 @@ def place(tree: Any, shardings: Any) -> Any:
 
 
 def fetch(x: jax.Array) -> np.ndarray:
-    """`x` on the host, whole, even where its shards live on other processes' devices."""
-    if x.is_fully_addressable:
+    """`x` on the host, whole, even where its shards live on other processes' devices (a
+    restored state is on the host already)."""
+    if not isinstance(x, jax.Array) or x.is_fully_addressable:
         return np.asarray(x)
     return np.asarray(multihost_utils.process_allgather(x, tiled=True))
 

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from fppo_jax.config import positive_int
 from fppo_jax.envs import Environment
 from fppo_jax.policy import Policy
 
@@ -22,11 +25,23 @@ def evaluate(
     """The undiscounted return of each of `episodes` episodes of `policy` on `env`: the most
     likely actions if `deterministic`, sampled ones otherwise. Episodes run in lockstep until
     each ends (terminated or truncated) or `max_steps` have passed."""
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
-        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    run = make_evaluator(env, episodes, seed=seed, deterministic=deterministic, max_steps=max_steps)
+    return np.asarray(jax.jit(run)(policy))
+
+
+def make_evaluator(
+    env: Environment,
+    episodes: int,
+    *,
+    seed: int = 0,
+    deterministic: bool = True,
+    max_steps: int = 10_000,
+) -> Callable[[Policy], jax.Array]:
+    """:func:`evaluate` as a pure function of the policy, to jit once and call (or vmap over a
+    batch of policies) as often as training goes: the same episodes (same `seed`) each time."""
+    positive_int("episodes", episodes)
     reset_key, run_key = jax.random.split(jax.random.key(seed))
 
-    @jax.jit
     def run(policy: Policy) -> jax.Array:
         state, obs = jax.vmap(env.reset)(jax.random.split(reset_key, episodes))
         ended = jnp.zeros(episodes, bool)
@@ -48,4 +63,4 @@ def evaluate(
         carry = (jnp.asarray(0), run_key, state, obs, ended, returns)
         return jax.lax.while_loop(going, step, carry)[-1]
 
-    return np.asarray(run(policy))
+    return run

@@ -1,19 +1,16 @@
 """Running a training program: compiled once, then called in equal chunks of updates.
 
-One run, or many vmapped along a leading run axis. Between chunks the host reports progress
-and checks the state; every chunk, and every group of runs of the same size, reuses the one
-compiled program.
+One run, or many vmapped along a leading run axis. Every chunk, and every group of runs of the
+same size, reuses the one compiled program; what the host does between chunks is the driver's
+(:mod:`fppo_jax.driver`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import math
-import sys
 import time
-from collections.abc import Callable
-from typing import Any, NamedTuple
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import jax
 import numpy as np
@@ -21,109 +18,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from fppo_jax.config import Hyperparameters
 from fppo_jax.distributed import input_sharding, place, state_shardings
-from fppo_jax.trainer import METRICS, Trainer, TrainState
-
-PROGRESS_LINES = 20  # chunks of updates a run is split into when progress is reported
-
-
-class Progress(NamedTuple):
-    """What a progress callback receives: once compiled (update 0, or the update a resumed run
-    starts from), then after each chunk.
-
-    `env_steps` and `total_steps` count every run; `average_return` is the mean over runs of
-    each run's latest average return; `steps_per_second` and `eta` (seconds left) are measured
-    over the updates run by this call.
-    """
-
-    update: int
-    num_updates: int
-    env_steps: int
-    total_steps: int
-    average_return: float
-    steps_per_second: float
-    elapsed: float
-    compile_seconds: float
-    eta: float = math.nan
-
-
-def print_progress(p: Progress) -> None:
-    """The default progress line, on stderr."""
-    if p.elapsed == 0:
-        resumed = f"; resuming at update {p.update}" if p.update else ""
-        print(f"compiled in {p.compile_seconds:.1f} s{resumed}", file=sys.stderr, flush=True)
-        return
-    avg = "-" if math.isnan(p.average_return) else f"{p.average_return:.1f}"
-    print(
-        f"update {p.update:>5}/{p.num_updates}  steps {p.env_steps:>10,}/{p.total_steps:,}  "
-        f"{p.steps_per_second:>9,.0f} steps/s  average return {avg:>8}  "
-        f"({p.elapsed:.1f} s, ETA {format_seconds(p.eta)})",
-        file=sys.stderr,
-        flush=True,
-    )
-
-
-def format_seconds(seconds: float) -> str:
-    """``42 s``, ``3 min 05 s`` or ``2 h 07 min``; ``-`` if unknown."""
-    if not math.isfinite(seconds):
-        return "-"
-    seconds = round(seconds)
-    if seconds < 60:
-        return f"{seconds} s"
-    if seconds < 3600:
-        return f"{seconds // 60} min {seconds % 60:02d} s"
-    return f"{seconds // 3600} h {seconds % 3600 // 60:02d} min"
-
-
-class ProgressBar:
-    """A progress bar on the terminal (rich): env steps, steps/s, average return and ETA.
-    A context manager; call it with each :class:`Progress`."""
-
-    def __init__(self, description: str):
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, TextColumn
-        from rich.progress import Progress as RichProgress
-
-        self._bar = RichProgress(
-            TextColumn("{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn(
-                "steps  {task.fields[speed]}  average return {task.fields[ret]}  "
-                "ETA {task.fields[eta]}"
-            ),
-            transient=False,
-            console=Console(stderr=True),
-        )
-        self._task = self._bar.add_task(description, total=None, speed="-", ret="-", eta="-")
-
-    def __enter__(self) -> ProgressBar:
-        self._bar.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._bar.stop()
-
-    def __call__(self, p: Progress) -> None:
-        self._bar.update(
-            self._task,
-            total=p.total_steps,
-            completed=p.env_steps,
-            speed=f"{p.steps_per_second:,.0f}/s" if p.elapsed else "-",
-            ret="-" if math.isnan(p.average_return) else f"{p.average_return:.1f}",
-            eta=format_seconds(p.eta),
-        )
-
-
-def reporter(progress: bool | Callable[[Progress], None], description: str) -> Any:
-    """The context manager that reports progress for `train` and `sweep`'s `progress`
-    argument: a bar on a terminal, lines otherwise, the user's callable, or nothing (None)."""
-    if callable(progress):
-        return contextlib.nullcontext(progress)
-    if not progress:
-        return contextlib.nullcontext(None)
-    if sys.stderr.isatty():
-        return ProgressBar(description)
-    return contextlib.nullcontext(print_progress)
+from fppo_jax.trainer import Trainer, TrainState
 
 
 def updates_per_call(num_updates: int, calls: int) -> int:
@@ -205,60 +100,22 @@ class _Placed:
         return self.compiled.memory_analysis()
 
 
-def execute(
-    program: Program,
-    keys: jax.Array,
-    hps: Hyperparameters,
-    *,
-    start: tuple[TrainState, dict[str, np.ndarray]] | None = None,
-    report: Callable[[Progress], None] | None = None,
-    after_chunk: Callable[[TrainState, dict[str, np.ndarray]], None] | None = None,
-) -> tuple[TrainState, dict[str, np.ndarray], float]:
-    """Train from `keys`, or from `start` (a state and the metrics that led to it): (final
-    state, metrics per update — [run, update] when batched —, seconds). `after_chunk` sees the
-    state and the metrics so far after every compiled call, and may raise to stop."""
+def run_chunks(
+    program: Program, state: TrainState, hps: Hyperparameters
+) -> Iterator[tuple[TrainState, dict[str, np.ndarray]]]:
+    """Train from `state` to the end of the run, one compiled call at a time: yields the state
+    after each call and that call's metrics (per update; [run, update] when batched). The next
+    call is dispatched before the caller's work on the current one, so the two overlap."""
     config = program.trainer.config
-    runs = program.runs or 1
-    total = config.num_updates * config.samples_per_update * runs
-    state, rows = (program.init(keys, hps), []) if start is None else (start[0], [start[1]])
-    first = int(np.max(state.update)) if start is not None else 0
-    if report:
-        steps = first * config.samples_per_update * runs
-        report(
-            Progress(
-                first, config.num_updates, steps, total, math.nan, 0.0, 0.0, program.compile_seconds
-            )
-        )
+    first = int(np.max(state.update))
     calls = -(-(config.num_updates - first) // program.updates_per_call)
-    began = time.perf_counter()
     pending = program.run(state, hps) if calls else None
     for call in range(calls):
         state, metrics = pending
         if call + 1 < calls:
-            # Dispatched before the host's work on this chunk, so that the work overlaps it.
             pending = program.run(state, hps)
-        rows.append(_ran(jax.device_get(metrics._asdict())))
-        if after_chunk:
-            after_chunk(state, _concatenate(rows))
-        if report:
-            elapsed = time.perf_counter() - began
-            done = min(first + (call + 1) * program.updates_per_call, config.num_updates)
-            steps = done * config.samples_per_update * runs
-            rate = (done - first) * config.samples_per_update * runs / max(elapsed, 1e-9)
-            report(
-                Progress(
-                    done,
-                    config.num_updates,
-                    steps,
-                    total,
-                    _latest(rows[-1]),
-                    rate,
-                    elapsed,
-                    program.compile_seconds,
-                    (total - steps) / max(rate, 1e-9),
-                )
-            )
-    return state, _concatenate(rows), time.perf_counter() - began
+        host = jax.device_get(metrics._asdict())  # a dict with its keys sorted
+        yield state, _ran({name: host[name] for name in metrics._fields})
 
 
 def _ran(metrics: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -268,13 +125,12 @@ def _ran(metrics: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {name: values[..., ran] for name, values in metrics.items()}
 
 
-def _concatenate(rows: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    return {name: np.concatenate([r[name] for r in rows], axis=-1) for name in METRICS}
+def concatenate(rows: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Metrics of consecutive chunks joined along the update axis; NaN where a chunk lacks
+    one (an evaluation column that a resumed run added)."""
+    names = dict.fromkeys(name for r in rows for name in r)
 
+    def column(r: dict[str, np.ndarray], name: str) -> np.ndarray:
+        return r[name] if name in r else np.full(r["env_steps"].shape, np.nan, np.float32)
 
-def _latest(metrics: dict[str, np.ndarray]) -> float:
-    returns = np.asarray(metrics["average_return"])
-    if returns.shape[-1] == 0:
-        return math.nan
-    latest = returns[..., -1]
-    return float(np.nanmean(latest)) if np.isfinite(latest).any() else math.nan
+    return {name: np.concatenate([column(r, name) for r in rows], axis=-1) for name in names}

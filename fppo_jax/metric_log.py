@@ -1,56 +1,214 @@
-"""Per-update metrics written as they arrive: ``metrics.csv`` and TensorBoard event files."""
+"""Per-update metrics written as they arrive: ``config.json`` first, then ``metrics.csv`` and
+TensorBoard event files, and optionally Weights & Biases.
+
+One run logs its metrics as they are. A sweep's runs log theirs side by side: ``metrics.csv``
+gains a leading ``run`` column, TensorBoard gets one directory per run (``tensorboard/run-007``)
+and W&B one panel prefix per run.
+"""
 
 from __future__ import annotations
 
 import csv
+import json
+import os
+import platform
+from collections.abc import Sequence
+from importlib import metadata
 from pathlib import Path
+from typing import Any
 
+import jax
 import numpy as np
 
-from fppo_jax.trainer import METRICS
+Block = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
+
+
+def environment_record() -> dict[str, Any]:
+    """Versions and devices, for the record of a run."""
+    versions = {}
+    for package in ("fppo-jax", "jax", "jaxlib", "flax", "optax", "brax", "mujoco", "gymnax"):
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            continue
+    return {
+        "versions": {"python": platform.python_version(), **versions},
+        "backend": jax.default_backend(),
+        "devices": [str(d.device_kind) for d in jax.devices()],
+    }
+
+
+def write_json(path: Path, value: Any) -> None:
+    """`value` as JSON at `path`, written whole or not at all (write, then rename)."""
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(json.dumps(value, indent=2, default=_plain) + "\n")
+    os.replace(partial, path)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
 
 
 class MetricLog:
-    """``<directory>/metrics.csv`` (one row per update, the columns of
-    :data:`~fppo_jax.trainer.METRICS`) and ``<directory>/tensorboard/`` (one scalar per metric
-    and update, against env steps).
+    """``<directory>/metrics.csv`` (one row per update, and per run for a sweep) and
+    ``<directory>/tensorboard/`` (one scalar per metric and update, against env steps).
 
-    `previous` are the metrics of a resumed run up to its checkpoint: the CSV is rewritten with
-    them, and TensorBoard is told to drop any later points an interrupted run had logged.
+    `previous` are the metrics a resumed run restored: the CSV is rewritten with them, and
+    TensorBoard is told to drop any later points an interrupted run had logged.
     """
 
-    def __init__(self, directory: str | Path, previous: dict[str, np.ndarray] | None = None):
+    def __init__(
+        self,
+        directory: str | Path,
+        config: dict[str, Any],
+        batched: bool,
+        previous: Sequence[Block] = (),
+    ):
         from tensorboardX import SummaryWriter
 
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
+        self._batched = batched
         self._csv = open(self.directory / "metrics.csv", "w", newline="")
         self._rows = csv.writer(self._csv)
-        self._rows.writerow(METRICS)
-        self._written = 0
-        purge = None
-        if previous is not None and len(previous["env_steps"]):
-            self._write_csv(previous)
-            purge = int(previous["env_steps"][-1]) + 1
-        self._tensorboard = SummaryWriter(str(self.directory / "tensorboard"), purge_step=purge)
+        self._columns: list[str] | None = None
+        self._writers: dict[int, Any] = {}
+        self._written: dict[int, int] = {}  # updates logged, per run
+        self._make_writer = SummaryWriter
+        self._purge: dict[int, int] = {}
+        for runs, metrics in previous:
+            self._write_csv(runs, metrics)
+            for index, run in enumerate(runs):
+                steps = _of_run(metrics, index, batched)["env_steps"]
+                if len(steps):
+                    self._purge[run] = int(steps[-1]) + 1
+        text = json.dumps(config, indent=2, default=_plain)
+        self._writer(0).add_text("config", f"```\n{text}\n```")
 
-    def write(self, metrics: dict[str, np.ndarray]) -> None:
-        """Log the updates of `metrics` (every update so far) not logged yet."""
-        start = self._written
-        self._write_csv(metrics)
-        for u in range(start, self._written):
-            step = int(metrics["env_steps"][u])
-            for name in METRICS[1:]:
-                self._tensorboard.add_scalar(name, float(metrics[name][u]), step)
-        self._tensorboard.flush()
+    def write(self, metrics: dict[str, np.ndarray], runs: range) -> None:
+        """Log the updates of `metrics` (every update so far of `runs`) not logged yet."""
+        logged = {run: self._written.get(run, 0) for run in runs}
+        self._write_csv(runs, metrics)
+        for index, run in enumerate(runs):
+            values = _of_run(metrics, index, self._batched)
+            writer = self._writer(run)
+            for u in range(logged[run], len(values["env_steps"])):
+                step = int(values["env_steps"][u])
+                for name, series in values.items():
+                    if name != "env_steps" and np.isfinite(series[u]):
+                        writer.add_scalar(name, float(series[u]), step)
+            writer.flush()
 
     def close(self) -> None:
         self._csv.close()
-        self._tensorboard.close()
+        for writer in self._writers.values():
+            writer.close()
 
-    def _write_csv(self, metrics: dict[str, np.ndarray]) -> None:
-        count = len(metrics["env_steps"])
-        columns = [np.asarray(metrics[name])[self._written : count].tolist() for name in METRICS]
-        self._rows.writerows(zip(*columns, strict=True))
+    def _writer(self, run: int) -> Any:
+        if run not in self._writers:
+            where = self.directory / "tensorboard"
+            if self._batched:
+                where = where / f"run-{run:03d}"
+            self._writers[run] = self._make_writer(str(where), purge_step=self._purge.get(run))
+        return self._writers[run]
+
+    def _write_csv(self, runs: range, metrics: dict[str, np.ndarray]) -> None:
+        if self._columns is None:
+            self._columns = list(metrics)
+            self._rows.writerow((["run"] if self._batched else []) + self._columns)
+        for index, run in enumerate(runs):
+            values = _of_run(metrics, index, self._batched)
+            count = len(values["env_steps"])
+            nan = np.full(count, np.nan)
+            columns = [np.asarray(values.get(name, nan)).tolist() for name in self._columns]
+            rows = list(zip(*columns, strict=True))[self._written.get(run, 0) :]
+            self._rows.writerows([run, *row] if self._batched else row for row in rows)
+            self._written[run] = count
         self._csv.flush()
-        self._written = count
+
+
+def require_wandb() -> Any:
+    """The ``wandb`` module, or an ImportError that says how to install it."""
+    try:
+        import wandb
+    except ImportError:
+        raise ImportError(
+            "wandb_project needs Weights & Biases: pip install 'fppo-jax[wandb]'"
+        ) from None
+    return wandb
+
+
+class WandbLog:
+    """The same scalars in Weights & Biases (``pip install wandb``; ``WANDB_MODE=offline``
+    works without an account or a network). A sweep's runs are prefixed ``run-007/``."""
+
+    def __init__(self, project: str, config: dict[str, Any], batched: bool, directory: Any):
+        wandb = require_wandb()
+        self._batched = batched
+        self._written: dict[int, int] = {}
+        self._run = wandb.init(
+            project=project,
+            config=config,
+            dir=str(directory) if directory is not None else None,
+            reinit="create_new",
+        )
+        self._run.define_metric("env_steps")
+        self._run.define_metric("*", step_metric="env_steps")
+
+    def write(self, metrics: dict[str, np.ndarray], runs: range) -> None:
+        for index, run in enumerate(runs):
+            values = _of_run(metrics, index, self._batched)
+            prefix = f"run-{run:03d}/" if self._batched else ""
+            for u in range(self._written.get(run, 0), len(values["env_steps"])):
+                row = {
+                    f"{prefix}{name}": float(series[u])
+                    for name, series in values.items()
+                    if name != "env_steps" and np.isfinite(series[u])
+                }
+                self._run.log({"env_steps": int(values["env_steps"][u]), **row})
+            self._written[run] = len(values["env_steps"])
+
+    def close(self) -> None:
+        self._run.finish()
+
+
+class Logs:
+    """Every log a run writes to, written and closed together."""
+
+    def __init__(self, sinks: list[MetricLog | WandbLog]):
+        self._sinks = sinks
+
+    def write(self, metrics: dict[str, np.ndarray], runs: range) -> None:
+        for sink in self._sinks:
+            sink.write(metrics, runs)
+
+    def close(self) -> None:
+        for sink in self._sinks:
+            sink.close()
+
+
+def open_logs(
+    directory: str | Path | None,
+    wandb_project: str | None,
+    config: dict[str, Any],
+    batched: bool,
+    previous: Sequence[Block] = (),
+) -> Logs | None:
+    """The logs asked for (None if none): `directory` gets ``config.json`` (`config` with the
+    versions and devices) at once, then ``metrics.csv`` and TensorBoard files as training goes;
+    `wandb_project` names a W&B project."""
+    record = {**config, **environment_record()}
+    sinks: list[MetricLog | WandbLog] = []
+    if directory is not None:
+        Path(directory).mkdir(parents=True, exist_ok=True)
+        write_json(Path(directory) / "config.json", record)
+        sinks.append(MetricLog(directory, record, batched, previous))
+    if wandb_project is not None:
+        sinks.append(WandbLog(wandb_project, record, batched, directory))
+    return Logs(sinks) if sinks else None
+
+
+def _of_run(metrics: dict[str, np.ndarray], index: int, batched: bool) -> dict[str, np.ndarray]:
+    return {name: np.asarray(v)[index] if batched else np.asarray(v) for name, v in metrics.items()}

@@ -49,6 +49,8 @@ DEFAULTS: dict[str, dict[str, float]] = {
     "tr-ppo-rb": {"alpha": 0.05, "delta": 0.03},
 }
 
+EPSILON = 0.2  # the clip range every variant takes, as the paper and baselines use it
+
 _TRUST_REGION = ("tr-ppo", "tr-ppo-rb")
 
 
@@ -85,7 +87,7 @@ class Objective:
         return VARIANTS[int(self.variant)]
 
 
-def objective(name: str, *, epsilon: float = 0.2, **hyperparameters: float) -> Objective:
+def objective(name: str, *, epsilon: float = EPSILON, **hyperparameters: float) -> Objective:
     """The objective of variant `name`, with its hyperparameters checked against their ranges.
 
     Variants and their hyperparameters: ``ppo`` (ε), ``fppo-lp`` (ε, α ≥ 1), ``fppo-qp``

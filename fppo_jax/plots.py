@@ -11,7 +11,7 @@ matplotlib.use("Agg")  # files only: no display is needed or assumed
 import matplotlib.pyplot as plt
 import numpy as np
 
-from fppo_jax.sweep import SweepResult, _nanmean, labels, max_average_return
+from fppo_jax.results import SweepResult, labels, max_average_return, nanmean
 
 SWEPT = ("alpha", "k", "delta", "epsilon", "learning_rate")
 
@@ -34,7 +34,7 @@ def plot_curves(result: SweepResult, path: Path) -> None:
     for index, name in enumerate(labels(result.settings)):
         m = result.setting_metrics(index)
         steps = m["env_steps"][0]
-        mean = _nanmean(m["average_return"], axis=0)
+        mean = nanmean(m["average_return"], axis=0)
         std = np.nanstd(m["average_return"], axis=0) if m["average_return"].size else mean
         (line,) = ax.plot(steps, mean, label=name)
         ax.fill_between(steps, mean - std, mean + std, color=line.get_color(), alpha=0.2)

@@ -13,6 +13,7 @@ import numpy as np
 from fppo_jax.envs import Box, Discrete
 from fppo_jax.networks import make_networks
 from fppo_jax.normalization import RunningStats
+from fppo_jax.trainer import Trainer, TrainState
 
 
 @jax.tree_util.register_dataclass
@@ -79,3 +80,14 @@ class Policy:
 
 
 _act = jax.jit(Policy.act)
+
+
+def make_policy(trainer: Trainer, state: TrainState) -> Policy:
+    """The policy of `state` (batched along runs if the state is), on its own."""
+    config = trainer.config
+    return Policy(
+        params=state.params["policy"],
+        obs_stats=state.obs_stats if config.normalize_observations else None,
+        action_space=trainer.env.action_space,
+        hidden_sizes=config.hidden_sizes,
+    )

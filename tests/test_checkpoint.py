@@ -239,11 +239,15 @@ def test_metrics_are_logged_to_csv_and_tensorboard_as_training_goes(tmp_path):
     # After each chunk the CSV already holds its rows (plus the header).
     assert [(u, rows - 1) for u, rows in seen[1:]] == [(u, u) for u, _ in seen[1:]]
     assert seen[-1][0] == 20
-    values = {}
+    values, texts = {}, []
     for event in read_events(tmp_path / "tensorboard"):
         for value in event.summary.value:
-            values.setdefault(value.tag, {})[event.step] = value.simple_value
+            if value.HasField("simple_value"):
+                values.setdefault(value.tag, {})[event.step] = value.simple_value
+            else:
+                texts.append(value.tag)
     assert set(values) == set(METRICS) - {"env_steps"}
+    assert texts == ["config/text_summary"]  # every setting, as TensorBoard's text
     loss = values["policy_loss"]
     assert sorted(loss) == list(result.metrics["env_steps"])
     np.testing.assert_array_equal([loss[s] for s in sorted(loss)], result.metrics["policy_loss"])
@@ -284,7 +288,7 @@ def make_cartpole_params():
 
 
 def test_progress_reports_an_eta_and_a_bar_only_on_a_terminal(monkeypatch):
-    from fppo_jax.execution import ProgressBar, format_seconds, print_progress, reporter
+    from fppo_jax.progress import ProgressBar, format_seconds, print_progress, reporter
 
     assert [format_seconds(s) for s in (4.4, 185, 7620, float("nan"))] == [
         "4 s",
@@ -311,7 +315,7 @@ def test_progress_reports_an_eta_and_a_bar_only_on_a_terminal(monkeypatch):
     [
         ({"resume": True}, "resume needs a checkpoint directory"),
         ({"checkpoint_every": 3}, "checkpoint_every needs a checkpoint directory"),
-        ({"checkpoint_dir": "unused", "keep": 0}, "keep must be a positive number"),
+        ({"checkpoint_dir": "unused", "keep": 0}, "keep must be a positive integer"),
         ({"checkpoint_dir": "unused", "checkpoint_every": 0}, "checkpoint_every must be"),
     ],
 )

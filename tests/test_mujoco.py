@@ -9,6 +9,7 @@ import pytest
 
 import fppo_jax
 from fppo_jax import TrainConfig, hyperparameters, make_env, make_train, sweep
+from fppo_jax.config import TABLE2
 from fppo_jax.envs import MUJOCO_TASKS, TASKS, Box, as_environment
 from fppo_jax.gae import gae
 from fppo_jax.mujoco_envs import BraxEnvironment, Swimmer, swimmer_model
@@ -65,7 +66,7 @@ def test_brax_env_object_is_accepted():
 def test_registered_tasks_have_gym_limits_and_table_2_settings():
     assert make_env("reacher").episode_length == 50
     assert make_env("swimmer").episode_length == 1000
-    assert {name: (TASKS[name].fppo_lp_alpha, TASKS[name].fppo_qp_k) for name in MUJOCO_TASKS} == {
+    assert {name: (TABLE2[name]["alpha"], TABLE2[name]["k"]) for name in MUJOCO_TASKS} == {
         "hopper": (1.3, 0.2),
         "walker2d": (1.3, 0.1),
         "halfcheetah": (1.3, 0.4),

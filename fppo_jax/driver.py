@@ -1,0 +1,486 @@
+"""The host-side driver that ``train`` and ``sweep`` share.
+
+It runs a batch of runs (one run is a batch of one, unbatched): checks the host-side options,
+opens the checkpoints and compares their record with the run, restores, compiles once, then
+calls the program in chunks of updates. Between chunks it checks for divergence, checkpoints,
+logs, evaluates, calls the user's callback and reports progress. A sweep's runs train in
+groups of one size, so every group reuses the one compiled program.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import jax
+import numpy as np
+from jax.sharding import Mesh
+
+from fppo_jax.checkpoint import (
+    Checkpoints,
+    ConfigMismatch,
+    Restored,
+    check_same_run,
+    open_checkpoints,
+)
+from fppo_jax.config import Hyperparameters, positive_int
+from fppo_jax.distributed import fetch, is_main_process, make_mesh
+from fppo_jax.evaluation import make_evaluator
+from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
+from fppo_jax.metric_log import Block, open_logs, require_wandb
+from fppo_jax.policy import Policy, make_policy
+from fppo_jax.progress import PROGRESS_LINES, Progress, reporter
+from fppo_jax.results import TrainingDiverged
+from fppo_jax.trainer import Trainer, TrainState
+
+
+class Snapshot(NamedTuple):
+    """What a callback sees between compiled chunks.
+
+    `update` counts the updates done; `metrics` holds every update so far (``[run, update]``
+    for a sweep's group of runs, whose indices in the sweep are `runs`); `state` is the
+    training state and `policy` its policy (both batched along runs in a sweep).
+    """
+
+    update: int
+    metrics: dict[str, np.ndarray]
+    state: TrainState
+    policy: Policy
+    runs: range
+
+
+Callback = Callable[[Snapshot], bool | None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Options:
+    """How runs are driven, apart from what they train: the host-side settings that ``train``
+    and ``sweep`` share. Checked when made, before anything is compiled."""
+
+    progress: bool | Callable[[Progress], None] = False
+    checkpoint_dir: str | Path | None = None
+    resume: bool = False
+    checkpoint_every: int | None = None
+    keep: int = 3
+    log_dir: str | Path | None = None
+    devices: int | None = None
+    callback: Callback | None = None
+    eval_every: int | None = None
+    eval_episodes: int = 10
+    wandb_project: str | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("resume",):
+            if not isinstance(getattr(self, name), bool | np.bool_):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if not (isinstance(self.progress, bool | np.bool_) or callable(self.progress)):
+            raise ValueError(f"progress must be True, False or a callable, got {self.progress!r}")
+        if self.callback is not None and not callable(self.callback):
+            raise ValueError(f"callback must be a callable, got {self.callback!r}")
+        positive_int("keep", self.keep)
+        positive_int("eval_episodes", self.eval_episodes)
+        for name in ("checkpoint_every", "eval_every", "devices"):
+            if getattr(self, name) is not None:
+                positive_int(name, getattr(self, name))
+        if self.checkpoint_dir is None and (self.resume or self.checkpoint_every is not None):
+            flag = "resume" if self.resume else "checkpoint_every"
+            raise ValueError(f"{flag} needs a checkpoint directory")
+        if self.wandb_project is not None:
+            if not isinstance(self.wandb_project, str):
+                raise ValueError(f"wandb_project must be a name, got {self.wandb_project!r}")
+            require_wandb()
+
+
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    """What to train: `keys` is one key (one run, unbatched) or a [run] array of them, with
+    `hps` alike; `record` is the configuration that checkpoints and outputs record.
+    `runs_per_call` fixes a sweep's group size (None: as many as fit in memory), and
+    `data_parallel` the devices each run's environments are split over."""
+
+    kind: str  # "train" or "sweep"
+    trainer: Trainer
+    keys: jax.Array
+    hps: Hyperparameters
+    record: dict[str, Any]
+    description: str
+    run_names: tuple[str, ...] = ()
+    runs_per_call: int | None = None
+    data_parallel: int | None = None
+
+    @property
+    def batched(self) -> bool:
+        return self.keys.ndim > 0
+
+    @property
+    def num_runs(self) -> int:
+        return self.keys.shape[0] if self.batched else 1
+
+
+@dataclasses.dataclass
+class Outcome:
+    """What the driver hands back: the last group's final state, every run's metrics (per
+    update, [run, update] when batched), the update each run diverged at (from 1) or 0, and
+    the times. `stopped_at` is the update where a callback stopped training, if it did."""
+
+    state: TrainState
+    metrics: dict[str, np.ndarray]
+    diverged: np.ndarray
+    compile_seconds: float
+    train_seconds: float
+    resumed_from: int
+    runs_per_call: int
+    stopped_at: int | None
+
+
+def drive(plan: Plan, options: Options) -> Outcome:
+    """Train `plan` as `options` say; see the module's docstring."""
+    trainer, config = plan.trainer, plan.trainer.config
+    mesh = make_mesh(options.devices, config.num_envs, plan.data_parallel)
+    if options.checkpoint_dir is not None and jax.process_count() > 1:
+        raise ValueError("checkpoints are written by single-process runs only")
+    checkpoints, record = open_checkpoints(
+        options.checkpoint_dir, options.resume, options.keep, plan.kind, plan.record
+    )
+    try:
+        size = _group_size(plan, mesh, record, checkpoints)
+        per_call = _updates_per_call(options, config.num_updates)
+        main = is_main_process()
+        restored = None
+        if record is not None:
+            like = jax.eval_shape(_init(plan), *_group(plan, 0, size))
+            restored = checkpoints.restore(
+                like, lambda r: check_same_run(r, plan.kind, plan.record, checkpoints.directory)
+            )
+        if options.progress is True and main:
+            print(f"{plan.description}: compiling…", file=sys.stderr, flush=True)
+        program = compile_program(trainer, *_group(plan, 0, size), per_call, mesh)
+        if plan.batched and plan.runs_per_call is None and record is None:
+            program, size = _fit_in_memory(program, plan, size, per_call, mesh)
+        with (
+            reporter(options.progress if main else False, plan.description) as report,
+            _Chunks(plan, options, program, size, checkpoints, restored, report, main) as chunks,
+        ):
+            return chunks.train()
+    finally:
+        if checkpoints:
+            checkpoints.close()
+
+
+def _init(plan: Plan) -> Callable:
+    return jax.vmap(plan.trainer.init) if plan.batched else plan.trainer.init
+
+
+def _group_size(
+    plan: Plan, mesh: Mesh | None, record: dict | None, checkpoints: Checkpoints | None
+) -> int:
+    """Runs per compiled call: the sweep's chunk, or its recorded one when resuming, rounded
+    up to split evenly over the devices that share the runs."""
+    if not plan.batched:
+        return 1
+    chunk = plan.runs_per_call
+    if record is not None:
+        if chunk is not None and chunk != record["runs_per_call"]:
+            raise ConfigMismatch(
+                f"{checkpoints.directory} holds a sweep of {record['runs_per_call']} runs "
+                f"per compiled call, not {chunk}; resume without chunk, or with that"
+            )
+        chunk = record["runs_per_call"]
+    across = mesh.shape["runs"] if mesh else 1
+    size = _multiple(min(chunk or plan.num_runs, plan.num_runs), across)
+    if record is not None and size != record["runs_per_call"]:
+        raise ConfigMismatch(
+            f"{checkpoints.directory} holds a sweep of {record['runs_per_call']} runs per "
+            f"call, which does not split evenly over {across} devices; resume with devices "
+            "that divide it"
+        )
+    return size
+
+
+def _updates_per_call(options: Options, num_updates: int) -> int:
+    """Checkpoints, logs, evaluations, callbacks and progress happen between compiled calls:
+    a call runs up to the next of them (one call for the whole run if none is asked for)."""
+    if options.checkpoint_every is not None:
+        per_call = min(options.checkpoint_every, num_updates)
+    elif options.checkpoint_dir or options.progress or options.log_dir or options.callback:
+        per_call = updates_per_call(num_updates, PROGRESS_LINES)
+    elif options.wandb_project:
+        per_call = updates_per_call(num_updates, PROGRESS_LINES)
+    else:
+        per_call = num_updates
+    if options.eval_every is not None:
+        per_call = math.gcd(per_call, min(options.eval_every, num_updates))
+    return per_call
+
+
+def _group(plan: Plan, group: int, size: int) -> tuple[jax.Array, Hyperparameters]:
+    """The keys and hyperparameters of group `group`: runs group·size … (group+1)·size − 1,
+    the last run repeated past the end, so that every group has one shape."""
+    if not plan.batched:
+        return plan.keys, plan.hps
+    index = _padded(group * size, size, plan.num_runs)
+    return plan.keys[index], jax.tree.map(lambda x: x[index], plan.hps)
+
+
+class _Chunks:
+    """The groups of a plan, run chunk by chunk, and the host's work between chunks."""
+
+    def __init__(
+        self,
+        plan: Plan,
+        options: Options,
+        program: Program,
+        size: int,
+        checkpoints: Checkpoints | None,
+        restored: Restored | None,
+        report: Callable[[Progress], None] | None,
+        main: bool,
+    ):
+        self.plan, self.options, self.program, self.size = plan, options, program, size
+        self.checkpoints, self.restored, self.report = checkpoints, restored, report
+        config = plan.trainer.config
+        self.num_updates, self.samples = config.num_updates, config.samples_per_update
+        self.finished: list[dict[str, np.ndarray]] = []  # each finished group's metrics
+        self.diverged = np.zeros(0, np.int32)
+        self.saved: list[int] = []  # updates checkpointed, for a diverged run's message
+        self.evaluate = None
+        if options.eval_every is not None:
+            evaluator = make_evaluator(plan.trainer.env, options.eval_episodes)
+            self.evaluate = jax.jit(jax.vmap(evaluator) if plan.batched else evaluator)
+        self.logs = None
+        if main:
+            self.logs = open_logs(
+                options.log_dir, options.wandb_project, plan.record, plan.batched, self._restored()
+            )
+
+    def __enter__(self) -> _Chunks:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.logs:
+            self.logs.close()
+
+    def _restored(self) -> list[Block]:
+        """The runs and metrics a resumed run starts from, for the logs to rewrite."""
+        if self.restored is None:
+            return []
+        curves, record = self.restored.curves, self.restored.record
+        if not self.plan.batched:
+            return [(range(1), _host(curves["current"]))]
+        blocks = []
+        if "finished" in curves:
+            finished = _host(curves["finished"])
+            blocks.append((range(len(finished["env_steps"])), finished))
+        begin = record["group"] * self.size
+        runs = range(begin, min(begin + self.size, self.plan.num_runs))
+        current = {k: v[: len(runs)] for k, v in _host(curves["current"]).items()}
+        return [*blocks, (runs, current)]
+
+    def train(self) -> Outcome:
+        first_group, start, resumed_from = 0, None, 0
+        if self.restored is not None:
+            curves, record = self.restored.curves, self.restored.record
+            if "finished" in curves:
+                self.finished.append(_host(curves["finished"]))
+                self.diverged = np.asarray(curves["finished_diverged"])
+            first_group, resumed_from = record["group"], record["update"]
+            start = (self.restored.state, _host(curves["current"]))
+            self.saved.append(resumed_from)
+        self.began = time.perf_counter()
+        self.steps_before = self._steps(first_group, resumed_from)
+        self._report(first_group, resumed_from, None)
+        state, stopped_at = None, None
+        for group in range(first_group, -(-self.plan.num_runs // self.size)):
+            keys, hps = _group(self.plan, group, self.size)
+            if group == first_group and start is not None:
+                initial, rows = start[0], [start[1]]
+            else:
+                initial, rows = self.program.init(keys, hps), []
+            state = initial  # a resumed group may have no update left to run
+            for state, chunk in run_chunks(self.program, initial, hps):
+                update = int(np.max(fetch(state.update)))
+                if not self.plan.batched:
+                    self._check_finite(int(fetch(state.nonfinite_update)))
+                policy = make_policy(self.plan.trainer, state)
+                if self.evaluate is not None:
+                    self._evaluate(policy, chunk, update)
+                rows.append(chunk)
+                metrics = concatenate(rows)
+                stop = self._after_chunk(group, state, metrics, update, policy)
+                self._report(group, update, metrics)
+                if stop:
+                    stopped_at = update
+                    break
+            kept = slice(0, min(self.size, self.plan.num_runs - group * self.size))
+            metrics = concatenate(rows)
+            self.finished.append(
+                {k: v[kept] for k, v in metrics.items()} if self.plan.batched else metrics
+            )
+            first_bad = np.atleast_1d(fetch(state.nonfinite_update))[kept] + 1
+            self.diverged = np.concatenate([self.diverged, first_bad])
+            if stopped_at is not None:
+                break
+        seconds = time.perf_counter() - self.began
+        if self.checkpoints:
+            self.checkpoints.wait()
+        return Outcome(
+            state=state,
+            metrics=_join(self.finished) if self.plan.batched else self.finished[-1],
+            diverged=self.diverged if self.plan.batched else self.diverged[0],
+            compile_seconds=self.program.compile_seconds,
+            train_seconds=seconds,
+            resumed_from=resumed_from,
+            runs_per_call=self.size,
+            stopped_at=stopped_at,
+        )
+
+    def _after_chunk(
+        self,
+        group: int,
+        state: TrainState,
+        metrics: dict[str, np.ndarray],
+        update: int,
+        policy: Policy,
+    ) -> bool:
+        """Checkpoint, logs and the callback; True to stop."""
+        if self.checkpoints:
+            self._save(group, state, metrics, update, policy)
+        runs = range(group * self.size, min((group + 1) * self.size, self.plan.num_runs))
+        if self.logs:
+            self.logs.write(metrics, runs)
+        callback = self.options.callback
+        if callback is None:
+            return False
+        return callback(Snapshot(update, metrics, state, policy, runs)) is False
+
+    def _check_finite(self, nonfinite: int) -> None:
+        """A single run stops at its first non-finite update (a sweep's runs go on)."""
+        if nonfinite < 0:
+            return
+        where = None
+        if self.checkpoints:
+            self.checkpoints.wait()
+            where = (
+                f"The last good checkpoint, at update {self.saved[-1]}, is in "
+                f"{self.checkpoints.directory}"
+                if self.saved
+                else "No checkpoint was written before it"
+            )
+        raise TrainingDiverged(nonfinite + 1, (nonfinite + 1) * self.samples, where)
+
+    def _evaluate(self, policy: Policy, chunk: dict[str, np.ndarray], update: int) -> None:
+        """`eval_return` beside a chunk's training metrics: the deterministic policy's mean
+        return, every `eval_every` updates and at the end, NaN between."""
+        column = np.full(chunk["env_steps"].shape, np.nan, np.float32)
+        if update % self.options.eval_every == 0 or update == self.num_updates:
+            column[..., -1] = np.asarray(self.evaluate(policy)).mean(axis=-1)
+        chunk["eval_return"] = column
+
+    def _save(
+        self,
+        group: int,
+        state: TrainState,
+        metrics: dict[str, np.ndarray],
+        update: int,
+        policy: Policy,
+    ) -> None:
+        record = {"kind": self.plan.kind, "config": self.plan.record, "group": group}
+        record.update(update=update, runs_per_call=self.size)
+        curves: dict[str, Any] = {"current": metrics}
+        if self.finished:
+            curves["finished"] = _join(self.finished)
+            curves["finished_diverged"] = self.diverged
+        step = group * self.num_updates + update
+        self.checkpoints.save(step, state, curves, record, None if self.plan.batched else policy)
+        self.saved.append(update)
+
+    def _steps(self, group: int, update: int) -> int:
+        """Env steps of every run, with groups before `group` done and `update` of this one."""
+        runs_done = min(group * self.size, self.plan.num_runs)
+        in_group = min(self.size, self.plan.num_runs - runs_done)
+        return (runs_done * self.num_updates + in_group * update) * self.samples
+
+    def _report(self, group: int, update: int, metrics: dict[str, np.ndarray] | None) -> None:
+        if not self.report:
+            return
+        total = self.plan.num_runs * self.num_updates * self.samples
+        steps = self._steps(group, update)
+        elapsed = time.perf_counter() - self.began if metrics is not None else 0.0
+        rate = (steps - self.steps_before) / elapsed if elapsed > 0 else 0.0
+        latest = math.nan
+        if metrics is not None:
+            returns = metrics["average_return"][..., -1]
+            if np.isfinite(returns).any():
+                latest = float(np.nanmean(returns))
+        eta = (total - steps) / rate if rate > 0 else math.nan
+        self.report(
+            Progress(
+                update,
+                self.num_updates,
+                steps,
+                total,
+                latest,
+                rate,
+                elapsed,
+                self.program.compile_seconds,
+                eta,
+            )
+        )
+
+
+def _host(metrics: dict[str, Any]) -> dict[str, np.ndarray]:
+    return {name: np.asarray(values) for name, values in metrics.items()}
+
+
+def _join(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Groups' metrics stacked along runs; a group stopped early is padded with NaN (and
+    env steps −1) to the others' length."""
+    names = dict.fromkeys(name for p in parts for name in p)
+    length = max(p["env_steps"].shape[-1] for p in parts)
+
+    def padded(p: dict[str, np.ndarray], name: str) -> np.ndarray:
+        values = np.asarray(p[name]) if name in p else np.full(p["env_steps"].shape, np.nan)
+        fill = -1 if name == "env_steps" else np.nan
+        width = [(0, 0)] * (values.ndim - 1) + [(0, length - values.shape[-1])]
+        return np.pad(values, width, constant_values=fill)
+
+    return {name: np.concatenate([padded(p, name) for p in parts]) for name in names}
+
+
+def _fit_in_memory(
+    program: Program, plan: Plan, size: int, per_call: int, mesh: Mesh | None
+) -> tuple[Program, int]:
+    """Halve the runs per call until the compiled program fits in half the free memory."""
+    across = mesh.shape["runs"] if mesh else 1
+    budget = _free_memory() / 2
+    while size > across:
+        analysis = program.run.memory_analysis()
+        need = analysis.temp_size_in_bytes + 2 * analysis.argument_size_in_bytes
+        if need <= budget:
+            break
+        size = _multiple((size + 1) // 2, across)
+        program = compile_program(plan.trainer, *_group(plan, 0, size), per_call, mesh)
+    return program, size
+
+
+def _multiple(size: int, of: int) -> int:
+    """`size` rounded up to a multiple of `of`."""
+    return -(-size // of) * of
+
+
+def _padded(begin: int, size: int, num_runs: int) -> np.ndarray:
+    return np.minimum(np.arange(begin, begin + size), num_runs - 1)
+
+
+def _free_memory() -> float:
+    device = jax.devices()[0]
+    stats = device.memory_stats() if hasattr(device, "memory_stats") else None
+    if stats and "bytes_limit" in stats:
+        return float(stats["bytes_limit"] - stats.get("bytes_in_use", 0))
+    return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))

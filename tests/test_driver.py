@@ -1,0 +1,153 @@
+"""The driver that train and sweep share: callbacks, periodic evaluation, logs and tracking,
+and a finished run going on for more steps."""
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import TINY
+from helpers import assert_bitwise_equal
+
+import fppo_jax
+from fppo_jax import ConfigMismatch, evaluate, make_env, sweep, train
+
+RUN = {"env": "cartpole", "variant": "fppo-lp", "seed": 1, "total_steps": 128 * 12, **TINY}
+
+
+def test_a_callback_sees_every_chunk_and_stops_the_run_checkpointed(tmp_path):
+    seen = []
+
+    def callback(snapshot: fppo_jax.Snapshot) -> bool:
+        seen.append(snapshot)
+        return snapshot.update < 6
+
+    stopped = train(**RUN, checkpoint_dir=tmp_path, checkpoint_every=3, callback=callback)
+    assert [s.update for s in seen] == [3, 6]
+    assert seen[-1].metrics["env_steps"].tolist() == [128 * u for u in range(1, 7)]
+    assert isinstance(seen[-1].policy, fppo_jax.Policy) and seen[-1].runs == range(1)
+    assert stopped.stopped_at == 6 and len(stopped.metrics["env_steps"]) == 6
+    assert "stopped by the callback at update 6" in stopped.summary()
+    # The checkpoint holds update 6: resuming finishes the run as if it had never stopped.
+    resumed = train(**RUN, checkpoint_dir=tmp_path, checkpoint_every=3, resume=True)
+    whole = train(**RUN, checkpoint_every=3, checkpoint_dir=tmp_path / "whole")
+    assert resumed.resumed_from == 6
+    assert_bitwise_equal(resumed.metrics, whole.metrics)
+    assert_bitwise_equal(resumed.params, whole.params)
+
+
+def test_periodic_evaluation_records_the_deterministic_return():
+    result = train(**RUN, eval_every=5, eval_episodes=3)
+    returns = result.metrics["eval_return"]
+    assert np.isfinite(returns[[4, 9, 11]]).all()  # updates 5, 10 and the last, 12
+    assert np.isnan(np.delete(returns, [4, 9, 11])).all()
+    final = evaluate(make_env("cartpole"), result.policy, 3, deterministic=True)
+    assert returns[-1] == pytest.approx(final.mean(), rel=1e-6)
+    # Evaluating does not change training.
+    plain = train(**RUN)
+    assert_bitwise_equal(plain.params, result.params)
+
+
+def test_config_json_is_written_before_training_with_versions_and_devices(tmp_path):
+    seen = {}
+
+    def progress(p):
+        if p.update == 0:  # reported once compiled, before the first update
+            seen.update(json.loads((tmp_path / "config.json").read_text()))
+
+    train(**RUN, log_dir=tmp_path, progress=progress)
+    assert seen["variant"] == "fppo-lp" and seen["alpha"] == 1.3 and seen["num_envs"] == 4
+    assert seen["versions"]["jax"] == __import__("jax").__version__
+    assert seen["backend"] == "cpu" and seen["devices"]
+
+
+def test_a_sweep_logs_every_run_and_its_evaluations(tmp_path):
+    result = sweep(
+        "cartpole",
+        {"variant": ["ppo", "fppo-qp"]},
+        seeds=2,
+        chunk=2,
+        total_steps=128 * 4,
+        **TINY,
+        log_dir=tmp_path,
+        eval_every=2,
+        eval_episodes=2,
+    )
+    with open(tmp_path / "metrics.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 4 * 4  # runs × updates
+    for row in rows:
+        run, update = int(row["run"]), int(row["env_steps"]) // 128 - 1
+        assert float(row["policy_loss"]) == pytest.approx(
+            float(result.metrics["policy_loss"][run, update])
+        )
+    assert sorted(p.name for p in (tmp_path / "tensorboard").iterdir()) == [
+        f"run-00{i}" for i in range(4)
+    ]
+    assert np.isfinite(result.metrics["eval_return"][:, [1, 3]]).all()
+    assert json.loads((tmp_path / "config.json").read_text())["grid"]["variant"] == [
+        "ppo",
+        "fppo-qp",
+    ]
+
+
+def test_a_callback_can_stop_a_sweep():
+    def callback(snapshot):
+        assert snapshot.metrics["env_steps"].shape[0] == 2  # [run, update]
+        return snapshot.update < 2
+
+    result = sweep(
+        "cartpole", {"variant": "ppo"}, seeds=2, total_steps=128 * 6, **TINY, callback=callback
+    )
+    assert result.metrics["env_steps"].shape == (2, 2)
+
+
+def test_a_finished_run_goes_on_for_more_steps_as_if_it_had_been_longer(tmp_path):
+    short = {**RUN, "total_steps": 128 * 6}
+    train(**short, checkpoint_dir=tmp_path)
+    longer = train(**RUN, checkpoint_dir=tmp_path, resume=True)
+    whole = train(**RUN)
+    assert longer.resumed_from == 6 and len(longer.metrics["env_steps"]) == 12
+    assert_bitwise_equal(longer.metrics, whole.metrics)
+    assert_bitwise_equal(longer.params, whole.params)
+
+
+def test_going_on_is_refused_where_the_learning_rate_schedule_depends_on_the_budget(tmp_path):
+    short = {**RUN, "total_steps": 128 * 6, "anneal_learning_rate": True}
+    train(**short, checkpoint_dir=tmp_path)
+    with pytest.raises(ConfigMismatch, match="its learning rate anneals over the run"):
+        train(**{**short, "total_steps": 128 * 12}, checkpoint_dir=tmp_path, resume=True)
+
+
+def test_weights_and_biases_logs_offline(tmp_path, monkeypatch):
+    pytest.importorskip("wandb")
+    monkeypatch.setenv("WANDB_MODE", "offline")
+    monkeypatch.setenv("WANDB_SILENT", "true")
+    monkeypatch.setenv("WANDB_DIR", str(tmp_path))
+    train(**RUN, wandb_project="fppo-test", log_dir=tmp_path)
+    (record,) = Path(tmp_path).glob("wandb/offline-run-*/run-*.wandb")
+    data = record.read_bytes()
+    for name in (b"average_return", b"negative_fraction_after", b"fppo-lp"):
+        assert name in data
+
+
+def test_weights_and_biases_missing_is_a_clear_error(monkeypatch):
+    monkeypatch.setitem(__import__("sys").modules, "wandb", None)
+    with pytest.raises(ImportError, match=r"pip install 'fppo-jax\[wandb\]'"):
+        train(**RUN, wandb_project="fppo-test")
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"eval_every": 0}, "eval_every must be a positive integer"),
+        ({"eval_episodes": 1.5}, "eval_episodes must be a positive integer"),
+        ({"callback": 3}, "callback must be a callable"),
+        ({"resume": "yes"}, "resume must be True or False"),
+        ({"seed": "1"}, "a seed must be an integer"),
+    ],
+)
+def test_bad_driver_options_are_refused_before_compiling(options, message):
+    with pytest.raises(ValueError, match=message):
+        train(**{**RUN, **options})

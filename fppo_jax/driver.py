@@ -61,7 +61,35 @@ Callback = Callable[[Snapshot], bool | None]
 @dataclasses.dataclass(frozen=True)
 class Options:
     """How runs are driven, apart from what they train: the host-side settings that ``train``
-    and ``sweep`` share. Checked when made, before anything is compiled."""
+    and ``sweep`` share, as keyword arguments of either. Checked when made, before anything is
+    compiled.
+
+    `progress`: ``True`` shows a progress bar on a terminal, or prints a line per chunk of
+    updates on stderr otherwise; a callable receives a :class:`~fppo_jax.progress.Progress`;
+    ``False`` (with nothing else between chunks) runs the whole training as one compiled call.
+
+    `checkpoint_dir`: save the full training state there every `checkpoint_every` updates
+    (default: a twentieth of the run), keeping the newest `keep` (see
+    :mod:`fppo_jax.checkpoint`). With ``resume=True`` training continues from the newest
+    intact checkpoint there, if any, and ends exactly as if it had never stopped; a checkpoint
+    of a differently configured run is refused with the differing fields named. Without
+    `resume`, a directory that already holds checkpoints is refused, so that none is
+    overwritten. A finished run goes on for more steps when resumed with a larger
+    ``total_steps``, unless its learning rate anneals over the run (refused, with the reason).
+
+    `log_dir`: write ``config.json`` (every setting, the versions and devices) there at once,
+    then ``metrics.csv`` and TensorBoard event files as training goes. `wandb_project` logs the
+    same to Weights & Biases (``pip install 'fppo-jax[wandb]'``).
+
+    `devices`: how many of the devices JAX sees (default: all) share the runs (see
+    :mod:`fppo_jax.distributed`). In a multi-process run only process 0 reports and writes.
+
+    `callback(snapshot)` is called between compiled chunks with a :class:`Snapshot`; returning
+    ``False`` stops training there (checkpointed, if checkpoints are on), and the result holds
+    the updates done. Every `eval_every` updates, and at the end, the deterministic policy plays
+    `eval_episodes` episodes and their mean return is recorded as the metric ``eval_return``
+    (NaN between evaluations).
+    """
 
     progress: bool | Callable[[Progress], None] = False
     checkpoint_dir: str | Path | None = None
@@ -96,6 +124,13 @@ class Options:
                 raise ValueError(f"wandb_project must be a name, got {self.wandb_project!r}")
             require_wandb()
 
+    @classmethod
+    def split(cls, settings: dict[str, Any]) -> tuple[Options, dict[str, Any]]:
+        """The options among a run's keyword `settings`, and the settings left."""
+        names = {field.name for field in dataclasses.fields(cls)}
+        options = cls(**{name: value for name, value in settings.items() if name in names})
+        return options, {name: value for name, value in settings.items() if name not in names}
+
 
 @dataclasses.dataclass(frozen=True)
 class Plan:
@@ -109,8 +144,8 @@ class Plan:
     keys: jax.Array
     hps: Hyperparameters
     record: dict[str, Any]
-    description: str
-    run_names: tuple[str, ...] = ()
+    description: str  # a few words, for the progress bar
+    header: str  # a line, printed before compiling when progress is shown
     runs_per_call: int | None = None
     data_parallel: int | None = None
 
@@ -159,7 +194,8 @@ def drive(plan: Plan, options: Options) -> Outcome:
                 like, lambda r: check_same_run(r, plan.kind, plan.record, checkpoints.directory)
             )
         if options.progress is True and main:
-            print(f"{plan.description}: compiling…", file=sys.stderr, flush=True)
+            where = f" on {mesh.size} devices" if mesh else ""
+            print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
         program = compile_program(trainer, *_group(plan, 0, size), per_call, mesh)
         if plan.batched and plan.runs_per_call is None and record is None:
             program, size = _fit_in_memory(program, plan, size, per_call, mesh)
@@ -350,7 +386,16 @@ class _Chunks:
     ) -> bool:
         """Checkpoint, logs and the callback; True to stop."""
         if self.checkpoints:
-            self._save(group, state, metrics, update, policy)
+            record = {"kind": self.plan.kind, "config": self.plan.record, "group": group}
+            record.update(update=update, runs_per_call=self.size)
+            curves: dict[str, Any] = {"current": metrics}
+            if self.finished:
+                curves["finished"] = _join(self.finished)
+                curves["finished_diverged"] = self.diverged
+            step = group * self.num_updates + update
+            kept = None if self.plan.batched else policy  # load_policy reads one run's
+            self.checkpoints.save(step, state, curves, record, kept)
+            self.saved.append(update)
         runs = range(group * self.size, min((group + 1) * self.size, self.plan.num_runs))
         if self.logs:
             self.logs.write(metrics, runs)
@@ -381,24 +426,6 @@ class _Chunks:
         if update % self.options.eval_every == 0 or update == self.num_updates:
             column[..., -1] = np.asarray(self.evaluate(policy)).mean(axis=-1)
         chunk["eval_return"] = column
-
-    def _save(
-        self,
-        group: int,
-        state: TrainState,
-        metrics: dict[str, np.ndarray],
-        update: int,
-        policy: Policy,
-    ) -> None:
-        record = {"kind": self.plan.kind, "config": self.plan.record, "group": group}
-        record.update(update=update, runs_per_call=self.size)
-        curves: dict[str, Any] = {"current": metrics}
-        if self.finished:
-            curves["finished"] = _join(self.finished)
-            curves["finished_diverged"] = self.diverged
-        step = group * self.num_updates + update
-        self.checkpoints.save(step, state, curves, record, None if self.plan.batched else policy)
-        self.saved.append(update)
 
     def _steps(self, group: int, update: int) -> int:
         """Env steps of every run, with groups before `group` done and `update` of this one."""

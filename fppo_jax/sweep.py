@@ -10,8 +10,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import sys
-from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import jax
@@ -30,11 +29,10 @@ from fppo_jax.config import (
     resolve_hyperparameters,
     table2,
 )
-from fppo_jax.driver import Callback, Options, Plan, drive
+from fppo_jax.driver import Options, Plan, drive
 from fppo_jax.envs import Environment, as_environment
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import VARIANTS
-from fppo_jax.progress import Progress
 from fppo_jax.results import SweepResult, labels
 from fppo_jax.trainer import make_train
 
@@ -86,57 +84,30 @@ def sweep(
     chunk: int | None = None,
     total_steps: int | None = None,
     preset: str = "paper",
-    progress: bool | Callable[[Progress], None] = False,
-    checkpoint_dir: str | Path | None = None,
-    resume: bool = False,
-    checkpoint_every: int | None = None,
-    keep: int = 3,
-    log_dir: str | Path | None = None,
-    devices: int | None = None,
     data_parallel: int | None = None,
-    callback: Callback | None = None,
-    eval_every: int | None = None,
-    eval_episodes: int = 10,
-    wandb_project: str | None = None,
-    **overrides: Any,
+    **settings: Any,
 ) -> SweepResult:
     """Train every setting of `grid` (see :func:`expand_grid`) with every seed, as one program.
 
     `seeds` is a count (0 … n−1) or a list; run (setting, seed) starts from
     ``jax.random.key(seed)``, as ``train(..., seed=seed)`` does, and matches that run.
-    `preset` and `overrides` are as in :func:`~fppo_jax.train`: a preset's
-    :class:`~fppo_jax.config.TrainConfig`, its fields, and fixed values of sweepable
-    hyperparameters. `chunk` is the number of runs per compiled call (default: as many as fit
-    in half the free memory). A run that diverges is reported and recorded in
-    ``SweepResult.diverged``; the others go on.
+    `preset` and `settings` are as in :func:`~fppo_jax.train`: a preset's
+    :class:`~fppo_jax.config.TrainConfig`, its fields, fixed values of sweepable
+    hyperparameters, and how the runs are driven (:class:`~fppo_jax.driver.Options`). `chunk`
+    is the number of runs per compiled call (default: as many as fit in half the free memory).
+    A run that diverges is reported and recorded in ``SweepResult.diverged``; the others go on.
 
-    `checkpoint_dir`, `resume`, `checkpoint_every` and `keep` are as in
-    :func:`~fppo_jax.train`: the state of the group of runs in training is saved every
-    `checkpoint_every` updates, with the metrics of the groups already done, and a resumed
-    sweep goes on from the group and update where it stopped (with the same runs per call).
+    Options apply to every run. A checkpoint holds the state of the group of runs in training
+    with the metrics of the groups already done, and a resumed sweep goes on from the group and
+    update where it stopped (with the same runs per call). ``metrics.csv`` in `log_dir` has a
+    ``run`` column and TensorBoard a directory per run; a callback sees one group of runs at a
+    time (``snapshot.runs``, metrics as [run, update]), and returning ``False`` stops the sweep.
 
     `devices` (default: all JAX sees) share the runs of each group, `data_parallel` of them
     (default 1) per run, splitting its environments (see :mod:`fppo_jax.distributed`); runs
     per call are rounded up to a multiple of ``devices / data_parallel``.
-
-    `log_dir`, `callback`, `eval_every`, `eval_episodes` and `wandb_project` are as in
-    :func:`~fppo_jax.train`, for every run: ``metrics.csv`` has a ``run`` column, TensorBoard
-    a directory per run, and a callback sees each group of runs (``snapshot.runs``) with its
-    metrics as [run, update]; returning ``False`` stops the whole sweep.
     """
-    options = Options(
-        progress,
-        checkpoint_dir,
-        resume,
-        checkpoint_every,
-        keep,
-        log_dir,
-        devices,
-        callback,
-        eval_every,
-        eval_episodes,
-        wandb_project,
-    )
+    options, overrides = Options.split(settings)
     fixed = {name: overrides.pop(name) for name in list(overrides) if name in SWEEPABLE}
     clash = sorted(set(fixed) & set(grid))
     if clash:
@@ -166,16 +137,11 @@ def sweep(
         stacked,
         record,
         f"sweep on {name}",
+        f"sweep on {name}: {len(settings)} settings × {len(seeds)} seeds = {len(runs)} runs; "
+        f"each {describe(config, preset)}",
         runs_per_call=chunk,
         data_parallel=1 if data_parallel is None else data_parallel,
     )
-    if progress is True:
-        print(
-            f"sweep on {name}: {len(settings)} settings × {len(seeds)} seeds = {len(runs)} "
-            f"runs; each {describe(config, preset)}",
-            file=sys.stderr,
-            flush=True,
-        )
     outcome = drive(plan, options)
     result = SweepResult(
         settings=settings,

@@ -80,8 +80,45 @@ def test_help_documents_every_flag():
         "--anneal-lr",
         "--output",
         "--quiet",
+        "--eval-every",
+        "--eval-episodes",
+        "--wandb-project",
     ]:
         assert flag in text
+
+
+def test_every_config_field_has_a_flag_named_after_it():
+    import dataclasses
+
+    from fppo_jax import TrainConfig
+    from fppo_jax.cli import _config_overrides
+
+    parser = build_parser()
+    for command in ("train", "sweep"):
+        fields = {f.name for f in dataclasses.fields(TrainConfig)}
+        args = parser.parse_args([command])
+        assert fields <= set(vars(args))  # one destination per field, None unless given
+        assert _config_overrides(args) == {"preset": "paper"}
+    named = parser.parse_args(
+        ["train", "--num-minibatches", "8", "--hidden-sizes", "32,16", "--no-normalize-rewards"]
+    )
+    aliased = parser.parse_args(["train", "--minibatches", "8", "--hidden", "32,16"])
+    assert _config_overrides(named) == {
+        "preset": "paper",
+        "num_minibatches": 8,
+        "hidden_sizes": (32, 16),
+        "normalize_rewards": False,
+    }
+    assert _config_overrides(aliased) == {
+        "preset": "paper",
+        "num_minibatches": 8,
+        "hidden_sizes": (32, 16),
+    }
+    assert _config_overrides(parser.parse_args(["train", "--no-obs-norm", "--anneal-lr"])) == {
+        "preset": "paper",
+        "normalize_observations": False,
+        "anneal_learning_rate": True,
+    }
 
 
 def test_console_entry_point_lists_tasks_and_variants():

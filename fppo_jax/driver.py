@@ -244,9 +244,12 @@ def _updates_per_call(options: Options, num_updates: int) -> int:
     a call runs up to the next of them (one call for the whole run if none is asked for)."""
     if options.checkpoint_every is not None:
         per_call = min(options.checkpoint_every, num_updates)
-    elif options.checkpoint_dir or options.progress or options.log_dir or options.callback:
-        per_call = updates_per_call(num_updates, PROGRESS_LINES)
-    elif options.wandb_project:
+    elif (
+        any(
+            (options.checkpoint_dir, options.progress, options.log_dir, options.callback),
+        )
+        or options.wandb_project
+    ):
         per_call = updates_per_call(num_updates, PROGRESS_LINES)
     else:
         per_call = num_updates
@@ -306,27 +309,25 @@ class _Chunks:
         """The runs and metrics a resumed run starts from, for the logs to rewrite."""
         if self.restored is None:
             return []
-        curves, record = self.restored.curves, self.restored.record
+        point = _resume_point(self.restored)
         if not self.plan.batched:
-            return [(range(1), _host(curves["current"]))]
+            return [(range(1), point.current)]
         blocks = []
-        if "finished" in curves:
-            finished = _host(curves["finished"])
-            blocks.append((range(len(finished["env_steps"])), finished))
-        begin = record["group"] * self.size
+        if point.finished:
+            blocks.append((range(len(point.finished["env_steps"])), point.finished))
+        begin = point.group * self.size
         runs = range(begin, min(begin + self.size, self.plan.num_runs))
-        current = {k: v[: len(runs)] for k, v in _host(curves["current"]).items()}
-        return [*blocks, (runs, current)]
+        return [*blocks, (runs, {k: v[: len(runs)] for k, v in point.current.items()})]
 
     def train(self) -> Outcome:
         first_group, start, resumed_from = 0, None, 0
         if self.restored is not None:
-            curves, record = self.restored.curves, self.restored.record
-            if "finished" in curves:
-                self.finished.append(_host(curves["finished"]))
-                self.diverged = np.asarray(curves["finished_diverged"])
-            first_group, resumed_from = record["group"], record["update"]
-            start = (self.restored.state, _host(curves["current"]))
+            point = _resume_point(self.restored)
+            if point.finished:
+                self.finished.append(point.finished)
+                self.diverged = point.finished_diverged
+            first_group, resumed_from = point.group, point.update
+            start = (self.restored.state, point.current)
             self.saved.append(resumed_from)
         self.began = time.perf_counter()
         self.steps_before = self._steps(first_group, resumed_from)
@@ -461,8 +462,26 @@ class _Chunks:
         )
 
 
-def _host(metrics: dict[str, Any]) -> dict[str, np.ndarray]:
-    return {name: np.asarray(values) for name, values in metrics.items()}
+class _ResumePoint(NamedTuple):
+    group: int
+    update: int
+    current: dict[str, np.ndarray]  # the group's metrics so far
+    finished: dict[str, np.ndarray]  # the finished groups' ({} if none)
+    finished_diverged: np.ndarray
+
+
+def _resume_point(restored: Restored) -> _ResumePoint:
+    """Where a checkpoint's record and curves say training stopped (a run's checkpoint of the
+    first format holds its metrics alone, and no group)."""
+    curves, record = restored.curves, restored.record
+    current = curves.get("current", curves)
+    return _ResumePoint(
+        group=record.get("group", 0),
+        update=record["update"],
+        current={name: np.asarray(values) for name, values in current.items()},
+        finished={name: np.asarray(v) for name, v in curves.get("finished", {}).items()},
+        finished_diverged=np.asarray(curves.get("finished_diverged", []), np.int32),
+    )
 
 
 def _join(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:

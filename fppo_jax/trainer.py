@@ -202,7 +202,8 @@ class Trainer:
         recent_returns, num_episodes = _push_returns(
             state.recent_returns, state.num_episodes, done, traj.episode_return
         )
-        new_state = TrainState(
+        new_state = dataclasses.replace(
+            state,
             params=params,
             opt_state=opt_state,
             obs_stats=obs_stats,
@@ -211,7 +212,6 @@ class Trainer:
             recent_returns=recent_returns,
             num_episodes=num_episodes,
             update=state.update + 1,
-            nonfinite_update=state.nonfinite_update,
             key=key,
         )
         metrics = Metrics(

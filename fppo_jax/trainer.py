@@ -9,6 +9,7 @@ chunk of updates from a state, for progress reporting between compiled calls.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 from typing import Any, NamedTuple
 
@@ -56,25 +57,24 @@ class TrainState:
     key: jax.Array
 
 
-class Metrics(NamedTuple):
-    """One row per update."""
+# Loss diagnostics averaged over the first epoch only, and their metrics' names. SPEC §3, escape
+# speed: the fraction of the batch in R+ ∪ R- as each minibatch meets it before training on it.
+_FIRST_EPOCH = {"negative_fraction": "negative_fraction_before"}
 
-    env_steps: jax.Array
-    average_return: jax.Array  # mean return of the last 100 finished episodes (NaN before any)
-    policy_loss: jax.Array
-    value_loss: jax.Array
-    entropy: jax.Array
-    approx_kl: jax.Array
-    clip_fraction: jax.Array
-    # SPEC §3, escape speed: the fraction of the batch in R+ ∪ R-, as each minibatch of the
-    # first epoch meets it, and under the parameters after the last epoch; and how far past the
-    # bound the latter sit on average.
-    negative_fraction_before: jax.Array
-    negative_fraction_after: jax.Array
-    negative_distance_after: jax.Array
+METRICS: tuple[str, ...] = (
+    "env_steps",
+    "average_return",  # mean return of the last 100 finished episodes (NaN before any)
+    # Each of LossInfo's diagnostics, averaged over the update.
+    *(_FIRST_EPOCH.get(name, name) for name in LossInfo._fields),
+    # SPEC §3, under the parameters after the last epoch: the fraction of the batch in R+ ∪ R-,
+    # and how far past the bound those samples sit on average.
+    "negative_fraction_after",
+    "negative_distance_after",
+)
 
 
-METRICS: tuple[str, ...] = Metrics._fields
+class Metrics(collections.namedtuple("Metrics", METRICS)):
+    """One row per update: a value for each name of :data:`METRICS`."""
 
 
 class Transition(NamedTuple):
@@ -133,6 +133,14 @@ def _keep_if_finite(new: TrainState, old: TrainState, losses: jax.Array) -> Trai
     kept = jax.tree.map(lambda n, o: jnp.where(finite, n, o), new, old)
     first_bad = jnp.where((old.nonfinite_update < 0) & ~finite, old.update, old.nonfinite_update)
     return dataclasses.replace(kept, update=new.update, nonfinite_update=first_bad)
+
+
+def _loss_metrics(infos: LossInfo) -> dict[str, jax.Array]:
+    """The update's loss diagnostics, [epoch, minibatch] each, averaged, by metric name."""
+    return {
+        _FIRST_EPOCH.get(name, name): jnp.mean(value[0] if name in _FIRST_EPOCH else value)
+        for name, value in infos._asdict().items()
+    }
 
 
 def _average_return(recent: jax.Array, num_episodes: jax.Array) -> jax.Array:
@@ -217,12 +225,7 @@ class Trainer:
         metrics = Metrics(
             env_steps=(new_state.update * config.samples_per_update).astype(jnp.int32),
             average_return=_average_return(recent_returns, num_episodes),
-            policy_loss=jnp.mean(infos.policy_loss),
-            value_loss=jnp.mean(infos.value_loss),
-            entropy=jnp.mean(infos.entropy),
-            approx_kl=jnp.mean(infos.approx_kl),
-            clip_fraction=jnp.mean(infos.clip_fraction),
-            negative_fraction_before=jnp.mean(infos.negative_fraction[0]),
+            **_loss_metrics(infos),
             negative_fraction_after=negative_fraction,
             negative_distance_after=negative_distance,
         )

@@ -23,9 +23,6 @@ from jax.sharding import PartitionSpec as P
 
 from fppo_jax.trainer import TrainState
 
-# TrainState fields with a leading environment axis: split across the `data` axis.
-PER_ENVIRONMENT = ("env_state", "obs", "episode_return", "discounted_return")
-
 
 def make_mesh(devices: int | None, num_envs: int, data_parallel: int | None = None) -> Mesh | None:
     """The mesh of `devices` devices (default: all JAX sees), or None for a single device.
@@ -60,14 +57,14 @@ def make_mesh(devices: int | None, num_envs: int, data_parallel: int | None = No
 
 
 def state_shardings(mesh: Mesh, state: TrainState, batched: bool) -> TrainState:
-    """Where each leaf of a (batched, for a sweep) training state lives on `mesh`."""
+    """Where each leaf of a (batched, for a sweep) training state lives on `mesh`: the
+    environments split over the `data` axis, everything else replicated on it."""
     runs = ("runs",) if batched else ()
-
-    def field(name: str) -> Any:
-        spec = P(*runs, "data") if name in PER_ENVIRONMENT else P(*runs)
-        return jax.tree.map(lambda _: NamedSharding(mesh, spec), getattr(state, name))
-
-    return TrainState(**{f.name: field(f.name) for f in dataclasses.fields(TrainState)})
+    replicated = NamedSharding(mesh, P(*runs))
+    per_environment = NamedSharding(mesh, P(*runs, "data"))
+    shardings = jax.tree.map(lambda _: replicated, state)
+    envs = jax.tree.map(lambda _: per_environment, state.envs)
+    return dataclasses.replace(shardings, envs=envs)
 
 
 def input_sharding(mesh: Mesh, batched: bool) -> NamedSharding:

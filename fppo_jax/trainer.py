@@ -9,6 +9,7 @@ chunk of updates from a state, for progress reporting between compiled calls.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 from typing import Any, NamedTuple
 
@@ -30,6 +31,17 @@ RETURN_WINDOW = 100  # episodes in `average_return` (SPEC §2)
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
+class Envs:
+    """The environments of a run, each leaf with a leading environment axis."""
+
+    state: Any
+    obs: jax.Array  # raw observation of each environment, to act on next
+    episode_return: jax.Array  # undiscounted return of each environment's current episode
+    discounted_return: jax.Array  # for reward scaling, reset at episode ends
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
 class TrainState:
     """Everything a run carries from one update to the next."""
 
@@ -37,10 +49,7 @@ class TrainState:
     opt_state: optax.OptState
     obs_stats: RunningStats
     return_stats: RunningStats
-    env_state: Any
-    obs: jax.Array  # raw observation of each environment, to act on next
-    episode_return: jax.Array  # undiscounted return of each environment's current episode
-    discounted_return: jax.Array  # for reward scaling, reset at episode ends
+    envs: Envs
     recent_returns: jax.Array  # ring buffer of the last RETURN_WINDOW finished episodes
     num_episodes: jax.Array
     update: jax.Array
@@ -48,25 +57,24 @@ class TrainState:
     key: jax.Array
 
 
-class Metrics(NamedTuple):
-    """One row per update."""
+# Loss diagnostics averaged over the first epoch only, and their metrics' names. SPEC §3, escape
+# speed: the fraction of the batch in R+ ∪ R- as each minibatch meets it before training on it.
+_FIRST_EPOCH = {"negative_fraction": "negative_fraction_before"}
 
-    env_steps: jax.Array
-    average_return: jax.Array  # mean return of the last 100 finished episodes (NaN before any)
-    policy_loss: jax.Array
-    value_loss: jax.Array
-    entropy: jax.Array
-    approx_kl: jax.Array
-    clip_fraction: jax.Array
-    # SPEC §3, escape speed: the fraction of the batch in R+ ∪ R-, as each minibatch of the
-    # first epoch meets it, and under the parameters after the last epoch; and how far past the
-    # bound the latter sit on average.
-    negative_fraction_before: jax.Array
-    negative_fraction_after: jax.Array
-    negative_distance_after: jax.Array
+METRICS: tuple[str, ...] = (
+    "env_steps",
+    "average_return",  # mean return of the last 100 finished episodes (NaN before any)
+    # Each of LossInfo's diagnostics, averaged over the update.
+    *(_FIRST_EPOCH.get(name, name) for name in LossInfo._fields),
+    # SPEC §3, under the parameters after the last epoch: the fraction of the batch in R+ ∪ R-,
+    # and how far past the bound those samples sit on average.
+    "negative_fraction_after",
+    "negative_distance_after",
+)
 
 
-METRICS: tuple[str, ...] = Metrics._fields
+class Metrics(collections.namedtuple("Metrics", METRICS)):
+    """One row per update: a value for each name of :data:`METRICS`."""
 
 
 class Transition(NamedTuple):
@@ -127,6 +135,14 @@ def _keep_if_finite(new: TrainState, old: TrainState, losses: jax.Array) -> Trai
     return dataclasses.replace(kept, update=new.update, nonfinite_update=first_bad)
 
 
+def _loss_metrics(infos: LossInfo) -> dict[str, jax.Array]:
+    """The update's loss diagnostics, [epoch, minibatch] each, averaged, by metric name."""
+    return {
+        _FIRST_EPOCH.get(name, name): jnp.mean(value[0] if name in _FIRST_EPOCH else value)
+        for name, value in infos._asdict().items()
+    }
+
+
 def _average_return(recent: jax.Array, num_episodes: jax.Array) -> jax.Array:
     filled = jnp.minimum(num_episodes, RETURN_WINDOW)
     total = jnp.sum(jnp.where(jnp.arange(RETURN_WINDOW) < filled, recent, 0.0))
@@ -155,10 +171,7 @@ class Trainer:
             opt_state=make_optimizer(hp, config).init(params),
             obs_stats=RunningStats.create((env.observation_size,)),
             return_stats=RunningStats.create(),
-            env_state=env_state,
-            obs=obs,
-            episode_return=zeros,
-            discounted_return=zeros,
+            envs=Envs(env_state, obs, episode_return=zeros, discounted_return=zeros),
             recent_returns=jnp.zeros(RETURN_WINDOW),
             num_episodes=jnp.asarray(0, jnp.int32),
             update=jnp.asarray(0, jnp.int32),
@@ -188,8 +201,7 @@ class Trainer:
         """One rollout and one PPO update; a non-finite result keeps the state it started from."""
         config = self.config
         key, rollout_key, epochs_key = jax.random.split(state.key, 3)
-        batch, traj, carry, obs_stats, return_stats = self._collect(state, hp, rollout_key)
-        env_state, obs, episode_return, discounted_return = carry
+        batch, traj, envs, obs_stats, return_stats = self._collect(state, hp, rollout_key)
         (params, opt_state), losses, infos, _ = self._epochs(state, hp, batch, epochs_key)
 
         negative_fraction, negative_distance = self._escape(params, batch, hp.objective.epsilon)
@@ -198,30 +210,22 @@ class Trainer:
         recent_returns, num_episodes = _push_returns(
             state.recent_returns, state.num_episodes, done, traj.episode_return
         )
-        new_state = TrainState(
+        new_state = dataclasses.replace(
+            state,
             params=params,
             opt_state=opt_state,
             obs_stats=obs_stats,
             return_stats=return_stats,
-            env_state=env_state,
-            obs=obs,
-            episode_return=episode_return,
-            discounted_return=discounted_return,
+            envs=envs,
             recent_returns=recent_returns,
             num_episodes=num_episodes,
             update=state.update + 1,
-            nonfinite_update=state.nonfinite_update,
             key=key,
         )
         metrics = Metrics(
             env_steps=(new_state.update * config.samples_per_update).astype(jnp.int32),
             average_return=_average_return(recent_returns, num_episodes),
-            policy_loss=jnp.mean(infos.policy_loss),
-            value_loss=jnp.mean(infos.value_loss),
-            entropy=jnp.mean(infos.entropy),
-            approx_kl=jnp.mean(infos.approx_kl),
-            clip_fraction=jnp.mean(infos.clip_fraction),
-            negative_fraction_before=jnp.mean(infos.negative_fraction[0]),
+            **_loss_metrics(infos),
             negative_fraction_after=negative_fraction,
             negative_distance_after=negative_distance,
         )
@@ -229,11 +233,11 @@ class Trainer:
 
     def _collect(
         self, state: TrainState, hp: Hyperparameters, key: jax.Array
-    ) -> tuple[Batch, Transition, tuple, RunningStats, RunningStats]:
-        """A rollout and its batch (advantages, targets), with the rollout's end and the
-        updated normaliser statistics."""
+    ) -> tuple[Batch, Transition, Envs, RunningStats, RunningStats]:
+        """A rollout and its batch (advantages, targets), with the environments where the
+        rollout left them and the updated normaliser statistics."""
         config = self.config
-        traj, carry = self._rollout(state, hp, key)
+        traj, envs = self._rollout(state, hp, key)
         obs_stats, return_stats = state.obs_stats, state.return_stats
         if config.normalize_observations:
             obs_stats = obs_stats.update(traj.raw_obs)
@@ -263,7 +267,7 @@ class Trainer:
                 traj.obs, traj.action, traj.log_prob, values, advantages, targets, traj.distribution
             ),
         )
-        return batch, traj, carry, obs_stats, return_stats
+        return batch, traj, envs, obs_stats, return_stats
 
     def escape_by_epoch(self, state: TrainState, hp: Hyperparameters) -> jax.Array:
         """SPEC §3 for the next update from `state`: the fraction of its batch in R+ ∪ R- after
@@ -292,7 +296,7 @@ class Trainer:
 
     def _rollout(
         self, state: TrainState, hp: Hyperparameters, key: jax.Array
-    ) -> tuple[Transition, tuple]:
+    ) -> tuple[Transition, Envs]:
         config, env, networks = self.config, self.env, self.networks
         action_space = env.action_space
         noise_key, step_key, reset_key = jax.random.split(key, 3)
@@ -308,8 +312,10 @@ class Trainer:
         env_index = jnp.arange(config.num_envs)
         step_env = jax.vmap(env.step)
 
-        def step(carry: tuple, inputs: tuple) -> tuple[tuple, Transition]:
-            env_state, obs, episode_return, discounted_return, episodes_ended = carry
+        def step(
+            carry: tuple[Envs, jax.Array], inputs: tuple
+        ) -> tuple[tuple[Envs, jax.Array], Transition]:
+            envs, episodes_ended = carry
             noise, keys, t = inputs
             # Without a pool, an environment ending at step t takes row t, so every reset is
             # fresh; with one, its episodes take the pool's rows in turn.
@@ -318,7 +324,7 @@ class Trainer:
             else:
                 take = lambda x: x[episodes_ended % pool, env_index]  # noqa: E731
             reset_state, first_obs = jax.tree.map(take, (reset_states, reset_obs))
-            seen = self.network_input(state.obs_stats, obs)
+            seen = self.network_input(state.obs_stats, envs.obs)
             dist = networks.distribution(state.params, seen)
             action = dist.sample_from(noise)
             env_action = action
@@ -327,13 +333,13 @@ class Trainer:
                 env_action = jnp.clip(
                     action, jnp.asarray(action_space.low), jnp.asarray(action_space.high)
                 )
-            env_state, out = step_env(keys, env_state, env_action)
-            episode_return = episode_return + out.reward
-            discounted_return = discounted_return * hp.gamma + out.reward
+            env_state, out = step_env(keys, envs.state, env_action)
+            episode_return = envs.episode_return + out.reward
+            discounted_return = envs.discounted_return * hp.gamma + out.reward
             done = out.terminated | out.truncated
             transition = Transition(
                 obs=seen,
-                raw_obs=obs,
+                raw_obs=envs.obs,
                 action=action,
                 log_prob=dist.log_prob(action),
                 distribution=dist,
@@ -344,20 +350,18 @@ class Trainer:
                 discounted_return=discounted_return,
                 episode_return=episode_return,
             )
-            carry = (
-                where_done(done, reset_state, env_state),
-                where_done(done, first_obs, out.obs),
-                jnp.where(done, 0.0, episode_return),
-                jnp.where(done, 0.0, discounted_return),
-                episodes_ended + done,
+            envs = Envs(
+                state=where_done(done, reset_state, env_state),
+                obs=where_done(done, first_obs, out.obs),
+                episode_return=jnp.where(done, 0.0, episode_return),
+                discounted_return=jnp.where(done, 0.0, discounted_return),
             )
-            return carry, transition
+            return (envs, episodes_ended + done), transition
 
         ended = jnp.zeros(config.num_envs, jnp.int32)
-        carry = (state.env_state, state.obs, state.episode_return, state.discounted_return, ended)
         inputs = (action_noise, step_keys, jnp.arange(config.num_steps))
-        carry, traj = jax.lax.scan(step, carry, inputs)
-        return traj, carry[:4]
+        (envs, _), traj = jax.lax.scan(step, (state.envs, ended), inputs)
+        return traj, envs
 
     def _epochs(
         self,

@@ -31,7 +31,7 @@ def devices(out: str) -> None:
         results[f"train{count}_return"] = run.metrics["average_return"]
         for i, leaf in enumerate(flat(run.params)):
             results[f"train{count}_param{i}"] = leaf
-        results[f"train{count}_obs_sharding"] = np.asarray(str(run.state.obs.sharding))
+        results[f"train{count}_obs_sharding"] = np.asarray(str(run.state.envs.obs.sharding))
     for name, options in {
         "sweep1": {"devices": 1},
         "sweep4": {"devices": 4},

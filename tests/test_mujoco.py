@@ -10,8 +10,8 @@ import pytest
 import fppo_jax
 from fppo_jax import TrainConfig, hyperparameters, make_env, make_train, sweep
 from fppo_jax.envs import MUJOCO_TASKS, TASKS, Box, as_environment
+from fppo_jax.envs.mjx import BraxEnvironment, Swimmer, swimmer_model
 from fppo_jax.gae import gae
-from fppo_jax.mujoco_envs import BraxEnvironment, Swimmer, swimmer_model
 from fppo_jax.objectives import VARIANTS
 from fppo_jax.render import RenderingUnavailable, episode_positions
 

@@ -12,20 +12,13 @@ import dataclasses
 import functools
 import io
 import warnings
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import mujoco
 
-from fppo_jax.envs import Box, Step
-
-
-class Timed(NamedTuple):
-    """An environment's own state and the steps taken in its episode."""
-
-    inner: Any
-    steps: jax.Array
+from fppo_jax.envs.core import Box, Step, Timed
 
 
 def _import_quietly() -> None:

@@ -1,0 +1,25 @@
+"""Environments: the interface the trainer steps (:mod:`.core`), one module per adapter
+(:mod:`.gymnax`, :mod:`.mjx`) and the task registry (:mod:`.tasks`).
+
+Only the interface, the gymnax adapter (which imports gymnax on first use) and the registry
+are imported here: the classic tasks never pay for Brax or MuJoCo.
+"""
+
+from fppo_jax.envs.core import Box, Discrete, Environment, Step, draw_resets, where_done
+from fppo_jax.envs.gymnax import GymnaxEnvironment
+from fppo_jax.envs.tasks import MUJOCO_TASKS, TASKS, Task, as_environment, make_env
+
+__all__ = [
+    "MUJOCO_TASKS",
+    "TASKS",
+    "Box",
+    "Discrete",
+    "Environment",
+    "GymnaxEnvironment",
+    "Step",
+    "Task",
+    "as_environment",
+    "draw_resets",
+    "make_env",
+    "where_done",
+]

@@ -36,6 +36,19 @@ from fppo_jax.objectives import VARIANTS
 from fppo_jax.policy import Policy
 from fppo_jax.trainer import Trainer, TrainState, make_train
 
+# The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task (to be moved to fppo_jax.config).
+TABLE2: dict[str, dict[str, float]] = {
+    "cartpole": {"alpha": 1.3, "k": 0.4},
+    "acrobot": {"alpha": 1.3, "k": 0.4},
+    "mountaincar": {"alpha": 1.3, "k": 0.4},
+    "hopper": {"alpha": 1.3, "k": 0.2},
+    "walker2d": {"alpha": 1.3, "k": 0.1},
+    "halfcheetah": {"alpha": 1.3, "k": 0.4},
+    "ant": {"alpha": 1.3, "k": 0.4},
+    "reacher": {"alpha": 1.1, "k": 0.4},
+    "swimmer": {"alpha": 1.1, "k": 0.1},
+}
+
 CONFIG_FIELDS = tuple(field.name for field in dataclasses.fields(TrainConfig))
 
 
@@ -333,11 +346,11 @@ def _resolve(
     config = resolve_config(
         env, total_steps, overrides, also_valid=tuple(HYPERPARAMETER_DEFAULTS), preset=preset
     )
-    task = TASKS.get(env) if isinstance(env, str) else None
-    if task and variant == "fppo-lp" and alpha is None:
-        alpha = task.fppo_lp_alpha
-    if task and variant == "fppo-qp" and k is None:
-        k = task.fppo_qp_k
+    table2 = TABLE2.get(env) if isinstance(env, str) else None
+    if table2 and variant == "fppo-lp" and alpha is None:
+        alpha = table2["alpha"]
+    if table2 and variant == "fppo-qp" and k is None:
+        k = table2["k"]
     hp = hyperparameters(variant, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **optimisation)
     o = hp.objective
     settings: dict[str, Any] = {"variant": variant, "epsilon": _as_float(o.epsilon)}

@@ -9,7 +9,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from fppo_jax.api import TrainingDiverged, TrainResult, describe_update, train
+from fppo_jax.api import TABLE2, TrainingDiverged, TrainResult, describe_update, train
 from fppo_jax.config import HYPERPARAMETER_DEFAULTS, PRESETS, preset_config
 from fppo_jax.distributed import initialize, is_main_process
 from fppo_jax.envs import TASKS, make_env
@@ -373,7 +373,7 @@ def _list() -> int:
     for task in TASKS.values():
         print(
             f"  {task.name:<12} {task.description}; {task.total_steps:,} steps, "
-            f"fppo-lp alpha {task.fppo_lp_alpha}, fppo-qp k {task.fppo_qp_k}"
+            f"fppo-lp alpha {TABLE2[task.name]['alpha']}, fppo-qp k {TABLE2[task.name]['k']}"
         )
     print("presets:")
     for name in PRESETS:

@@ -24,6 +24,7 @@ import numpy as np
 from jax.sharding import Mesh
 
 from fppo_jax.api import (
+    TABLE2,
     checkpoint_every_updates,
     describe,
     env_name,
@@ -33,7 +34,7 @@ from fppo_jax.api import (
 from fppo_jax.checkpoint import Checkpoints, ConfigMismatch, Restored
 from fppo_jax.config import HYPERPARAMETER_DEFAULTS, Hyperparameters, hyperparameters
 from fppo_jax.distributed import fetch, is_main_process, make_mesh
-from fppo_jax.envs import TASKS, Environment, as_environment
+from fppo_jax.envs import Environment, as_environment
 from fppo_jax.execution import (
     PROGRESS_LINES,
     Program,
@@ -67,7 +68,7 @@ def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[s
     bad = [v for v in variants if v not in VARIANTS]
     if bad:
         raise ValueError(f"unknown variant {bad[0]!r}; valid variants: {', '.join(VARIANTS)}")
-    defaults = TASKS[task] if task in TASKS else None
+    defaults = TABLE2[task] if task in TABLE2 else None
     settings: list[dict[str, Any]] = []
     for variant, *combo in itertools.product(variants, *values.values()):
         setting: dict[str, Any] = {"variant": variant}
@@ -75,9 +76,9 @@ def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[s
             if name not in _VARIANT_SPECIFIC or name in VARIANT_DEFAULTS[variant]:
                 setting[name] = float(value)
         if defaults and variant == "fppo-lp":
-            setting.setdefault("alpha", defaults.fppo_lp_alpha)
+            setting.setdefault("alpha", defaults["alpha"])
         if defaults and variant == "fppo-qp":
-            setting.setdefault("k", defaults.fppo_qp_k)
+            setting.setdefault("k", defaults["k"])
         if setting not in settings:
             settings.append(setting)
     return settings

@@ -1,8 +1,11 @@
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
-from fppo_jax.envs import TASKS, Discrete, as_environment, draw_resets, make_env, where_done
+from fppo_jax import TrainConfig, hyperparameters, make_train
+from fppo_jax.envs import TASKS, Box, Discrete, as_environment, draw_resets, make_env, where_done
+from fppo_jax.envs.gymnax import gymnax_environment
 
 
 def run_until_done(env, policy, limit=1000):
@@ -78,3 +81,12 @@ def test_unknown_environment_lists_the_registered_ones():
         make_env("cartpol")
     with pytest.raises(TypeError, match="expected a registered environment name"):
         as_environment(42)
+
+
+def test_a_continuous_gymnax_environment_trains_under_jit(tiny):
+    env = gymnax_environment("Pendulum-v1")
+    assert env.action_space == Box((-2.0,), (2.0,))
+    config = TrainConfig(total_steps=3 * 128, **tiny)
+    _, metrics = jax.jit(make_train(config, env))(jax.random.key(0), hyperparameters("ppo"))
+    for name in ("policy_loss", "value_loss", "entropy", "approx_kl"):
+        assert np.isfinite(getattr(metrics, name)).all(), name

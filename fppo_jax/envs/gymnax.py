@@ -12,6 +12,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from fppo_jax.envs.core import Box, Discrete, Step
 
@@ -34,8 +35,9 @@ class GymnaxEnvironment:
         space = self.env.action_space(self.params)
         if isinstance(space, spaces.Discrete):
             return Discrete(int(space.n))
-        low = jnp.broadcast_to(space.low, space.shape)
-        high = jnp.broadcast_to(space.high, space.shape)
+        # numpy, not jnp: the bounds are constants, and jnp would trace them under jit.
+        low = np.broadcast_to(np.asarray(space.low, np.float64), space.shape)
+        high = np.broadcast_to(np.asarray(space.high, np.float64), space.shape)
         return Box(tuple(map(float, low)), tuple(map(float, high)))
 
     def reset(self, key: jax.Array) -> tuple[Any, jax.Array]:

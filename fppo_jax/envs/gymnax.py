@@ -7,6 +7,7 @@ JAX's backends before a multi-process run can join (fppo_jax.distributed).
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 from typing import Any
 
@@ -19,14 +20,18 @@ from fppo_jax.envs.core import Box, Discrete, Step
 
 @dataclasses.dataclass(frozen=True)
 class GymnaxEnvironment:
-    """A gymnax (≥ 1.0) environment with fixed parameters (they set the episode limit)."""
+    """A gymnax (≥ 1.0) environment with fixed parameters (they set the episode limit).
+
+    Observations are flattened: the trainer's networks take vectors, and MinAtar observes
+    images.
+    """
 
     env: Any  # gymnax.environments.environment.Environment
     params: Any
 
     @property
     def observation_size(self) -> int:
-        return int(self.env.observation_space(self.params).shape[0])
+        return math.prod(self.env.observation_space(self.params).shape)
 
     @property
     def action_space(self) -> Discrete | Box:
@@ -42,7 +47,7 @@ class GymnaxEnvironment:
 
     def reset(self, key: jax.Array) -> tuple[Any, jax.Array]:
         obs, state = self.env.reset(key, self.params)
-        return state, obs.astype(jnp.float32)
+        return state, obs.reshape(-1).astype(jnp.float32)
 
     def step(self, key: jax.Array, state: Any, action: jax.Array) -> tuple[Any, Step]:
         # gymnax's own `step` also computes a reset at every step; the trainer does that for
@@ -50,7 +55,7 @@ class GymnaxEnvironment:
         obs, state, reward, terminated, _ = self.env.step_env(key, state, action, self.params)
         truncated = self.env.is_truncated(state, self.params)
         return state, Step(
-            obs.astype(jnp.float32), reward.astype(jnp.float32), terminated, truncated
+            obs.reshape(-1).astype(jnp.float32), reward.astype(jnp.float32), terminated, truncated
         )
 
 
@@ -59,6 +64,10 @@ def gymnax_environment(env_id: str, max_steps: int | None = None) -> GymnaxEnvir
     steps per episode."""
     import gymnax
 
+    if env_id not in gymnax.registered_envs:
+        raise ValueError(
+            f"gymnax has no environment {env_id!r}; it offers: " + ", ".join(gymnax.registered_envs)
+        )
     env, params = gymnax.make(env_id)
     if max_steps is not None:
         params = params.replace(max_steps_in_episode=max_steps)

@@ -115,6 +115,8 @@ def brax_environment(name: str, episode_length: int = 1000, **kwargs: Any) -> Br
     _import_quietly()
     from brax import envs
 
+    if name not in envs._envs:
+        raise ValueError(f"Brax has no environment {name!r}; it offers: " + ", ".join(envs._envs))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         env = envs.get_environment(name, backend="mjx", **kwargs)

@@ -62,6 +62,14 @@ def test_brax_env_object_is_accepted():
     assert env.observation_size == 11 and env.action_space.size == 2
 
 
+def test_any_brax_environment_by_name():
+    env = make_env("brax/inverted_pendulum")
+    assert isinstance(env, BraxEnvironment) and env.episode_length == 1000
+    assert env.observation_size == 4 and env.action_space == Box((-3.0,), (3.0,))
+    with pytest.raises(ValueError, match=r"^Brax has no environment 'nope'; it offers: ant, "):
+        make_env("brax/nope")
+
+
 def test_registered_tasks_have_gym_limits_and_budgets():
     assert make_env("reacher").episode_length == 50
     assert make_env("swimmer").episode_length == 1000

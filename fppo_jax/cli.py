@@ -19,7 +19,7 @@ from fppo_jax.config import (
     preset_config,
 )
 from fppo_jax.distributed import initialize, is_main_process
-from fppo_jax.envs import TASKS, make_env
+from fppo_jax.envs import NAMESPACES, TASKS, make_env
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
 from fppo_jax.results import SweepResult, TrainingDiverged
 from fppo_jax.sweep import sweep
@@ -415,6 +415,9 @@ def _list() -> int:
             f"  {task.name:<12} {task.description}; {task.total_steps:,} steps, "
             f"fppo-lp alpha {TABLE2[task.name]['alpha']}, fppo-qp k {TABLE2[task.name]['k']}"
         )
+    print("namespaces (any id the library has, e.g. --env gymnax/Pendulum-v1):")
+    for name, text in NAMESPACES.items():
+        print(f"  {name + '/':<12} {text}")
     print("presets:")
     for name in PRESETS:
         config = preset_config(name, total_steps=10**9)

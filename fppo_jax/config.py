@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.envs import TASKS
+from fppo_jax.envs import lookup
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import EPSILON, VARIANTS, Objective, objective
 
@@ -239,8 +239,7 @@ def resolve_config(
 ) -> TrainConfig:
     """The checked TrainConfig of `preset` and `overrides`, with the task's step budget by
     default."""
-    if isinstance(env, str) and env not in TASKS:
-        raise ValueError(f"unknown environment {env!r}; registered: {', '.join(TASKS)}")
+    task = lookup(env) if isinstance(env, str) else None  # an unknown name is refused here
     unknown = sorted(set(overrides) - set(CONFIG_FIELDS))
     if unknown:
         raise ValueError(
@@ -251,7 +250,6 @@ def resolve_config(
     if total_steps is not None:
         values["total_steps"] = total_steps
     elif "total_steps" not in values:
-        task = TASKS.get(env) if isinstance(env, str) else None
         values["total_steps"] = task.total_steps if task else TrainConfig.total_steps
     return preset_config(preset, **values)
 

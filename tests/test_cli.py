@@ -128,6 +128,7 @@ def test_console_entry_point_lists_tasks_and_variants():
     assert "cartpole" in out.stdout and "tr-ppo-rb" in out.stdout and "alpha 1.3" in out.stdout
     assert "swimmer      Swimmer on MJX" in out.stdout and "fppo-qp k 0.1" in out.stdout
     assert "massive    32,768 samples (2048 envs × 16 steps)" in out.stdout
+    assert "gymnax/" in out.stdout and "playground/" in out.stdout
     assert "Failed to import" not in out.stdout + out.stderr
 
 
@@ -181,3 +182,13 @@ def test_sweep_value_ranges_and_errors(tmp_path, capsys):
     assert "expected start:stop:step" in capsys.readouterr().err
     assert main(["table", str(tmp_path / "nothing")]) == 2
     assert "not a sweep's output" in capsys.readouterr().err
+
+
+def test_namespaced_environments_train_and_sweep_from_the_command_line(tmp_path, capsys):
+    args = ["--env", "gymnax/Pendulum-v1", "--steps", "256", "--quiet", *TINY_FLAGS]
+    assert main(["train", "--variant", "ppo", *args]) == 0
+    assert "ppo on gymnax/Pendulum-v1" in capsys.readouterr().out
+    assert main(["sweep", "--variant", "ppo", "--seeds", "2", *args]) == 0
+    assert "2 runs on gymnax/Pendulum-v1" in capsys.readouterr().out
+    assert main(["train", "--env", "nope/CartPole-v1", "--quiet"]) == 2
+    assert "unknown environment 'nope/CartPole-v1'" in capsys.readouterr().err

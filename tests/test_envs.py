@@ -1,8 +1,24 @@
+import subprocess
+import sys
+
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
-from fppo_jax.envs import TASKS, Discrete, as_environment, draw_resets, make_env, where_done
+from fppo_jax import TrainConfig, hyperparameters, make_train
+from fppo_jax.envs import (
+    NAMESPACES,
+    TASKS,
+    Box,
+    Discrete,
+    as_environment,
+    draw_resets,
+    lookup,
+    make_env,
+    where_done,
+)
+from fppo_jax.envs.gymnax import gymnax_environment
 
 
 def run_until_done(env, policy, limit=1000):
@@ -71,10 +87,71 @@ def test_acrobot_episode_limit_is_500():
     assert make_env("acrobot").params.max_steps_in_episode == 500
 
 
-def test_unknown_environment_lists_the_registered_ones():
-    with pytest.raises(
-        ValueError, match="unknown environment 'cartpol'; registered: cartpole, acrobot"
-    ):
-        make_env("cartpol")
+REGISTERED = "cartpole, acrobot, mountaincar, hopper, walker2d, halfcheetah, ant, reacher, swimmer"
+
+
+@pytest.mark.parametrize("name", ["cartpol", "gym/CartPole-v1", "gymnax/", "Pendulum-v1"])
+def test_an_unknown_name_lists_the_registered_tasks_and_the_namespaces(name):
+    message = (
+        f"unknown environment {name!r}; registered: {REGISTERED}; "
+        "namespaced: gymnax/<id>, brax/<id>, playground/<id>"
+    )
+    with pytest.raises(ValueError) as error:
+        lookup(name)
+    assert str(error.value) == message
+    with pytest.raises(ValueError, match=r"^unknown environment"):
+        make_env(name)
+
+
+def test_lookup_gives_registered_and_namespaced_tasks():
+    assert lookup("hopper") is TASKS["hopper"]
+    task = lookup("brax/humanoid")
+    assert task.name == "brax/humanoid" and task.total_steps == 100_000
+    assert task.description == "humanoid from the brax namespace"
+    assert set(NAMESPACES) == {"gymnax", "brax", "playground"}
     with pytest.raises(TypeError, match="expected a registered environment name"):
         as_environment(42)
+
+
+def test_neither_importing_nor_looking_up_loads_an_environment_library():
+    code = (
+        "import sys, fppo_jax; from fppo_jax.envs import lookup; "
+        "[lookup(n) for n in ('cartpole', 'gymnax/Pendulum-v1', 'brax/ant', 'playground/X')]; "
+        "print(sorted({m.split('.')[0] for m in sys.modules} "
+        "& {'gymnax', 'brax', 'mujoco', 'mujoco_playground'}))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize(
+    "name, obs_size, action_space",
+    [
+        ("gymnax/Acrobot-v1", 6, Discrete(3)),
+        ("gymnax/Pendulum-v1", 3, Box((-2.0,), (2.0,))),
+        ("gymnax/Breakout-MinAtar", 10 * 10 * 4, Discrete(3)),  # image observations, flattened
+    ],
+)
+def test_any_gymnax_environment_by_id(name, obs_size, action_space):
+    env = make_env(name)
+    assert env.observation_size == obs_size and env.action_space == action_space
+    assert env.params.max_steps_in_episode == env.env.default_params.max_steps_in_episode
+    state, obs = env.reset(jax.random.key(1))
+    action = jnp.zeros(action_space.size) if isinstance(action_space, Box) else jnp.int32(0)
+    state, out = jax.jit(env.step)(jax.random.key(2), state, action)
+    assert obs.shape == out.obs.shape == (obs_size,) and out.obs.dtype == jnp.float32
+    assert out.reward.shape == out.terminated.shape == out.truncated.shape == ()
+
+
+def test_an_unknown_gymnax_id_lists_what_gymnax_offers():
+    with pytest.raises(ValueError, match=r"^gymnax has no environment 'Nope-v0'; it offers: Cart"):
+        make_env("gymnax/Nope-v0")
+
+
+def test_a_continuous_gymnax_environment_trains_under_jit(tiny):
+    env = gymnax_environment("Pendulum-v1")
+    assert env.action_space == Box((-2.0,), (2.0,))
+    config = TrainConfig(total_steps=3 * 128, **tiny)
+    _, metrics = jax.jit(make_train(config, env))(jax.random.key(0), hyperparameters("ppo"))
+    for name in ("policy_loss", "value_loss", "entropy", "approx_kl"):
+        assert np.isfinite(getattr(metrics, name)).all(), name

@@ -11,8 +11,8 @@ import fppo_jax
 from fppo_jax import TrainConfig, hyperparameters, make_env, make_train, sweep
 from fppo_jax.config import TABLE2
 from fppo_jax.envs import MUJOCO_TASKS, TASKS, Box, as_environment
+from fppo_jax.envs.mjx import BraxEnvironment, Swimmer, swimmer_model
 from fppo_jax.gae import gae
-from fppo_jax.mujoco_envs import BraxEnvironment, Swimmer, swimmer_model
 from fppo_jax.objectives import VARIANTS
 from fppo_jax.render import RenderingUnavailable, episode_positions
 
@@ -63,7 +63,15 @@ def test_brax_env_object_is_accepted():
     assert env.observation_size == 11 and env.action_space.size == 2
 
 
-def test_registered_tasks_have_gym_limits_and_table_2_settings():
+def test_any_brax_environment_by_name():
+    env = make_env("brax/inverted_pendulum")
+    assert isinstance(env, BraxEnvironment) and env.episode_length == 1000
+    assert env.observation_size == 4 and env.action_space == Box((-3.0,), (3.0,))
+    with pytest.raises(ValueError, match=r"^Brax has no environment 'nope'; it offers: ant, "):
+        make_env("brax/nope")
+
+
+def test_registered_tasks_have_gym_limits_budgets_and_table_2_settings():
     assert make_env("reacher").episode_length == 50
     assert make_env("swimmer").episode_length == 1000
     assert {name: (TABLE2[name]["alpha"], TABLE2[name]["k"]) for name in MUJOCO_TASKS} == {

@@ -12,20 +12,13 @@ import dataclasses
 import functools
 import io
 import warnings
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import mujoco
 
-from fppo_jax.envs import Box, Step
-
-
-class Timed(NamedTuple):
-    """An environment's own state and the steps taken in its episode."""
-
-    inner: Any
-    steps: jax.Array
+from fppo_jax.envs.core import Box, Step, Timed
 
 
 def _import_quietly() -> None:
@@ -122,6 +115,8 @@ def brax_environment(name: str, episode_length: int = 1000, **kwargs: Any) -> Br
     _import_quietly()
     from brax import envs
 
+    if name not in envs._envs:
+        raise ValueError(f"Brax has no environment {name!r}; it offers: " + ", ".join(envs._envs))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         env = envs.get_environment(name, backend="mjx", **kwargs)

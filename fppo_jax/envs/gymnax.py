@@ -1,0 +1,84 @@
+"""gymnax environments: the adapter, one made by id, and a check that needs no gymnax import.
+
+gymnax is imported only when needed: importing it runs JAX computations, which would start
+JAX's backends before a multi-process run can join (fppo_jax.distributed).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fppo_jax.envs.core import Box, Discrete, Step
+
+
+@dataclasses.dataclass(frozen=True)
+class GymnaxEnvironment:
+    """A gymnax (≥ 1.0) environment with fixed parameters (they set the episode limit).
+
+    Observations are flattened: the trainer's networks take vectors, and MinAtar observes
+    images.
+    """
+
+    env: Any  # gymnax.environments.environment.Environment
+    params: Any
+
+    @property
+    def observation_size(self) -> int:
+        return math.prod(self.env.observation_space(self.params).shape)
+
+    @property
+    def action_space(self) -> Discrete | Box:
+        from gymnax.environments import spaces
+
+        space = self.env.action_space(self.params)
+        if isinstance(space, spaces.Discrete):
+            return Discrete(int(space.n))
+        # numpy, not jnp: the bounds are constants, and jnp would trace them under jit.
+        low = np.broadcast_to(np.asarray(space.low, np.float64), space.shape)
+        high = np.broadcast_to(np.asarray(space.high, np.float64), space.shape)
+        return Box(tuple(map(float, low)), tuple(map(float, high)))
+
+    def reset(self, key: jax.Array) -> tuple[Any, jax.Array]:
+        obs, state = self.env.reset(key, self.params)
+        return state, obs.reshape(-1).astype(jnp.float32)
+
+    def step(self, key: jax.Array, state: Any, action: jax.Array) -> tuple[Any, Step]:
+        # gymnax's own `step` also computes a reset at every step; the trainer does that for
+        # a whole rollout at once, so only the transition is taken here.
+        obs, state, reward, terminated, _ = self.env.step_env(key, state, action, self.params)
+        truncated = self.env.is_truncated(state, self.params)
+        return state, Step(
+            obs.reshape(-1).astype(jnp.float32), reward.astype(jnp.float32), terminated, truncated
+        )
+
+
+def gymnax_environment(env_id: str, max_steps: int | None = None) -> GymnaxEnvironment:
+    """gymnax's environment `env_id`, with its default parameters and, if given, `max_steps`
+    steps per episode."""
+    import gymnax
+
+    if env_id not in gymnax.registered_envs:
+        raise ValueError(
+            f"gymnax has no environment {env_id!r}; it offers: " + ", ".join(gymnax.registered_envs)
+        )
+    env, params = gymnax.make(env_id)
+    if max_steps is not None:
+        params = params.replace(max_steps_in_episode=max_steps)
+    return GymnaxEnvironment(env, params)
+
+
+def is_gymnax_env(env: Any) -> bool:
+    """Whether `env` is a gymnax environment (checked without importing gymnax if it is not
+    loaded)."""
+    if "gymnax" not in sys.modules:
+        return False
+    from gymnax.environments.environment import Environment as GymnaxEnv
+
+    return isinstance(env, GymnaxEnv)

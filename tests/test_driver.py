@@ -151,3 +151,12 @@ def test_weights_and_biases_missing_is_a_clear_error(monkeypatch):
 def test_bad_driver_options_are_refused_before_compiling(options, message):
     with pytest.raises(ValueError, match=message):
         train(**{**RUN, **options})
+
+
+def test_a_finished_sweep_resumed_reports_its_results_again(tmp_path):
+    grid = {"variant": ["ppo", "fppo-lp"]}
+    run = {"seeds": 1, "chunk": 1, "total_steps": 128 * 4, **TINY, "checkpoint_dir": tmp_path}
+    first = sweep("cartpole", grid, **run)
+    again = sweep("cartpole", grid, **run, resume=True)
+    assert_bitwise_equal(again.metrics, first.metrics)
+    assert again.diverged.tolist() == first.diverged.tolist() == [0, 0]

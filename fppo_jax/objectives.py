@@ -74,6 +74,13 @@ class Objective:
     ) -> jax.Array:
         """Per-sample objective values (to maximise). `kl` is required by tr-ppo and tr-ppo-rb."""
         if kl is None:
+            if isinstance(self.variant, jax.core.Tracer):
+                # Which variant runs is known only when it runs: a trust-region one would go
+                # ungated.
+                raise ValueError(
+                    "the variant is traced (under jit or vmap), so it may gate on the KL "
+                    "divergence: pass kl= (per-sample KL(π_old ‖ π_θ))"
+                )
             if _needs_kl(self.variant):
                 raise ValueError(
                     f"{self.name} gates on the KL divergence: pass kl= (per-sample KL(π_old ‖ π_θ))"
@@ -138,8 +145,6 @@ def _check_range(variant: str, key: str, value: float) -> None:
 
 
 def _needs_kl(variant: jax.Array) -> bool:
-    if isinstance(variant, jax.core.Tracer):
-        return False
     return bool(np.isin(np.asarray(variant), [VARIANTS.index(v) for v in _TRUST_REGION]).any())
 
 
@@ -175,7 +180,11 @@ def _fppo_qp(o: Objective, r: jax.Array, a: jax.Array, kl: jax.Array) -> jax.Arr
     r_plus, r_minus = negative_regions(r, a, o.epsilon)
     # SPEC §1: the paper's Eq. 22 prints `+ k(lo - r)²` for R+, which makes F ≥ r so that the
     # min keeps rA and nothing is pulled. Its Eq. 21 and proof (Eq. 23) give `r - k(lo - r)²`.
-    pulled = jnp.where(r_plus, r - o.k * (lo - r) ** 2, r + o.k * (r - hi) ** 2)
+    # The distance is masked before it is squared: an unselected branch's infinite square
+    # would turn the select's zero gradient into NaN.
+    below = jnp.where(r_plus, lo - r, 0.0)
+    above = jnp.where(r_minus, r - hi, 0.0)
+    pulled = jnp.where(r_plus, r - o.k * below**2, r + o.k * above**2)
     f = jnp.where(r_plus | r_minus, pulled, jnp.clip(r, lo, hi))
     return jnp.minimum(r * a, f * a)
 

@@ -202,3 +202,29 @@ def test_trust_region_variants_require_kl():
 
 def test_objective_name():
     assert [objective(v).name for v in VARIANTS] == list(VARIANTS)
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_an_unselected_branch_cannot_make_the_gradient_nan(variant):
+    # A > 0 and an overflowed ratio: every variant's own branch is flat or linear there, but
+    # FPPO-QP's square of the distance past the bound is infinite; the select must not turn
+    # its zero weight into NaN.
+    obj = objective(variant)
+    grad = jax.grad(lambda r: obj(r, jnp.float32(1.0), jnp.float32(0.0)))(jnp.float32(jnp.inf))
+    assert np.isfinite(grad)
+
+
+def test_a_traced_objective_without_kl_is_refused():
+    # Under jit the variant is not known while tracing: a trust-region one would run ungated.
+    with pytest.raises(ValueError, match="pass kl="):
+        jax.jit(lambda o, r, a: o(r, a))(objective("tr-ppo"), jnp.ones(3), jnp.ones(3))
+    with pytest.raises(ValueError, match="pass kl="):
+        jax.vmap(lambda o, r, a: o(r, a))(
+            jax.tree.map(lambda *x: jnp.stack(x), objective("ppo"), objective("tr-ppo")),
+            jnp.ones((2, 3)),
+            jnp.ones((2, 3)),
+        )
+    kl = jnp.zeros(3)
+    assert jax.jit(lambda o, r, a: o(r, a, kl))(
+        objective("tr-ppo"), jnp.ones(3), jnp.ones(3)
+    ).shape == (3,)

@@ -1,5 +1,6 @@
-"""The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``eval`` a saved or
-checkpointed policy, ``table`` and ``plot`` a sweep's results, ``list`` the tasks and variants."""
+"""The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``eval`` (and render)
+a saved or checkpointed policy, ``table`` and ``plot`` a sweep's results, ``list`` the tasks and
+variants."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from fppo_jax.config import (
     preset_config,
 )
 from fppo_jax.distributed import initialize, is_main_process
-from fppo_jax.envs import TASKS, make_env
+from fppo_jax.envs import MUJOCO_TASKS, TASKS, make_env
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
 from fppo_jax.results import SweepResult, TrainingDiverged
 from fppo_jax.sweep import sweep
@@ -303,11 +304,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     evaluation = commands.add_parser(
         "eval",
-        help="report a trained policy's return",
+        help="report a trained policy's return, or render it",
         description="Run the policy saved in DIR (of `fppo-jax train --save-policy DIR`), or "
         "that of the newest checkpoint in DIR (of `--checkpoint-dir DIR`), for whole episodes "
         "on its task, with its most likely actions (deterministic) and with sampled ones "
-        "(stochastic), and report the returns.",
+        "(stochastic), and report the returns. --render PATH also saves an episode of the "
+        "deterministic policy on a MuJoCo task (.mp4, .gif or .png strip).",
         formatter_class=formatter,
     )
     evaluation.add_argument(
@@ -321,6 +323,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     evaluation.add_argument("--episodes", type=_positive_int, default=10, help="episodes each")
     evaluation.add_argument("--seed", type=int, default=0, help="random seed of the episodes")
+    evaluation.add_argument(
+        "--render",
+        type=Path,
+        metavar="PATH",
+        help="MuJoCo tasks: save an episode of the deterministic policy as an .mp4, a .gif or "
+        "a .png strip",
+    )
 
     commands.add_parser("list", help="list the tasks and the variants")
     return parser
@@ -397,12 +406,21 @@ def _eval(args: argparse.Namespace) -> int:
     from fppo_jax.checkpoint import read_policy
     from fppo_jax.evaluation import evaluate
 
+    if args.render:
+        from fppo_jax.render import check_render_path
+
+        check_render_path(args.render)
     policy, record = read_policy(args.checkpoint)
     config = record["config"]
     if config["env"] not in TASKS:
         raise ValueError(
             f"the policy's environment {config['env']!r} is not a registered task; load the "
             "policy with fppo_jax.load_policy and evaluate it on your environment"
+        )
+    if args.render and config["env"] not in MUJOCO_TASKS:
+        raise ValueError(
+            f"{config['env']} is a classic (gymnax) task, which MuJoCo cannot render; --render "
+            f"takes the policy of a MuJoCo task ({', '.join(MUJOCO_TASKS)})"
         )
     env = make_env(config["env"])
     steps = record["update"] * config["num_envs"] * config["num_steps"]
@@ -417,6 +435,14 @@ def _eval(args: argparse.Namespace) -> int:
             f"  {name:<13} return {returns.mean():.1f} ± {returns.std():.1f} "
             f"(min {returns.min():.1f}, max {returns.max():.1f})"
         )
+    if args.render:
+        from fppo_jax.render import RenderingUnavailable, render_policy
+
+        try:
+            print(f"wrote {render_policy(env, policy, args.render, seed=args.seed)}")
+        except RenderingUnavailable as error:
+            print(f"fppo-jax: not rendered: {error}", file=sys.stderr)
+            return 2
     return 0
 
 

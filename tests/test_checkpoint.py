@@ -202,6 +202,14 @@ def test_a_saved_policy_acts_as_the_trained_policy_and_is_not_overwritten(tmp_pa
 
     assert main(["eval", "--policy", str(tmp_path / "policy"), "--episodes", "2"]) == 0
     assert "fppo-qp on cartpole, seed 3: saved policy at update 20" in capsys.readouterr().out
+    assert main(["eval", "--policy", str(tmp_path / "policy"), "--render", "a.mp4"]) == 2
+    assert (
+        "cartpole is a classic (gymnax) task, which MuJoCo cannot render" in capsys.readouterr().err
+    )
+    assert main(["eval", "--policy", str(tmp_path / "policy"), "--render", "a.avi"]) == 2
+    assert (
+        "render to a .png (image strip), a .gif (animation) or an .mp4" in capsys.readouterr().err
+    )
 
 
 def test_cli_saves_the_trained_policy_and_refuses_before_training_to_overwrite_it(tmp_path, capsys):

@@ -4,7 +4,7 @@ The surrogate objective is a pure function of traced data (:func:`objective`), a
 training run is one compiled function of its key and hyperparameters (:func:`make_train`), so
 seeds, variants and their hyperparameters vmap into one program. :func:`train` runs one
 policy, checkpointed and resumable; :func:`sweep` runs a grid of settings × seeds as one
-program; :func:`load_policy` reads a trained policy back from its checkpoints.
+program; :func:`load_policy` reads a trained policy back, saved or from its checkpoints.
 """
 
 import os

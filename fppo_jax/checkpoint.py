@@ -9,14 +9,21 @@ temporary directory and renames it once complete, so a killed process leaves who
 only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
 checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old
 checkpoints are deleted only after a newer one is complete.
+
+A trained policy can also be saved on its own (:func:`save_policy`, ``TrainResult.save``):
+``<directory>/policy.json`` (its description, the run's configuration and a SHA-256 digest of
+its arrays) and ``<directory>/policy.npz`` (the arrays, named by their paths), each written to a
+temporary name and renamed. :func:`load_policy` reads either kind of directory.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
+import io
 import json
 import logging
+import os
 import shutil
 import warnings
 from collections.abc import Callable
@@ -26,6 +33,7 @@ from typing import Any
 import jax
 import numpy as np
 import orbax.checkpoint as ocp
+from flax.traverse_util import flatten_dict, unflatten_dict
 
 from fppo_jax.policy import Policy
 
@@ -117,23 +125,102 @@ def check_same_run(
         )
 
 
+POLICY_FILE, ARRAYS_FILE = "policy.json", "policy.npz"
+
+
+def save_policy(
+    directory: str | Path,
+    policy: Policy,
+    record: dict[str, Any],
+    *,
+    overwrite: bool = False,
+) -> Path:
+    """Write `policy` and `record` (the run's ``config`` and its ``update``) to `directory` as
+    ``policy.json`` and ``policy.npz``; a saved policy already there is refused unless
+    `overwrite`. Returns the directory."""
+    directory = Path(directory)
+    check_no_saved_policy(directory, overwrite)
+    directory.mkdir(parents=True, exist_ok=True)
+    arrays = flatten_dict(jax.device_get(policy.arrays()), sep="/")
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    saved = {
+        **record,
+        "kind": "policy",
+        "policy": policy.describe(),
+        "digest": _digest(arrays),
+    }
+    # policy.json last: it marks the directory as a saved policy, and an overwrite killed
+    # between the two renames leaves arrays that fail its digest, never a wrong policy.
+    _write_atomically(directory / ARRAYS_FILE, buffer.getvalue())
+    _write_atomically(
+        directory / POLICY_FILE, (json.dumps(_jsonable(saved), indent=2) + "\n").encode()
+    )
+    return directory
+
+
+def check_no_saved_policy(directory: str | Path, overwrite: bool = False) -> None:
+    """Raise ValueError if `directory` holds a saved policy and not `overwrite`."""
+    if not overwrite and (Path(directory) / POLICY_FILE).exists():
+        raise ValueError(
+            f"{directory} already holds a saved policy; pass overwrite=True to replace it, or "
+            "choose another directory"
+        )
+
+
 def load_policy(directory: str | Path) -> Policy:
-    """The trained policy in checkpoint directory `directory` (of :func:`fppo_jax.train` with
-    ``checkpoint_dir``), as a :class:`~fppo_jax.policy.Policy`: an inference function of raw
-    observations that needs neither the trainer nor the environment."""
+    """The trained policy in `directory`, as a :class:`~fppo_jax.policy.Policy`: an inference
+    function of raw observations that needs neither the trainer nor the environment.
+    `directory` holds a saved policy (``TrainResult.save``) or the checkpoints of
+    :func:`fppo_jax.train` (``checkpoint_dir``), whose newest readable one is used."""
     return read_policy(directory)[0]
 
 
 def read_policy(directory: str | Path) -> tuple[Policy, dict[str, Any]]:
-    """The policy in `directory` and the record of its run (configuration, step)."""
+    """The policy in `directory` and the record of its run (``config``, ``update``, ``kind``:
+    ``"policy"`` for a saved policy, ``"train"`` for a checkpoint)."""
     directory = Path(directory)
     if not directory.is_dir():
-        raise FileNotFoundError(f"checkpoint directory {directory} not found")
+        raise FileNotFoundError(f"policy or checkpoint directory {directory} not found")
+    if (directory / POLICY_FILE).exists():
+        return _read_saved_policy(directory)
     checkpoints = Checkpoints(directory)
     try:
+        if not checkpoints.steps():
+            raise FileNotFoundError(
+                f"{directory} holds neither a saved policy ({POLICY_FILE} and {ARRAYS_FILE}) "
+                "nor checkpoints"
+            )
         return checkpoints.policy()
     finally:
         checkpoints.close()
+
+
+def _read_saved_policy(directory: Path) -> tuple[Policy, dict[str, Any]]:
+    try:
+        saved = json.loads((directory / POLICY_FILE).read_text())
+        with np.load(directory / ARRAYS_FILE, allow_pickle=False) as npz:
+            arrays = dict(npz)
+        if _digest(arrays) != saved["digest"]:
+            raise ValueError("its arrays do not match the digest written with them")
+        policy = Policy.from_parts(saved["policy"], unflatten_dict(arrays, sep="/"))
+    except Exception as error:  # any failure to read back is damage
+        raise ValueError(
+            f"the saved policy in {directory} is damaged ({type(error).__name__}: "
+            f"{_first_line(error)})"
+        ) from error
+    return policy, saved
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    """Write `path` under a temporary name and rename it, so that no reader ever sees it
+    half-written."""
+    temporary = path.with_name(f".{path.name}.tmp")
+    with open(temporary, "wb") as file:
+        file.write(data)
+        file.flush()
+        os.fsync(file.fileno())
+    os.replace(temporary, path)
 
 
 class Checkpoints:

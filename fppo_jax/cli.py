@@ -1,5 +1,6 @@
-"""The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``eval`` a checkpointed
-policy, ``table`` and ``plot`` a sweep's results, ``list`` the tasks and variants."""
+"""The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``eval`` (and render)
+a saved or checkpointed policy, ``table`` and ``plot`` a sweep's results, ``list`` the tasks and
+variants."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from fppo_jax.api import train
+from fppo_jax.checkpoint import check_no_saved_policy
 from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
     PRESETS,
@@ -19,7 +21,7 @@ from fppo_jax.config import (
     preset_config,
 )
 from fppo_jax.distributed import initialize, is_main_process
-from fppo_jax.envs import NAMESPACES, TASKS, make_env
+from fppo_jax.envs import MUJOCO_TASKS, NAMESPACES, TASKS, make_env
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
 from fppo_jax.results import SweepResult, TrainingDiverged
 from fppo_jax.sweep import sweep
@@ -255,7 +257,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--render",
         type=Path,
         metavar="PATH",
-        help="MuJoCo tasks: save an episode of the trained policy as a .png strip or a .gif",
+        help="MuJoCo tasks: save an episode of the trained policy as an .mp4, a .gif or a "
+        ".png strip",
+    )
+    run.add_argument(
+        "--save-policy",
+        type=Path,
+        metavar="DIR",
+        help="save the trained policy and the run's configuration in DIR, for fppo-jax eval "
+        "and fppo_jax.load_policy",
     )
     _add_run_flags(run)
 
@@ -295,25 +305,44 @@ def build_parser() -> argparse.ArgumentParser:
 
     evaluation = commands.add_parser(
         "eval",
-        help="report a checkpointed policy's return",
-        description="Run the policy of the newest checkpoint in DIR (of `fppo-jax train "
-        "--checkpoint-dir DIR`) for whole episodes on its task, with its most likely actions "
-        "(deterministic) and with sampled ones (stochastic), and report the returns.",
+        help="report a trained policy's return, or render it",
+        description="Run the policy saved in DIR (of `fppo-jax train --save-policy DIR`), or "
+        "that of the newest checkpoint in DIR (of `--checkpoint-dir DIR`), for whole episodes "
+        "on its task, with its most likely actions (deterministic) and with sampled ones "
+        "(stochastic), and report the returns. --render PATH also saves an episode of the "
+        "deterministic policy on a MuJoCo task (.mp4, .gif or .png strip).",
         formatter_class=formatter,
     )
     evaluation.add_argument(
-        "--checkpoint", type=Path, required=True, metavar="DIR", help="checkpoint directory"
+        "--checkpoint",
+        "--policy",
+        dest="checkpoint",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="a checkpoint directory or a saved policy",
     )
     evaluation.add_argument("--episodes", type=_positive_int, default=10, help="episodes each")
     evaluation.add_argument("--seed", type=int, default=0, help="random seed of the episodes")
+    evaluation.add_argument(
+        "--render",
+        type=Path,
+        metavar="PATH",
+        help="MuJoCo tasks: save an episode of the deterministic policy as an .mp4, a .gif or "
+        "a .png strip",
+    )
 
     commands.add_parser("list", help="list the tasks and the variants")
     return parser
 
 
 def _train(args: argparse.Namespace) -> int:
-    if args.render and args.render.suffix not in (".png", ".gif"):
-        raise ValueError(f"--render takes a .png or .gif path, not {args.render}")
+    if args.render:
+        from fppo_jax.render import check_render_path
+
+        check_render_path(args.render)
+    if args.save_policy:  # refused now rather than after training
+        check_no_saved_policy(args.save_policy)
     optimisation = {
         name: getattr(args, name)
         for name in HYPERPARAMETER_DEFAULTS
@@ -337,6 +366,8 @@ def _train(args: argparse.Namespace) -> int:
     if args.output:
         result.write(args.output)
         print(f"wrote {args.output}/config.json, metrics.csv, tensorboard/, summary.txt")
+    if args.save_policy:
+        print(f"wrote {result.save(args.save_policy)}/policy.json, policy.npz")
     if args.render:
         from fppo_jax.render import RenderingUnavailable
 
@@ -378,17 +409,27 @@ def _eval(args: argparse.Namespace) -> int:
     from fppo_jax.checkpoint import read_policy
     from fppo_jax.evaluation import evaluate
 
+    if args.render:
+        from fppo_jax.render import check_render_path
+
+        check_render_path(args.render)
     policy, record = read_policy(args.checkpoint)
     config = record["config"]
     if config["env"] not in TASKS:
         raise ValueError(
-            f"the checkpoint's environment {config['env']!r} is not a registered task; load the "
+            f"the policy's environment {config['env']!r} is not a registered task; load the "
             "policy with fppo_jax.load_policy and evaluate it on your environment"
+        )
+    if args.render and config["env"] not in MUJOCO_TASKS:
+        raise ValueError(
+            f"{config['env']} is a classic (gymnax) task, which MuJoCo cannot render; --render "
+            f"takes the policy of a MuJoCo task ({', '.join(MUJOCO_TASKS)})"
         )
     env = make_env(config["env"])
     steps = record["update"] * config["num_envs"] * config["num_steps"]
+    source = "saved policy" if record["kind"] == "policy" else "checkpoint"
     print(
-        f"{config['variant']} on {config['env']}, seed {config['seed']}: checkpoint at update "
+        f"{config['variant']} on {config['env']}, seed {config['seed']}: {source} at update "
         f"{record['update']} ({steps:,} env steps); {args.episodes} episodes each"
     )
     for name, deterministic in (("deterministic", True), ("stochastic", False)):
@@ -397,6 +438,14 @@ def _eval(args: argparse.Namespace) -> int:
             f"  {name:<13} return {returns.mean():.1f} ± {returns.std():.1f} "
             f"(min {returns.min():.1f}, max {returns.max():.1f})"
         )
+    if args.render:
+        from fppo_jax.render import RenderingUnavailable, render_policy
+
+        try:
+            print(f"wrote {render_policy(env, policy, args.render, seed=args.seed)}")
+        except RenderingUnavailable as error:
+            print(f"fppo-jax: not rendered: {error}", file=sys.stderr)
+            return 2
     return 0
 
 

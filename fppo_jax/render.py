@@ -1,4 +1,5 @@
-"""Pictures of a policy acting on a MuJoCo task: an image strip (PNG) or an animation (GIF).
+"""Pictures of a policy acting on a MuJoCo task: an image strip (PNG), an animation (GIF) or
+a video (MP4, encoded by the ffmpeg that imageio-ffmpeg brings).
 
 The episode runs in JAX (MJX); the frames are drawn by MuJoCo's own renderer from the
 recorded joint positions, which needs an OpenGL context. Without a display that is EGL or
@@ -22,6 +23,15 @@ from fppo_jax.envs import Environment
 
 class RenderingUnavailable(RuntimeError):
     """MuJoCo could not create an OpenGL context on this machine."""
+
+
+def check_render_path(path: str | Path) -> None:
+    """Raise ValueError unless `path` names a format that :func:`save_frames` writes."""
+    if Path(path).suffix not in (".png", ".gif", ".mp4"):
+        raise ValueError(
+            "render to a .png (image strip), a .gif (animation) or an .mp4 (video), not "
+            f"{Path(path).name}"
+        )
 
 
 def episode_positions(
@@ -93,21 +103,24 @@ def _body_extent(model: mujoco.MjModel, data: mujoco.MjData) -> float:
 
 
 def save_frames(frames: np.ndarray, path: str | Path, dt: float, strip_length: int = 8) -> Path:
-    """`.gif`: every frame, played at the environment's speed; `.png`: `strip_length` frames
-    spread evenly over the episode, side by side."""
+    """`.gif` and `.mp4`: every frame, played at the environment's speed; `.png`:
+    `strip_length` frames spread evenly over the episode, side by side."""
     from PIL import Image
 
+    check_render_path(path)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix == ".gif":
+    if path.suffix == ".mp4":
+        import imageio.v2 as imageio
+
+        imageio.mimwrite(path, list(frames), fps=1 / dt)
+    elif path.suffix == ".gif":
         images = [Image.fromarray(frame) for frame in frames]
         duration = max(round(1000 * dt), 20)  # GIF players round below 20 ms up
         images[0].save(path, save_all=True, append_images=images[1:], duration=duration, loop=0)
-    elif path.suffix == ".png":
+    else:
         index = np.linspace(0, len(frames) - 1, min(strip_length, len(frames))).round()
         Image.fromarray(np.concatenate(frames[index.astype(int)], axis=1)).save(path)
-    else:
-        raise ValueError(f"render to a .png (image strip) or a .gif (animation), not {path.name}")
     return path
 
 
@@ -122,10 +135,9 @@ def render_policy(
     height: int = 240,
 ) -> Path:
     """Run `policy` for one episode of the MuJoCo task `env` and save it to `path` (`.png`
-    strip or `.gif`). Raises :class:`RenderingUnavailable` where no OpenGL context can be
-    made; the suffix is checked before anything runs."""
-    if Path(path).suffix not in (".png", ".gif"):
-        raise ValueError(f"render to a .png (image strip) or a .gif (animation), not {path}")
+    strip, `.gif` or `.mp4`). Raises :class:`RenderingUnavailable` where no OpenGL context can
+    be made; the suffix is checked before anything runs."""
+    check_render_path(path)
     model: Any = getattr(env, "mj_model", None)
     if model is None:
         raise TypeError(f"{type(env).__name__} is not a MuJoCo environment: nothing to render")

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from fppo_jax.checkpoint import save_policy
 from fppo_jax.config import SYMBOLS, VARIANT_SPECIFIC
 from fppo_jax.envs import Environment
 from fppo_jax.policy import Policy
@@ -60,6 +61,14 @@ class TrainResult:
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         (directory / "summary.txt").write_text(self.summary() + "\n")
+
+    def save(self, directory: str | Path, *, overwrite: bool = False) -> Path:
+        """Save the trained policy and the run's configuration in `directory`, for
+        :func:`fppo_jax.load_policy` and ``fppo-jax eval --checkpoint`` (see
+        :func:`fppo_jax.checkpoint.save_policy`); a saved policy already there is refused
+        unless `overwrite`. Returns the directory."""
+        record = {"config": self.config, "update": len(self.metrics["env_steps"])}
+        return save_policy(directory, self.policy, record, overwrite=overwrite)
 
     def render(self, path: str | Path, *, seed: int = 0, max_steps: int = 1000) -> Path:
         """Save one episode of the trained policy (the most likely actions) on a MuJoCo task

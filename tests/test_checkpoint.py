@@ -1,5 +1,7 @@
 import csv
+import json
 import os
+import re
 import signal
 import struct
 import subprocess
@@ -17,7 +19,7 @@ from tensorboardX.proto.event_pb2 import Event
 
 import fppo_jax
 from fppo_jax import ConfigMismatch, DamagedCheckpoint, TrainingDiverged, load_policy, train
-from fppo_jax.checkpoint import Checkpoints
+from fppo_jax.checkpoint import Checkpoints, read_policy, save_policy
 from fppo_jax.cli import main
 from fppo_jax.envs import Box
 from fppo_jax.normalization import RunningStats
@@ -179,6 +181,90 @@ def make_gaussian_params():
     params = networks.init(jax.random.key(0), 3)["policy"]
     # A mean far outside the bounds, so that clipping matters.
     return jax.tree.map(lambda x: x * 50, params)
+
+
+def test_a_saved_policy_acts_as_the_trained_policy_and_is_not_overwritten(tmp_path, capsys):
+    result = train(**RUN)
+    assert result.save(tmp_path / "policy") == tmp_path / "policy"
+    policy, record = read_policy(tmp_path / "policy")
+    assert_bitwise_equal(policy.arrays(), result.policy.arrays())
+    obs = np.random.default_rng(0).normal(size=(64, 4)).astype(np.float32)
+    np.testing.assert_array_equal(policy(obs), result.policy(obs))
+    key = jax.random.key(1)
+    np.testing.assert_array_equal(policy(obs, key), result.policy(obs, key))
+    assert record["config"] == json.loads(json.dumps(result.config))
+    assert (record["kind"], record["update"]) == ("policy", 20)
+
+    with pytest.raises(ValueError, match="already holds a saved policy; pass overwrite=True"):
+        result.save(tmp_path / "policy")
+    result.save(tmp_path / "policy", overwrite=True)
+    assert sorted(p.name for p in (tmp_path / "policy").iterdir()) == ["policy.json", "policy.npz"]
+
+    assert main(["eval", "--policy", str(tmp_path / "policy"), "--episodes", "2"]) == 0
+    assert "fppo-qp on cartpole, seed 3: saved policy at update 20" in capsys.readouterr().out
+    assert main(["eval", "--policy", str(tmp_path / "policy"), "--render", "a.mp4"]) == 2
+    assert (
+        "cartpole is a classic (gymnax) task, which MuJoCo cannot render" in capsys.readouterr().err
+    )
+    assert main(["eval", "--policy", str(tmp_path / "policy"), "--render", "a.avi"]) == 2
+    assert (
+        "render to a .png (image strip), a .gif (animation) or an .mp4" in capsys.readouterr().err
+    )
+
+
+def test_cli_saves_the_trained_policy_and_refuses_before_training_to_overwrite_it(tmp_path, capsys):
+    flags = ["train", "--steps", "256", "--save-policy", str(tmp_path), "--quiet"]
+    flags += ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+    assert main(flags) == 0
+    assert f"wrote {tmp_path}/policy.json, policy.npz" in capsys.readouterr().out
+    assert load_policy(tmp_path).action_space.n == 2
+    saved = (tmp_path / "policy.json").read_bytes()
+    assert main(flags) == 2
+    out, err = capsys.readouterr()
+    assert "already holds a saved policy" in err and "updates" not in out  # nothing trained
+    assert (tmp_path / "policy.json").read_bytes() == saved
+
+
+def save_gaussian_policy(directory: Path) -> Policy:
+    stats = RunningStats(jnp.full(3, 0.5), jnp.full(3, 4.0), jnp.asarray(10.0))
+    policy = Policy(make_gaussian_params(), stats, Box((-1.0, -2.0), (1.0, 2.0)), (8,))
+    save_policy(directory, policy, {"config": {"env": "mine"}, "update": 7})
+    return policy
+
+
+def test_a_saved_gaussian_policy_round_trips_bit_for_bit(tmp_path):
+    policy = save_gaussian_policy(tmp_path)
+    again = load_policy(tmp_path)
+    assert_bitwise_equal(again.arrays(), policy.arrays())
+    assert (again.action_space, again.hidden_sizes) == (policy.action_space, (8,))
+    obs = np.random.default_rng(0).normal(size=(16, 3)).astype(np.float32) * 5
+    np.testing.assert_array_equal(again(obs), policy(obs))
+    key = jax.random.key(2)
+    np.testing.assert_array_equal(again(obs, key), policy(obs, key))
+
+
+@pytest.mark.parametrize("how", ["truncated", "replaced"])
+def test_a_damaged_saved_policy_is_reported_naming_its_directory(tmp_path, how):
+    policy = save_gaussian_policy(tmp_path)
+    arrays = tmp_path / "policy.npz"
+    if how == "truncated":
+        arrays.write_bytes(arrays.read_bytes()[:-100])
+    else:  # a well-formed file with other values: only the digest tells
+        flat = dict(np.load(arrays))
+        flat["obs_stats/mean"] = np.asarray(policy.obs_stats.mean) + 1
+        with open(arrays, "wb") as f:
+            np.savez(f, **flat)
+    with pytest.raises(ValueError, match=f"saved policy in {tmp_path} is damaged"):
+        load_policy(tmp_path)
+
+
+def test_a_directory_with_neither_a_policy_nor_checkpoints_is_refused_by_name(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("not a policy")
+    message = f"{tmp_path} holds neither a saved policy (policy.json and policy.npz) nor checkp"
+    with pytest.raises(FileNotFoundError, match=re.escape(message)):
+        load_policy(tmp_path)
+    assert main(["eval", "--checkpoint", str(tmp_path)]) == 2
+    assert message in capsys.readouterr().err
 
 
 def test_nan_guard_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):

@@ -134,8 +134,8 @@ def test_console_entry_point_lists_tasks_and_variants():
 
 def test_render_needs_a_picture_format_and_a_mujoco_task(tmp_path, capsys):
     args = ["train", "--env", "cartpole", "--steps", "2048", "--quiet"]
-    assert main([*args, "--render", str(tmp_path / "x.mp4")]) == 2
-    assert "--render takes a .png or .gif path" in capsys.readouterr().err
+    assert main([*args, "--render", str(tmp_path / "x.webm")]) == 2
+    assert "a .gif (animation) or an .mp4 (video)" in capsys.readouterr().err
     assert main([*args, "--render", str(tmp_path / "x.png")]) == 2
     assert "not rendered: GymnaxEnvironment is not a MuJoCo environment" in capsys.readouterr().err
 

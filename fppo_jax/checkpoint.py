@@ -23,7 +23,6 @@ import hashlib
 import io
 import json
 import logging
-import os
 import shutil
 import warnings
 from collections.abc import Callable
@@ -35,6 +34,7 @@ import numpy as np
 import orbax.checkpoint as ocp
 from flax.traverse_util import flatten_dict, unflatten_dict
 
+from fppo_jax.files import write_atomically
 from fppo_jax.policy import Policy
 
 # Orbax reports every save and restore through absl logging at INFO and WARNING.
@@ -152,8 +152,8 @@ def save_policy(
     }
     # policy.json last: it marks the directory as a saved policy, and an overwrite killed
     # between the two renames leaves arrays that fail its digest, never a wrong policy.
-    _write_atomically(directory / ARRAYS_FILE, buffer.getvalue())
-    _write_atomically(
+    write_atomically(directory / ARRAYS_FILE, buffer.getvalue())
+    write_atomically(
         directory / POLICY_FILE, (json.dumps(_jsonable(saved), indent=2) + "\n").encode()
     )
     return directory
@@ -210,17 +210,6 @@ def _read_saved_policy(directory: Path) -> tuple[Policy, dict[str, Any]]:
             f"{_first_line(error)})"
         ) from error
     return policy, saved
-
-
-def _write_atomically(path: Path, data: bytes) -> None:
-    """Write `path` under a temporary name and rename it, so that no reader ever sees it
-    half-written."""
-    temporary = path.with_name(f".{path.name}.tmp")
-    with open(temporary, "wb") as file:
-        file.write(data)
-        file.flush()
-        os.fsync(file.fileno())
-    os.replace(temporary, path)
 
 
 class Checkpoints:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import platform
 from collections.abc import Sequence
 from importlib import metadata
@@ -19,6 +18,8 @@ from typing import Any
 
 import jax
 import numpy as np
+
+from fppo_jax.files import write_json
 
 Block = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
 
@@ -36,19 +37,6 @@ def environment_record() -> dict[str, Any]:
         "backend": jax.default_backend(),
         "devices": [str(d.device_kind) for d in jax.devices()],
     }
-
-
-def write_json(path: Path, value: Any) -> None:
-    """`value` as JSON at `path`, written whole or not at all (write, then rename)."""
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text(json.dumps(value, indent=2, default=_plain) + "\n")
-    os.replace(partial, path)
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
 
 
 class MetricLog:
@@ -84,7 +72,7 @@ class MetricLog:
                 steps = _of_run(metrics, index, batched)["env_steps"]
                 if len(steps):
                     self._purge[run] = int(steps[-1]) + 1
-        text = json.dumps(config, indent=2, default=_plain)
+        text = json.dumps(config, indent=2, default=str)
         self._writer(0).add_text("config", f"```\n{text}\n```")
 
     def write(self, metrics: dict[str, np.ndarray], runs: range) -> None:

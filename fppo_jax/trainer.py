@@ -19,7 +19,7 @@ import optax
 
 from fppo_jax.config import Hyperparameters, TrainConfig
 from fppo_jax.distributions import Distribution
-from fppo_jax.envs import Box, Environment, draw_resets, where_done
+from fppo_jax.envs import Box, Environment, check_environment, draw_resets, where_done
 from fppo_jax.gae import gae
 from fppo_jax.losses import Batch, LossInfo, ppo_loss
 from fppo_jax.networks import Networks, make_networks
@@ -402,5 +402,8 @@ class Trainer:
 
 
 def make_train(config: TrainConfig, env: Environment) -> Trainer:
-    """The training program for `config` on `env`: a pure function of (key, hyperparameters)."""
+    """The training program for `config` on `env`: a pure function of (key, hyperparameters).
+    `env` is checked against the interface first (:func:`~fppo_jax.envs.core.check_environment`),
+    so that a broken one is named here rather than deep in a trace."""
+    check_environment(env)
     return Trainer(config, env, make_networks(env.action_space, config.hidden_sizes))

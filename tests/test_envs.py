@@ -1,3 +1,4 @@
+import dataclasses
 import subprocess
 import sys
 
@@ -13,6 +14,7 @@ from fppo_jax.envs import (
     Box,
     Discrete,
     as_environment,
+    check_environment,
     draw_resets,
     lookup,
     make_env,
@@ -155,3 +157,51 @@ def test_a_continuous_gymnax_environment_trains_under_jit(tiny):
     _, metrics = jax.jit(make_train(config, env))(jax.random.key(0), hyperparameters("ppo"))
     for name in ("policy_loss", "value_loss", "entropy", "approx_kl"):
         assert np.isfinite(getattr(metrics, name)).all(), name
+
+
+@dataclasses.dataclass(frozen=True)
+class Broken:
+    """CartPole with one part of its contract broken."""
+
+    how: str
+    inner: object = dataclasses.field(default_factory=lambda: make_env("cartpole"))
+
+    @property
+    def observation_size(self):
+        return 5 if self.how == "size" else 4
+
+    @property
+    def action_space(self):
+        return self.inner.action_space
+
+    def reset(self, key):
+        return self.inner.reset(key)
+
+    def step(self, key, state, action):
+        state, out = self.inner.step(key, state, action)
+        if self.how == "tuple":
+            return state, tuple(out)
+        if self.how == "reward":
+            return state, out._replace(reward=jnp.stack([out.reward, out.reward]))
+        if self.how == "terminated":
+            return state, out._replace(terminated=out.terminated.astype(jnp.float32))
+        return state, out
+
+
+@pytest.mark.parametrize(
+    "how, message",
+    [
+        (
+            "size",
+            r"reset's observation: expected shape \(5,\) and a float dtype; found shape \(4,\)",
+        ),
+        ("tuple", r"step must return \(next state, Step\(obs, reward, terminated, truncated\)\)"),
+        ("reward", r"step's reward: expected shape \(\) and a numeric dtype; found shape \(2,\)"),
+        ("terminated", r"step's terminated: expected shape \(\) and a bool dtype; found .*float32"),
+    ],
+)
+def test_a_broken_environment_is_named_before_compiling(how, message):
+    config = TrainConfig(total_steps=128, num_envs=4, num_steps=32, num_minibatches=4)
+    with pytest.raises(TypeError, match=message):
+        make_train(config, Broken(how))
+    check_environment(Broken("none"))  # the unbroken wrapper passes

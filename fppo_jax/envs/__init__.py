@@ -6,7 +6,15 @@ Only the interface, the gymnax adapter (which imports gymnax on first use) and t
 are imported here: the classic tasks never pay for Brax, MuJoCo or Playground.
 """
 
-from fppo_jax.envs.core import Box, Discrete, Environment, Step, draw_resets, where_done
+from fppo_jax.envs.core import (
+    Box,
+    Discrete,
+    Environment,
+    Step,
+    check_environment,
+    draw_resets,
+    where_done,
+)
 from fppo_jax.envs.gymnax import GymnaxEnvironment
 from fppo_jax.envs.tasks import (
     MUJOCO_TASKS,
@@ -29,6 +37,7 @@ __all__ = [
     "Step",
     "Task",
     "as_environment",
+    "check_environment",
     "draw_resets",
     "lookup",
     "make_env",

@@ -81,3 +81,48 @@ def where_done(done: jax.Array, reset: Any, stepped: Any) -> Any:
         return jnp.where(done.reshape(done.shape + (1,) * (x.ndim - 1)), r, x)
 
     return jax.tree.map(select, reset, stepped)
+
+
+def check_environment(env: Environment) -> None:
+    """Raise ``TypeError`` unless `env` keeps the contract the trainer relies on, checked on
+    shapes alone (``jax.eval_shape``: nothing runs): `reset` gives a ``(observation_size,)``
+    float observation, and `step` a state of the same structure and a :class:`Step` whose
+    observation has that shape too, with a scalar reward and boolean scalars `terminated` and
+    `truncated`. The error names the field, what was expected and what was found."""
+    size = env.observation_size
+    if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+        raise TypeError(f"observation_size must be a positive integer, got {size!r}")
+    space = env.action_space
+    if not isinstance(space, Discrete | Box):
+        raise TypeError(f"action_space must be a Discrete or a Box, got {space!r}")
+    key = jax.random.key(0)
+    state, obs = jax.eval_shape(env.reset, key)
+    _expect("reset's observation", obs, (size,), jnp.floating)
+    action = (
+        jax.ShapeDtypeStruct((), jnp.int32)
+        if isinstance(space, Discrete)
+        else jax.ShapeDtypeStruct((space.size,), jnp.float32)
+    )
+    out = jax.eval_shape(env.step, key, state, action)
+    if not (isinstance(out, tuple) and len(out) == 2 and isinstance(out[1], Step)):
+        raise TypeError(
+            "step must return (next state, Step(obs, reward, terminated, truncated)), got "
+            f"{type(out).__name__}"
+            + (f" of {', '.join(type(x).__name__ for x in out)}" if isinstance(out, tuple) else "")
+        )
+    next_state, step = out
+    if jax.tree.structure(next_state) != jax.tree.structure(state):
+        raise TypeError("step's next state must have the structure of reset's state")
+    _expect("step's obs", step.obs, (size,), jnp.floating)
+    _expect("step's reward", step.reward, (), jnp.number)
+    _expect("step's terminated", step.terminated, (), jnp.bool_)
+    _expect("step's truncated", step.truncated, (), jnp.bool_)
+
+
+def _expect(name: str, value: Any, shape: tuple[int, ...], kind: Any) -> None:
+    found_shape = getattr(value, "shape", None)
+    dtype = getattr(value, "dtype", None)
+    if found_shape != shape or dtype is None or not jnp.issubdtype(dtype, kind):
+        expected = {jnp.floating: "float", jnp.number: "numeric", jnp.bool_: "bool"}[kind]
+        found = f"shape {found_shape}, dtype {dtype}" if dtype is not None else type(value).__name__
+        raise TypeError(f"{name}: expected shape {shape} and a {expected} dtype; found {found}")

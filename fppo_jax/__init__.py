@@ -16,7 +16,12 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")
 
 from fppo_jax.api import train
-from fppo_jax.checkpoint import ConfigMismatch, DamagedCheckpoint, load_policy
+from fppo_jax.checkpoint import (
+    CheckpointsUnavailable,
+    ConfigMismatch,
+    DamagedCheckpoint,
+    load_policy,
+)
 from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters
 from fppo_jax.driver import Snapshot
 from fppo_jax.envs import TASKS, Environment, make_env
@@ -32,6 +37,7 @@ __all__ = [
     "METRICS",
     "TASKS",
     "VARIANTS",
+    "CheckpointsUnavailable",
     "ConfigMismatch",
     "DamagedCheckpoint",
     "Environment",

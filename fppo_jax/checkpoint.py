@@ -19,10 +19,12 @@ temporary name and renamed. :func:`load_policy` reads either kind of directory.
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import hashlib
 import io
 import json
 import logging
+import os
 import shutil
 import warnings
 from collections.abc import Callable
@@ -43,6 +45,11 @@ logging.getLogger("absl").setLevel(logging.ERROR)
 
 class DamagedCheckpoint(UserWarning):
     """A checkpoint could not be read back intact and was set aside."""
+
+
+class CheckpointsUnavailable(RuntimeError):
+    """A checkpoint directory cannot be used: another process writes there, or none of its
+    checkpoints is intact."""
 
 
 class ConfigMismatch(ValueError):
@@ -74,6 +81,7 @@ def open_checkpoints(
         return None, None
     checkpoints = Checkpoints(directory, keep)
     try:
+        checkpoints.lock()
         record = checkpoints.latest_record()
         if record is not None and not resume:
             raise ValueError(
@@ -82,7 +90,7 @@ def open_checkpoints(
             )
         if record is not None:
             check_same_run(record, kind, run_config, checkpoints.directory)
-    except ValueError:
+    except Exception:
         checkpoints.close()
         raise
     return checkpoints, record
@@ -219,6 +227,7 @@ class Checkpoints:
         if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
             raise ValueError(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
+        self._lock: int | None = None
         if self.directory.exists() and not self.directory.is_dir():
             raise ValueError(f"checkpoint directory {self.directory} is a file")
         # Orbax deletes the checkpoints beyond `keep` only after a new one is committed, in the
@@ -332,9 +341,31 @@ class Checkpoints:
         """Block until the checkpoint being written is complete."""
         self._manager.wait_until_finished()
 
+    def lock(self) -> None:
+        """Make this the directory's one writer, or raise ``RuntimeError`` naming the process
+        that is. The operating system drops the lock when its holder exits, however it ends,
+        so a killed run's directory is never locked for good."""
+        path = self.directory / ".lock"
+        descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(descriptor, 64, 0).decode(errors="replace").strip() or "unknown"
+            os.close(descriptor)
+            raise CheckpointsUnavailable(
+                f"another process (pid {holder}) is writing checkpoints in {self.directory}; "
+                "wait for it to end, or use another checkpoint directory"
+            ) from None
+        os.ftruncate(descriptor, 0)
+        os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
+        self._lock = descriptor
+
     def close(self) -> None:
-        """Finish writing."""
+        """Finish writing, and let another process write here."""
         self._manager.close()
+        if self._lock is not None:
+            os.close(self._lock)  # releases the lock
+            self._lock = None
 
     def _set_aside(self, step: int, error: Exception) -> None:
         damaged = self.directory / "damaged"

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from fppo_jax.api import train
-from fppo_jax.checkpoint import check_no_saved_policy
+from fppo_jax.checkpoint import CheckpointsUnavailable, check_no_saved_policy
 from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
     PRESETS,
@@ -492,7 +492,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     }
     try:
         return commands[args.command](args)
-    except (ValueError, FileNotFoundError, TrainingDiverged) as error:
+    except (ValueError, FileNotFoundError, TrainingDiverged, CheckpointsUnavailable) as error:
         print(f"fppo-jax: error: {error}", file=sys.stderr)
         return 2
 

@@ -24,6 +24,7 @@ from jax.sharding import Mesh
 
 from fppo_jax.checkpoint import (
     Checkpoints,
+    CheckpointsUnavailable,
     ConfigMismatch,
     Restored,
     check_same_run,
@@ -193,6 +194,12 @@ def drive(plan: Plan, options: Options) -> Outcome:
             restored = checkpoints.restore(
                 like, lambda r: check_same_run(r, plan.kind, plan.record, checkpoints.directory)
             )
+            if restored is None:  # never a silent fresh start: the user decides
+                raise CheckpointsUnavailable(
+                    f"no checkpoint in {checkpoints.directory} is intact (each was moved to "
+                    f"{checkpoints.directory / 'damaged'}); nothing was restored. To start "
+                    "afresh, remove the directory or choose another"
+                )
         if options.progress is True and main:
             where = f" on {mesh.size} devices" if mesh else ""
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)

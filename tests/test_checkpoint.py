@@ -412,3 +412,49 @@ def test_bad_checkpoint_options_are_refused_before_compiling(tmp_path, options, 
         train(**RUN, **options)
     with pytest.raises(ValueError, match=message):
         fppo_jax.sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=512, **TINY, **options)
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_all_checkpoints_damaged_is_an_error_never_a_silent_fresh_start(tmp_path):
+    run = {**RUN, "total_steps": 128 * 4}
+    train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
+    for step in steps_on_disk(tmp_path):
+        damage(tmp_path / str(step), "altered")
+    with (
+        pytest.warns(DamagedCheckpoint),
+        pytest.raises(fppo_jax.CheckpointsUnavailable, match=r"no checkpoint in .* is intact"),
+    ):
+        train(**run, checkpoint_dir=tmp_path, resume=True, checkpoint_every=2)
+
+
+def test_one_writer_per_checkpoint_directory_and_no_lock_outlives_its_process(tmp_path):
+    from fppo_jax.checkpoint import open_checkpoints
+
+    held, _ = open_checkpoints(tmp_path, False, 3, "train", {})
+    try:
+        with pytest.raises(fppo_jax.CheckpointsUnavailable, match=rf"pid {os.getpid()}"):
+            train(**RUN, checkpoint_dir=tmp_path)
+    finally:
+        held.close()
+    # A writer killed while it holds the lock: the next one is not blocked.
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys, time; from fppo_jax.checkpoint import open_checkpoints; "
+            "open_checkpoints(sys.argv[1], False, 3, 'train', {}); print('locked', flush=True); "
+            "time.sleep(600)",
+            str(tmp_path),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        with pytest.raises(fppo_jax.CheckpointsUnavailable, match=rf"pid {holder.pid}"):
+            train(**RUN, checkpoint_dir=tmp_path)
+    finally:
+        holder.kill()
+        holder.wait()
+    result = train(**RUN, checkpoint_dir=tmp_path)
+    assert len(result.metrics["env_steps"]) == 20

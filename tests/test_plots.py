@@ -1,3 +1,4 @@
+import importlib.util
 import os
 import subprocess
 import sys
@@ -102,3 +103,15 @@ def test_fppo_jax_plot_without_a_display(result, tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "MPLBACKEND")}
     subprocess.run([sys.executable, "-m", "fppo_jax", "plot", str(tmp_path)], env=env, check=True)
     assert (tmp_path / "curves.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_figures_script_draws_from_the_recorded_results(tmp_path, monkeypatch):
+    spec = importlib.util.spec_from_file_location("figures", REPO / "experiments" / "figures.py")
+    figures = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(figures)
+    monkeypatch.setattr(figures, "measure_escape_speed", None)  # nothing is trained
+    monkeypatch.setattr(sys, "argv", ["figures.py", "--out", str(tmp_path)])
+    figures.main()
+    written = {path.name: path.stat().st_size for path in tmp_path.iterdir()}
+    assert {"objectives.png", "table1_classic.png", "escape_speed.png"} <= set(written)
+    assert all(size < 200_000 for size in written.values())

@@ -6,7 +6,9 @@ Each task's 25 runs (variants × seeds) are one sweep: one vmapped, compiled pro
 average return" follows SPEC §2: per seed, the mean return of the last 100 finished episodes
 after every update; averaged over seeds; the maximum of that curve, ± the standard deviation
 across seeds at that update. Writes experiments/results/table1_classic.md, with the escape-
-speed comparison (SPEC §3) beside it.
+speed comparison (SPEC §3) beside it, and each task's curves (`SweepResult.write`, with the
+metrics the table and the figures use) to experiments/results/table1_classic/<task>/, which
+`fppo-jax plot` and experiments/figures.py read.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ import numpy as np
 from fppo_jax import TrainConfig, sweep
 from fppo_jax.results import max_average_return
 
+# What the table and the figures read: the curves stay small enough to keep in the repository.
+RECORDED = ("env_steps", "average_return", "negative_fraction_before", "negative_fraction_after")
 VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
 PAPER = {  # SPEC §2, Table 1
     "cartpole": (200.0, 200.0, 200.0, 192.7, 200.0),
@@ -35,6 +39,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=100_000)
     parser.add_argument(
         "--output", type=Path, default=Path(__file__).parent / "results" / "table1_classic.md"
+    )
+    parser.add_argument(
+        "--curves", type=Path, default=Path(__file__).parent / "results" / "table1_classic"
     )
     args = parser.parse_args()
 
@@ -64,6 +71,7 @@ def main() -> None:
         start = time.perf_counter()
         result = sweep(task, {"variant": list(VARIANTS)}, seeds=args.seeds, total_steps=args.steps)
         seconds = time.perf_counter() - start
+        result.write(args.curves / task, metrics=RECORDED)
         lines += [
             f"## {task}",
             "",

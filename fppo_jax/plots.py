@@ -1,51 +1,122 @@
-"""PNG figures of a sweep: learning curves (the paper's Figs. 4–5) and the α/k chart (Fig. 6)."""
+"""Figures: every variant's surrogate and slope against the ratio (the paper's Figs. 1 and 3), a
+sweep's learning curves (Figs. 4–5) and α/k chart (Fig. 6), and the escape-speed chart.
+
+Each function draws on the Axes it is given, or on a new figure, and returns the figure. Saving
+is the caller's (``fig.savefig``); :func:`plot_sweep` does it for a sweep's directory. No
+backend is chosen here: a notebook shows the figures inline, and a process without a display
+falls back to Agg.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")  # files only: no display is needed or assumed
-
+import jax
+import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.ticker import PercentFormatter
 
+from fppo_jax.objectives import EPSILON, VARIANTS, objective
 from fppo_jax.results import SweepResult, labels, max_average_return, nanmean
 
 SWEPT = ("alpha", "k", "delta", "epsilon", "learning_rate")
+IN_NEGATIVE_REGIONS = "share of the batch in R+ ∪ R-"
+YLABELS = {
+    "average_return": "average return (last 100 episodes)",
+    "negative_fraction_before": f"{IN_NEGATIVE_REGIONS}, first epoch",
+    "negative_fraction_after": f"{IN_NEGATIVE_REGIONS}, after the update",
+    "clip_fraction": "clip fraction",
+}
+FRACTIONS = ("clip_fraction", "negative_fraction_before", "negative_fraction_after")
 
 
-def plot_sweep(result: SweepResult, directory: str | Path) -> list[Path]:
-    """Write `curves.png`, and `ablation.png` if a numeric hyperparameter takes several values.
-    Returns the paths written."""
-    directory = Path(directory)
-    written = [directory / "curves.png"]
-    plot_curves(result, written[0])
-    if ablation_keys(result):
-        written.append(directory / "ablation.png")
-        plot_ablation(result, written[-1])
-    return written
-
-
-def plot_curves(result: SweepResult, path: Path) -> None:
-    """Average return against env steps: mean over seeds, ± one std as a band."""
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for index, name in enumerate(labels(result.settings)):
-        m = result.setting_metrics(index)
-        steps = m["env_steps"][0]
-        mean = nanmean(m["average_return"], axis=0)
-        std = np.nanstd(m["average_return"], axis=0) if m["average_return"].size else mean
-        (line,) = ax.plot(steps, mean, label=name)
-        ax.fill_between(steps, mean - std, mean + std, color=line.get_color(), alpha=0.2)
-    ax.set_xlabel("env steps")
-    ax.set_ylabel("average return (last 100 episodes)")
-    ax.set_title(f"{result.config['env']}: mean ± std over {len(result.seeds)} seeds")
+def plot_objective(
+    advantage: float = 1.0,
+    *,
+    slope: bool = False,
+    variants: Sequence[str] = VARIANTS,
+    epsilon: float = EPSILON,
+    ax: Axes | None = None,
+) -> Figure:
+    """Each variant's surrogate L(r, A), or its slope ∂L/∂r (by `jax.grad`), against the ratio r
+    for one advantage, from :func:`fppo_jax.objective` with the paper's hyperparameters; R+
+    (A > 0) or R- (A < 0) shaded."""
+    ax = _axes(ax, (5.5, 3.5))
+    ratio = jnp.linspace(1 - 2.5 * epsilon, 1 + 2.5 * epsilon, 401)
+    for i, variant in enumerate(variants):
+        value = _surrogate(variant, epsilon, advantage)
+        curve = jax.vmap(jax.grad(value) if slope else value)(ratio)
+        # Where variants coincide, the first (PPO, the reference) stays in sight.
+        ax.plot(ratio, curve, label=variant, zorder=2 + len(variants) - i)
+    if advantage > 0:
+        ax.axvspan(ratio[0], 1 - epsilon, color="grey", alpha=0.15, lw=0)
+        where = "A > 0 (R+ shaded)"
+    else:
+        ax.axvspan(1 + epsilon, ratio[-1], color="grey", alpha=0.15, lw=0)
+        where = "A < 0 (R- shaded)"
+    ax.set(xlabel="ratio r", ylabel="∂L/∂r" if slope else f"L(r, A = {advantage:+g})")
+    ax.set_title(f"{'slope' if slope else 'surrogate'}, {where}")
     ax.legend(fontsize="small")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    return ax.figure
+
+
+def _surrogate(variant: str, epsilon: float, advantage: float) -> Callable[[jax.Array], jax.Array]:
+    """L(r) for one variant and advantage, a scalar function of the ratio to differentiate."""
+    f = objective(variant, epsilon=epsilon)
+    a = jnp.asarray(advantage, jnp.float32)
+
+    def value(r: jax.Array) -> jax.Array:
+        # The trust-region variants gate on KL(π_old ‖ π_θ); drawn against the ratio alone, the
+        # per-sample estimate (r − 1) − log r stands in for it.
+        return f(r, a, kl=(r - 1) - jnp.log(r))
+
+    return value
+
+
+def plot_objectives(
+    variants: Sequence[str] = VARIANTS, *, epsilon: float = EPSILON, axes: np.ndarray | None = None
+) -> Figure:
+    """The paper's Figs. 1 and 3 together: surrogates (left) and slopes (right) for A = +1 (top)
+    and A = −1 (bottom), on `axes` (2 × 2) if given; one legend."""
+    if axes is None:
+        _, axes = plt.subplots(2, 2, figsize=(10, 6.5), sharex=True, layout="constrained")
+    for row, advantage in enumerate((1.0, -1.0)):
+        for col, slope in enumerate((False, True)):
+            ax = axes[row][col]
+            plot_objective(advantage, slope=slope, variants=variants, epsilon=epsilon, ax=ax)
+            if (row, col) != (0, 1):
+                ax.get_legend().remove()
+            if row == 0:
+                ax.set_xlabel("")
+    return axes[0][0].figure
+
+
+def plot_curves(
+    result: SweepResult, metric: str = "average_return", *, ax: Axes | None = None
+) -> Figure:
+    """`metric` (the average return unless told) against env steps, one line per setting: the mean
+    over seeds, ± one std as a band."""
+    ax = _axes(ax, (7, 4.5))
+    for index, name in enumerate(labels(result.settings)):
+        m = result.setting_metrics(index)
+        mean = nanmean(m[metric], axis=0)
+        # np.nanstd, without its warnings for the updates before any seed finished an episode.
+        std = np.sqrt(nanmean((m[metric] - mean) ** 2, axis=0))
+        (line,) = ax.plot(m["env_steps"][0], mean, label=name)
+        band = (mean - std, mean + std)
+        ax.fill_between(m["env_steps"][0], *band, color=line.get_color(), alpha=0.2, lw=0)
+    ax.set(xlabel="env steps", ylabel=YLABELS.get(metric, metric))
+    ax.set_title(f"{result.config['env']}: mean ± std over {len(result.seeds)} seeds")
+    if metric in FRACTIONS:
+        ax.yaxis.set_major_formatter(PercentFormatter(1.0))
+    ax.legend(fontsize="small")
+    ax.grid(alpha=0.3)
+    return ax.figure
 
 
 def ablation_keys(result: SweepResult) -> list[str]:
@@ -53,11 +124,18 @@ def ablation_keys(result: SweepResult) -> list[str]:
     return [key for key in SWEPT if len({s[key] for s in result.settings if key in s}) > 1]
 
 
-def plot_ablation(result: SweepResult, path: Path) -> None:
-    """Max average return (SPEC §2) against each swept hyperparameter, one line per variant."""
+def plot_ablation(result: SweepResult, *, axes: Sequence[Axes] | None = None) -> Figure:
+    """Max average return (SPEC §2) against each swept hyperparameter (:func:`ablation_keys`), one
+    panel per hyperparameter (on `axes` if given) and one line per variant."""
     keys = ablation_keys(result)
-    fig, axes = plt.subplots(1, len(keys), figsize=(5 * len(keys), 4), squeeze=False)
-    for ax, key in zip(axes[0], keys, strict=True):
+    if not keys:
+        raise ValueError("no numeric hyperparameter takes several values in this sweep")
+    if axes is None:
+        _, axes = plt.subplots(
+            1, len(keys), figsize=(5 * len(keys), 4), squeeze=False, layout="constrained"
+        )
+        axes = axes[0]
+    for ax, key in zip(axes, keys, strict=True):
         for variant in dict.fromkeys(s["variant"] for s in result.settings):
             points = [
                 (s[key], *max_average_return(result.setting_metrics(i)["average_return"])[:2])
@@ -67,11 +145,51 @@ def plot_ablation(result: SweepResult, path: Path) -> None:
             if len(points) > 1:
                 x, best, std = (np.asarray(v) for v in zip(*sorted(points), strict=True))
                 ax.errorbar(x, best, yerr=std, marker="o", capsize=3, label=variant)
-        ax.set_xlabel(key)
-        ax.set_ylabel("max average return")
+        ax.set(xlabel=key, ylabel="max average return")
+        ax.set_title(f"{result.config['env']}: mean ± std over {len(result.seeds)} seeds")
         ax.legend(fontsize="small")
         ax.grid(alpha=0.3)
-    fig.suptitle(f"{result.config['env']}: max average return over {len(result.seeds)} seeds")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    return axes[0].figure
+
+
+def plot_escape_speed(
+    fractions: np.ndarray, variants: Sequence[str], *, ax: Axes | None = None
+) -> Figure:
+    """The paper's mechanism: the share of one batch in R+ ∪ R- after each epoch of an update,
+    one line per variant, all from the same states. `fractions` is [state, variant, epoch], as
+    :meth:`fppo_jax.Trainer.escape_by_epoch` vmapped over states and variants gives it; the line
+    is the mean over states, the band ± one std."""
+    ax = _axes(ax, (6, 4))
+    fractions = np.asarray(fractions)
+    epochs = np.arange(1, fractions.shape[-1] + 1)
+    for i, variant in enumerate(variants):
+        mean, std = fractions[:, i].mean(0), fractions[:, i].std(0)
+        (line,) = ax.plot(epochs, mean, marker="o", ms=3, label=variant)
+        ax.fill_between(epochs, mean - std, mean + std, color=line.get_color(), alpha=0.15, lw=0)
+    ax.set(xlabel="epoch", ylabel=IN_NEGATIVE_REGIONS)
+    ax.set_title(f"one batch, epoch by epoch: mean ± std over {len(fractions)} states")
+    ax.yaxis.set_major_formatter(PercentFormatter(1.0))
+    ax.legend(fontsize="small")
+    ax.grid(alpha=0.3)
+    return ax.figure
+
+
+def plot_sweep(result: SweepResult, directory: str | Path) -> list[Path]:
+    """Write `curves.png`, and `ablation.png` if a numeric hyperparameter takes several values,
+    to `directory`. Returns the paths written."""
+    figures = {"curves.png": plot_curves(result)}
+    if ablation_keys(result):
+        figures["ablation.png"] = plot_ablation(result)
+    paths = []
+    for name, fig in figures.items():
+        paths.append(Path(directory) / name)
+        fig.savefig(paths[-1], dpi=120)
+        plt.close(fig)
+    return paths
+
+
+def _axes(ax: Axes | None, figsize: tuple[float, float]) -> Axes:
+    """`ax`, or the Axes of a new figure."""
+    if ax is None:
+        _, ax = plt.subplots(figsize=figsize, layout="constrained")
+    return ax

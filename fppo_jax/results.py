@@ -165,19 +165,20 @@ class SweepResult:
             )
         return "\n".join(lines)
 
-    def write(self, directory: str | Path) -> None:
-        """`curves.csv` (one row per run and update) and `sweep.json` (everything else)."""
+    def write(self, directory: str | Path, metrics: Sequence[str] = METRICS) -> None:
+        """`curves.csv` (one row per run and update, a column per name in `metrics`) and
+        `sweep.json` (everything else). Fewer metrics make a smaller file to keep."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         keys = list(dict.fromkeys(k for s in self.settings for k in s))
         with open(directory / "curves.csv", "w", newline="") as f:
             writer = csv.writer(f)
-            writer.writerow(["run", "seed", *keys, "update", *METRICS])
+            writer.writerow(["run", "seed", *keys, "update", *metrics])
             for i, run in enumerate(self.runs):
                 setting = self.settings[run["setting"]]
                 head = [i, run["seed"], *[setting.get(k, "") for k in keys]]
                 for u in range(self.metrics["env_steps"].shape[1]):
-                    values = [self.metrics[name][i, u].item() for name in METRICS]
+                    values = [self.metrics[name][i, u].item() for name in metrics]
                     writer.writerow([*head, u + 1, *values])
         record = {
             "settings": self.settings,
@@ -192,19 +193,21 @@ class SweepResult:
 
     @classmethod
     def read(cls, directory: str | Path) -> SweepResult:
-        """What :meth:`write` wrote."""
+        """What :meth:`write` wrote: the metrics its `curves.csv` holds."""
         directory = Path(directory)
         for name in ("sweep.json", "curves.csv"):
             if not (directory / name).is_file():
                 raise FileNotFoundError(f"{directory / name} not found: not a sweep's output")
         record = json.loads((directory / "sweep.json").read_text())
         with open(directory / "curves.csv", newline="") as f:
-            rows = list(csv.DictReader(f))
+            reader = csv.DictReader(f)
+            rows = list(reader)
         num_runs = len(record["runs"])
         num_updates = len(rows) // max(num_runs, 1)
         metrics = {
             name: np.array([float(r[name]) for r in rows]).reshape(num_runs, num_updates)
             for name in METRICS
+            if name in reader.fieldnames
         }
         metrics["env_steps"] = metrics["env_steps"].astype(np.int64)
         return cls(

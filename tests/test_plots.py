@@ -1,0 +1,117 @@
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+from fppo_jax.plots import (
+    plot_ablation,
+    plot_curves,
+    plot_escape_speed,
+    plot_objective,
+    plot_objectives,
+    plot_sweep,
+)
+from fppo_jax.results import SweepResult
+from fppo_jax.trainer import METRICS
+
+REPO = Path(__file__).resolve().parent.parent
+ESCAPE = np.random.default_rng(1).uniform(0, 0.05, size=(2, 3, 4))  # [state, variant, epoch]
+
+
+@pytest.fixture
+def result() -> SweepResult:
+    """A made-up sweep: PPO and FPPO-LP at two αs, 2 seeds, 4 updates."""
+    settings = [
+        {"variant": "ppo"},
+        {"variant": "fppo-lp", "alpha": 1.1},
+        {"variant": "fppo-lp", "alpha": 1.5},
+    ]
+    runs = [{"setting": s, "seed": seed} for s in range(3) for seed in range(2)]
+    metrics = {name: np.random.default_rng(0).uniform(size=(6, 4)) for name in METRICS}
+    metrics["env_steps"] = np.tile(2048 * np.arange(1, 5), (6, 1))
+    metrics["average_return"][:, 0] = np.nan  # no episode finished in the first update
+    return SweepResult(
+        settings=settings,
+        seeds=[0, 1],
+        runs=runs,
+        metrics=metrics,
+        diverged=np.zeros(6, int),
+        config={"env": "cartpole"},
+        compile_seconds=0.0,
+        train_seconds=0.0,
+    )
+
+
+@pytest.fixture(autouse=True)
+def close_figures():
+    yield
+    plt.close("all")
+
+
+def test_each_plot_returns_a_new_figure(result):
+    figures = [
+        plot_objective(),
+        plot_objective(-1.0, slope=True, variants=["ppo", "fppo-qp"]),
+        plot_objectives(),
+        plot_curves(result),
+        plot_curves(result, "negative_fraction_after"),
+        plot_ablation(result),
+        plot_escape_speed(ESCAPE, ["ppo", "fppo-lp", "fppo-qp"]),
+    ]
+    assert all(isinstance(fig, Figure) for fig in figures)
+    assert len(set(map(id, figures))) == len(figures)
+
+
+def test_each_plot_draws_on_the_axes_it_is_given(result):
+    for draw in (
+        lambda ax: plot_objective(ax=ax),
+        lambda ax: plot_curves(result, ax=ax),
+        lambda ax: plot_ablation(result, axes=[ax]),
+        lambda ax: plot_escape_speed(ESCAPE, ["ppo", "fppo-lp", "fppo-qp"], ax=ax),
+    ):
+        fig, ax = plt.subplots()
+        assert draw(ax) is fig and ax.lines
+    fig, axes = plt.subplots(2, 2)
+    assert plot_objectives(axes=axes) is fig
+    assert all(len(ax.lines) == 6 for ax in axes.flat)  # one per variant
+
+
+def test_importing_plots_leaves_the_backend_alone():
+    code = "import matplotlib, fppo_jax.plots; print(matplotlib.get_backend())"
+    env = {**os.environ, "MPLBACKEND": "svg"}
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "svg"
+
+
+def test_plot_sweep_writes_the_pngs_and_closes_its_figures(result, tmp_path):
+    paths = plot_sweep(result, tmp_path)
+    assert paths == [tmp_path / "curves.png", tmp_path / "ablation.png"]
+    assert all(path.read_bytes()[:4] == b"\x89PNG" for path in paths)
+    assert not plt.get_fignums()
+
+
+def test_fppo_jax_plot_without_a_display(result, tmp_path):
+    result.write(tmp_path, metrics=("env_steps", "average_return"))
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "MPLBACKEND")}
+    subprocess.run([sys.executable, "-m", "fppo_jax", "plot", str(tmp_path)], env=env, check=True)
+    assert (tmp_path / "curves.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_figures_script_draws_from_the_recorded_results(tmp_path, monkeypatch):
+    spec = importlib.util.spec_from_file_location("figures", REPO / "experiments" / "figures.py")
+    figures = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(figures)
+    monkeypatch.setattr(figures, "measure_escape_speed", None)  # nothing is trained
+    monkeypatch.setattr(sys, "argv", ["figures.py", "--out", str(tmp_path)])
+    figures.main()
+    written = {path.name: path.stat().st_size for path in tmp_path.iterdir()}
+    assert {"objectives.png", "table1_classic.png", "escape_speed.png"} <= set(written)
+    assert all(size < 200_000 for size in written.values())

@@ -57,17 +57,16 @@ def train(
     optimisation = {
         name: overrides.pop(name) for name in HYPERPARAMETER_DEFAULTS if name in overrides
     }
-    config = resolve_config(
-        env, total_steps, overrides, also_valid=tuple(HYPERPARAMETER_DEFAULTS), preset=preset
-    )
+    valid = (*HYPERPARAMETER_DEFAULTS, *Options.names())
+    config = resolve_config(env, total_steps, overrides, also_valid=valid, preset=preset)
     task = env if isinstance(env, str) else None
-    hp, settings = resolve_hyperparameters(
+    hp, setting = resolve_hyperparameters(
         variant, task, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **optimisation
     )
     seed = check_seed(seed)
     environment = as_environment(env)
     name = environment_name(env, environment)
-    record = {**settings, "env": name, "seed": seed, "preset": preset}
+    record = {**setting, "env": name, "seed": seed, "preset": preset}
     record.update(dataclasses.asdict(config))
     trainer = make_train(config, environment)
     description = f"{variant} on {name}"

@@ -126,9 +126,13 @@ class Options:
             require_wandb()
 
     @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return tuple(field.name for field in dataclasses.fields(cls))
+
+    @classmethod
     def split(cls, settings: dict[str, Any]) -> tuple[Options, dict[str, Any]]:
         """The options among a run's keyword `settings`, and the settings left."""
-        names = {field.name for field in dataclasses.fields(cls)}
+        names = cls.names()
         options = cls(**{name: value for name, value in settings.items() if name in names})
         return options, {name: value for name, value in settings.items() if name not in names}
 

@@ -112,7 +112,8 @@ def sweep(
     clash = sorted(set(fixed) & set(grid))
     if clash:
         raise ValueError(f"{', '.join(clash)} given both in the grid and as a fixed value")
-    config = resolve_config(env, total_steps, overrides, also_valid=SWEEPABLE, preset=preset)
+    valid = (*SWEEPABLE, *Options.names())
+    config = resolve_config(env, total_steps, overrides, also_valid=valid, preset=preset)
     task = env if isinstance(env, str) else None
     settings = expand_grid({**grid, **fixed}, task)
     hps = [resolve_hyperparameters(task=task, **setting)[0] for setting in settings]

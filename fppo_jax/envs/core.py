@@ -66,6 +66,21 @@ class Timed(NamedTuple):
     steps: jax.Array
 
 
+def limited_step(
+    state: Timed, inner: Any, obs: jax.Array, reward: jax.Array, done: jax.Array, limit: int
+) -> tuple[Timed, Step]:
+    """The step of an adapter that keeps the episode limit itself: the inner environment's
+    `done` is termination, and reaching `limit` steps without it is truncation."""
+    steps = state.steps + 1
+    terminated = done > 0
+    return Timed(inner, steps), Step(
+        obs=obs.astype(jnp.float32),
+        reward=reward.astype(jnp.float32),
+        terminated=terminated,
+        truncated=(steps >= limit) & ~terminated,
+    )
+
+
 def draw_resets(env: Environment, key: jax.Array, shape: tuple[int, ...]) -> tuple[Any, jax.Array]:
     """A fresh reset (state, obs) for every index of `shape`, drawn in one vectorised batch."""
     reset = env.reset

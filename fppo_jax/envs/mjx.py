@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
-from fppo_jax.envs.core import Box, Step, Timed
+from fppo_jax.envs.core import Box, Step, Timed, limited_step
 
 
 def _import_quietly() -> None:
@@ -100,14 +100,7 @@ class BraxEnvironment:
 
     def step(self, key: jax.Array, state: Timed, action: jax.Array) -> tuple[Timed, Step]:
         inner = self.env.step(state.inner, action)
-        steps = state.steps + 1
-        terminated = inner.done > 0
-        return Timed(inner, steps), Step(
-            obs=inner.obs.astype(jnp.float32),
-            reward=inner.reward.astype(jnp.float32),
-            terminated=terminated,
-            truncated=(steps >= self.episode_length) & ~terminated,
-        )
+        return limited_step(state, inner, inner.obs, inner.reward, inner.done, self.episode_length)
 
 
 def brax_environment(name: str, episode_length: int = 1000, **kwargs: Any) -> BraxEnvironment:

@@ -17,7 +17,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from fppo_jax.envs.core import Box, Step, Timed
+from fppo_jax.envs.core import Box, Step, Timed, limited_step
 
 
 def _registry() -> ModuleType:
@@ -70,14 +70,8 @@ class PlaygroundEnvironment:
 
     def step(self, key: jax.Array, state: Timed, action: jax.Array) -> tuple[Timed, Step]:
         inner = self.env.step(state.inner, action)
-        steps = state.steps + 1
-        terminated = inner.done > 0
-        return Timed(inner, steps), Step(
-            obs=self._observation(inner.obs),
-            reward=inner.reward.astype(jnp.float32),
-            terminated=terminated,
-            truncated=(steps >= self.episode_length) & ~terminated,
-        )
+        obs = self._observation(inner.obs)
+        return limited_step(state, inner, obs, inner.reward, inner.done, self.episode_length)
 
     def _observation(self, obs: jax.Array | Mapping[str, jax.Array]) -> jax.Array:
         if isinstance(obs, Mapping):

@@ -29,8 +29,18 @@ class Policy:
     action_space: Discrete | Box = dataclasses.field(metadata={"static": True})
     hidden_sizes: tuple[int, ...] = dataclasses.field(metadata={"static": True})
 
+    @property
+    def observation_size(self) -> int:
+        """The size of the observations the policy takes (its first layer's inputs)."""
+        return int(self.params["params"]["MLP_0"]["Dense_0"]["kernel"].shape[-2])
+
     def act(self, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
         obs = jnp.asarray(obs, jnp.float32)
+        if obs.shape[-1:] != (self.observation_size,):
+            raise ValueError(
+                f"the policy takes observations of size {self.observation_size} (the last "
+                f"axis), got shape {obs.shape}"
+            )
         if self.obs_stats is not None:
             obs = self.obs_stats.normalize(obs)
         networks = make_networks(self.action_space, self.hidden_sizes)

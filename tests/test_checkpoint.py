@@ -161,6 +161,10 @@ def test_load_policy_acts_as_the_trained_policy(tmp_path):
     key = jax.random.key(1)
     np.testing.assert_array_equal(policy(obs, key), result.policy(obs, key))
     assert_bitwise_equal(policy.params, result.params["policy"])
+    assert policy.observation_size == 4
+    for wrong in (np.zeros(5, np.float32), np.zeros((64, 3), np.float32)):
+        with pytest.raises(ValueError, match=r"takes observations of size 4 .*got shape"):
+            policy(wrong)
 
 
 def test_a_continuous_policy_round_trips_through_its_description():

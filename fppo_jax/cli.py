@@ -492,7 +492,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     }
     try:
         return commands[args.command](args)
-    except (ValueError, FileNotFoundError, TrainingDiverged, CheckpointsUnavailable) as error:
+    except (
+        ValueError,
+        FileNotFoundError,
+        MemoryError,
+        TrainingDiverged,
+        CheckpointsUnavailable,
+    ) as error:
         print(f"fppo-jax: error: {error}", file=sys.stderr)
         return 2
 

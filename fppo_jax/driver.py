@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import sys
 import time
 from collections.abc import Callable
@@ -34,6 +33,7 @@ from fppo_jax.config import Hyperparameters, positive_int
 from fppo_jax.distributed import fetch, is_main_process, make_mesh
 from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
+from fppo_jax.memory import runs_per_call
 from fppo_jax.metric_log import Block, open_logs, require_wandb
 from fppo_jax.policy import Policy, make_policy
 from fppo_jax.progress import PROGRESS_LINES, Progress, reporter
@@ -207,9 +207,10 @@ def drive(plan: Plan, options: Options) -> Outcome:
         if options.progress is True and main:
             where = f" on {mesh.size} devices" if mesh else ""
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
+        if plan.runs_per_call is None and record is None:
+            runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
+            size = runs_per_call(trainer, *_first_run(plan), size, runs, data)
         program = compile_program(trainer, *_group(plan, 0, size), per_call, mesh)
-        if plan.batched and plan.runs_per_call is None and record is None:
-            program, size = _fit_in_memory(program, plan, size, per_call, mesh)
         with (
             reporter(options.progress if main else False, plan.description) as report,
             _Chunks(plan, options, program, size, checkpoints, restored, report, main) as chunks,
@@ -267,6 +268,12 @@ def _updates_per_call(options: Options, num_updates: int) -> int:
     if options.eval_every is not None:
         per_call = math.gcd(per_call, min(options.eval_every, num_updates))
     return per_call
+
+
+def _first_run(plan: Plan) -> tuple[jax.Array, Hyperparameters]:
+    if not plan.batched:
+        return plan.keys, plan.hps
+    return plan.keys[0], jax.tree.map(lambda x: x[0], plan.hps)
 
 
 def _group(plan: Plan, group: int, size: int) -> tuple[jax.Array, Hyperparameters]:
@@ -510,22 +517,6 @@ def _join(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     return {name: np.concatenate([padded(p, name) for p in parts]) for name in names}
 
 
-def _fit_in_memory(
-    program: Program, plan: Plan, size: int, per_call: int, mesh: Mesh | None
-) -> tuple[Program, int]:
-    """Halve the runs per call until the compiled program fits in half the free memory."""
-    across = mesh.shape["runs"] if mesh else 1
-    budget = _free_memory() / 2
-    while size > across:
-        analysis = program.run.memory_analysis()
-        need = analysis.temp_size_in_bytes + 2 * analysis.argument_size_in_bytes
-        if need <= budget:
-            break
-        size = _multiple((size + 1) // 2, across)
-        program = compile_program(plan.trainer, *_group(plan, 0, size), per_call, mesh)
-    return program, size
-
-
 def _multiple(size: int, of: int) -> int:
     """`size` rounded up to a multiple of `of`."""
     return -(-size // of) * of
@@ -533,11 +524,3 @@ def _multiple(size: int, of: int) -> int:
 
 def _padded(begin: int, size: int, num_runs: int) -> np.ndarray:
     return np.minimum(np.arange(begin, begin + size), num_runs - 1)
-
-
-def _free_memory() -> float:
-    device = jax.devices()[0]
-    stats = device.memory_stats() if hasattr(device, "memory_stats") else None
-    if stats and "bytes_limit" in stats:
-        return float(stats["bytes_limit"] - stats.get("bytes_in_use", 0))
-    return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))

@@ -201,7 +201,7 @@ class Trainer:
         """One rollout and one PPO update; a non-finite result keeps the state it started from."""
         config = self.config
         key, rollout_key, epochs_key = jax.random.split(state.key, 3)
-        batch, traj, envs, obs_stats, return_stats = self._collect(state, hp, rollout_key)
+        batch, traj, envs, obs_stats, return_stats = self.collect(state, hp, rollout_key)
         (params, opt_state), losses, infos, _ = self._epochs(state, hp, batch, epochs_key)
 
         negative_fraction, negative_distance = self._escape(params, batch, hp.objective.epsilon)
@@ -231,7 +231,7 @@ class Trainer:
         )
         return _keep_if_finite(new_state, state, losses), metrics
 
-    def _collect(
+    def collect(
         self, state: TrainState, hp: Hyperparameters, key: jax.Array
     ) -> tuple[Batch, Transition, Envs, RunningStats, RunningStats]:
         """A rollout and its batch (advantages, targets), with the environments where the
@@ -275,7 +275,7 @@ class Trainer:
         The batch and the minibatch order are those :meth:`update` would use, so variants
         given the same state are compared on the same samples."""
         _, rollout_key, epochs_key = jax.random.split(state.key, 3)
-        batch, *_ = self._collect(state, hp, rollout_key)
+        batch, *_ = self.collect(state, hp, rollout_key)
         return self._epochs(state, hp, batch, epochs_key, track_escape=True)[3]
 
     def network_input(self, stats: RunningStats, obs: jax.Array) -> jax.Array:

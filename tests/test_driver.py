@@ -3,8 +3,10 @@ and a finished run going on for more steps."""
 
 import csv
 import json
+import sys
 from pathlib import Path
 
+import jax
 import numpy as np
 import pytest
 from conftest import TINY
@@ -133,7 +135,7 @@ def test_weights_and_biases_logs_offline(tmp_path, monkeypatch):
 
 
 def test_weights_and_biases_missing_is_a_clear_error(monkeypatch):
-    monkeypatch.setitem(__import__("sys").modules, "wandb", None)
+    monkeypatch.setitem(sys.modules, "wandb", None)
     with pytest.raises(ImportError, match=r"pip install 'fppo-jax\[wandb\]'"):
         train(**RUN, wandb_project="fppo-test")
 
@@ -160,3 +162,30 @@ def test_a_finished_sweep_resumed_reports_its_results_again(tmp_path):
     again = sweep("cartpole", grid, **run, resume=True)
     assert_bitwise_equal(again.metrics, first.metrics)
     assert again.diverged.tolist() == first.diverged.tolist() == [0, 0]
+
+
+def test_a_sweep_chooses_its_runs_per_call_once_before_compiling(monkeypatch):
+    from fppo_jax import driver, memory
+
+    trainer = fppo_jax.make_train(
+        fppo_jax.TrainConfig(total_steps=128 * 2, **TINY), make_env("cartpole")
+    )
+    one_run = memory.run_bytes(trainer, jax.random.key(0), fppo_jax.hyperparameters())
+    monkeypatch.setattr(memory, "free_bytes", lambda: 2 * 3.5 * one_run)  # 3 runs fit in half
+    compiled = []
+    compile_program = driver.compile_program
+    monkeypatch.setattr(
+        driver, "compile_program", lambda *a, **k: compiled.append(1) or compile_program(*a, **k)
+    )
+    result = sweep("cartpole", {"variant": "ppo"}, seeds=8, total_steps=128 * 2, **TINY)
+    assert result.config["runs_per_call"] == 3 and len(compiled) == 1
+    assert result.metrics["env_steps"].shape == (8, 2)
+
+
+def test_a_run_that_cannot_fit_is_refused_before_compiling(monkeypatch):
+    from fppo_jax import driver, memory
+
+    monkeypatch.setattr(memory, "free_bytes", lambda: 1024.0)
+    monkeypatch.setattr(driver, "compile_program", lambda *a, **k: pytest.fail("compiled"))
+    with pytest.raises(MemoryError, match=r"one run needs about .* GiB .* lower num_envs"):
+        train(**RUN)

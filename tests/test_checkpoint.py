@@ -2,6 +2,7 @@ import csv
 import json
 import os
 import re
+import shutil
 import signal
 import struct
 import subprocess
@@ -462,3 +463,19 @@ def test_one_writer_per_checkpoint_directory_and_no_lock_outlives_its_process(tm
         holder.wait()
     result = train(**RUN, checkpoint_dir=tmp_path)
     assert len(result.metrics["env_steps"]) == 20
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_a_fallback_checkpoint_is_checked_against_the_run_too(tmp_path):
+    run = {**RUN, "total_steps": 128 * 4}
+    train(**run, checkpoint_dir=tmp_path / "mine", checkpoint_every=2)
+    train(**{**run, "seed": 4}, checkpoint_dir=tmp_path / "other", checkpoint_every=2)
+    # The older checkpoint is another run's (copied in by hand), the newer one damaged.
+    shutil.rmtree(tmp_path / "mine" / "2")
+    shutil.copytree(tmp_path / "other" / "2", tmp_path / "mine" / "2")
+    damage(tmp_path / "mine" / "4", "altered")
+    with (
+        pytest.warns(DamagedCheckpoint),
+        pytest.raises(ConfigMismatch, match=r"seed \(checkpoint 4, now 3\)"),
+    ):
+        train(**run, checkpoint_dir=tmp_path / "mine", resume=True, checkpoint_every=2)

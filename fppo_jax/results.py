@@ -148,22 +148,45 @@ class SweepResult:
         return {name: values[rows] for name, values in self.metrics.items()}
 
     def table(self) -> str:
-        """Table 1 style, one row per setting: max average return (SPEC §2) and more, Markdown."""
+        """Table 1 style, one row per setting, Markdown: the max average return (SPEC §2, mean ±
+        std), the env steps it was reached at, the final average return and the share of samples
+        in R± after the update, all over the seeds whose runs did not diverge. `seeds` says how
+        many that is and how many diverged (``3 of 5 (2 diverged)``); a setting whose runs all
+        diverged reads ``diverged at update N`` (the first of them) instead of figures."""
         lines = [
-            "| setting | max average return | at env steps | final average return "
+            "| setting | seeds | max average return | at env steps | final average return "
             "| in R± after update |",
-            "|---|---|---|---|---|",
+            "|---|---|---|---|---|---|",
         ]
         for index, name in enumerate(labels(self.settings)):
-            m = self.setting_metrics(index)
-            best, std, at = max_average_return(m["average_return"])
-            final = nanmean(m["average_return"][:, -1]) if m["average_return"].size else np.nan
-            steps = int(m["env_steps"][0, at]) if at >= 0 else 0
-            lines.append(
-                f"| {name} | {best:.1f} ± {std:.1f} | {steps:,} | {final:.1f} | "
-                f"{np.mean(m['negative_fraction_after']):.2%} |"
-            )
+            runs = np.flatnonzero([run["setting"] == index for run in self.runs])
+            diverged = np.asarray(self.diverged)[runs]
+            kept = runs[diverged == 0]
+            lost = runs.size - kept.size
+            seeds = f"{kept.size} of {runs.size} ({lost} diverged)" if lost else f"{runs.size}"
+            if kept.size:
+                figures = self._figures(kept)
+            else:  # every run diverged, or the sweep stopped before this setting's runs
+                failed = f"diverged at update {diverged.min()}" if lost else "not trained"
+                figures = [failed, "–", "–", "–"]
+            lines.append(f"| {name} | {seeds} | {' | '.join(figures)} |")
         return "\n".join(lines)
+
+    def _figures(self, runs: np.ndarray) -> list[str]:
+        """The table's figures over `runs`, "–" for what is not known (no episode finished, a
+        metric not recorded)."""
+        returns = self.metrics["average_return"][runs]
+        best, std, at = max_average_return(returns)
+        if at < 0:
+            return ["no episode finished", "–", "–", "–"]
+        final = nanmean(returns[:, -1])
+        fraction = self.metrics.get("negative_fraction_after")
+        return [
+            f"{best:.1f} ± {std:.1f}",
+            f"{int(self.metrics['env_steps'][runs[0], at]):,}",
+            f"{final:.1f}" if np.isfinite(final) else "–",
+            "–" if fraction is None else f"{np.mean(fraction[runs]):.2%}",
+        ]
 
     def write(self, directory: str | Path, metrics: Sequence[str] = METRICS) -> None:
         """`curves.csv` (one row per run and update, a column per name in `metrics`) and

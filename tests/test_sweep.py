@@ -135,3 +135,55 @@ def test_written_results_read_back(mixed, tmp_path):
     ]
     with pytest.raises(FileNotFoundError, match="not a sweep's output"):
         SweepResult.read(tmp_path / "missing")
+
+
+def made_by_hand() -> SweepResult:
+    """Three settings × three seeds, three updates of 128 env steps: two of ppo's runs diverged
+    (their returns and fractions are far off, to show they are left out), and all of fppo-lp's."""
+    settings = [
+        {"variant": "ppo"},
+        {"variant": "fppo-lp", "alpha": 1.3},
+        {"variant": "tr-ppo", "delta": 0.02},
+    ]
+    runs = [{"setting": s, "seed": seed} for s in range(3) for seed in range(3)]
+    metrics = {name: np.full((9, 3), 0.5) for name in METRICS}
+    metrics["env_steps"] = np.tile(128 * np.arange(1, 4), (9, 1))
+    metrics["average_return"] = np.array(
+        [[10, 30, 20], [900, 900, 900], [900, 900, 900]]
+        + [[np.nan, 1, 2]] * 3
+        + [[10, 20, 30], [20, 40, 60], [30, 60, 90]],
+        float,
+    )
+    metrics["negative_fraction_after"][1:3] = 1.0
+    return SweepResult(
+        settings=settings,
+        seeds=[0, 1, 2],
+        runs=runs,
+        metrics=metrics,
+        diverged=np.array([0, 3, 2, 4, 2, 3, 0, 0, 0]),
+        config={"env": "cartpole"},
+        compile_seconds=0.0,
+        train_seconds=0.0,
+    )
+
+
+def test_the_table_counts_only_the_runs_that_did_not_diverge(tmp_path):
+    result = made_by_hand()
+    assert result.table().splitlines()[2:] == [
+        "| ppo | 1 of 3 (2 diverged) | 30.0 ± 0.0 | 256 | 20.0 | 50.00% |",
+        "| fppo-lp α=1.3 | 0 of 3 (3 diverged) | diverged at update 2 | – | – | – |",
+        "| tr-ppo δ=0.02 | 3 | 60.0 ± 24.5 | 384 | 60.0 | 50.00% |",
+    ]
+    result.write(tmp_path)
+    assert SweepResult.read(tmp_path).table() == result.table()
+
+
+def test_a_sweep_whose_setting_diverges_shows_it():
+    grid = {"variant": "ppo", "learning_rate": [3e-4, 1e30]}
+    result = sweep("cartpole", grid, seeds=2, **TINY)
+    assert result.diverged.tolist() == [0, 0, 1, 1]
+    rows = result.table().splitlines()[2:]
+    assert rows[0].startswith("| ppo learning_rate=0.0003 | 2 | ")
+    assert rows[1] == (
+        "| ppo learning_rate=1e+30 | 0 of 2 (2 diverged) | diverged at update 1 | – | – | – |"
+    )

@@ -4,6 +4,7 @@ import subprocess
 import sys
 
 import pytest
+from helpers import sweep_by_hand
 
 from fppo_jax.cli import build_parser, main
 
@@ -182,6 +183,19 @@ def test_sweep_value_ranges_and_errors(tmp_path, capsys):
     assert "expected start:stop:step" in capsys.readouterr().err
     assert main(["table", str(tmp_path / "nothing")]) == 2
     assert "not a sweep's output" in capsys.readouterr().err
+
+
+def test_table_prints_diverged_runs_and_refuses_a_damaged_file(tmp_path, capsys):
+    sweep_by_hand().write(tmp_path)
+    assert main(["table", str(tmp_path)]) == 0
+    row = "| fppo-lp α=1.3 | 0 of 3 (3 diverged) | diverged at update 2 | – | – | – |"
+    assert row in capsys.readouterr().out.splitlines()
+    curves = tmp_path / "curves.csv"
+    curves.write_text("".join(curves.read_text().splitlines(keepends=True)[:-1]))
+    assert main(["table", str(tmp_path)]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err == f"fppo-jax: error: {curves}: run 8 has no update 3 (the file goes to update 3)\n"
 
 
 def test_namespaced_environments_train_and_sweep_from_the_command_line(tmp_path, capsys):

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from collections.abc import Sequence
+from decimal import Decimal, InvalidOperation
 from pathlib import Path
 
 from fppo_jax.api import train
@@ -44,20 +46,32 @@ def _sizes(text: str) -> tuple[int, ...]:
     return sizes
 
 
+# The most values one start:stop:step may give: far more than a sweep trains, so more is a
+# mistyped step.
+MAX_RANGE = 1000
+
+
 def _values(text: str) -> list[float]:
-    """``1.1:1.5:0.1`` (inclusive) or ``0.1,0.2,0.4``."""
+    """``1.1:1.5:0.1`` (inclusive, never past its stop) or ``0.1,0.2,0.4``; finite numbers."""
+    # Decimal, so that 1.1:1.5:0.1 steps by exactly 0.1 and ends on 1.5, neither short nor past.
     try:
-        if ":" in text:
-            start, stop, step = (float(x) for x in text.split(":"))
-            if step <= 0 or stop < start:
-                raise ValueError
-            count = round((stop - start) / step) + 1
-            return [round(start + i * step, 10) for i in range(count)]
-        return [float(x) for x in text.split(",")]
-    except ValueError:
+        parts = [Decimal(part) for part in text.split(":" if ":" in text else ",")]
+    except InvalidOperation:
         raise argparse.ArgumentTypeError(
-            f"expected start:stop:step (stop >= start, step > 0) or a comma list, got {text!r}"
+            f"expected start:stop:step or a comma list of numbers, got {text!r}"
         ) from None
+    if not all(part.is_finite() and math.isfinite(part) for part in parts):
+        raise argparse.ArgumentTypeError(f"values must be finite numbers, got {text!r}")
+    if ":" not in text:
+        return [float(part) for part in parts]
+    if len(parts) != 3 or parts[2] <= 0 or parts[1] < parts[0]:
+        raise argparse.ArgumentTypeError(
+            f"expected start:stop:step with stop >= start and step > 0, got {text!r}"
+        )
+    start, stop, step = parts
+    if (stop - start) / step >= MAX_RANGE:
+        raise argparse.ArgumentTypeError(f"{text} gives more than {MAX_RANGE} values")
+    return [float(start + i * step) for i in range(int((stop - start) // step) + 1)]
 
 
 def _names(text: str) -> list[str]:

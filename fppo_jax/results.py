@@ -148,22 +148,45 @@ class SweepResult:
         return {name: values[rows] for name, values in self.metrics.items()}
 
     def table(self) -> str:
-        """Table 1 style, one row per setting: max average return (SPEC §2) and more, Markdown."""
+        """Table 1 style, one row per setting, Markdown: the max average return (SPEC §2, mean ±
+        std), the env steps it was reached at, the final average return and the share of samples
+        in R± after the update, all over the seeds whose runs did not diverge. `seeds` says how
+        many that is and how many diverged (``3 of 5 (2 diverged)``); a setting whose runs all
+        diverged reads ``diverged at update N`` (the first of them) instead of figures."""
         lines = [
-            "| setting | max average return | at env steps | final average return "
+            "| setting | seeds | max average return | at env steps | final average return "
             "| in R± after update |",
-            "|---|---|---|---|---|",
+            "|---|---|---|---|---|---|",
         ]
         for index, name in enumerate(labels(self.settings)):
-            m = self.setting_metrics(index)
-            best, std, at = max_average_return(m["average_return"])
-            final = nanmean(m["average_return"][:, -1]) if m["average_return"].size else np.nan
-            steps = int(m["env_steps"][0, at]) if at >= 0 else 0
-            lines.append(
-                f"| {name} | {best:.1f} ± {std:.1f} | {steps:,} | {final:.1f} | "
-                f"{np.mean(m['negative_fraction_after']):.2%} |"
-            )
+            runs = np.flatnonzero([run["setting"] == index for run in self.runs])
+            diverged = np.asarray(self.diverged)[runs]
+            kept = runs[diverged == 0]
+            lost = runs.size - kept.size
+            seeds = f"{kept.size} of {runs.size} ({lost} diverged)" if lost else f"{runs.size}"
+            if kept.size:
+                figures = self._figures(kept)
+            else:  # every run diverged, or the sweep stopped before this setting's runs
+                failed = f"diverged at update {diverged.min()}" if lost else "not trained"
+                figures = [failed, "–", "–", "–"]
+            lines.append(f"| {name} | {seeds} | {' | '.join(figures)} |")
         return "\n".join(lines)
+
+    def _figures(self, runs: np.ndarray) -> list[str]:
+        """The table's figures over `runs`, "–" for what is not known (no episode finished, a
+        metric not recorded)."""
+        returns = self.metrics["average_return"][runs]
+        best, std, at = max_average_return(returns)
+        if at < 0:
+            return ["no episode finished", "–", "–", "–"]
+        final = nanmean(returns[:, -1])
+        fraction = self.metrics.get("negative_fraction_after")
+        return [
+            f"{best:.1f} ± {std:.1f}",
+            f"{int(self.metrics['env_steps'][runs[0], at]):,}",
+            f"{final:.1f}" if np.isfinite(final) else "–",
+            "–" if fraction is None else f"{np.mean(fraction[runs]):.2%}",
+        ]
 
     def write(self, directory: str | Path, metrics: Sequence[str] = METRICS) -> None:
         """`curves.csv` (one row per run and update, a column per name in `metrics`) and
@@ -193,33 +216,99 @@ class SweepResult:
 
     @classmethod
     def read(cls, directory: str | Path) -> SweepResult:
-        """What :meth:`write` wrote: the metrics its `curves.csv` holds."""
+        """What :meth:`write` wrote: the metrics its `curves.csv` holds, each row placed by its
+        ``run`` and ``update`` columns, so the rows may come in any order. A `curves.csv` that is
+        not every update of every run of ``sweep.json`` once (a column, a run or an update
+        missing or repeated, a value not a number) is refused with a ``ValueError``."""
         directory = Path(directory)
         for name in ("sweep.json", "curves.csv"):
             if not (directory / name).is_file():
                 raise FileNotFoundError(f"{directory / name} not found: not a sweep's output")
         record = json.loads((directory / "sweep.json").read_text())
-        with open(directory / "curves.csv", newline="") as f:
-            reader = csv.DictReader(f)
-            rows = list(reader)
-        num_runs = len(record["runs"])
-        num_updates = len(rows) // max(num_runs, 1)
-        metrics = {
-            name: np.array([float(r[name]) for r in rows]).reshape(num_runs, num_updates)
-            for name in METRICS
-            if name in reader.fieldnames
-        }
-        metrics["env_steps"] = metrics["env_steps"].astype(np.int64)
         return cls(
             settings=record["settings"],
             seeds=record["seeds"],
             runs=record["runs"],
-            metrics=metrics,
+            metrics=_read_curves(directory / "curves.csv", record["runs"]),
             diverged=np.asarray(record["diverged"]),
             config=record["config"],
             compile_seconds=record["compile_seconds"],
             train_seconds=record["train_seconds"],
         )
+
+
+# The columns every reader of a sweep needs; the other metrics are read when they are there.
+CURVES_NEEDED = ("run", "update", "env_steps", "average_return")
+
+
+def _read_curves(path: Path, runs: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
+    """The metrics of a sweep's `curves.csv` at `path`, [run, update], for `runs` (its
+    ``sweep.json``'s); a ``ValueError`` naming the file says what is wrong with it."""
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        columns = reader.fieldnames or []
+        missing = [name for name in CURVES_NEEDED if name not in columns]
+        if missing:
+            raise ValueError(f"{path} has no {', '.join(missing)} column")
+        names = [name for name in METRICS if name in columns]
+        cells: dict[tuple[int, int], list[float]] = {}
+        for row in reader:
+            where = f"{path}, line {reader.line_num}"
+            if None in row or None in row.values():
+                raise ValueError(f"{where}: not one value per column of the header")
+            run, update = _cell(row, "run", where, int), _cell(row, "update", where, int)
+            if update < 1:
+                raise ValueError(f"{where}: update {update}, but updates count from 1")
+            if (run, update) in cells:
+                raise ValueError(f"{where}: run {run}, update {update} a second time")
+            if "seed" in row and 0 <= run < len(runs):
+                seed = _cell(row, "seed", where, int)
+                if seed != runs[run]["seed"]:
+                    raise ValueError(
+                        f"{where}: run {run} has seed {seed}, sweep.json {runs[run]['seed']}"
+                    )
+            cells[run, update] = [_cell(row, name, where, float) for name in names]
+    if not cells:
+        raise ValueError(f"{path} has no rows")
+    found, expected = {run for run, _ in cells}, set(range(len(runs)))
+    if found - expected:
+        raise ValueError(
+            f"{path} has rows for run {_few(found - expected)}; sweep.json has {len(runs)} runs"
+        )
+    if expected - found:
+        raise ValueError(
+            f"{path} has no rows for run {_few(expected - found)} of sweep.json's {len(runs)}"
+        )
+    num_updates = max(update for _, update in cells)
+    for run in range(len(runs)):
+        lacking = [u for u in range(1, num_updates + 1) if (run, u) not in cells]
+        if lacking:
+            raise ValueError(
+                f"{path}: run {run} has no update {_few(lacking)} (the file goes to update "
+                f"{num_updates})"
+            )
+    at = tuple((np.array(list(cells)) - (0, 1)).T)  # each row's [run, update − 1]
+    values = np.array(list(cells.values()))
+    metrics = {name: np.empty((len(runs), num_updates)) for name in names}
+    for name, column in zip(names, values.T, strict=True):
+        metrics[name][at] = column
+    metrics["env_steps"] = metrics["env_steps"].astype(np.int64)
+    return metrics
+
+
+def _cell(row: Mapping[str, str], column: str, where: str, kind: type) -> Any:
+    try:
+        return kind(row[column])
+    except ValueError:
+        number = "an integer" if kind is int else "a number"
+        raise ValueError(f"{where}: {column} is {row[column]!r}, not {number}") from None
+
+
+def _few(numbers: set[int] | list[int]) -> str:
+    """Sorted, the first five and how many more."""
+    numbers = sorted(numbers)
+    more = f" and {len(numbers) - 5} more" if len(numbers) > 5 else ""
+    return ", ".join(map(str, numbers[:5])) + more
 
 
 def max_average_return(average_return: np.ndarray) -> tuple[float, float, int]:

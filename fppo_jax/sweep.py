@@ -90,7 +90,8 @@ def sweep(
     """Train every setting of `grid` (see :func:`expand_grid`) with every seed, as one program.
 
     `seeds` is a count (0 … n−1) or a list; run (setting, seed) starts from
-    ``jax.random.key(seed)``, as ``train(..., seed=seed)`` does, and matches that run.
+    ``jax.random.key(seed)``, as ``train(..., seed=seed)`` does, and matches that run to float
+    tolerance over its first updates, then drifts from it (vmapped kernels round differently).
     `preset` and `settings` are as in :func:`~fppo_jax.train`: a preset's
     :class:`~fppo_jax.config.TrainConfig`, its fields, fixed values of sweepable
     hyperparameters, and how the runs are driven (:class:`~fppo_jax.driver.Options`). `chunk`

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from fppo_jax import METRICS, SweepResult
 from fppo_jax.envs import Step, make_env
 
 
@@ -41,3 +42,33 @@ def assert_bitwise_equal(a, b) -> None:
         x, y = np.asarray(x), np.asarray(y)
         assert x.dtype == y.dtype and x.shape == y.shape
         assert x.tobytes() == y.tobytes()
+
+
+def sweep_by_hand() -> SweepResult:
+    """Three settings × three seeds, three updates of 128 env steps: two of ppo's runs diverged
+    (their returns and fractions are far off, to show they are left out), and all of fppo-lp's."""
+    settings = [
+        {"variant": "ppo"},
+        {"variant": "fppo-lp", "alpha": 1.3},
+        {"variant": "tr-ppo", "delta": 0.02},
+    ]
+    runs = [{"setting": s, "seed": seed} for s in range(3) for seed in range(3)]
+    metrics = {name: np.full((9, 3), 0.5) for name in METRICS}
+    metrics["env_steps"] = np.tile(128 * np.arange(1, 4), (9, 1))
+    metrics["average_return"] = np.array(
+        [[10, 30, 20], [900, 900, 900], [900, 900, 900]]
+        + [[np.nan, 1, 2]] * 3
+        + [[10, 20, 30], [20, 40, 60], [30, 60, 90]],
+        float,
+    )
+    metrics["negative_fraction_after"][1:3] = 1.0
+    return SweepResult(
+        settings=settings,
+        seeds=[0, 1, 2],
+        runs=runs,
+        metrics=metrics,
+        diverged=np.array([0, 3, 2, 4, 2, 3, 0, 0, 0]),
+        config={"env": "cartpole"},
+        compile_seconds=0.0,
+        train_seconds=0.0,
+    )

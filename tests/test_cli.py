@@ -4,6 +4,7 @@ import subprocess
 import sys
 
 import pytest
+from helpers import sweep_by_hand
 
 from fppo_jax.cli import build_parser, main
 
@@ -182,6 +183,57 @@ def test_sweep_value_ranges_and_errors(tmp_path, capsys):
     assert "expected start:stop:step" in capsys.readouterr().err
     assert main(["table", str(tmp_path / "nothing")]) == 2
     assert "not a sweep's output" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "text, values",
+    [
+        ("0:1:0.6", [0.0, 0.6]),  # not past its stop
+        ("0:1:0.3", [0.0, 0.3, 0.6, 0.9]),
+        ("0:1:0.1", [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0]),  # nor short of it
+        ("1e-4:5e-4:1e-4", [1e-4, 2e-4, 3e-4, 4e-4, 5e-4]),
+        ("0.3:0.3:0.1", [0.3]),
+        ("0:999:1", [float(i) for i in range(1000)]),
+    ],
+)
+def test_value_ranges_end_on_or_before_their_stop_without_float_error(text, values):
+    from fppo_jax.cli import _values
+
+    assert _values(text) == values
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("0:1000:1", "0:1000:1 gives more than 1000 values"),
+        ("0:1:1e-9", "0:1:1e-9 gives more than 1000 values"),
+        ("0:inf:1", "values must be finite numbers, got '0:inf:1'"),
+        ("nan:1:0.1", "values must be finite numbers"),
+        ("0:1:nan", "values must be finite numbers"),
+        ("0.1,inf", "values must be finite numbers"),
+        ("1e400,1", "values must be finite numbers"),
+        ("0:1:0", "expected start:stop:step with stop >= start and step > 0, got '0:1:0'"),
+        ("0:1", "expected start:stop:step with stop >= start and step > 0"),
+        ("0.1,,0.2", "expected start:stop:step or a comma list of numbers, got '0.1,,0.2'"),
+    ],
+)
+def test_bad_values_are_refused_saying_why(text, message, capsys):
+    with pytest.raises(SystemExit):
+        main(["sweep", "--alpha", text])
+    assert message in capsys.readouterr().err
+
+
+def test_table_prints_diverged_runs_and_refuses_a_damaged_file(tmp_path, capsys):
+    sweep_by_hand().write(tmp_path)
+    assert main(["table", str(tmp_path)]) == 0
+    row = "| fppo-lp α=1.3 | 0 of 3 (3 diverged) | diverged at update 2 | – | – | – |"
+    assert row in capsys.readouterr().out.splitlines()
+    curves = tmp_path / "curves.csv"
+    curves.write_text("".join(curves.read_text().splitlines(keepends=True)[:-1]))
+    assert main(["table", str(tmp_path)]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err == f"fppo-jax: error: {curves}: run 8 has no update 3 (the file goes to update 3)\n"
 
 
 def test_namespaced_environments_train_and_sweep_from_the_command_line(tmp_path, capsys):

@@ -1,10 +1,10 @@
 """The host-side driver that ``train`` and ``sweep`` share.
 
 It runs a batch of runs (one run is a batch of one, unbatched): checks the host-side options,
-opens the checkpoints and compares their record with the run, restores, compiles once, then
-calls the program in chunks of updates. Between chunks it checks for divergence, checkpoints,
-logs, evaluates, calls the user's callback and reports progress. A sweep's runs train in
-groups of one size, so every group reuses the one compiled program.
+opens the checkpoints and compares their record with the run, checks the log directory,
+restores, compiles once, then calls the program in chunks of updates. Between chunks it checks
+for divergence, checkpoints, logs, evaluates, calls the user's callback and reports progress.
+A sweep's runs train in groups of one size, so every group reuses the one compiled program.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from fppo_jax.config import Hyperparameters, positive_int
 from fppo_jax.distributed import fetch, is_main_process, make_mesh
 from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
-from fppo_jax.metric_log import Block, open_logs, require_wandb
+from fppo_jax.metric_log import Block, open_logs, prepare_log_dir, require_wandb
 from fppo_jax.policy import Policy, make_policy
 from fppo_jax.progress import PROGRESS_LINES, Progress, reporter
 from fppo_jax.results import TrainingDiverged
@@ -79,8 +79,11 @@ class Options:
     ``total_steps``, unless its learning rate anneals over the run (refused, with the reason).
 
     `log_dir`: write ``config.json`` (every setting, the versions and devices) there at once,
-    then ``metrics.csv`` and TensorBoard event files as training goes. `wandb_project` logs the
-    same to Weights & Biases (``pip install 'fppo-jax[wandb]'``).
+    then ``metrics.csv`` and TensorBoard event files as training goes. It is made and checked
+    writable before compiling; one that holds a run's outputs is refused, unless `resume`
+    continues the run whose ``config.json`` it is (the checkpoint's, or this run's if there is
+    no checkpoint yet). `wandb_project` logs the same to Weights & Biases
+    (``pip install 'fppo-jax[wandb]'``).
 
     `devices`: how many of the devices JAX sees (default: all) share the runs (see
     :mod:`fppo_jax.distributed`). In a multi-process run only process 0 reports and writes.
@@ -189,9 +192,14 @@ def drive(plan: Plan, options: Options) -> Outcome:
         options.checkpoint_dir, options.resume, options.keep, plan.kind, plan.record
     )
     try:
+        main = is_main_process()
+        if options.log_dir is not None and main:
+            resumed = None
+            if options.resume:  # the run checkpointed, or this one if nothing was yet
+                resumed = plan.record if record is None else record["config"]
+            prepare_log_dir(options.log_dir, resumed)
         size = _group_size(plan, mesh, record, checkpoints)
         per_call = _updates_per_call(options, config.num_updates)
-        main = is_main_process()
         restored = None
         if record is not None:
             like = jax.eval_shape(_init(plan), *_group(plan, 0, size))

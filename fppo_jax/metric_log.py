@@ -19,9 +19,12 @@ from typing import Any
 import jax
 import numpy as np
 
-from fppo_jax.files import write_json
+from fppo_jax.files import json_value, writable_directory, write_json
 
 Block = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
+
+# What a run writes in its log directory; a directory holding any of them is another run's.
+OUTPUTS = ("config.json", "metrics.csv", "curves.csv", "sweep.json", "summary.txt")
 
 
 def environment_record() -> dict[str, Any]:
@@ -37,6 +40,39 @@ def environment_record() -> dict[str, Any]:
         "backend": jax.default_backend(),
         "devices": [str(d.device_kind) for d in jax.devices()],
     }
+
+
+def prepare_log_dir(directory: str | Path, resumed: dict[str, Any] | None) -> None:
+    """Make `directory` for a run's logs, or raise ValueError, before anything is compiled: if
+    it cannot be written, or if it holds a run's outputs (:data:`OUTPUTS`), which are never
+    overwritten unasked. Only the run resumed, configured as `resumed`, continues there, when
+    the ``config.json`` there records that configuration."""
+    directory = writable_directory(directory)
+    found = [name for name in OUTPUTS if (directory / name).exists()]
+    if not found:
+        return
+    if resumed is None:
+        raise ValueError(
+            f"{directory} already holds a run's outputs ({', '.join(found)}); choose another "
+            "directory, or resume that run (resume=True, --resume) from its checkpoint "
+            "directory to continue it"
+        )
+    if _recorded(directory) != json_value(resumed):
+        raise ValueError(
+            f"{directory} holds the outputs of another run than the one resumed (its "
+            "config.json records other settings, or none); choose another directory"
+        )
+
+
+def _recorded(directory: Path) -> dict[str, Any] | None:
+    """The settings ``config.json`` in `directory` records, without the versions and devices,
+    which may change between a run and its resumption (None if there are none)."""
+    try:
+        record = json.loads((directory / "config.json").read_text())
+    except (OSError, ValueError):
+        return None
+    machine = environment_record()
+    return {name: value for name, value in record.items() if name not in machine}
 
 
 class MetricLog:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import platform
 from collections.abc import Sequence
 from importlib import metadata
@@ -79,8 +80,9 @@ class MetricLog:
     """``<directory>/metrics.csv`` (one row per update, and per run for a sweep) and
     ``<directory>/tensorboard/`` (one scalar per metric and update, against env steps).
 
-    `previous` are the metrics a resumed run restored: the CSV is rewritten with them, and
-    TensorBoard is told to drop any later points an interrupted run had logged.
+    `previous` are the metrics a resumed run restored: the CSV is rewritten with them (under a
+    temporary name, then renamed over the old one), and TensorBoard is told to drop any later
+    points an interrupted run had logged.
     """
 
     def __init__(
@@ -95,7 +97,8 @@ class MetricLog:
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self._batched = batched
-        self._csv = open(self.directory / "metrics.csv", "w", newline="")
+        temporary = self.directory / ".metrics.csv.tmp"
+        self._csv = open(temporary, "w", newline="")
         self._rows = csv.writer(self._csv)
         self._columns: list[str] | None = None
         self._writers: dict[int, Any] = {}
@@ -108,6 +111,8 @@ class MetricLog:
                 steps = _of_run(metrics, index, batched)["env_steps"]
                 if len(steps):
                     self._purge[run] = int(steps[-1]) + 1
+        os.fsync(self._csv.fileno())
+        os.replace(temporary, self.directory / "metrics.csv")  # the open file goes on there
         text = json.dumps(config, indent=2, default=str)
         self._writer(0).add_text("config", f"```\n{text}\n```")
 

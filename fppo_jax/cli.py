@@ -399,8 +399,7 @@ def _sweep(args: argparse.Namespace) -> int:
         f"(+{result.compile_seconds:.1f} s compiling), {result.config['runs_per_call']} per call"
     )
     print(result.table())
-    if args.output:
-        result.write(args.output)
+    if args.output:  # written by the sweep as each group of runs finished
         print(f"wrote {args.output}/curves.csv, sweep.json")
     return 0
 

@@ -145,7 +145,9 @@ class Plan:
     """What to train: `keys` is one key (one run, unbatched) or a [run] array of them, with
     `hps` alike; `record` is the configuration that checkpoints and outputs record.
     `runs_per_call` fixes a sweep's group size (None: as many as fit in memory), and
-    `data_parallel` the devices each run's environments are split over."""
+    `data_parallel` the devices each run's environments are split over. `after_group`, if
+    given, is called on the process that writes with the :class:`Outcome` of the runs finished
+    so far, after each group (a sweep writes its curves with it)."""
 
     kind: str  # "train" or "sweep"
     trainer: Trainer
@@ -156,6 +158,7 @@ class Plan:
     header: str  # a line, printed before compiling when progress is shown
     runs_per_call: int | None = None
     data_parallel: int | None = None
+    after_group: Callable[[Outcome], None] | None = None
 
     @property
     def batched(self) -> bool:
@@ -302,6 +305,7 @@ class _Chunks:
     ):
         self.plan, self.options, self.program, self.size = plan, options, program, size
         self.checkpoints, self.restored, self.report = checkpoints, restored, report
+        self.after_group = plan.after_group if main else None
         config = plan.trainer.config
         self.num_updates, self.samples = config.num_updates, config.samples_per_update
         self.finished: list[dict[str, np.ndarray]] = []  # each finished group's metrics
@@ -380,17 +384,23 @@ class _Chunks:
             )
             first_bad = np.atleast_1d(fetch(state.nonfinite_update))[kept] + 1
             self.diverged = np.concatenate([self.diverged, first_bad])
+            if self.after_group:
+                self.after_group(self._outcome(state, resumed_from, stopped_at))
             if stopped_at is not None:
                 break
-        seconds = time.perf_counter() - self.began
+        outcome = self._outcome(state, resumed_from, stopped_at)
         if self.checkpoints:
             self.checkpoints.wait()
+        return outcome
+
+    def _outcome(self, state: TrainState, resumed_from: int, stopped_at: int | None) -> Outcome:
+        """The runs finished so far, ending with the group whose final state is `state`."""
         return Outcome(
             state=state,
             metrics=_join(self.finished) if self.plan.batched else self.finished[-1],
             diverged=self.diverged if self.plan.batched else self.diverged[0],
             compile_seconds=self.program.compile_seconds,
-            train_seconds=seconds,
+            train_seconds=time.perf_counter() - self.began,
             resumed_from=resumed_from,
             runs_per_call=self.size,
             stopped_at=stopped_at,

@@ -204,3 +204,29 @@ def test_a_log_dir_holding_a_run_is_refused_unless_that_run_is_resumed(tmp_path,
     rows = list(csv.DictReader(open(logs / "metrics.csv")))
     assert [int(r["env_steps"]) for r in rows] == resumed.metrics["env_steps"].tolist()
     assert len(rows) == 12 and not list(logs.glob(".*.tmp"))
+
+
+def test_a_sweep_writes_its_curves_as_each_group_finishes(tmp_path):
+    seen = []
+
+    def callback(snapshot):
+        if snapshot.runs == range(1, 2):  # the second group: the first one's curves are there
+            seen.extend(csv.DictReader(open(tmp_path / "curves.csv")))
+            return False
+
+    result = sweep(
+        "cartpole",
+        {"variant": "ppo"},
+        seeds=2,
+        chunk=1,
+        total_steps=128 * 4,
+        **TINY,
+        log_dir=tmp_path,
+        callback=callback,
+    )
+    assert [(r["run"], int(r["env_steps"])) for r in seen] == [("0", 128 * u) for u in range(1, 5)]
+    assert [float(r["policy_loss"]) for r in seen] == result.metrics["policy_loss"][0].tolist()
+    # Once stopped, the second group's run is there too, as far as it went.
+    rows = list(csv.DictReader(open(tmp_path / "curves.csv")))
+    assert [int(r["env_steps"]) for r in rows if r["run"] == "1"] == [128, -1, -1, -1]
+    assert json.loads((tmp_path / "sweep.json").read_text())["runs"] == result.runs

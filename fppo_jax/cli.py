@@ -24,6 +24,7 @@ from fppo_jax.config import (
 )
 from fppo_jax.distributed import initialize, is_main_process
 from fppo_jax.envs import MUJOCO_TASKS, NAMESPACES, TASKS, make_env
+from fppo_jax.files import writable_directory
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
 from fppo_jax.results import SweepResult, TrainingDiverged
 from fppo_jax.sweep import sweep
@@ -357,6 +358,7 @@ def _train(args: argparse.Namespace) -> int:
         check_render_path(args.render)
     if args.save_policy:  # refused now rather than after training
         check_no_saved_policy(args.save_policy)
+        writable_directory(args.save_policy)
     optimisation = {
         name: getattr(args, name)
         for name in HYPERPARAMETER_DEFAULTS
@@ -413,8 +415,7 @@ def _sweep(args: argparse.Namespace) -> int:
         f"(+{result.compile_seconds:.1f} s compiling), {result.config['runs_per_call']} per call"
     )
     print(result.table())
-    if args.output:
-        result.write(args.output)
+    if args.output:  # written by the sweep as each group of runs finished
         print(f"wrote {args.output}/curves.csv, sweep.json")
     return 0
 

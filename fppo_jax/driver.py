@@ -1,10 +1,10 @@
 """The host-side driver that ``train`` and ``sweep`` share.
 
 It runs a batch of runs (one run is a batch of one, unbatched): checks the host-side options,
-opens the checkpoints and compares their record with the run, restores, compiles once, then
-calls the program in chunks of updates. Between chunks it checks for divergence, checkpoints,
-logs, evaluates, calls the user's callback and reports progress. A sweep's runs train in
-groups of one size, so every group reuses the one compiled program.
+opens the checkpoints and compares their record with the run, checks the log directory,
+restores, compiles once, then calls the program in chunks of updates. Between chunks it checks
+for divergence, checkpoints, logs, evaluates, calls the user's callback and reports progress.
+A sweep's runs train in groups of one size, so every group reuses the one compiled program.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from fppo_jax.distributed import fetch, is_main_process, make_mesh
 from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
 from fppo_jax.memory import runs_per_call
-from fppo_jax.metric_log import Block, open_logs, require_wandb
+from fppo_jax.metric_log import Block, open_logs, prepare_log_dir, require_wandb
 from fppo_jax.policy import Policy, make_policy
 from fppo_jax.progress import PROGRESS_LINES, Progress, reporter
 from fppo_jax.results import TrainingDiverged
@@ -79,8 +79,11 @@ class Options:
     ``total_steps``, unless its learning rate anneals over the run (refused, with the reason).
 
     `log_dir`: write ``config.json`` (every setting, the versions and devices) there at once,
-    then ``metrics.csv`` and TensorBoard event files as training goes. `wandb_project` logs the
-    same to Weights & Biases (``pip install 'fppo-jax[wandb]'``).
+    then ``metrics.csv`` and TensorBoard event files as training goes. It is made and checked
+    writable before compiling; one that holds a run's outputs is refused, unless `resume`
+    continues the run whose ``config.json`` it is (the checkpoint's, or this run's if there is
+    no checkpoint yet). `wandb_project` logs the same to Weights & Biases
+    (``pip install 'fppo-jax[wandb]'``).
 
     `devices`: how many of the devices JAX sees (default: all) share the runs (see
     :mod:`fppo_jax.distributed`). In a multi-process run only process 0 reports and writes.
@@ -142,7 +145,9 @@ class Plan:
     """What to train: `keys` is one key (one run, unbatched) or a [run] array of them, with
     `hps` alike; `record` is the configuration that checkpoints and outputs record.
     `runs_per_call` fixes a sweep's group size (None: as many as fit in memory), and
-    `data_parallel` the devices each run's environments are split over."""
+    `data_parallel` the devices each run's environments are split over. `after_group`, if
+    given, is called on the process that writes with the :class:`Outcome` of the runs finished
+    so far, after each group (a sweep writes its curves with it)."""
 
     kind: str  # "train" or "sweep"
     trainer: Trainer
@@ -153,6 +158,7 @@ class Plan:
     header: str  # a line, printed before compiling when progress is shown
     runs_per_call: int | None = None
     data_parallel: int | None = None
+    after_group: Callable[[Outcome], None] | None = None
 
     @property
     def batched(self) -> bool:
@@ -189,9 +195,14 @@ def drive(plan: Plan, options: Options) -> Outcome:
         options.checkpoint_dir, options.resume, options.keep, plan.kind, plan.record
     )
     try:
+        main = is_main_process()
+        if options.log_dir is not None and main:
+            resumed = None
+            if options.resume:  # the run checkpointed, or this one if nothing was yet
+                resumed = plan.record if record is None else record["config"]
+            prepare_log_dir(options.log_dir, resumed)
         size = _group_size(plan, mesh, record, checkpoints)
         per_call = _updates_per_call(options, config.num_updates)
-        main = is_main_process()
         restored = None
         if record is not None:
             like = jax.eval_shape(_init(plan), *_group(plan, 0, size))
@@ -301,6 +312,7 @@ class _Chunks:
     ):
         self.plan, self.options, self.program, self.size = plan, options, program, size
         self.checkpoints, self.restored, self.report = checkpoints, restored, report
+        self.after_group = plan.after_group if main else None
         config = plan.trainer.config
         self.num_updates, self.samples = config.num_updates, config.samples_per_update
         self.finished: list[dict[str, np.ndarray]] = []  # each finished group's metrics
@@ -379,17 +391,23 @@ class _Chunks:
             )
             first_bad = np.atleast_1d(fetch(state.nonfinite_update))[kept] + 1
             self.diverged = np.concatenate([self.diverged, first_bad])
+            if self.after_group:
+                self.after_group(self._outcome(state, resumed_from, stopped_at))
             if stopped_at is not None:
                 break
-        seconds = time.perf_counter() - self.began
+        outcome = self._outcome(state, resumed_from, stopped_at)
         if self.checkpoints:
             self.checkpoints.wait()
+        return outcome
+
+    def _outcome(self, state: TrainState, resumed_from: int, stopped_at: int | None) -> Outcome:
+        """The runs finished so far, ending with the group whose final state is `state`."""
         return Outcome(
             state=state,
             metrics=_join(self.finished) if self.plan.batched else self.finished[-1],
             diverged=self.diverged if self.plan.batched else self.diverged[0],
             compile_seconds=self.program.compile_seconds,
-            train_seconds=seconds,
+            train_seconds=time.perf_counter() - self.began,
             resumed_from=resumed_from,
             runs_per_call=self.size,
             stopped_at=stopped_at,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import platform
 from collections.abc import Sequence
 from importlib import metadata
@@ -19,9 +20,12 @@ from typing import Any
 import jax
 import numpy as np
 
-from fppo_jax.files import write_json
+from fppo_jax.files import json_value, writable_directory, write_json
 
 Block = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
+
+# What a run writes in its log directory; a directory holding any of them is another run's.
+OUTPUTS = ("config.json", "metrics.csv", "curves.csv", "sweep.json", "summary.txt")
 
 
 def environment_record() -> dict[str, Any]:
@@ -39,12 +43,46 @@ def environment_record() -> dict[str, Any]:
     }
 
 
+def prepare_log_dir(directory: str | Path, resumed: dict[str, Any] | None) -> None:
+    """Make `directory` for a run's logs, or raise ValueError, before anything is compiled: if
+    it cannot be written, or if it holds a run's outputs (:data:`OUTPUTS`), which are never
+    overwritten unasked. Only the run resumed, configured as `resumed`, continues there, when
+    the ``config.json`` there records that configuration."""
+    directory = writable_directory(directory)
+    found = [name for name in OUTPUTS if (directory / name).exists()]
+    if not found:
+        return
+    if resumed is None:
+        raise ValueError(
+            f"{directory} already holds a run's outputs ({', '.join(found)}); choose another "
+            "directory, or resume that run (resume=True, --resume) from its checkpoint "
+            "directory to continue it"
+        )
+    if _recorded(directory) != json_value(resumed):
+        raise ValueError(
+            f"{directory} holds the outputs of another run than the one resumed (its "
+            "config.json records other settings, or none); choose another directory"
+        )
+
+
+def _recorded(directory: Path) -> dict[str, Any] | None:
+    """The settings ``config.json`` in `directory` records, without the versions and devices,
+    which may change between a run and its resumption (None if there are none)."""
+    try:
+        record = json.loads((directory / "config.json").read_text())
+    except (OSError, ValueError):
+        return None
+    machine = environment_record()
+    return {name: value for name, value in record.items() if name not in machine}
+
+
 class MetricLog:
     """``<directory>/metrics.csv`` (one row per update, and per run for a sweep) and
     ``<directory>/tensorboard/`` (one scalar per metric and update, against env steps).
 
-    `previous` are the metrics a resumed run restored: the CSV is rewritten with them, and
-    TensorBoard is told to drop any later points an interrupted run had logged.
+    `previous` are the metrics a resumed run restored: the CSV is rewritten with them (under a
+    temporary name, then renamed over the old one), and TensorBoard is told to drop any later
+    points an interrupted run had logged.
     """
 
     def __init__(
@@ -59,7 +97,8 @@ class MetricLog:
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self._batched = batched
-        self._csv = open(self.directory / "metrics.csv", "w", newline="")
+        temporary = self.directory / ".metrics.csv.tmp"
+        self._csv = open(temporary, "w", newline="")
         self._rows = csv.writer(self._csv)
         self._columns: list[str] | None = None
         self._writers: dict[int, Any] = {}
@@ -72,6 +111,8 @@ class MetricLog:
                 steps = _of_run(metrics, index, batched)["env_steps"]
                 if len(steps):
                     self._purge[run] = int(steps[-1]) + 1
+        os.fsync(self._csv.fileno())
+        os.replace(temporary, self.directory / "metrics.csv")  # the open file goes on there
         text = json.dumps(config, indent=2, default=str)
         self._writer(0).add_text("config", f"```\n{text}\n```")
 

@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 
 from fppo_jax.envs import Environment
+from fppo_jax.files import writable_directory
 
 
 class RenderingUnavailable(RuntimeError):
@@ -26,12 +27,14 @@ class RenderingUnavailable(RuntimeError):
 
 
 def check_render_path(path: str | Path) -> None:
-    """Raise ValueError unless `path` names a format that :func:`save_frames` writes."""
+    """Raise ValueError unless `path` names a format that :func:`save_frames` writes, in a
+    directory that can be written (made if missing)."""
     if Path(path).suffix not in (".png", ".gif", ".mp4"):
         raise ValueError(
             "render to a .png (image strip), a .gif (animation) or an .mp4 (video), not "
             f"{Path(path).name}"
         )
+    writable_directory(Path(path).parent)
 
 
 def episode_positions(
@@ -109,7 +112,6 @@ def save_frames(frames: np.ndarray, path: str | Path, dt: float, strip_length: i
 
     check_render_path(path)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix == ".mp4":
         import imageio.v2 as imageio
 

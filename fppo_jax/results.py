@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import json
 import warnings
 from collections.abc import Mapping, Sequence
@@ -16,6 +17,7 @@ import numpy as np
 from fppo_jax.checkpoint import save_policy
 from fppo_jax.config import SYMBOLS, VARIANT_SPECIFIC
 from fppo_jax.envs import Environment
+from fppo_jax.files import write_atomically, write_json
 from fppo_jax.policy import Policy
 from fppo_jax.trainer import METRICS, TrainState
 
@@ -56,11 +58,11 @@ class TrainResult:
     stopped_at: int | None = None  # the update where a callback stopped training
 
     def write(self, directory: str | Path) -> None:
-        """``summary.txt`` in `directory` (``config.json`` and ``metrics.csv`` are written as
-        training goes, by ``log_dir``)."""
+        """``summary.txt`` in `directory`, whole or not at all (``config.json`` and
+        ``metrics.csv`` are written as training goes, by ``log_dir``)."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
-        (directory / "summary.txt").write_text(self.summary() + "\n")
+        write_atomically(directory / "summary.txt", (self.summary() + "\n").encode())
 
     def save(self, directory: str | Path, *, overwrite: bool = False) -> Path:
         """Save the trained policy and the run's configuration in `directory`, for
@@ -190,19 +192,21 @@ class SweepResult:
 
     def write(self, directory: str | Path, metrics: Sequence[str] = METRICS) -> None:
         """`curves.csv` (one row per run and update, a column per name in `metrics`) and
-        `sweep.json` (everything else). Fewer metrics make a smaller file to keep."""
+        `sweep.json` (everything else), each whole or not at all. Fewer metrics make a smaller
+        file to keep."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         keys = list(dict.fromkeys(k for s in self.settings for k in s))
-        with open(directory / "curves.csv", "w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(["run", "seed", *keys, "update", *metrics])
-            for i, run in enumerate(self.runs):
-                setting = self.settings[run["setting"]]
-                head = [i, run["seed"], *[setting.get(k, "") for k in keys]]
-                for u in range(self.metrics["env_steps"].shape[1]):
-                    values = [self.metrics[name][i, u].item() for name in metrics]
-                    writer.writerow([*head, u + 1, *values])
+        text = io.StringIO(newline="")
+        writer = csv.writer(text)
+        writer.writerow(["run", "seed", *keys, "update", *metrics])
+        for i, run in enumerate(self.runs):
+            setting = self.settings[run["setting"]]
+            head = [i, run["seed"], *[setting.get(k, "") for k in keys]]
+            for u in range(self.metrics["env_steps"].shape[1]):
+                values = [self.metrics[name][i, u].item() for name in metrics]
+                writer.writerow([*head, u + 1, *values])
+        write_atomically(directory / "curves.csv", text.getvalue().encode())
         record = {
             "settings": self.settings,
             "seeds": self.seeds,
@@ -212,7 +216,7 @@ class SweepResult:
             "compile_seconds": self.compile_seconds,
             "train_seconds": self.train_seconds,
         }
-        (directory / "sweep.json").write_text(json.dumps(record, indent=2) + "\n")
+        write_json(directory / "sweep.json", record)
 
     @classmethod
     def read(cls, directory: str | Path) -> SweepResult:

@@ -29,7 +29,7 @@ from fppo_jax.config import (
     resolve_hyperparameters,
     table2,
 )
-from fppo_jax.driver import Options, Plan, drive
+from fppo_jax.driver import Options, Outcome, Plan, drive
 from fppo_jax.envs import Environment, as_environment
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import VARIANTS
@@ -101,8 +101,10 @@ def sweep(
     Options apply to every run. A checkpoint holds the state of the group of runs in training
     with the metrics of the groups already done, and a resumed sweep goes on from the group and
     update where it stopped (with the same runs per call). ``metrics.csv`` in `log_dir` has a
-    ``run`` column and TensorBoard a directory per run; a callback sees one group of runs at a
-    time (``snapshot.runs``, metrics as [run, update]), and returning ``False`` stops the sweep.
+    ``run`` column and TensorBoard a directory per run, and each group of runs, once finished,
+    adds its runs to ``curves.csv`` and ``sweep.json`` there (:meth:`SweepResult.write`); a
+    callback sees one group of runs at a time (``snapshot.runs``, metrics as [run, update]),
+    and returning ``False`` stops the sweep.
 
     `devices` (default: all JAX sees) share the runs of each group, `data_parallel` of them
     (default 1) per run, splitting its environments (see :mod:`fppo_jax.distributed`); runs
@@ -130,6 +132,23 @@ def sweep(
     grid_values = {key: _as_list(key, v) for key, v in {**grid, **fixed}.items()}
     record = {"env": name, "grid": grid_values, "seeds": seeds, "preset": preset}
     record.update(dataclasses.asdict(config))
+
+    def result_of(outcome: Outcome) -> SweepResult:
+        return SweepResult(
+            settings=settings,
+            seeds=seeds,
+            runs=runs[: len(outcome.diverged)],
+            metrics=outcome.metrics,
+            diverged=outcome.diverged,
+            config={**record, "runs_per_call": outcome.runs_per_call},
+            compile_seconds=outcome.compile_seconds,
+            train_seconds=outcome.train_seconds,
+        )
+
+    # Written after each group, so that a crash or a stop later loses no finished run.
+    def write_finished(outcome: Outcome) -> None:
+        result_of(outcome).write(options.log_dir)
+
     keys = jnp.stack([jax.random.key(run["seed"]) for run in runs])
     stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *[hps[run["setting"]] for run in runs])
     plan = Plan(
@@ -143,18 +162,9 @@ def sweep(
         f"each {describe(config, preset)}",
         runs_per_call=chunk,
         data_parallel=1 if data_parallel is None else data_parallel,
+        after_group=None if options.log_dir is None else write_finished,
     )
-    outcome = drive(plan, options)
-    result = SweepResult(
-        settings=settings,
-        seeds=seeds,
-        runs=runs[: len(outcome.diverged)],
-        metrics=outcome.metrics,
-        diverged=outcome.diverged,
-        config={**record, "runs_per_call": outcome.runs_per_call},
-        compile_seconds=outcome.compile_seconds,
-        train_seconds=outcome.train_seconds,
-    )
+    result = result_of(drive(plan, options))
     names = labels(settings)
     for i in np.flatnonzero(result.diverged):
         run = runs[i]

@@ -6,6 +6,7 @@ import sys
 import pytest
 from helpers import sweep_by_hand
 
+import fppo_jax.driver
 from fppo_jax.cli import build_parser, main
 
 TINY_FLAGS = ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
@@ -139,6 +140,19 @@ def test_render_needs_a_picture_format_and_a_mujoco_task(tmp_path, capsys):
     assert "a .gif (animation) or an .mp4 (video)" in capsys.readouterr().err
     assert main([*args, "--render", str(tmp_path / "x.png")]) == 2
     assert "not rendered: GymnaxEnvironment is not a MuJoCo environment" in capsys.readouterr().err
+
+
+def test_outputs_that_cannot_be_written_are_refused_before_training(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    (tmp_path / "file").write_text("")
+    under_a_file = tmp_path / "file" / "sub"
+    for flag, path in [
+        ("--output", under_a_file),
+        ("--save-policy", under_a_file),
+        ("--render", under_a_file / "hopper.gif"),
+    ]:
+        assert main(["train", "--quiet", flag, str(path)]) == 2
+        assert f"cannot write to {under_a_file}: Not a directory" in capsys.readouterr().err
 
 
 def test_sweep_then_table_then_plot(tmp_path, capsys):

@@ -3,6 +3,7 @@ and a finished run going on for more steps."""
 
 import csv
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -13,7 +14,9 @@ from conftest import TINY
 from helpers import assert_bitwise_equal
 
 import fppo_jax
+import fppo_jax.driver
 from fppo_jax import ConfigMismatch, evaluate, make_env, sweep, train
+from fppo_jax.files import writable_directory
 
 RUN = {"env": "cartpole", "variant": "fppo-lp", "seed": 1, "total_steps": 128 * 12, **TINY}
 
@@ -189,3 +192,70 @@ def test_a_run_that_cannot_fit_is_refused_before_compiling(monkeypatch):
     monkeypatch.setattr(driver, "compile_program", lambda *a, **k: pytest.fail("compiled"))
     with pytest.raises(MemoryError, match=r"one run needs about .* GiB .* lower num_envs"):
         train(**RUN)
+
+
+def compiled(*_):
+    pytest.fail("compiled before refusing")
+
+
+def test_a_log_dir_that_cannot_be_written_is_refused_before_compiling(tmp_path, monkeypatch):
+    monkeypatch.setattr(fppo_jax.driver, "compile_program", compiled)
+    (tmp_path / "file").write_text("")
+    under_a_file = tmp_path / "file" / "sub"
+    with pytest.raises(ValueError, match=f"cannot write to {under_a_file}: Not a directory"):
+        train(**RUN, log_dir=under_a_file)
+    with pytest.raises(ValueError, match=f"cannot write to {under_a_file}"):
+        sweep("cartpole", {"variant": "ppo"}, seeds=2, **TINY, log_dir=under_a_file)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes in read-only directories")
+def test_a_read_only_directory_is_refused(tmp_path):
+    tmp_path.chmod(0o500)
+    with pytest.raises(ValueError, match=f"cannot write to {tmp_path}: Permission denied"):
+        writable_directory(tmp_path)
+
+
+def test_a_log_dir_holding_a_run_is_refused_unless_that_run_is_resumed(tmp_path, monkeypatch):
+    logs, checkpoints = tmp_path / "logs", tmp_path / "checkpoints"
+    driven = {"log_dir": logs, "checkpoint_every": 3}
+    train(**RUN, **driven, checkpoint_dir=checkpoints, callback=lambda s: s.update < 6)
+    written = {p.name: p.read_bytes() for p in logs.iterdir() if p.is_file()}
+    with monkeypatch.context() as m:
+        m.setattr(fppo_jax.driver, "compile_program", compiled)
+        with pytest.raises(ValueError, match=r"already holds a run's outputs \(config.json, "):
+            train(**RUN, log_dir=logs)
+        with pytest.raises(ValueError, match="outputs of another run than the one resumed"):
+            other = {**RUN, "seed": 2}
+            train(**other, **driven, checkpoint_dir=tmp_path / "other", resume=True)
+    assert {p.name: p.read_bytes() for p in logs.iterdir() if p.is_file()} == written
+    # Resumed from its checkpoint, the run goes on logging where it stopped.
+    resumed = train(**RUN, **driven, checkpoint_dir=checkpoints, resume=True)
+    rows = list(csv.DictReader(open(logs / "metrics.csv")))
+    assert [int(r["env_steps"]) for r in rows] == resumed.metrics["env_steps"].tolist()
+    assert len(rows) == 12 and not list(logs.glob(".*.tmp"))
+
+
+def test_a_sweep_writes_its_curves_as_each_group_finishes(tmp_path):
+    seen = []
+
+    def callback(snapshot):
+        if snapshot.runs == range(1, 2):  # the second group: the first one's curves are there
+            seen.extend(csv.DictReader(open(tmp_path / "curves.csv")))
+            return False
+
+    result = sweep(
+        "cartpole",
+        {"variant": "ppo"},
+        seeds=2,
+        chunk=1,
+        total_steps=128 * 4,
+        **TINY,
+        log_dir=tmp_path,
+        callback=callback,
+    )
+    assert [(r["run"], int(r["env_steps"])) for r in seen] == [("0", 128 * u) for u in range(1, 5)]
+    assert [float(r["policy_loss"]) for r in seen] == result.metrics["policy_loss"][0].tolist()
+    # Once stopped, the second group's run is there too, as far as it went.
+    rows = list(csv.DictReader(open(tmp_path / "curves.csv")))
+    assert [int(r["env_steps"]) for r in rows if r["run"] == "1"] == [128, -1, -1, -1]
+    assert json.loads((tmp_path / "sweep.json").read_text())["runs"] == result.runs

@@ -20,7 +20,7 @@ import numpy as np
 
 from fppo_jax.envs import lookup
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
-from fppo_jax.objectives import EPSILON, VARIANTS, Objective, objective
+from fppo_jax.objectives import EPSILON, VARIANTS, Objective, objective, real
 
 # The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task (SPEC §1).
 TABLE2: dict[str, dict[str, float]] = {
@@ -218,7 +218,8 @@ def hyperparameters(
     settings = {**HYPERPARAMETER_DEFAULTS, **{k_: v for k_, v in values.items() if v is not None}}
     for name, value in settings.items():
         bound, ok = _RANGES[name]
-        if not (math.isfinite(float(value)) and ok(float(value))):
+        value = real(name, value)
+        if not (math.isfinite(value) and ok(value)):
             raise ValueError(f"{name} must be {bound}, got {value}")
     return Hyperparameters(
         objective=objective(variant, epsilon=epsilon, alpha=alpha, k=k, delta=delta),

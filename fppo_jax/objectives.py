@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from collections.abc import Callable
 
 import jax
@@ -113,7 +114,7 @@ def objective(name: str, *, epsilon: float = EPSILON, **hyperparameters: float) 
         raise ValueError(f"{name} has no hyperparameter {', '.join(extra)} (it takes: {takes})")
     values = {"epsilon": epsilon, **allowed, **given}
     for key, value in values.items():
-        _check_range(name, key, float(value))
+        _check_range(name, key, real(key, value))
     return Objective(
         variant=jnp.asarray(VARIANTS.index(name), jnp.int32),
         epsilon=jnp.asarray(values["epsilon"], jnp.float32),
@@ -121,6 +122,18 @@ def objective(name: str, *, epsilon: float = EPSILON, **hyperparameters: float) 
         k=jnp.asarray(values.get("k", 0.0), jnp.float32),
         delta=jnp.asarray(values.get("delta", 0.0), jnp.float32),
     )
+
+
+def real(name: str, value: object) -> float:
+    """`value` as a float if it is a real number (numpy's included); strings and booleans,
+    which ``float`` would take, are refused."""
+    if isinstance(value, str | bool | np.bool_) or not isinstance(
+        value, numbers.Real | np.ndarray | jax.Array
+    ):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    if np.ndim(value) != 0:
+        raise ValueError(f"{name} must be a single number, got an array of shape {np.shape(value)}")
+    return float(value)
 
 
 def _check_range(variant: str, key: str, value: float) -> None:

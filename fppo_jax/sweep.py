@@ -32,7 +32,7 @@ from fppo_jax.config import (
 from fppo_jax.driver import Options, Outcome, Plan, drive
 from fppo_jax.envs import Environment, as_environment
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
-from fppo_jax.objectives import VARIANTS
+from fppo_jax.objectives import VARIANTS, real
 from fppo_jax.results import SweepResult, labels
 from fppo_jax.trainer import make_train
 
@@ -61,7 +61,7 @@ def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[s
         setting: dict[str, Any] = {"variant": variant}
         for name, value in zip(values, combo, strict=True):
             if name not in VARIANT_SPECIFIC or name in VARIANT_DEFAULTS[variant]:
-                setting[name] = float(value)
+                setting[name] = real(name, value)
         for name, value in table2(task, variant).items():
             setting.setdefault(name, value)
         if setting not in settings:

@@ -228,3 +228,19 @@ def test_a_traced_objective_without_kl_is_refused():
     assert jax.jit(lambda o, r, a: o(r, a, kl))(
         objective("tr-ppo"), jnp.ones(3), jnp.ones(3)
     ).shape == (3,)
+
+
+@pytest.mark.parametrize("value", ["1.3", True, np.ones(2), [1.3]])
+def test_a_hyperparameter_that_is_not_a_number_is_refused(value):
+    with pytest.raises(ValueError, match=r"alpha must be a (single )?number"):
+        objective("fppo-lp", alpha=value)
+    assert objective("fppo-lp", alpha=np.float32(1.25)).alpha == np.float32(1.25)
+
+
+def test_an_optimisation_setting_that_is_not_a_number_is_refused():
+    from fppo_jax import hyperparameters, sweep
+
+    with pytest.raises(ValueError, match=r"learning_rate must be a number, got '0\.001'"):
+        hyperparameters("ppo", learning_rate="0.001")
+    with pytest.raises(ValueError, match=r"k must be a number, got '0\.4'"):
+        sweep("cartpole", {"variant": "fppo-qp", "k": ["0.4"]}, seeds=1)

@@ -4,6 +4,7 @@ and a finished run going on for more steps."""
 import csv
 import json
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -259,3 +260,40 @@ def test_a_sweep_writes_its_curves_as_each_group_finishes(tmp_path):
     rows = list(csv.DictReader(open(tmp_path / "curves.csv")))
     assert [int(r["env_steps"]) for r in rows if r["run"] == "1"] == [128, -1, -1, -1]
     assert json.loads((tmp_path / "sweep.json").read_text())["runs"] == result.runs
+
+
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        ({"num_envs": 4.0}, "num_envs must be a positive integer, got 4.0"),
+        ({"num_envs": True}, "num_envs must be a positive integer, got True"),
+        ({"normalize_rewards": "no"}, "normalize_rewards must be True or False, got 'no'"),
+        ({"hidden_sizes": "64"}, "hidden_sizes must be positive layer widths, got '64'"),
+        ({"hidden_sizes": (64, 0)}, "each of hidden_sizes must be a positive integer, got 0"),
+        ({"resets_per_rollout": 0}, "resets_per_rollout must be a positive integer, got 0"),
+    ],
+)
+def test_config_fields_are_checked_for_type_and_range(settings, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        fppo_jax.TrainConfig(**settings)
+
+
+def test_numpy_integers_are_integers():
+    config = fppo_jax.TrainConfig(total_steps=np.int64(4096), num_envs=np.int32(4))
+    assert config.num_envs == 4 and type(config.num_envs) is int
+
+
+@pytest.mark.parametrize(
+    "seeds, message",
+    [
+        ([1, 1], "seeds must be distinct, got [1, 1]"),
+        (["1"], "a seed must be an integer, got '1'"),
+        ([2**70], "a seed must fit in 64 bits"),
+        ("5", "seeds must be a count or a sequence of integers, got '5'"),
+        (0, "seeds must be a positive integer, got 0"),
+        ([], "a sweep needs at least one seed"),
+    ],
+)
+def test_seeds_are_checked_before_anything_is_made(seeds, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        sweep("cartpole", {"variant": "ppo"}, seeds=seeds)

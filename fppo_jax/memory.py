@@ -67,9 +67,9 @@ def runs_per_call(
 
 
 def free_bytes() -> float:
-    """Free memory of the first device: its allocator's limit where it reports one (GPU, TPU),
-    else the host's available memory."""
-    device = jax.devices()[0]
+    """Free memory of this process's first device: its allocator's limit where it reports one
+    (GPU, TPU), else the host's available memory."""
+    device = jax.local_devices()[0]
     stats = device.memory_stats() if hasattr(device, "memory_stats") else None
     if stats and "bytes_limit" in stats:
         return float(stats["bytes_limit"] - stats.get("bytes_in_use", 0))

@@ -226,7 +226,12 @@ def attempt(kind, directory, log, cache, stop, where) -> dict | None:
     return None
 
 
-@pytest.mark.parametrize("kind", ["train", "sweep"])
+@pytest.mark.parametrize(
+    "kind",
+    # The sweep's chain (over a minute on a CPU) runs with -m slow; the train chain, and the
+    # sweep resumed after its end (tests/test_driver.py), in the default run.
+    ["train", pytest.param("sweep", marks=pytest.mark.slow)],
+)
 def test_killed_at_every_moment_and_resumed_each_time_ends_as_if_never_stopped(kind, tmp_path):
     cache, directory = tmp_path / "jax-cache", tmp_path / "checkpoints"
     # Uninterrupted first, to fill the compilation cache: with the same options, so that it is

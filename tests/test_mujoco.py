@@ -27,7 +27,17 @@ SHAPES = {  # observation size, action size
 }
 
 
-@pytest.mark.parametrize("name", MUJOCO_TASKS)
+# Hopper (Brax, terminating), Reacher (Brax, 50 steps) and Swimmer (MJX itself) in the default
+# run; the other Brax tasks, which the same adapter steps, with -m slow.
+@pytest.mark.parametrize(
+    "name",
+    [
+        name
+        if name in ("hopper", "reacher", "swimmer")
+        else pytest.param(name, marks=pytest.mark.slow)
+        for name in MUJOCO_TASKS
+    ],
+)
 def test_task_resets_and_steps(name):
     env = make_env(name)
     obs_size, action_size = SHAPES[name]
@@ -154,6 +164,7 @@ def test_truncation_is_bootstrapped_on_a_continuous_task():
     assert np.all(np.abs(next_values[4]) > 1e-6)
 
 
+@pytest.mark.slow  # a minute on a CPU; every variant trains on Pendulum in the default run
 def test_every_variant_trains_on_a_mujoco_task():
     result = sweep(
         "reacher",

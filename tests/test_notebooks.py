@@ -23,7 +23,14 @@ def test_notebook_is_committed_without_outputs(path):
     )
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.stem)
+# The quickstart trains on MJX (a 30-40 s compilation on a CPU) and renders: -m slow runs it.
+RUNNABLE = [
+    pytest.param(path, marks=pytest.mark.slow) if path.stem == "quickstart" else path
+    for path in NOTEBOOKS
+]
+
+
+@pytest.mark.parametrize("path", RUNNABLE, ids=lambda path: path.stem)
 def test_notebook_runs_top_to_bottom_with_a_small_budget(path, tmp_path, monkeypatch):
     monkeypatch.setenv("FPPO_JAX_NOTEBOOK_BUDGET", "small")
     notebook = nbformat.read(path, as_version=4)

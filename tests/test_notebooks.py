@@ -23,10 +23,12 @@ def test_notebook_is_committed_without_outputs(path):
     )
 
 
-# The quickstart trains on MJX (a 30-40 s compilation on a CPU) and renders: -m slow runs it.
+# A notebook that takes most of a minute or more runs with -m slow: the quickstart trains on MJX
+# and renders, the sweeps and escape-speed ones train dozens of runs. What they call is tested
+# on its own in the default run (test_plots.py, test_sweep.py, test_trainer.py).
+SLOW = {"quickstart", "sweeps", "escape_speed"}
 RUNNABLE = [
-    pytest.param(path, marks=pytest.mark.slow) if path.stem == "quickstart" else path
-    for path in NOTEBOOKS
+    pytest.param(path, marks=pytest.mark.slow) if path.stem in SLOW else path for path in NOTEBOOKS
 ]
 
 

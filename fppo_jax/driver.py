@@ -377,8 +377,8 @@ class _Chunks:
                 policy = make_policy(self.plan.trainer, state)
                 if self.evaluate is not None:
                     self._evaluate(policy, chunk, update)
-                rows.append(chunk)
-                metrics = concatenate(rows)
+                metrics = concatenate([*rows, chunk])
+                rows = [metrics]  # joined once per chunk, not every chunk again each time
                 stop = self._after_chunk(group, state, metrics, update, policy)
                 self._report(group, update, metrics)
                 if stop:

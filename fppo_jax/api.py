@@ -16,7 +16,7 @@ from fppo_jax.config import (
     resolve_hyperparameters,
 )
 from fppo_jax.driver import Options, Plan, drive
-from fppo_jax.envs import Environment, as_environment
+from fppo_jax.envs import Environment, as_environment, choose_backend, describe_backend
 from fppo_jax.objectives import EPSILON
 from fppo_jax.policy import make_policy
 from fppo_jax.results import TrainResult
@@ -34,6 +34,7 @@ def train(
     seed: int = 0,
     total_steps: int | None = None,
     preset: str = "paper",
+    backend: str = "auto",
     **settings: Any,
 ) -> TrainResult:
     """Train one policy with `variant` on `env` and return its metrics, parameters and policy.
@@ -42,7 +43,10 @@ def train(
     :class:`~fppo_jax.envs.Environment`. For a registered task, FPPO-LP's α and FPPO-QP's k
     default to the paper's Table 2 and `total_steps` to the paper's budget. `preset` names the
     run's shape (:data:`fppo_jax.config.PRESETS`): ``"paper"`` (SPEC §2: 8 environments × 256
-    steps) or ``"massive"`` (2048 environments × 16 steps, for a GPU). `settings` are
+    steps) or ``"massive"`` (2048 environments × 16 steps, for a GPU). `backend` runs a MuJoCo
+    task on ``"mjx"`` or in ``"native"`` MuJoCo (envpool, gym's own version of the task), or
+    ``"auto"``: MJX with a GPU or TPU, native on a CPU (:data:`fppo_jax.envs.BACKENDS`).
+    `settings` are
     :class:`TrainConfig` fields (``num_envs``, ``num_steps``, ``num_minibatches``, …),
     optimisation settings (``learning_rate``, ``gamma``, ``gae_lambda``, ``entropy_coef``,
     ``value_coef``, ``max_grad_norm``) and how the run is driven
@@ -64,13 +68,14 @@ def train(
         variant, task, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **optimisation
     )
     seed = check_seed(seed)
-    environment = as_environment(env)
+    chosen, why = choose_backend(env, backend)
+    environment = as_environment(env, backend)
     name = environment_name(env, environment)
-    record = {**setting, "env": name, "seed": seed, "preset": preset}
+    record = {**setting, "env": name, "backend": chosen, "seed": seed, "preset": preset}
     record.update(dataclasses.asdict(config))
     trainer = make_train(config, environment)
     description = f"{variant} on {name}"
-    header = f"{description}: {describe(config, preset)}"
+    header = f"{description}{describe_backend(chosen, why)}: {describe(config, preset)}"
     plan = Plan("train", trainer, jax.random.key(seed), hp, record, description, header)
     outcome = drive(plan, options)
     return TrainResult(

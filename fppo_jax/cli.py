@@ -23,7 +23,7 @@ from fppo_jax.config import (
     preset_config,
 )
 from fppo_jax.distributed import initialize, is_main_process
-from fppo_jax.envs import MUJOCO_TASKS, NAMESPACES, TASKS, make_env
+from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, NAMESPACES, TASKS, make_env
 from fppo_jax.files import writable_directory
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
 from fppo_jax.results import SweepResult, TrainingDiverged
@@ -126,6 +126,17 @@ def _add_config_flags(command: argparse.ArgumentParser) -> None:
         group.add_argument(*flags, dest=field.name, type=_PARSERS[field.type], help=text)
 
 
+def _add_backend_flag(command: argparse.ArgumentParser, default: str | None) -> None:
+    command.add_argument(
+        "--backend",
+        default=default,
+        choices=list(BACKENDS),
+        help="what runs a MuJoCo task: "
+        + "; ".join(f"{name}: {text}" for name, text in BACKENDS.items())
+        + (f" (default: {default})" if default else " (default: the run's own)"),
+    )
+
+
 def _add_run_flags(command: argparse.ArgumentParser) -> None:
     """The task, the preset, the run's shape and how it is driven, shared by train and sweep."""
     command.add_argument(
@@ -133,6 +144,7 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
         default="cartpole",
         help="a registered task (fppo-jax list) or a namespaced id such as gymnax/Pendulum-v1",
     )
+    _add_backend_flag(command, "auto")
     command.add_argument(
         "--preset",
         default="paper",
@@ -338,6 +350,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a checkpoint directory or a saved policy",
     )
     evaluation.add_argument("--episodes", type=_positive_int, default=10, help="episodes each")
+    _add_backend_flag(evaluation, None)
     evaluation.add_argument("--seed", type=int, default=0, help="random seed of the episodes")
     evaluation.add_argument(
         "--render",
@@ -372,6 +385,7 @@ def _train(args: argparse.Namespace) -> int:
         delta=args.delta,
         epsilon=EPSILON if args.epsilon is None else args.epsilon,
         seed=args.seed,
+        backend=args.backend,
         **_driver_options(args),
         **_config_overrides(args),
         **optimisation,
@@ -404,6 +418,7 @@ def _sweep(args: argparse.Namespace) -> int:
         seeds=args.seeds,
         chunk=args.chunk,
         data_parallel=args.data_parallel,
+        backend=args.backend,
         **_driver_options(args),
         **_config_overrides(args),
     )
@@ -440,7 +455,7 @@ def _eval(args: argparse.Namespace) -> int:
             f"{config['env']} is a classic (gymnax) task, which MuJoCo cannot render; --render "
             f"takes the policy of a MuJoCo task ({', '.join(MUJOCO_TASKS)})"
         )
-    env = make_env(config["env"])
+    env = make_env(config["env"], args.backend or config.get("backend", "auto"))
     steps = record["update"] * config["num_envs"] * config["num_steps"]
     source = "saved policy" if record["kind"] == "policy" else "checkpoint"
     print(
@@ -477,11 +492,15 @@ def _list() -> int:
     for task in TASKS.values():
         print(
             f"  {task.name:<12} {task.description}; {task.total_steps:,} steps, "
-            f"fppo-lp alpha {TABLE2[task.name]['alpha']}, fppo-qp k {TABLE2[task.name]['k']}"
+            f"fppo-lp alpha {TABLE2[task.name]['alpha']}, fppo-qp k {TABLE2[task.name]['k']}; "
+            f"backends: {', '.join(task.backends)}" + (f" ({task.native})" if task.native else "")
         )
     print("namespaces (any id the library has, e.g. --env gymnax/Pendulum-v1):")
     for name, text in NAMESPACES.items():
         print(f"  {name + '/':<12} {text}")
+    print("backends (--backend):")
+    for name, text in BACKENDS.items():
+        print(f"  {name:<10} {text}")
     print("presets:")
     for name in PRESETS:
         config = preset_config(name, total_steps=10**9)

@@ -31,6 +31,7 @@ from fppo_jax.checkpoint import (
 )
 from fppo_jax.config import Hyperparameters, positive_int
 from fppo_jax.distributed import fetch, is_main_process, make_mesh
+from fppo_jax.envs import resets_itself
 from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
 from fppo_jax.memory import runs_per_call
@@ -85,8 +86,14 @@ class Options:
     no checkpoint yet). `wandb_project` logs the same to Weights & Biases
     (``pip install 'fppo-jax[wandb]'``).
 
-    `devices`: how many of the devices JAX sees (default: all) share the runs (see
-    :mod:`fppo_jax.distributed`). In a multi-process run only process 0 reports and writes.
+    Environments whose state lives outside JAX (native MuJoCo) cannot be checkpointed: a
+    resumed run goes on from the restored policy, optimiser and normalisers with every
+    environment starting a new episode, so it learns on but is not bitwise the run that never
+    stopped (it says so on resuming).
+
+    `devices`: how many of the devices JAX sees (default: all; one for native MuJoCo, which
+    steps on the host) share the runs (see :mod:`fppo_jax.distributed`). In a multi-process run
+    only process 0 reports and writes.
 
     `callback(snapshot)` is called between compiled chunks with a :class:`Snapshot`; returning
     ``False`` stops training there (checkpointed, if checkpoints are on), and the result holds
@@ -188,7 +195,15 @@ class Outcome:
 def drive(plan: Plan, options: Options) -> Outcome:
     """Train `plan` as `options` say; see the module's docstring."""
     trainer, config = plan.trainer, plan.trainer.config
-    mesh = make_mesh(options.devices, config.num_envs, plan.data_parallel)
+    devices = options.devices
+    if resets_itself(trainer.env):
+        if devices not in (None, 1) or jax.process_count() > 1:
+            raise ValueError(
+                "native MuJoCo steps its environments on this host, for one device: "
+                "devices must be 1, in a single process"
+            )
+        devices = 1
+    mesh = make_mesh(devices, config.num_envs, plan.data_parallel)
     if options.checkpoint_dir is not None and jax.process_count() > 1:
         raise ValueError("checkpoints are written by single-process runs only")
     checkpoints, record = open_checkpoints(
@@ -357,7 +372,7 @@ class _Chunks:
                 self.finished.append(point.finished)
                 self.diverged = point.finished_diverged
             first_group, resumed_from = point.group, point.update
-            start = (self.restored.state, point.current)
+            start = (self._restart_envs(self.restored.state, resumed_from), point.current)
             self.saved.append(resumed_from)
         self.began = time.perf_counter()
         self.steps_before = self._steps(first_group, resumed_from)
@@ -399,6 +414,20 @@ class _Chunks:
         if self.checkpoints:
             self.checkpoints.wait()
         return outcome
+
+    def _restart_envs(self, state: TrainState, update: int) -> TrainState:
+        """A restored state, with new environments if theirs lived outside JAX."""
+        trainer = self.plan.trainer
+        if not resets_itself(trainer.env):
+            return state
+        print(
+            f"resuming at update {update} in fresh environments: native MuJoCo's state is not "
+            "checkpointed, so each environment starts a new episode here (not bitwise the run "
+            "that never stopped)",
+            file=sys.stderr,
+        )
+        restart = jax.vmap(trainer.restart_envs) if self.plan.batched else trainer.restart_envs
+        return jax.jit(restart)(state)
 
     def _outcome(self, state: TrainState, resumed_from: int, stopped_at: int | None) -> Outcome:
         """The runs finished so far, ending with the group whose final state is `state`."""

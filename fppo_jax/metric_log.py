@@ -31,14 +31,24 @@ OUTPUTS = ("config.json", "metrics.csv", "curves.csv", "sweep.json", "summary.tx
 def environment_record() -> dict[str, Any]:
     """Versions and devices, for the record of a run."""
     versions = {}
-    for package in ("fppo-jax", "jax", "jaxlib", "flax", "optax", "brax", "mujoco", "gymnax"):
+    for package in (
+        "fppo-jax",
+        "jax",
+        "jaxlib",
+        "flax",
+        "optax",
+        "brax",
+        "mujoco",
+        "gymnax",
+        "envpool",
+    ):
         try:
             versions[package] = metadata.version(package)
         except metadata.PackageNotFoundError:
             continue
     return {
         "versions": {"python": platform.python_version(), **versions},
-        "backend": jax.default_backend(),
+        "platform": jax.default_backend(),
         "devices": [str(d.device_kind) for d in jax.devices()],
     }
 

@@ -90,6 +90,8 @@ class TrainResult:
         trained = steps - self.resumed_from * samples
         speed = f"{trained / self.train_seconds:,.0f} env steps/s" if trained else "nothing left"
         resumed = f", resumed at update {self.resumed_from}" if self.resumed_from else ""
+        if resumed and c.get("backend") == "native":
+            resumed += " in fresh environments"
         if self.stopped_at is not None:
             resumed += f", stopped by the callback at update {self.stopped_at}"
         lines = [

@@ -30,7 +30,7 @@ from fppo_jax.config import (
     table2,
 )
 from fppo_jax.driver import Options, Outcome, Plan, drive
-from fppo_jax.envs import Environment, as_environment
+from fppo_jax.envs import Environment, as_environment, choose_backend, describe_backend
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import VARIANTS, real
 from fppo_jax.results import SweepResult, labels
@@ -84,6 +84,7 @@ def sweep(
     chunk: int | None = None,
     total_steps: int | None = None,
     preset: str = "paper",
+    backend: str = "auto",
     data_parallel: int | None = None,
     **settings: Any,
 ) -> SweepResult:
@@ -92,7 +93,7 @@ def sweep(
     `seeds` is a count (0 … n−1) or a list; run (setting, seed) starts from
     ``jax.random.key(seed)``, as ``train(..., seed=seed)`` does, and matches that run to float
     tolerance over its first updates, then drifts from it (vmapped kernels round differently).
-    `preset` and `settings` are as in :func:`~fppo_jax.train`: a preset's
+    `preset`, `backend` and `settings` are as in :func:`~fppo_jax.train`: a preset's
     :class:`~fppo_jax.config.TrainConfig`, its fields, fixed values of sweepable
     hyperparameters, and how the runs are driven (:class:`~fppo_jax.driver.Options`). `chunk`
     is the number of runs per compiled call (default: as many as fit in half the free memory).
@@ -127,10 +128,11 @@ def sweep(
     if data_parallel is not None:
         positive_int("data_parallel", data_parallel)
 
-    environment = as_environment(env)
+    chosen, why = choose_backend(env, backend)
+    environment = as_environment(env, backend)
     name = environment_name(env, environment)
     grid_values = {key: _as_list(key, v) for key, v in {**grid, **fixed}.items()}
-    record = {"env": name, "grid": grid_values, "seeds": seeds, "preset": preset}
+    record = {"env": name, "backend": chosen, "grid": grid_values, "seeds": seeds, "preset": preset}
     record.update(dataclasses.asdict(config))
 
     def result_of(outcome: Outcome) -> SweepResult:
@@ -158,7 +160,8 @@ def sweep(
         stacked,
         record,
         f"sweep on {name}",
-        f"sweep on {name}: {len(settings)} settings × {len(seeds)} seeds = {len(runs)} runs; "
+        f"sweep on {name}{describe_backend(chosen, why)}: {len(settings)} settings × "
+        f"{len(seeds)} seeds = {len(runs)} runs; "
         f"each {describe(config, preset)}",
         runs_per_call=chunk,
         data_parallel=1 if data_parallel is None else data_parallel,

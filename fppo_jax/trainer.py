@@ -19,7 +19,14 @@ import optax
 
 from fppo_jax.config import Hyperparameters, TrainConfig
 from fppo_jax.distributions import Distribution
-from fppo_jax.envs import Box, Environment, check_environment, draw_resets, where_done
+from fppo_jax.envs import (
+    Box,
+    Environment,
+    check_environment,
+    draw_resets,
+    resets_itself,
+    where_done,
+)
 from fppo_jax.gae import gae
 from fppo_jax.losses import Batch, LossInfo, ppo_loss
 from fppo_jax.networks import Networks, make_networks
@@ -164,20 +171,32 @@ class Trainer:
         config, env = self.config, self.env
         key, net_key, env_key = jax.random.split(key, 3)
         params = self.networks.init(net_key, env.observation_size)
-        env_state, obs = jax.vmap(env.reset)(jax.random.split(env_key, config.num_envs))
-        zeros = jnp.zeros(config.num_envs)
         return TrainState(
             params=params,
             opt_state=make_optimizer(hp, config).init(params),
             obs_stats=RunningStats.create((env.observation_size,)),
             return_stats=RunningStats.create(),
-            envs=Envs(env_state, obs, episode_return=zeros, discounted_return=zeros),
+            envs=self._fresh_envs(env_key),
             recent_returns=jnp.zeros(RETURN_WINDOW),
             num_episodes=jnp.asarray(0, jnp.int32),
             update=jnp.asarray(0, jnp.int32),
             nonfinite_update=jnp.asarray(-1, jnp.int32),
             key=key,
         )
+
+    def restart_envs(self, state: TrainState) -> TrainState:
+        """`state` with every environment starting a new episode, drawn from the run's key and
+        update: for a restored run whose environments' state lived outside JAX (see
+        :func:`~fppo_jax.envs.core.resets_itself`), which no checkpoint holds. Episodes in
+        progress are dropped; everything learnt, the normalisers included, is kept."""
+        key = jax.random.fold_in(state.key, state.update)
+        return dataclasses.replace(state, envs=self._fresh_envs(key))
+
+    def _fresh_envs(self, key: jax.Array) -> Envs:
+        num_envs = self.config.num_envs
+        env_state, obs = jax.vmap(self.env.reset)(jax.random.split(key, num_envs))
+        zeros = jnp.zeros(num_envs)
+        return Envs(env_state, obs, episode_return=zeros, discounted_return=zeros)
 
     def run(
         self, state: TrainState, hp: Hyperparameters, num_updates: int
@@ -307,8 +326,10 @@ class Trainer:
         shape = (config.num_steps, config.num_envs)
         action_noise = networks.action_noise(noise_key, shape)
         step_keys = jax.random.split(step_key, shape)
+        own_resets = resets_itself(env)
         pool = config.resets_per_rollout or config.num_steps
-        reset_states, reset_obs = draw_resets(env, reset_key, (pool, config.num_envs))
+        if not own_resets:
+            reset_states, reset_obs = draw_resets(env, reset_key, (pool, config.num_envs))
         env_index = jnp.arange(config.num_envs)
         step_env = jax.vmap(env.step)
 
@@ -317,13 +338,6 @@ class Trainer:
         ) -> tuple[tuple[Envs, jax.Array], Transition]:
             envs, episodes_ended = carry
             noise, keys, t = inputs
-            # Without a pool, an environment ending at step t takes row t, so every reset is
-            # fresh; with one, its episodes take the pool's rows in turn.
-            if config.resets_per_rollout is None:
-                take = lambda x: x[t]  # noqa: E731
-            else:
-                take = lambda x: x[episodes_ended % pool, env_index]  # noqa: E731
-            reset_state, first_obs = jax.tree.map(take, (reset_states, reset_obs))
             seen = self.network_input(state.obs_stats, envs.obs)
             dist = networks.distribution(state.params, seen)
             action = dist.sample_from(noise)
@@ -350,9 +364,21 @@ class Trainer:
                 discounted_return=discounted_return,
                 episode_return=episode_return,
             )
+            if own_resets:
+                next_state, next_obs = env_state, out.next_obs
+            else:
+                # Without a pool, an environment ending at step t takes row t, so every reset
+                # is fresh; with one, its episodes take the pool's rows in turn.
+                if config.resets_per_rollout is None:
+                    take = lambda x: x[t]  # noqa: E731
+                else:
+                    take = lambda x: x[episodes_ended % pool, env_index]  # noqa: E731
+                reset_state, first_obs = jax.tree.map(take, (reset_states, reset_obs))
+                next_state = where_done(done, reset_state, env_state)
+                next_obs = where_done(done, first_obs, out.obs)
             envs = Envs(
-                state=where_done(done, reset_state, env_state),
-                obs=where_done(done, first_obs, out.obs),
+                state=next_state,
+                obs=next_obs,
                 episode_return=jnp.where(done, 0.0, episode_return),
                 discounted_return=jnp.where(done, 0.0, discounted_return),
             )

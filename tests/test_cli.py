@@ -128,7 +128,9 @@ def test_console_entry_point_lists_tasks_and_variants():
         [sys.executable, "-m", "fppo_jax", "list"], capture_output=True, text=True, check=True
     )
     assert "cartpole" in out.stdout and "tr-ppo-rb" in out.stdout and "alpha 1.3" in out.stdout
-    assert "swimmer      Swimmer on MJX" in out.stdout and "fppo-qp k 0.1" in out.stdout
+    assert "swimmer      Swimmer: 1000-step episodes" in out.stdout
+    assert "fppo-qp k 0.1" in out.stdout and "backends: mjx, native (Hopper-v3)" in out.stdout
+    assert "auto       MJX where" in out.stdout and "native/" in out.stdout
     assert "massive    32,768 samples (2048 envs × 16 steps)" in out.stdout
     assert "gymnax/" in out.stdout and "playground/" in out.stdout
     assert "Failed to import" not in out.stdout + out.stderr

@@ -65,7 +65,7 @@ def test_config_json_is_written_before_training_with_versions_and_devices(tmp_pa
     train(**RUN, log_dir=tmp_path, progress=progress)
     assert seen["variant"] == "fppo-lp" and seen["alpha"] == 1.3 and seen["num_envs"] == 4
     assert seen["versions"]["jax"] == __import__("jax").__version__
-    assert seen["backend"] == "cpu" and seen["devices"]
+    assert seen["platform"] == "cpu" and seen["devices"]
 
 
 def test_a_sweep_logs_every_run_and_its_evaluations(tmp_path):

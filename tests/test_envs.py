@@ -96,7 +96,7 @@ REGISTERED = "cartpole, acrobot, mountaincar, hopper, walker2d, halfcheetah, ant
 def test_an_unknown_name_lists_the_registered_tasks_and_the_namespaces(name):
     message = (
         f"unknown environment {name!r}; registered: {REGISTERED}; "
-        "namespaced: gymnax/<id>, brax/<id>, playground/<id>"
+        "namespaced: gymnax/<id>, brax/<id>, playground/<id>, native/<id>"
     )
     with pytest.raises(ValueError) as error:
         lookup(name)
@@ -110,7 +110,7 @@ def test_lookup_gives_registered_and_namespaced_tasks():
     task = lookup("brax/humanoid")
     assert task.name == "brax/humanoid" and task.total_steps == 100_000
     assert task.description == "humanoid from the brax namespace"
-    assert set(NAMESPACES) == {"gymnax", "brax", "playground"}
+    assert set(NAMESPACES) == {"gymnax", "brax", "playground", "native"}
     with pytest.raises(TypeError, match="expected a registered environment name"):
         as_environment(42)
 

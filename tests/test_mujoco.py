@@ -39,7 +39,7 @@ SHAPES = {  # observation size, action size
     ],
 )
 def test_task_resets_and_steps(name):
-    env = make_env(name)
+    env = make_env(name, "mjx")
     obs_size, action_size = SHAPES[name]
     assert env.observation_size == obs_size
     assert env.action_space == Box((-1.0,) * action_size, (1.0,) * action_size)
@@ -83,8 +83,8 @@ def test_any_brax_environment_by_name():
 
 
 def test_registered_tasks_have_gym_limits_budgets_and_table_2_settings():
-    assert make_env("reacher").episode_length == 50
-    assert make_env("swimmer").episode_length == 1000
+    assert make_env("reacher", "mjx").episode_length == 50
+    assert make_env("swimmer", "mjx").episode_length == 1000
     assert {name: (TABLE2[name]["alpha"], TABLE2[name]["k"]) for name in MUJOCO_TASKS} == {
         "hopper": (1.3, 0.2),
         "walker2d": (1.3, 0.1),
@@ -169,6 +169,7 @@ def test_every_variant_trains_on_a_mujoco_task():
     result = sweep(
         "reacher",
         {"variant": list(VARIANTS)},
+        backend="mjx",
         seeds=1,
         total_steps=256,
         num_envs=4,
@@ -222,7 +223,14 @@ def test_frames_are_saved_as_an_mp4_played_at_the_environments_speed(tmp_path):
 @pytest.mark.slow
 def test_eval_renders_an_episode_of_a_saved_policy_as_mp4(tmp_path, capsys):
     result = fppo_jax.train(
-        "reacher", "ppo", total_steps=64, num_envs=2, num_steps=32, num_minibatches=1, num_epochs=1
+        "reacher",
+        "ppo",
+        backend="mjx",
+        total_steps=64,
+        num_envs=2,
+        num_steps=32,
+        num_minibatches=1,
+        num_epochs=1,
     )
     result.save(tmp_path / "policy")
     video = tmp_path / "episode.mp4"

@@ -3,6 +3,7 @@
 An environment is a pair of pure functions on one (unbatched) environment; the trainer vmaps
 them over its parallel environments and resets the environments whose episode ended (it draws
 the reset states for a whole rollout in one vectorised batch, outside the sequential loop).
+An environment whose state lives outside JAX resets itself instead (:func:`resets_itself`).
 """
 
 from __future__ import annotations
@@ -34,12 +35,17 @@ class Box:
 
 
 class Step(NamedTuple):
-    """The outcome of one step: `obs` is the observation it produced (before any reset)."""
+    """The outcome of one step: `obs` is the observation it produced (before any reset).
+
+    `next_obs` is given by an environment that resets itself, and only by one: the observation
+    to act on next, the new episode's first where this step ended one and `obs` elsewhere.
+    """
 
     obs: jax.Array
     reward: jax.Array
     terminated: jax.Array
     truncated: jax.Array
+    next_obs: jax.Array | None = None
 
 
 @runtime_checkable
@@ -56,6 +62,13 @@ class Environment(Protocol):
     def step(self, key: jax.Array, state: Any, action: jax.Array) -> tuple[Any, Step]:
         """(next state, the step's outcome); no reset: the trainer resets ended episodes."""
         ...
+
+
+def resets_itself(env: Environment) -> bool:
+    """Whether `env` starts a new episode within the `step` that ends one (its next state is
+    already the new episode's, and its step gives `next_obs`), as an environment must whose
+    state lives outside JAX: then the trainer draws no reset states for it."""
+    return bool(getattr(env, "resets_itself", False))
 
 
 class Timed(NamedTuple):
@@ -102,8 +115,9 @@ def check_environment(env: Environment) -> None:
     """Raise ``TypeError`` unless `env` keeps the contract the trainer relies on, checked on
     shapes alone (``jax.eval_shape``: nothing runs): `reset` gives a ``(observation_size,)``
     float observation, and `step` a state of the same structure and a :class:`Step` whose
-    observation has that shape too, with a scalar reward and boolean scalars `terminated` and
-    `truncated`. The error names the field, what was expected and what was found."""
+    observation has that shape too, with a scalar reward, boolean scalars `terminated` and
+    `truncated`, and `next_obs` of that shape if and only if the environment resets itself
+    (:func:`resets_itself`). The error names the field, what was expected and what was found."""
     size = env.observation_size
     if isinstance(size, bool) or not isinstance(size, int) or size < 1:
         raise TypeError(f"observation_size must be a positive integer, got {size!r}")
@@ -132,6 +146,10 @@ def check_environment(env: Environment) -> None:
     _expect("step's reward", step.reward, (), jnp.number)
     _expect("step's terminated", step.terminated, (), jnp.bool_)
     _expect("step's truncated", step.truncated, (), jnp.bool_)
+    if resets_itself(env):
+        _expect("step's next_obs", step.next_obs, (size,), jnp.floating)
+    elif step.next_obs is not None:
+        raise TypeError("step's next_obs is for environments that reset themselves only")
 
 
 def _expect(name: str, value: Any, shape: tuple[int, ...], kind: Any) -> None:

@@ -28,6 +28,7 @@ class GymnaxEnvironment:
 
     env: Any  # gymnax.environments.environment.Environment
     params: Any
+    backend = "gymnax"
 
     @property
     def observation_size(self) -> int:

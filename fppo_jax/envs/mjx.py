@@ -72,6 +72,11 @@ class BraxEnvironment:
     env: Any
     episode_length: int = 1000
 
+    @property
+    def backend(self) -> str:
+        """What steps it, as records name it: "mjx", or Brax's own pipeline ("generalized")."""
+        return str(getattr(self.env, "backend", "brax"))
+
     @functools.cached_property
     def observation_size(self) -> int:
         # Brax's own `observation_size` runs a reset op by op: 20 s for an MJX model on a CPU.
@@ -138,6 +143,7 @@ class Swimmer:
     mj_model: mujoco.MjModel = dataclasses.field(default_factory=swimmer_model)
     episode_length: int = 1000
     frame_skip: int = 4
+    backend = "mjx"
     ctrl_cost_weight: float = 1e-4
     reset_noise_scale: float = 0.1
 

@@ -41,6 +41,7 @@ class PlaygroundEnvironment:
     env: Any  # mujoco_playground.MjxEnv
     episode_length: int = 1000
     obs_key: str = "state"
+    backend = "mjx"
 
     @functools.cached_property
     def observation_size(self) -> int:

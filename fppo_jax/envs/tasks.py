@@ -1,6 +1,7 @@
 """The task registry: named tasks with the paper's settings, names by namespace
-(``gymnax/<id>``, ``brax/<name>``, ``playground/<Name>``), and what turns a name or a foreign
-environment into an :class:`~fppo_jax.envs.core.Environment`.
+(``gymnax/<id>``, ``brax/<name>``, ``playground/<Name>``, ``native/<id>``), the backends that
+run them, and what turns a name or a foreign environment into an
+:class:`~fppo_jax.envs.core.Environment`.
 
 Adapters are imported inside the factories, so that a task pays only for its own library.
 """
@@ -10,6 +11,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from typing import Any
+
+import jax
 
 from fppo_jax.envs.core import Environment
 
@@ -50,15 +53,31 @@ def _playground(name: str) -> Callable[[], Environment]:
     return make
 
 
+def _native(task_id: str) -> Callable[[], Environment]:
+    def make() -> Environment:
+        from fppo_jax.envs.native import NativeEnvironment
+
+        return NativeEnvironment(task_id)
+
+    return make
+
+
 @dataclasses.dataclass(frozen=True)
 class Task:
     """A named task and its default step budget: the paper's, for a registered task (SPEC §1;
-    SPEC §2)."""
+    SPEC §2). `backend` names what runs `make`'s environment; `native`, if given, is the
+    envpool id of the same task in native MuJoCo (gym's own version of it)."""
 
     name: str
     make: Callable[[], Environment]
     total_steps: int
     description: str
+    backend: str
+    native: str | None = None
+
+    @property
+    def backends(self) -> tuple[str, ...]:
+        return (self.backend, "native") if self.native else (self.backend,)
 
 
 TASKS: dict[str, Task] = {
@@ -69,33 +88,38 @@ TASKS: dict[str, Task] = {
             _gymnax("CartPole-v1", 200),
             100_000,
             "CartPole-v0: 200-step episodes, discrete",
+            "gymnax",
         ),
         Task(
             "acrobot",
             _gymnax("Acrobot-v1", 500),
             100_000,
             "Acrobot-v1: 500-step episodes, discrete",
+            "gymnax",
         ),
         Task(
             "mountaincar",
             _gymnax("MountainCar-v0", 200),
             100_000,
             "MountainCar-v0: 200-step episodes, sparse reward, discrete",
+            "gymnax",
         ),
         *(
             Task(
                 name,
                 _swimmer(limit) if name == "swimmer" else _brax(name, limit),
                 1_000_000,
-                f"{title} on MJX: {text}",
+                f"{native.split('-')[0]}: {limit}-step episodes, {actions} actions",
+                "mjx",
+                native,
             )
-            for name, title, limit, text in (
-                ("hopper", "Hopper", 1000, "1000-step episodes, 3 actions"),
-                ("walker2d", "Walker2d", 1000, "1000-step episodes, 6 actions"),
-                ("halfcheetah", "HalfCheetah", 1000, "1000-step episodes, 6 actions"),
-                ("ant", "Ant", 1000, "1000-step episodes, 8 actions"),
-                ("reacher", "Reacher", 50, "50-step episodes, 2 actions"),
-                ("swimmer", "Swimmer", 1000, "1000-step episodes, 2 actions"),
+            for name, native, limit, actions in (
+                ("hopper", "Hopper-v3", 1000, 3),
+                ("walker2d", "Walker2d-v3", 1000, 6),
+                ("halfcheetah", "HalfCheetah-v3", 1000, 6),
+                ("ant", "Ant-v3", 1000, 8),
+                ("reacher", "Reacher-v2", 50, 2),
+                ("swimmer", "Swimmer-v3", 1000, 2),
             )
         ),
     )
@@ -109,13 +133,16 @@ NAMESPACES: dict[str, str] = {
     "brax": "any Brax environment on MJX, 1000-step episodes (brax/reacher)",
     "playground": "a MuJoCo Playground environment on MJX, its own episode limit "
     "(playground/CartpoleBalance)",
+    "native": "any envpool MuJoCo task in native MuJoCo, its own episode limit (native/Hopper-v4)",
 }
+_NAMESPACE_BACKENDS = {"gymnax": "gymnax", "brax": "mjx", "playground": "mjx", "native": "native"}
 _NAMESPACED_FORMS = ", ".join(f"{namespace}/<id>" for namespace in NAMESPACES)
 
 _FACTORIES: dict[str, Callable[[str], Callable[[], Environment]]] = {
     "gymnax": _gymnax,
     "brax": _brax,
     "playground": _playground,
+    "native": _native,
 }
 
 
@@ -129,23 +156,82 @@ def lookup(name: str) -> Task:
     namespace, _, env_id = name.partition("/")
     if namespace in NAMESPACES and env_id:
         description = f"{env_id} from the {namespace} namespace"
-        return Task(name, _FACTORIES[namespace](env_id), 100_000, description)
+        backend = _NAMESPACE_BACKENDS[namespace]
+        return Task(name, _FACTORIES[namespace](env_id), 100_000, description, backend)
     raise ValueError(
         f"unknown environment {name!r}; registered: {', '.join(TASKS)}; "
         f"namespaced: {_NAMESPACED_FORMS}"
     )
 
 
-def make_env(name: str) -> Environment:
-    """The registered or namespaced task `name` (see :func:`lookup`)."""
-    return lookup(name).make()
+BACKENDS: dict[str, str] = {
+    "auto": "MJX where JAX has a GPU or TPU, native MuJoCo on a CPU (MJX if envpool is missing)",
+    "mjx": "MuJoCo on MJX, in JAX: the whole program on the accelerator",
+    "native": "gym's own MuJoCo tasks in native MuJoCo on the host (envpool), for CPUs",
+}
+NATIVE_TASKS: tuple[str, ...] = tuple(name for name, task in TASKS.items() if task.native)
 
 
-def as_environment(env: str | Environment | Any) -> Environment:
-    """A registered or namespaced name, a gymnax environment (default parameters), a Brax
-    ``Env`` (1000-step episodes) or an :class:`Environment`."""
+def choose_backend(env: str | Any, backend: str = "auto") -> tuple[str, str]:
+    """The backend that runs `env` when `backend` is asked for, and why, if "auto" chose it;
+    checked without building anything. A task's own backend (as a run records it, "gymnax"
+    say) is taken as it is, and a custom environment object runs as it is."""
+    if isinstance(env, str) and backend == lookup(env).backend:
+        return backend, ""
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; valid backends: {', '.join(BACKENDS)}")
+    if not isinstance(env, str):
+        if backend != "auto":
+            raise ValueError("backend applies to tasks given by name; this environment runs as is")
+        return str(getattr(env, "backend", "custom")), ""
+    task = lookup(env)
+    if backend == "auto":
+        if not task.native:
+            return task.backend, ""
+        from fppo_jax.envs.native import INSTALL, envpool_installed
+
+        if jax.default_backend() != "cpu":
+            return task.backend, f"auto: JAX runs on a {jax.default_backend().upper()}"
+        if not envpool_installed():
+            return task.backend, f"auto: native MuJoCo needs envpool, {INSTALL}"
+        return "native", "auto: JAX runs on the CPU"
+    if backend == "native" and not task.native and task.backend != "native":
+        raise ValueError(
+            f"{env} has no native version; tasks with one: {', '.join(NATIVE_TASKS)} "
+            "(and native/<envpool id>)"
+        )
+    if backend == "mjx" and task.backend != "mjx":
+        raise ValueError(f"{env} runs on {task.backend}, not MJX; backend applies to MuJoCo tasks")
+    if backend == "native":
+        from fppo_jax.envs.native import require_envpool
+
+        require_envpool()
+    return backend, ""
+
+
+def describe_backend(backend: str, why: str) -> str:
+    """How a summary names the backend a MuJoCo run ran on ("" for other tasks)."""
+    if backend not in ("mjx", "native"):
+        return ""
+    return f" ({'native MuJoCo' if backend == 'native' else 'MJX'}{'; ' + why if why else ''})"
+
+
+def make_env(name: str, backend: str = "auto") -> Environment:
+    """The registered or namespaced task `name` (see :func:`lookup`) on `backend` (see
+    :data:`BACKENDS` and :func:`choose_backend`)."""
+    task = lookup(name)
+    chosen, _ = choose_backend(name, backend)
+    if chosen == "native" and task.native:
+        return _native(task.native)()
+    return task.make()
+
+
+def as_environment(env: str | Environment | Any, backend: str = "auto") -> Environment:
+    """A registered or namespaced name (on `backend`), a gymnax environment (default
+    parameters), a Brax ``Env`` (1000-step episodes) or an :class:`Environment`."""
     if isinstance(env, str):
-        return make_env(env)
+        return make_env(env, backend)
+    choose_backend(env, backend)
     from fppo_jax.envs.gymnax import GymnaxEnvironment, is_gymnax_env
 
     if is_gymnax_env(env):

@@ -1,0 +1,220 @@
+"""gym's own MuJoCo tasks in native MuJoCo (envpool's C++ ports), stepped from inside the
+compiled training program.
+
+The physics runs on the host: each environment of a run is a slot of an envpool pool, and
+its JAX state is only the pool's number and the slot's. ``reset`` and ``step`` are
+``jax.pure_callback``s that vmap as one call over every environment of every run
+(``vmap_method="broadcast_all"``), so a sweep steps one pool of runs × environments per step of
+its rollout, with no Python loop per environment.
+
+envpool resets an ended environment on its next ``step`` and reports that call's output as if it
+were a transition. Here the step that ends an episode resets the environment at once (a reset of
+just those slots), and returns both the episode's final observation, which the trainer
+bootstraps from at truncation, and the new episode's first, which it acts on next: the
+environment resets itself (:attr:`resets_itself`), so the trainer draws no reset states for it.
+
+Each environment is seeded from its own key, so a run's environments are the same whether it
+trains alone or in a sweep. The state behind the slots lives outside JAX and no checkpoint
+holds it: a restored run starts new episodes in fresh environments (see
+:meth:`~fppo_jax.trainer.Trainer.restart_envs`).
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import importlib.util
+import os
+import threading
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fppo_jax.envs.core import Box, Step
+
+INSTALL = "pip install 'fppo-jax[native]' (envpool, Linux only)"
+MAX_POOLS = 16  # pools kept alive at once: training's, and a few evaluations' beside it
+
+
+def envpool_installed() -> bool:
+    return importlib.util.find_spec("envpool") is not None
+
+
+def require_envpool() -> None:
+    if not envpool_installed():
+        raise ValueError(f"the native backend steps MuJoCo through envpool: {INSTALL}")
+
+
+class NativeState(NamedTuple):
+    """Which envpool pool and which of its slots an environment is, and the steps it has taken:
+    a pure callback given the same arguments twice may be run once, so every step's must
+    differ."""
+
+    pool: jax.Array
+    slot: jax.Array
+    steps: jax.Array
+
+
+class _Pools:
+    """The live pools by number, the newest :data:`MAX_POOLS` kept (a pool is made per reset
+    of a batch of environments: one per run or sweep group, and one per evaluation)."""
+
+    def __init__(self) -> None:
+        self.pools: collections.OrderedDict[int, Any] = collections.OrderedDict()
+        self.count = 0
+        self.lock = threading.Lock()
+
+    def add(self, pool: Any) -> int:
+        with self.lock:
+            self.count += 1
+            self.pools[self.count] = pool
+            while len(self.pools) > MAX_POOLS:
+                self.pools.popitem(last=False)
+            return self.count
+
+    def __getitem__(self, number: int) -> Any:
+        with self.lock:
+            if number not in self.pools:
+                raise RuntimeError(
+                    f"native environment pool {number} is closed (only the newest {MAX_POOLS} "
+                    "are kept, and none outlives its process): reset the environments"
+                )
+            return self.pools[number]
+
+
+_POOLS = _Pools()
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class NativeEnvironment:
+    """The envpool task `task_id` (e.g. ``"Hopper-v3"``) as an
+    :class:`~fppo_jax.envs.core.Environment` that resets itself; its episode limit is reported
+    as truncation, separately from termination."""
+
+    task_id: str
+    backend = "native"
+    resets_itself = True
+
+    def __post_init__(self) -> None:
+        require_envpool()
+        import envpool
+
+        if self.task_id not in envpool.list_all_envs():
+            raise ValueError(f"envpool has no task {self.task_id!r}")
+        spec = envpool.make_spec(self.task_id)
+        (size,) = spec.observation_space.shape
+        space = spec.action_space
+        object.__setattr__(self, "observation_size", int(size))
+        object.__setattr__(
+            self,
+            "action_space",
+            Box(tuple(map(float, space.low)), tuple(map(float, space.high))),
+        )
+        object.__setattr__(self, "max_episode_steps", int(spec.config.max_episode_steps))
+
+    def reset(self, key: jax.Array) -> tuple[NativeState, jax.Array]:
+        shapes = (
+            NativeState(_int32(()), _int32(()), _int32(())),
+            jax.ShapeDtypeStruct((self.observation_size,), jnp.float32),
+        )
+        return jax.pure_callback(
+            self._host_reset, shapes, jax.random.key_data(key), vmap_method="broadcast_all"
+        )
+
+    def step(
+        self, key: jax.Array, state: NativeState, action: jax.Array
+    ) -> tuple[NativeState, Step]:
+        obs = jax.ShapeDtypeStruct((self.observation_size,), jnp.float32)
+        flag = jax.ShapeDtypeStruct((), jnp.bool_)
+        shapes = Step(obs, jax.ShapeDtypeStruct((), jnp.float32), flag, flag, obs)
+        out = jax.pure_callback(
+            self._host_step,
+            shapes,
+            state.pool,
+            state.slot,
+            state.steps,
+            action,
+            vmap_method="broadcast_all",
+        )
+        return state._replace(steps=state.steps + 1), out
+
+    def _host_reset(self, key_data: np.ndarray) -> tuple[NativeState, np.ndarray]:
+        import envpool
+
+        key_data = np.asarray(key_data)
+        batch = key_data.shape[:-1]
+        seeds = seeds_of(key_data)
+        count = len(seeds)
+        pool = envpool.make(
+            self.task_id,
+            env_type="gymnasium",
+            num_envs=count,
+            env_seed=seeds,
+            num_threads=min(count, os.cpu_count() or 1),
+        )
+        obs, info = pool.reset()
+        number = _POOLS.add(pool)
+        slots = np.arange(count, dtype=np.int32)
+        first = np.empty_like(obs)
+        first[info["env_id"]] = obs
+        return (
+            NativeState(
+                np.full(batch, number, np.int32), slots.reshape(batch), np.zeros(batch, np.int32)
+            ),
+            first.reshape(*batch, -1).astype(np.float32),
+        )
+
+    def _host_step(
+        self, pool: np.ndarray, slot: np.ndarray, steps: np.ndarray, action: np.ndarray
+    ) -> Step:
+        batch = np.shape(pool)
+        pools, slots = np.asarray(pool).reshape(-1), np.asarray(slot).reshape(-1)
+        actions = np.asarray(action, np.float64).reshape(len(slots), -1)
+        out = Step(
+            obs=np.empty((len(slots), self.observation_size), np.float32),
+            reward=np.empty(len(slots), np.float32),
+            terminated=np.empty(len(slots), bool),
+            truncated=np.empty(len(slots), bool),
+            next_obs=np.empty((len(slots), self.observation_size), np.float32),
+        )
+        for number in np.unique(pools):
+            rows = np.flatnonzero(pools == number)
+            _step_pool(_POOLS[int(number)], slots[rows], actions[rows], rows, out)
+        return Step(*(x.reshape(*batch, *x.shape[1:]) for x in out))
+
+
+def seeds_of(key_data: np.ndarray) -> list[int]:
+    """One envpool seed (a 31-bit C int) per key of `key_data` [..., words], from its words."""
+    words = np.asarray(key_data).reshape(-1, key_data.shape[-1]).astype(np.uint64)
+    return [int(s) for s in (words[:, 0] * np.uint64(0x9E3779B1) ^ words[:, -1]) % 2**31]
+
+
+def _step_pool(
+    pool: Any, slots: np.ndarray, actions: np.ndarray, rows: np.ndarray, out: Step
+) -> None:
+    """Step `slots` of `pool` with `actions`, reset the ones whose episode ended, and write
+    their outcome to `out`'s `rows`."""
+    obs, reward, terminated, truncated, info = pool.step(actions, slots)
+    # envpool answers in its own order: each answer is placed by the slot it names.
+    where = rows[_positions(slots, info["env_id"])]
+    out.obs[where] = obs
+    out.reward[where] = reward
+    out.terminated[where] = terminated
+    out.truncated[where] = truncated & ~terminated
+    out.next_obs[where] = obs
+    ended = info["env_id"][terminated | truncated]
+    if len(ended):
+        first, info = pool.reset(ended)
+        out.next_obs[rows[_positions(slots, info["env_id"])]] = first
+
+
+def _positions(slots: np.ndarray, answered: np.ndarray) -> np.ndarray:
+    """Where each slot of `answered` sits in `slots`."""
+    order = np.argsort(slots)
+    return order[np.searchsorted(slots, answered, sorter=order)]
+
+
+def _int32(shape: tuple[int, ...]) -> jax.ShapeDtypeStruct:
+    return jax.ShapeDtypeStruct(shape, jnp.int32)

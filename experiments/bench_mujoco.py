@@ -1,22 +1,31 @@
-"""Training throughput on a MuJoCo task (MJX): the environment alone, this trainer, Brax's PPO.
+"""Training throughput on a MuJoCo task, per backend: the environment alone, this trainer, and
+Brax's PPO on MJX.
 
-    python experiments/bench_mujoco.py --env hopper --num-envs 128          # CPU
-    python experiments/bench_mujoco.py --env ant --preset massive            # GPU
+    python experiments/bench_mujoco.py --env hopper --shape paper      # CPU: native against MJX
+    python experiments/bench_mujoco.py --env hopper --num-envs 128     # CPU, MJX's best shape
+    python experiments/bench_mujoco.py --env ant --preset massive --backends mjx     # GPU
 
-Measured side by side in one run, on the same task, environment count and samples per update:
+Measured side by side in one run, on the same task, environment count and samples per update,
+for each backend (`--backends`, default native and mjx):
 (a) the environment alone: random actions in a jitted scan, vmapped over the environments,
-    restarting ended episodes from one reset state per environment per rollout, as (b) does;
+    restarting ended episodes as (b) does (from one reset state per environment per rollout on
+    MJX; native environments reset themselves);
 (b) this trainer (`fppo_jax.train`, PPO), the whole run one compiled call, compile timed apart;
-(c) Brax's own trainer, `brax.training.agents.ppo.train`, with the same environments, unroll
-    length, minibatches, epochs and 64×64 networks; its figure is its own ``training/sps``
-    for the last of its three training epochs, evaluation off (the first two epochs both
-    compile: under JAX 0.10 Brax's epoch function is compiled again for the second call).
-Writes experiments/results/bench_mujoco_<env>_<N>envs_<platform>.md.
+(c) on MJX, Brax's own trainer, `brax.training.agents.ppo.train`, with the same environments,
+    unroll length, minibatches, epochs and 64×64 networks; its figure is its own
+    ``training/sps`` for the last of its three training epochs, evaluation off (the first two
+    epochs both compile: under JAX 0.10 Brax's epoch function is compiled again for the
+    second call).
+`--shape paper` times the paper preset's own update (8 environments × 256 steps, 32
+minibatches × 10 epochs); otherwise the unroll, minibatches and epochs are the flags'.
+`--mjx-updates` times fewer updates on MJX, which is slow on a CPU. Writes
+experiments/results/bench_mujoco_<env>_<N>envs_<platform>.md.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import functools
 import os
@@ -29,8 +38,8 @@ import jax
 import jax.numpy as jnp
 
 import fppo_jax
-from fppo_jax.config import describe, preset_config
-from fppo_jax.envs import draw_resets, make_env, where_done
+from fppo_jax.config import describe_update, preset_config
+from fppo_jax.envs import draw_resets, make_env, resets_itself, where_done
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -40,6 +49,8 @@ def env_alone(env, num_envs: int, num_steps: int, num_rollouts: int):
     space = env.action_space
     low, high = jnp.asarray(space.low), jnp.asarray(space.high)
 
+    own_resets = resets_itself(env)
+
     def run(key: jax.Array) -> jax.Array:
         init_key, key = jax.random.split(key)
         state, _ = draw_resets(env, init_key, (num_envs,))
@@ -48,11 +59,13 @@ def env_alone(env, num_envs: int, num_steps: int, num_rollouts: int):
             action_key, step_key, reset_key = jax.random.split(key, 3)
             shape = (num_steps, num_envs)
             actions = jax.random.uniform(action_key, (*shape, space.size), minval=low, maxval=high)
-            resets, _ = draw_resets(env, reset_key, (num_envs,))
+            resets = None if own_resets else draw_resets(env, reset_key, (num_envs,))[0]
 
             def step(state, inputs):
                 keys, action = inputs
                 state, out = jax.vmap(env.step)(keys, state, action)
+                if own_resets:
+                    return state, out.reward
                 return where_done(out.terminated | out.truncated, resets, state), out.reward
 
             keys = jax.random.split(step_key, shape)
@@ -91,7 +104,7 @@ def brax_ppo(env_name: str, config, total_steps: int) -> tuple[float, float]:
     reports = []
     start = time.perf_counter()
     ppo.train(
-        environment=make_env(env_name).env,
+        environment=make_env(env_name, "mjx").env,
         num_timesteps=total_steps,
         episode_length=1000,
         num_envs=config.num_envs,
@@ -131,89 +144,114 @@ def machine() -> str:
     )
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default="hopper")
-    parser.add_argument("--preset", default="paper", choices=["paper", "massive"])
-    parser.add_argument("--num-envs", type=int, help="default: the preset's")
-    parser.add_argument("--num-steps", type=int, default=16, help="unroll length per update")
-    parser.add_argument("--minibatches", type=int, default=4)
-    parser.add_argument("--epochs", type=int, default=4)
-    parser.add_argument("--updates", type=int, default=40, help="updates timed per trainer")
-    parser.add_argument("--skip-brax", action="store_true", help="leave out (c)")
-    args = parser.parse_args()
-
-    shape = {"num_steps": args.num_steps, "num_minibatches": args.minibatches}
-    shape["num_epochs"] = args.epochs
-    if args.preset == "massive":
-        shape = {}  # the preset's own shape
-    if args.num_envs:
-        shape["num_envs"] = args.num_envs
-    probe = preset_config(args.preset, **shape)
-    total_steps = args.updates * probe.samples_per_update
-    config = preset_config(args.preset, total_steps=total_steps, resets_per_rollout=1, **shape)
-    env = make_env(args.env)
-    print(f"{args.env}: {describe(config, args.preset)} on {machine()}", flush=True)
-
+def measure(args: argparse.Namespace, backend: str, config, updates: int) -> list[tuple]:
+    """Rows (a), (b) and, on MJX, (c) of one backend: (name, steps/s, compile s, ratio)."""
+    config = dataclasses.replace(config, total_steps=updates * config.samples_per_update)
+    total_steps = config.total_steps
+    env = make_env(args.env, backend)
+    label = {"mjx": "MJX", "native": "native"}[backend]
     alone = env_alone(env, config.num_envs, config.num_steps, config.num_updates)
     alone_compile, alone_seconds = timed(alone, jax.random.key(0))
     alone_rate = total_steps / alone_seconds
-    print(f"(a) env alone: {alone_rate:,.0f} steps/s (compile {alone_compile:.1f} s)", flush=True)
+    print(f"{label} (a) env alone: {alone_rate:,.0f} steps/s", flush=True)
 
     fields = ("num_envs", "num_steps", "num_minibatches", "num_epochs", "resets_per_rollout")
     ours = fppo_jax.train(
         args.env,
         "ppo",
+        backend=backend,
         total_steps=total_steps,
         preset=args.preset,
         **{name: getattr(config, name) for name in fields},
     )
     ours_rate = total_steps / ours.train_seconds
-    print(
-        f"(b) fppo-jax: {ours_rate:,.0f} steps/s (compile {ours.compile_seconds:.1f} s)",
-        flush=True,
-    )
-
+    print(f"{label} (b) fppo-jax: {ours_rate:,.0f} steps/s", flush=True)
     rows = [
-        ("(a) environment alone, random actions", alone_rate, alone_compile, "—"),
+        (f"{label} (a) environment alone, random actions", alone_rate, alone_compile, "—"),
         (
-            "(b) fppo-jax `train` (PPO)",
+            f"{label} (b) fppo-jax `train` (PPO)",
             ours_rate,
             ours.compile_seconds,
             f"(b)/(a) = {ours_rate / alone_rate:.2f}",
         ),
     ]
-    if not args.skip_brax:
+    if backend == "mjx" and not args.skip_brax:
         brax_rate, brax_wall = brax_ppo(args.env, config, total_steps)
-        print(f"(c) Brax PPO: {brax_rate:,.0f} steps/s ({brax_wall:.1f} s in all)", flush=True)
+        print(f"MJX (c) Brax PPO: {brax_rate:,.0f} steps/s ({brax_wall:.1f} s in all)", flush=True)
         rows.append(
             (
-                "(c) Brax `ppo.train`",
+                "MJX (c) Brax `ppo.train`",
                 brax_rate,
                 None,
                 f"(b)/(c) = {ours_rate / brax_rate:.2f}",
             )
         )
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="hopper")
+    parser.add_argument("--preset", default="paper", choices=["paper", "massive"])
+    parser.add_argument(
+        "--shape", choices=["paper"], help="the paper preset's own update shape, not the flags'"
+    )
+    parser.add_argument("--backends", nargs="+", default=["native", "mjx"])
+    parser.add_argument("--num-envs", type=int, help="default: the preset's")
+    parser.add_argument("--num-steps", type=int, default=16, help="unroll length per update")
+    parser.add_argument("--minibatches", type=int, default=4)
+    parser.add_argument("--epochs", type=int, default=4)
+    parser.add_argument("--updates", type=int, default=40, help="updates timed per trainer")
+    parser.add_argument("--mjx-updates", type=int, help="updates timed on MJX (default: --updates)")
+    parser.add_argument("--skip-brax", action="store_true", help="leave out (c)")
+    args = parser.parse_args()
+
+    shape = {"num_steps": args.num_steps, "num_minibatches": args.minibatches}
+    shape["num_epochs"] = args.epochs
+    if args.preset == "massive" or args.shape == "paper":
+        shape = {}  # the preset's own shape
+    if args.num_envs:
+        shape["num_envs"] = args.num_envs
+    probe = preset_config(args.preset, **shape)
+    config = preset_config(
+        args.preset, total_steps=probe.samples_per_update, resets_per_rollout=1, **shape
+    )
+    print(f"{args.env}: {describe_update(config)} on {machine()}", flush=True)
+    rows, timed_updates = [], {}
+    for backend in args.backends:
+        updates = args.mjx_updates if backend == "mjx" and args.mjx_updates else args.updates
+        timed_updates[backend] = updates
+        rows += measure(args, backend, config, updates)
+    rates = {row[0].split(" ")[0]: row[1] for row in rows if "(b)" in row[0]}
+    if {"native", "MJX"} <= set(rates):
+        ratio = rates["native"] / rates["MJX"]
+        rows.append(("native (b) / MJX (b)", None, None, f"{ratio:.1f}×"))
 
     command = " ".join(["python experiments/bench_mujoco.py", *sys.argv[1:]])
     platform_name = jax.devices()[0].platform
     path = RESULTS / f"bench_mujoco_{args.env}_{config.num_envs}envs_{platform_name}.md"
+    steps = ", ".join(
+        f"{updates * config.samples_per_update:,} env steps on {backend}"
+        for backend, updates in timed_updates.items()
+    )
     lines = [
-        f"# Training throughput on {args.env} (MJX), {config.num_envs} environments",
+        f"# Training throughput on {args.env}, {config.num_envs} environments: "
+        + " and ".join(args.backends),
         "",
-        f"- Machine: {machine()}",
+        f"- Machine: {machine()}; nothing else running",
         f"- Command: `{command}`",
         f"- Date: {datetime.date.today()}",
-        f"- Shape: {describe(config, args.preset)}, {total_steps:,} env steps per "
-        "trainer; one reset state per environment per rollout in (a) and (b), Brax's "
-        "auto-reset in (c)",
+        f"- Shape: preset {args.preset}, {describe_update(config)}; {steps}; on MJX one reset "
+        "state per environment per rollout in (a) and (b), Brax's auto-reset in (c); native "
+        "environments reset themselves",
         "",
         "| | env steps/s | compile (s) | ratio |",
         "|---|---|---|---|",
     ]
     for name, rate, compile_seconds, ratio in rows:
+        shown_rate = "" if rate is None else f"{rate:,.0f}"
         shown = "in epochs 1–2" if compile_seconds is None else f"{compile_seconds:.1f}"
-        lines.append(f"| {name} | {rate:,.0f} | {shown} | {ratio} |")
+        lines.append(f"| {name} | {shown_rate} | {'' if rate is None else shown} | {ratio} |")
     path.write_text("\n".join(lines) + "\n")
     print(f"wrote {path}")
 

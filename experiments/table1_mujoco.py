@@ -1,32 +1,40 @@
-"""The paper's Table 1, MuJoCo rows on MJX: variants × seeds × 1M steps, each task one sweep.
+"""The paper's Table 1, MuJoCo rows, and its Figs. 4–5: variants × seeds × 1M steps, each task one
+sweep, on the backend asked for.
 
-    python experiments/table1_mujoco.py                       # Hopper; PPO, FPPO-LP, FPPO-QP
-    python experiments/table1_mujoco.py --tasks hopper walker2d ant \\
-        --variants fppo-lp fppo-qp ppo tr-ppo ppo-rb
-    python experiments/table1_mujoco.py --steps 8192 --seeds 1  # a smoke run on a CPU
+    python experiments/table1_mujoco.py --backend native --tasks reacher swimmer   # a CPU
+    python experiments/table1_mujoco.py --backend mjx --tasks hopper ant           # a GPU
+    python experiments/table1_mujoco.py --backend native --steps 8192 --seeds 1 \\
+        --variants ppo --tasks reacher --results /tmp/smoke                        # a smoke run
 
-Meant for a GPU: on a 2-core CPU one Hopper run of 1M steps takes hours. Each task's runs are
-one vmapped, compiled program (`fppo_jax.sweep`) with the `paper` preset (SPEC §2). Writes
-experiments/results/table1_mujoco_<platform>.md (returns beside the paper's, wall time,
-escape speed) and each sweep's curves under experiments/results/table1_mujoco_<platform>/.
-MJX is not the paper's MuJoCo 1.5 with gym v2, so absolute returns differ; what should agree
-is the comparison between variants.
+Each task's runs (all five variants × seeds 0–4 by default, Table 2's α and k, the `paper`
+preset of SPEC §2) are one vmapped, compiled program (`fppo_jax.sweep`). As each task ends, its
+curves (`SweepResult.write`, the metrics the table and figures read) and its run record go to
+<results>/table1_mujoco_<backend>/<task>/, its learning curves (mean ± std over seeds, every
+variant) to <results>/table1_mujoco_<backend>/<task>.png, and <results>/
+table1_mujoco_<backend>.md is written again from every task recorded so far, saying which are
+still to run: a long reproduction can go task by task, across sittings. Neither MJX nor envpool
+is the paper's MuJoCo 1.5 with gym v2, so absolute returns differ; what should agree is how the
+variants compare.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
+import json
+import os
+import platform
 import sys
 import time
 from pathlib import Path
 
 import jax
-import numpy as np
+import matplotlib
 
 from fppo_jax import sweep
 from fppo_jax.config import describe, preset_config
-from fppo_jax.envs import MUJOCO_TASKS
-from fppo_jax.results import max_average_return
+from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, choose_backend
+from fppo_jax.results import SweepResult
 
 PAPER = {  # SPEC §2, Table 1: FPPO-LP, FPPO-QP, PPO, TR-PPO, PPO-RB
     "walker2d": (4030.4, 3893.4, 3368.5, 3279.8, 2858.4),
@@ -37,72 +45,114 @@ PAPER = {  # SPEC §2, Table 1: FPPO-LP, FPPO-QP, PPO, TR-PPO, PPO-RB
     "swimmer": (113.6, 115.5, 100.2, 108.9, 99.8),
 }
 PAPER_VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
+# What the table and the figures read: the curves stay small enough to keep in the repository.
+RECORDED = ("env_steps", "average_return", "negative_fraction_before", "negative_fraction_after")
 RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def machine() -> str:
+    device = jax.devices()[0]
+    kind = "" if device.platform == "cpu" else f" {device.device_kind}"
+    return (
+        f"{device.platform.upper()}{kind}, {os.cpu_count()} CPU cores "
+        f"({platform.processor() or platform.machine()}), jax {jax.__version__}"
+    )
+
+
+def run_task(task: str, args: argparse.Namespace, directory: Path) -> None:
+    """One task's sweep, its curves and record, and its figure."""
+    start = time.perf_counter()
+    result = sweep(
+        task,
+        {"variant": list(args.variants)},
+        seeds=args.seeds,
+        total_steps=args.steps,
+        chunk=args.chunk,
+        backend=args.backend,
+        progress=True,
+    )
+    wall = time.perf_counter() - start
+    result.write(directory / task, metrics=RECORDED)
+    record = {
+        "machine": machine(),
+        "date": str(datetime.date.today()),
+        "wall_seconds": round(wall, 1),
+        "command": " ".join(["python experiments/table1_mujoco.py", *sys.argv[1:]]),
+    }
+    (directory / task / "run.json").write_text(json.dumps(record, indent=1) + "\n")
+    figure(result, directory / f"{task}.png")
+
+
+def figure(result: SweepResult, path: Path) -> None:
+    matplotlib.use("Agg")
+    from fppo_jax.plots import plot_curves
+
+    fig = plot_curves(result)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    matplotlib.pyplot.close(fig)
+
+
+def report(args: argparse.Namespace, directory: Path, backend: str) -> Path:
+    """The Markdown table of every task recorded under `directory`, beside the paper's."""
+    config = preset_config("paper", total_steps=args.steps)
+    done = [task for task in MUJOCO_TASKS if (directory / task / "run.json").exists()]
+    pending = [task for task in MUJOCO_TASKS if task not in done]
+    lines = [
+        f"# Table 1, MuJoCo rows, on {backend}",
+        "",
+        f"- Protocol (SPEC §2): {describe(config, 'paper')} per run; Table 2's α and k; each "
+        "task's runs (variants × seeds) are one sweep, one compiled program.",
+        "- Max average return: the maximum over updates of the seed-mean of the "
+        "last-100-episode average return, ± the std across seeds there, over the seeds that "
+        "did not diverge (`seeds` says how many, and how many diverged). Escape: the fraction "
+        "of each update's batch left in R+ ∪ R- after its last epoch, averaged over the run.",
+        f"- Tasks done: {', '.join(done) or 'none'}; still to run: {', '.join(pending) or 'none'}.",
+        "",
+    ]
+    for task in done:
+        result = SweepResult.read(directory / task)
+        record = json.loads((directory / task / "run.json").read_text())
+        hours = record["wall_seconds"] / 3600
+        paper = ", ".join(
+            f"{s['variant']} {PAPER[task][PAPER_VARIANTS.index(s['variant'])]}"
+            for s in result.settings
+        )
+        lines += [
+            f"## {task}",
+            "",
+            f"{len(result.runs)} runs ({result.config['total_steps']:,} env steps each) in "
+            f"{record['wall_seconds']:,.0f} s ({hours:.2f} h; {result.compile_seconds:.0f} s "
+            f"compiling) on {record['machine']}, {record['date']}: `{record['command']}`.",
+            "",
+            result.table(),
+            "",
+            f"Paper (Table 1, max average return): {paper}.",
+            "",
+            f"![{task}: learning curves]({directory.name}/{task}.png)",
+            "",
+        ]
+    path = directory.parent / f"{directory.name}.md"
+    path.write_text("\n".join(lines))
+    return path
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tasks", nargs="+", default=["hopper"], choices=list(MUJOCO_TASKS))
-    parser.add_argument(
-        "--variants", nargs="+", default=["ppo", "fppo-lp", "fppo-qp"], choices=PAPER_VARIANTS
-    )
+    parser.add_argument("--tasks", nargs="+", default=list(MUJOCO_TASKS), choices=MUJOCO_TASKS)
+    parser.add_argument("--variants", nargs="+", default=PAPER_VARIANTS, choices=PAPER_VARIANTS)
+    parser.add_argument("--backend", default="auto", choices=list(BACKENDS))
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=1_000_000)
     parser.add_argument("--chunk", type=int, help="runs per compiled call (default: automatic)")
+    parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
     args = parser.parse_args()
 
-    platform = jax.devices()[0].platform
-    device = f"{platform.upper()} ({jax.devices()[0].device_kind})"
-    config = preset_config("paper", total_steps=args.steps)
-    runs = len(args.variants) * args.seeds
-    lines = [
-        "# Learning on the MuJoCo tasks (MJX)",
-        "",
-        f"- Machine: {device}, jax {jax.__version__}",
-        f"- Command: `python experiments/table1_mujoco.py {' '.join(sys.argv[1:])}`",
-        f"- Protocol (SPEC §2): {describe(config, 'paper')}; α and k from Table 2; seeds "
-        f"0–{args.seeds - 1}; each task's {runs} runs are one sweep (one compiled program).",
-        "- Max average return: the maximum over updates of the seed-mean of the last-100-episode "
-        "average return, ± the std across seeds there. Escape: the fraction of each update's "
-        "batch left in R+ ∪ R- after its last epoch, averaged over the run and the seeds.",
-        "",
-    ]
+    backend, why = choose_backend(args.tasks[0], args.backend)
+    directory = args.results / f"table1_mujoco_{backend}"
+    print(f"backend {backend}{' (' + why + ')' if why else ''}; results in {directory}")
     for task in args.tasks:
-        start = time.perf_counter()
-        result = sweep(
-            task,
-            {"variant": list(args.variants)},
-            seeds=args.seeds,
-            total_steps=args.steps,
-            chunk=args.chunk,
-            progress=True,
-        )
-        seconds = time.perf_counter() - start
-        result.write(RESULTS / f"table1_mujoco_{platform}" / task)
-        lines += [
-            f"## {task}",
-            "",
-            f"{runs} runs in {seconds:.0f} s wall ({result.compile_seconds:.0f} s compiling), "
-            f"{result.config['runs_per_call']} runs per compiled call.",
-            "",
-            "| variant | max average return | paper (Table 1) | final average return "
-            "| escape: in R± after update |",
-            "|---|---|---|---|---|",
-        ]
-        for index, variant in enumerate(args.variants):
-            m = result.setting_metrics(index)
-            best, std, _ = max_average_return(m["average_return"])
-            final = np.nanmean(m["average_return"][:, -1])
-            paper = PAPER[task][PAPER_VARIANTS.index(variant)]
-            lines.append(
-                f"| {variant} | {best:.1f} ± {std:.1f} | {paper} | {final:.1f} | "
-                f"{np.mean(m['negative_fraction_after']):.2%} |"
-            )
-            print(f"{task:<12} {variant:<8} max {best:9.1f} ± {std:7.1f}  final {final:9.1f}")
-        lines.append("")
-    path = RESULTS / f"table1_mujoco_{platform}.md"
-    path.write_text("\n".join(lines))
-    print(f"wrote {path}")
+        run_task(task, args, directory)
+        print(f"wrote {report(args, directory, backend)}", flush=True)
 
 
 if __name__ == "__main__":

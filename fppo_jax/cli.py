@@ -469,10 +469,11 @@ def _eval(args: argparse.Namespace) -> int:
             f"(min {returns.min():.1f}, max {returns.max():.1f})"
         )
     if args.render:
-        from fppo_jax.render import RenderingUnavailable, render_policy
+        from fppo_jax.render import RenderingUnavailable, drawable, render_policy
 
         try:
-            print(f"wrote {render_policy(env, policy, args.render, seed=args.seed)}")
+            path = render_policy(drawable(env, config["env"]), policy, args.render, seed=args.seed)
+            print(f"wrote {path}")
         except RenderingUnavailable as error:
             print(f"fppo-jax: not rendered: {error}", file=sys.stderr)
             return 2

@@ -126,6 +126,17 @@ def save_frames(frames: np.ndarray, path: str | Path, dt: float, strip_length: i
     return path
 
 
+def drawable(env: Environment, task: str) -> Environment:
+    """`env`, or for a task run in native MuJoCo (whose state lives in envpool) the same task on
+    MJX, whose model replays the episode: the observations are the same vectors on both, except
+    Ant's (the policy refuses those, saying so)."""
+    if getattr(env, "backend", None) != "native":
+        return env
+    from fppo_jax.envs import make_env
+
+    return make_env(task, "mjx")
+
+
 def render_policy(
     env: Environment,
     policy: Callable[[jax.Array], jax.Array],

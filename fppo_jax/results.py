@@ -74,10 +74,12 @@ class TrainResult:
 
     def render(self, path: str | Path, *, seed: int = 0, max_steps: int = 1000) -> Path:
         """Save one episode of the trained policy (the most likely actions) on a MuJoCo task
-        as a ``.png`` image strip or a ``.gif``; see :mod:`fppo_jax.render`."""
-        from fppo_jax.render import render_policy
+        as a ``.png`` image strip, a ``.gif`` or an ``.mp4``; see :mod:`fppo_jax.render` (a
+        native MuJoCo run is drawn on MJX, by :func:`~fppo_jax.render.drawable`)."""
+        from fppo_jax.render import drawable, render_policy
 
-        return render_policy(self.env, self.policy, path, seed=seed, max_steps=max_steps)
+        env = drawable(self.env, self.config["env"])
+        return render_policy(env, self.policy, path, seed=seed, max_steps=max_steps)
 
     def summary(self) -> str:
         """A few lines: the run, its speed, its returns and its escape-speed diagnostic."""

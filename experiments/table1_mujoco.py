@@ -8,7 +8,8 @@
 Meant for a GPU: on a 2-core CPU one Hopper run of 1M steps takes hours. Each task's runs are
 one vmapped, compiled program (`fppo_jax.sweep`) with the `paper` preset (SPEC §2). Writes
 experiments/results/table1_mujoco_<platform>.md (returns beside the paper's, wall time,
-escape speed) and each sweep's curves under experiments/results/table1_mujoco_<platform>/.
+escape speed) and each sweep's curves under experiments/results/table1_mujoco_<platform>/;
+runs that diverged are left out, and counted beside their variant, as `fppo-jax table` does.
 MJX is not the paper's MuJoCo 1.5 with gym v2, so absolute returns differ; what should agree
 is the comparison between variants.
 """
@@ -90,12 +91,18 @@ def main() -> None:
             "|---|---|---|---|---|",
         ]
         for index, variant in enumerate(args.variants):
-            m = result.setting_metrics(index)
-            best, std, _ = max_average_return(m["average_return"])
-            final = np.nanmean(m["average_return"][:, -1])
+            m = result.setting_metrics(index)  # its runs that did not diverge, as fppo-jax table
+            name = variant
+            if result.setting_runs(index)[1].size:
+                name += f", seeds {result.setting_seeds(index)}"
+            best, std, at = max_average_return(m["average_return"])
             paper = PAPER[task][PAPER_VARIANTS.index(variant)]
+            if at < 0:  # every run diverged, or none finished an episode
+                lines.append(f"| {name} | – | {paper} | – | – |")
+                continue
+            final = np.nanmean(m["average_return"][:, -1])
             lines.append(
-                f"| {variant} | {best:.1f} ± {std:.1f} | {paper} | {final:.1f} | "
+                f"| {name} | {best:.1f} ± {std:.1f} | {paper} | {final:.1f} | "
                 f"{np.mean(m['negative_fraction_after']):.2%} |"
             )
             print(f"{task:<12} {variant:<8} max {best:9.1f} ± {std:7.1f}  final {final:9.1f}")

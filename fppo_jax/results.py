@@ -145,16 +145,31 @@ class SweepResult:
     compile_seconds: float
     train_seconds: float
 
+    def setting_runs(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Setting `index`'s runs that did not diverge (indices into `runs`), and the update
+        each of its other runs diverged at."""
+        runs = np.flatnonzero([run["setting"] == index for run in self.runs])
+        diverged = np.asarray(self.diverged)[runs]
+        return runs[diverged == 0], diverged[diverged > 0]
+
     def setting_metrics(self, index: int) -> dict[str, np.ndarray]:
-        """Metrics of setting `index`, [seed, update]."""
-        rows = [i for i, run in enumerate(self.runs) if run["setting"] == index]
-        return {name: values[rows] for name, values in self.metrics.items()}
+        """Metrics of setting `index`'s runs that did not diverge, [seed, update]: what its
+        figures are over (:meth:`setting_seeds` says how many)."""
+        kept, _ = self.setting_runs(index)
+        return {name: values[kept] for name, values in self.metrics.items()}
+
+    def setting_seeds(self, index: int) -> str:
+        """How many seeds setting `index`'s figures are over, as the table's ``seeds`` column
+        says it: ``5``, or ``3 of 5 (2 diverged)``."""
+        kept, diverged = self.setting_runs(index)
+        total = kept.size + diverged.size
+        return f"{kept.size} of {total} ({diverged.size} diverged)" if diverged.size else f"{total}"
 
     def table(self) -> str:
         """Table 1 style, one row per setting, Markdown: the max average return (SPEC §2, mean ±
         std), the env steps it was reached at, the final average return and the share of samples
         in R± after the update, all over the seeds whose runs did not diverge. `seeds` says how
-        many that is and how many diverged (``3 of 5 (2 diverged)``); a setting whose runs all
+        many that is and how many diverged (:meth:`setting_seeds`); a setting whose runs all
         diverged reads ``diverged at update N`` (the first of them) instead of figures."""
         lines = [
             "| setting | seeds | max average return | at env steps | final average return "
@@ -162,17 +177,13 @@ class SweepResult:
             "|---|---|---|---|---|---|",
         ]
         for index, name in enumerate(labels(self.settings)):
-            runs = np.flatnonzero([run["setting"] == index for run in self.runs])
-            diverged = np.asarray(self.diverged)[runs]
-            kept = runs[diverged == 0]
-            lost = runs.size - kept.size
-            seeds = f"{kept.size} of {runs.size} ({lost} diverged)" if lost else f"{runs.size}"
+            kept, diverged = self.setting_runs(index)
             if kept.size:
                 figures = self._figures(kept)
             else:  # every run diverged, or the sweep stopped before this setting's runs
-                failed = f"diverged at update {diverged.min()}" if lost else "not trained"
+                failed = f"diverged at update {diverged.min()}" if diverged.size else "not trained"
                 figures = [failed, "–", "–", "–"]
-            lines.append(f"| {name} | {seeds} | {' | '.join(figures)} |")
+            lines.append(f"| {name} | {self.setting_seeds(index)} | {' | '.join(figures)} |")
         return "\n".join(lines)
 
     def _figures(self, runs: np.ndarray) -> list[str]:

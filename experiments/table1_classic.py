@@ -5,7 +5,8 @@
 Each task's 25 runs (variants × seeds) are one sweep: one vmapped, compiled program. "Max
 average return" follows SPEC §2: per seed, the mean return of the last 100 finished episodes
 after every update; averaged over seeds; the maximum of that curve, ± the standard deviation
-across seeds at that update. Writes experiments/results/table1_classic.md, with the escape-
+across seeds at that update; runs that diverged are left out, and counted beside their
+variant, as `fppo-jax table` does. Writes experiments/results/table1_classic.md, with the escape-
 speed comparison (SPEC §3) beside it, and each task's curves (`SweepResult.write`, with the
 metrics the table and the figures use) to experiments/results/table1_classic/<task>/, which
 `fppo-jax plot` and experiments/figures.py read.
@@ -81,17 +82,23 @@ def main() -> None:
             "| escape: in R± after update |",
             "|---|---|---|---|---|",
         ]
-        for variant, paper in zip(VARIANTS, PAPER[task], strict=True):
-            m = result.setting_metrics(VARIANTS.index(variant))
-            best, std, index = max_average_return(m["average_return"])
-            steps = int(m["env_steps"][0, index])
+        for index, (variant, paper) in enumerate(zip(VARIANTS, PAPER[task], strict=True)):
+            m = result.setting_metrics(index)  # its runs that did not diverge, as fppo-jax table
+            name = variant
+            if result.setting_runs(index)[1].size:
+                name += f", seeds {result.setting_seeds(index)}"
+            best, std, at = max_average_return(m["average_return"])
+            if at < 0:  # every run diverged, or none finished an episode
+                lines.append(f"| {name} | – | {paper} | – | – |")
+                continue
+            steps = int(m["env_steps"][0, at])
             final = np.nanmean(m["average_return"][:, -1])
             after, before = (
                 np.mean(m["negative_fraction_after"]),
                 np.mean(m["negative_fraction_before"]),
             )
             lines.append(
-                f"| {variant} | {best:.1f} ± {std:.1f} ({steps:,}) | {paper} | {final:.1f} | "
+                f"| {name} | {best:.1f} ± {std:.1f} ({steps:,}) | {paper} | {final:.1f} | "
                 f"{after:.2%} ({before:.2%}) |"
             )
             print(f"{task:<12} {variant:<8} max {best:8.1f} ± {std:5.1f}  final {final:8.1f}")

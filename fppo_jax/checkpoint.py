@@ -26,6 +26,7 @@ import json
 import logging
 import os
 import shutil
+import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -228,6 +229,7 @@ class Checkpoints:
             raise ValueError(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
         self._lock: int | None = None
+        _ReadsLeftBehind.quieten()
         if self.directory.exists() and not self.directory.is_dir():
             raise ValueError(f"checkpoint directory {self.directory} is a file")
         # Orbax deletes the checkpoints beyond `keep` only after a new one is committed, in the
@@ -381,6 +383,38 @@ class Checkpoints:
             DamagedCheckpoint,
             stacklevel=3,
         )
+
+
+class _ReadsLeftBehind:
+    """An unraisable-exception hook that drops the reports of reads that orbax left behind, and
+    passes every other report on to the hook it replaced.
+
+    When orbax's read of one array fails (a file cut short), it closes the event loop it reads
+    in while tensorstore is still reading the other arrays. Each of those reads, once done,
+    schedules its result on the closed loop from a tensorstore thread, and the RuntimeError is
+    reported as unraisable: a screen of tracebacks, up to the interpreter's exit, about a
+    failure that was caught and reported as a damaged checkpoint already.
+    """
+
+    def __init__(self, previous: Callable[[Any], object]):
+        self.previous = previous
+
+    def __call__(self, unraisable: Any) -> None:
+        trace = unraisable.exc_traceback
+        left_behind = (
+            isinstance(unraisable.exc_value, RuntimeError)
+            and str(unraisable.exc_value) == "Event loop is closed"
+            and trace is not None
+            and trace.tb_frame.f_code.co_name == "call_soon_threadsafe"  # called from C
+        )
+        if not left_behind:
+            self.previous(unraisable)
+
+    @classmethod
+    def quieten(cls) -> None:
+        """Install the hook, unless it is the one installed."""
+        if not isinstance(sys.unraisablehook, cls):
+            sys.unraisablehook = cls(sys.unraisablehook)
 
 
 def _args(**items: Any) -> ocp.args.Composite:

@@ -5,15 +5,18 @@ variants."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import math
 import sys
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
+from typing import Any
 
 from fppo_jax.api import train
-from fppo_jax.checkpoint import CheckpointsUnavailable, check_no_saved_policy
+from fppo_jax.checkpoint import CheckpointsUnavailable, DamagedCheckpoint, check_no_saved_policy
 from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
     PRESETS,
@@ -513,6 +516,23 @@ def _list() -> int:
     return 0
 
 
+@contextlib.contextmanager
+def _warnings_as_lines() -> Iterator[None]:
+    """A damaged checkpoint reported in a line of the command's own, as its errors are; any
+    other warning as before."""
+    with warnings.catch_warnings():
+        show = warnings.showwarning
+
+        def shown(message: Warning | str, category: type[Warning], *rest: Any) -> None:
+            if issubclass(category, DamagedCheckpoint):
+                print(f"fppo-jax: warning: {message}", file=sys.stderr)
+            else:
+                show(message, category, *rest)
+
+        warnings.showwarning = shown
+        yield
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if getattr(args, "distributed", False):
@@ -525,17 +545,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         "eval": _eval,
         "list": lambda a: _list(),
     }
-    try:
-        return commands[args.command](args)
-    except (
-        ValueError,
-        FileNotFoundError,
-        MemoryError,
-        TrainingDiverged,
-        CheckpointsUnavailable,
-    ) as error:
-        print(f"fppo-jax: error: {error}", file=sys.stderr)
-        return 2
+    with _warnings_as_lines():
+        try:
+            return commands[args.command](args)
+        except (
+            ValueError,
+            FileNotFoundError,
+            MemoryError,
+            TrainingDiverged,
+            CheckpointsUnavailable,
+        ) as error:
+            print(f"fppo-jax: error: {error}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":

@@ -100,10 +100,16 @@ def plot_curves(
     result: SweepResult, metric: str = "average_return", *, ax: Axes | None = None
 ) -> Figure:
     """`metric` (the average return unless told) against env steps, one line per setting: the mean
-    over seeds, ± one std as a band."""
+    over seeds, ± one std as a band. Runs that diverged are left out, as the table leaves them
+    out, and the legend says how many seeds a setting's line is over when some did."""
     ax = _axes(ax, (7, 4.5))
     for index, name in enumerate(labels(result.settings)):
+        if result.setting_runs(index)[1].size:
+            name += f", seeds {result.setting_seeds(index)}"
         m = result.setting_metrics(index)
+        if not len(m[metric]):  # every run diverged: in the legend, with no line
+            ax.plot([], [], label=name)
+            continue
         mean = nanmean(m[metric], axis=0)
         # np.nanstd, without its warnings for the updates before any seed finished an episode.
         std = np.sqrt(nanmean((m[metric] - mean) ** 2, axis=0))
@@ -126,7 +132,8 @@ def ablation_keys(result: SweepResult) -> list[str]:
 
 def plot_ablation(result: SweepResult, *, axes: Sequence[Axes] | None = None) -> Figure:
     """Max average return (SPEC §2) against each swept hyperparameter (:func:`ablation_keys`), one
-    panel per hyperparameter (on `axes` if given) and one line per variant."""
+    panel per hyperparameter (on `axes` if given) and one line per variant. Runs that diverged
+    are left out, as the table leaves them out, and the legend says how many did."""
     keys = ablation_keys(result)
     if not keys:
         raise ValueError("no numeric hyperparameter takes several values in this sweep")
@@ -137,19 +144,30 @@ def plot_ablation(result: SweepResult, *, axes: Sequence[Axes] | None = None) ->
         axes = axes[0]
     for ax, key in zip(axes, keys, strict=True):
         for variant in dict.fromkeys(s["variant"] for s in result.settings):
-            points = [
-                (s[key], *max_average_return(result.setting_metrics(i)["average_return"])[:2])
-                for i, s in enumerate(result.settings)
-                if s["variant"] == variant and key in s
-            ]
-            if len(points) > 1:
-                x, best, std = (np.asarray(v) for v in zip(*sorted(points), strict=True))
-                ax.errorbar(x, best, yerr=std, marker="o", capsize=3, label=variant)
+            chosen = sorted(
+                (i for i, s in enumerate(result.settings) if s["variant"] == variant and key in s),
+                key=lambda i: result.settings[i][key],
+            )
+            if len(chosen) < 2:
+                continue
+            x = [result.settings[i][key] for i in chosen]
+            returns = [result.setting_metrics(i)["average_return"] for i in chosen]
+            best, std, _ = np.array([max_average_return(r) for r in returns]).T
+            label = variant + _lost(result, chosen)
+            ax.errorbar(x, best, yerr=std, marker="o", capsize=3, label=label)
         ax.set(xlabel=key, ylabel="max average return")
         ax.set_title(f"{result.config['env']}: mean ± std over {len(result.seeds)} seeds")
         ax.legend(fontsize="small")
         ax.grid(alpha=0.3)
     return axes[0].figure
+
+
+def _lost(result: SweepResult, settings: list[int]) -> str:
+    """How many of the runs of `settings` diverged, for a legend ("" if none)."""
+    runs = [result.setting_runs(i) for i in settings]
+    lost = sum(diverged.size for _, diverged in runs)
+    total = lost + sum(kept.size for kept, _ in runs)
+    return f", {lost} of {total} runs diverged" if lost else ""
 
 
 def plot_escape_speed(

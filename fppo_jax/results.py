@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import hashlib
 import io
 import json
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -148,16 +149,31 @@ class SweepResult:
     compile_seconds: float
     train_seconds: float
 
+    def setting_runs(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Setting `index`'s runs that did not diverge (indices into `runs`), and the update
+        each of its other runs diverged at."""
+        runs = np.flatnonzero([run["setting"] == index for run in self.runs])
+        diverged = np.asarray(self.diverged)[runs]
+        return runs[diverged == 0], diverged[diverged > 0]
+
     def setting_metrics(self, index: int) -> dict[str, np.ndarray]:
-        """Metrics of setting `index`, [seed, update]."""
-        rows = [i for i, run in enumerate(self.runs) if run["setting"] == index]
-        return {name: values[rows] for name, values in self.metrics.items()}
+        """Metrics of setting `index`'s runs that did not diverge, [seed, update]: what its
+        figures are over (:meth:`setting_seeds` says how many)."""
+        kept, _ = self.setting_runs(index)
+        return {name: values[kept] for name, values in self.metrics.items()}
+
+    def setting_seeds(self, index: int) -> str:
+        """How many seeds setting `index`'s figures are over, as the table's ``seeds`` column
+        says it: ``5``, or ``3 of 5 (2 diverged)``."""
+        kept, diverged = self.setting_runs(index)
+        total = kept.size + diverged.size
+        return f"{kept.size} of {total} ({diverged.size} diverged)" if diverged.size else f"{total}"
 
     def table(self) -> str:
         """Table 1 style, one row per setting, Markdown: the max average return (SPEC §2, mean ±
         std), the env steps it was reached at, the final average return and the share of samples
         in R± after the update, all over the seeds whose runs did not diverge. `seeds` says how
-        many that is and how many diverged (``3 of 5 (2 diverged)``); a setting whose runs all
+        many that is and how many diverged (:meth:`setting_seeds`); a setting whose runs all
         diverged reads ``diverged at update N`` (the first of them) instead of figures."""
         lines = [
             "| setting | seeds | max average return | at env steps | final average return "
@@ -165,17 +181,13 @@ class SweepResult:
             "|---|---|---|---|---|---|",
         ]
         for index, name in enumerate(labels(self.settings)):
-            runs = np.flatnonzero([run["setting"] == index for run in self.runs])
-            diverged = np.asarray(self.diverged)[runs]
-            kept = runs[diverged == 0]
-            lost = runs.size - kept.size
-            seeds = f"{kept.size} of {runs.size} ({lost} diverged)" if lost else f"{runs.size}"
+            kept, diverged = self.setting_runs(index)
             if kept.size:
                 figures = self._figures(kept)
             else:  # every run diverged, or the sweep stopped before this setting's runs
-                failed = f"diverged at update {diverged.min()}" if lost else "not trained"
+                failed = f"diverged at update {diverged.min()}" if diverged.size else "not trained"
                 figures = [failed, "–", "–", "–"]
-            lines.append(f"| {name} | {seeds} | {' | '.join(figures)} |")
+            lines.append(f"| {name} | {self.setting_seeds(index)} | {' | '.join(figures)} |")
         return "\n".join(lines)
 
     def _figures(self, runs: np.ndarray) -> list[str]:
@@ -196,8 +208,8 @@ class SweepResult:
 
     def write(self, directory: str | Path, metrics: Sequence[str] = METRICS) -> None:
         """`curves.csv` (one row per run and update, a column per name in `metrics`) and
-        `sweep.json` (everything else), each whole or not at all. Fewer metrics make a smaller
-        file to keep."""
+        `sweep.json` (everything else, and the SHA-256 digest of that `curves.csv`), each whole
+        or not at all. Fewer metrics make a smaller file to keep."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         keys = list(dict.fromkeys(k for s in self.settings for k in s))
@@ -210,7 +222,8 @@ class SweepResult:
             for u in range(self.metrics["env_steps"].shape[1]):
                 values = [self.metrics[name][i, u].item() for name in metrics]
                 writer.writerow([*head, u + 1, *values])
-        write_atomically(directory / "curves.csv", text.getvalue().encode())
+        curves = text.getvalue().encode()
+        write_atomically(directory / "curves.csv", curves)
         record = {
             "settings": self.settings,
             "seeds": self.seeds,
@@ -219,40 +232,132 @@ class SweepResult:
             "config": self.config,
             "compile_seconds": self.compile_seconds,
             "train_seconds": self.train_seconds,
+            "curves_sha256": hashlib.sha256(curves).hexdigest(),
         }
+        # Last, and naming the curves it goes with: a process stopped between the two renames
+        # leaves a pair that reading refuses, never one that reads as a wrong sweep.
         write_json(directory / "sweep.json", record)
 
     @classmethod
     def read(cls, directory: str | Path) -> SweepResult:
         """What :meth:`write` wrote: the metrics its `curves.csv` holds, each row placed by its
-        ``run`` and ``update`` columns, so the rows may come in any order. A `curves.csv` that is
+        ``run`` and ``update`` columns, so the rows may come in any order. A ``ValueError``
+        naming the file says what is wrong with a ``sweep.json`` that is not JSON or lacks a
+        key or a value of the kind written (:data:`RECORD`), with a `curves.csv` that is not the
+        one ``sweep.json`` was written with (by its digest), and with a `curves.csv` that is
         not every update of every run of ``sweep.json`` once (a column, a run or an update
-        missing or repeated, a value not a number) is refused with a ``ValueError``."""
+        missing or repeated, a value not a number)."""
         directory = Path(directory)
         for name in ("sweep.json", "curves.csv"):
             if not (directory / name).is_file():
                 raise FileNotFoundError(f"{directory / name} not found: not a sweep's output")
-        record = json.loads((directory / "sweep.json").read_text())
+        record = _read_record(directory / "sweep.json")
+        path = directory / "curves.csv"
+        curves = path.read_bytes()
+        if hashlib.sha256(curves).hexdigest() != record["curves_sha256"]:
+            raise ValueError(
+                f"{path} is not the curves.csv that {directory / 'sweep.json'} was written with "
+                "(its SHA-256 digest differs from the one recorded there): the two are not one "
+                "sweep's results, e.g. a sweep stopped between writing them, or a file changed "
+                "since"
+            )
         return cls(
             settings=record["settings"],
             seeds=record["seeds"],
             runs=record["runs"],
-            metrics=_read_curves(directory / "curves.csv", record["runs"]),
-            diverged=np.asarray(record["diverged"]),
+            metrics=_read_curves(path, curves.decode(errors="replace"), record["runs"]),
+            diverged=np.asarray(record["diverged"], np.int64),
             config=record["config"],
             compile_seconds=record["compile_seconds"],
             train_seconds=record["train_seconds"],
         )
 
 
+def _integer(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _list_of(values: Any, valid: Callable[[Any], bool]) -> bool:
+    return isinstance(values, list) and all(valid(value) for value in values)
+
+
+def _setting(value: Any) -> bool:
+    return (
+        isinstance(value, dict)
+        and isinstance(value.get("variant"), str)
+        and all(_number(v) for k, v in value.items() if k != "variant")
+    )
+
+
+def _run(value: Any, settings: int) -> bool:
+    return (
+        isinstance(value, dict)
+        and _integer(value.get("setting"))
+        and 0 <= value["setting"] < settings
+        and _integer(value.get("seed"))
+    )
+
+
+# What a sweep's reader needs of sweep.json: each key, what its value must be, and the check
+# (which may look at the keys before it, already checked).
+RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
+    "settings": (
+        "a list of settings, each a variant and numbers",
+        lambda v, r: _list_of(v, _setting),
+    ),
+    "seeds": ("a list of integers", lambda v, r: _list_of(v, _integer)),
+    "runs": (
+        "a list of runs, each a setting (an index into settings) and a seed",
+        lambda v, r: _list_of(v, lambda run: _run(run, len(r["settings"]))),
+    ),
+    "diverged": (
+        "a list of one integer per run",
+        lambda v, r: _list_of(v, _integer) and len(v) == len(r["runs"]),
+    ),
+    "config": ("an object naming the env", lambda v, r: isinstance(v, dict) and "env" in v),
+    "compile_seconds": ("a number", lambda v, r: _number(v)),
+    "train_seconds": ("a number", lambda v, r: _number(v)),
+    "curves_sha256": (
+        "a SHA-256 digest in hex",
+        lambda v, r: isinstance(v, str) and len(v) == 64 and set(v) <= set("0123456789abcdef"),
+    ),
+}
+
+
+def _read_record(path: Path) -> dict[str, Any]:
+    """``sweep.json`` at `path`, checked against :data:`RECORD`; a ``ValueError`` naming the
+    file says what is wrong with it."""
+    try:
+        record = json.loads(path.read_bytes())
+    except ValueError as error:  # not JSON, or not text: a file cut short or written over
+        raise ValueError(f"{path} is not valid JSON ({error})") from None
+    if not isinstance(record, dict):
+        raise ValueError(
+            f"{path} holds a {type(record).__name__}, not a sweep's record (an object)"
+        )
+    missing = [key for key in RECORD if key not in record]
+    if missing:
+        raise ValueError(f"{path} has no {', '.join(missing)}")
+    for key, (expected, valid) in RECORD.items():
+        if not valid(record[key], record):
+            found = json.dumps(record[key])
+            found = found if len(found) <= 60 else found[:57] + "..."
+            raise ValueError(f"{path}: {key} is {found}, not {expected}")
+    return record
+
+
 # The columns every reader of a sweep needs; the other metrics are read when they are there.
 CURVES_NEEDED = ("run", "update", "env_steps", "average_return")
 
 
-def _read_curves(path: Path, runs: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
-    """The metrics of a sweep's `curves.csv` at `path`, [run, update], for `runs` (its
-    ``sweep.json``'s); a ``ValueError`` naming the file says what is wrong with it."""
-    with open(path, newline="") as f:
+def _read_curves(path: Path, text: str, runs: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
+    """The metrics of a sweep's `curves.csv` at `path`, whose `text` was read, [run, update],
+    for `runs` (its ``sweep.json``'s); a ``ValueError`` naming the file says what is wrong."""
+    with io.StringIO(text, newline="") as f:
         reader = csv.DictReader(f)
         columns = reader.fieldnames or []
         missing = [name for name in CURVES_NEEDED if name not in columns]

@@ -97,9 +97,6 @@ def damage(step_dir: Path, how: str) -> None:
         target.write_bytes(bytes(data))
 
 
-# Orbax's reader of a truncated file leaves an asyncio callback behind that finds its loop
-# closed; the failure itself is caught and reported, which is what is tested.
-@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 @pytest.mark.parametrize("how", ["truncated", "altered"])
 def test_damaged_latest_checkpoint_is_reported_and_the_previous_one_used(tmp_path, how):
     run = {**RUN, "total_steps": 128 * 6}
@@ -419,7 +416,6 @@ def test_bad_checkpoint_options_are_refused_before_compiling(tmp_path, options, 
         fppo_jax.sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=512, **TINY, **options)
 
 
-@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 def test_all_checkpoints_damaged_is_an_error_never_a_silent_fresh_start(tmp_path):
     run = {**RUN, "total_steps": 128 * 4}
     train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
@@ -430,6 +426,45 @@ def test_all_checkpoints_damaged_is_an_error_never_a_silent_fresh_start(tmp_path
         pytest.raises(fppo_jax.CheckpointsUnavailable, match=r"no checkpoint in .* is intact"),
     ):
         train(**run, checkpoint_dir=tmp_path, resume=True, checkpoint_every=2)
+
+
+def test_the_command_line_says_in_a_line_each_that_the_checkpoints_are_damaged(tmp_path):
+    # Files cut short fail orbax's reads mid-way, the case whose reads left behind on a closed
+    # event loop would otherwise print a screen of tracebacks, up to the interpreter's exit.
+    flags = [
+        *["train", "--env", "cartpole", "--variant", "fppo-qp", "--seed", "3", "--steps", "512"],
+        *["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"],
+        *["--quiet", "--checkpoint-dir", str(tmp_path), "--checkpoint-every", "2"],
+    ]
+    assert main(flags) == 0
+    for step in steps_on_disk(tmp_path):
+        damage(tmp_path / str(step), "truncated")
+    path = os.pathsep.join(
+        [str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")]
+    )
+    resumed = subprocess.run(
+        [sys.executable, "-m", "fppo_jax", *flags, "--resume"],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": path},
+        timeout=240,
+    )
+    assert resumed.returncode == 2
+    assert "Traceback" not in resumed.stderr and "Event loop is closed" not in resumed.stderr
+    said = [line for line in resumed.stderr.splitlines() if line.startswith("fppo-jax: ")]
+    assert len(said) == 3, resumed.stderr
+    for line, step in zip(said, (4, 2), strict=False):
+        assert line.startswith(
+            f"fppo-jax: warning: checkpoint at step {step} in {tmp_path} is damaged (ValueError: "
+        )
+        assert line.endswith(
+            f"moved to {tmp_path / 'damaged' / str(step)}, trying the previous one"
+        )
+    assert said[2] == (
+        f"fppo-jax: error: no checkpoint in {tmp_path} is intact (each was moved to "
+        f"{tmp_path / 'damaged'}); nothing was restored. To start afresh, remove the directory or "
+        "choose another"
+    )
 
 
 def test_one_writer_per_checkpoint_directory_and_no_lock_outlives_its_process(tmp_path):
@@ -465,7 +500,6 @@ def test_one_writer_per_checkpoint_directory_and_no_lock_outlives_its_process(tm
     assert len(result.metrics["env_steps"]) == 20
 
 
-@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 def test_a_fallback_checkpoint_is_checked_against_the_run_too(tmp_path):
     run = {**RUN, "total_steps": 128 * 4}
     train(**run, checkpoint_dir=tmp_path / "mine", checkpoint_every=2)

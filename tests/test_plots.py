@@ -7,6 +7,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from helpers import sweep_by_hand
 from matplotlib.figure import Figure
 
 from fppo_jax.plots import (
@@ -80,6 +81,37 @@ def test_each_plot_draws_on_the_axes_it_is_given(result):
     fig, axes = plt.subplots(2, 2)
     assert plot_objectives(axes=axes) is fig
     assert all(len(ax.lines) == 6 for ax in axes.flat)  # one per variant
+
+
+def test_runs_that_diverged_are_left_out_of_the_curves_and_counted_as_the_table_counts_them():
+    result = sweep_by_hand()  # ppo: 2 of 3 runs diverged; fppo-lp: all 3; tr-ppo: none
+    ax = plot_curves(result).axes[0]
+    lines = {line.get_label(): line for line in ax.lines}
+    assert list(lines) == [
+        "ppo, seeds 1 of 3 (2 diverged)",
+        "fppo-lp α=1.3, seeds 0 of 3 (3 diverged)",
+        "tr-ppo δ=0.02",
+    ]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == list(lines)
+    # The run that did not diverge alone, not its diverged runs' 900s.
+    np.testing.assert_array_equal(lines["ppo, seeds 1 of 3 (2 diverged)"].get_ydata(), [10, 30, 20])
+    assert len(lines["fppo-lp α=1.3, seeds 0 of 3 (3 diverged)"].get_xdata()) == 0
+    np.testing.assert_array_equal(lines["tr-ppo δ=0.02"].get_ydata(), [20, 40, 60])
+    for index in range(3):
+        row = result.table().splitlines()[2 + index]
+        assert row.split(" | ")[1] == result.setting_seeds(index)
+
+
+def test_runs_that_diverged_are_left_out_of_the_ablation_chart(result):
+    result.diverged[3] = 2  # α = 1.1's second seed; its return, far off, is to be left out
+    result.metrics["average_return"][3] = 1e6
+    ax = plot_ablation(result).axes[0]
+    (bars,) = ax.containers
+    assert bars.get_label() == "fppo-lp, 1 of 4 runs diverged"
+    line = bars.lines[0]
+    best = [result.metrics["average_return"][2, 1:].max()]  # α = 1.1: its one seed left
+    best.append(np.nanmax(result.metrics["average_return"][4:].mean(axis=0)))
+    np.testing.assert_allclose(line.get_ydata(), best)
 
 
 def test_importing_plots_leaves_the_backend_alone():

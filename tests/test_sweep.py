@@ -1,4 +1,6 @@
 import csv
+import hashlib
+import json
 import logging
 import random
 import re
@@ -9,6 +11,7 @@ import pytest
 from helpers import sweep_by_hand
 
 from fppo_jax import METRICS, VARIANTS, SweepResult, expand_grid, sweep, train
+from fppo_jax.cli import main
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2, "total_steps": 256}
 
@@ -167,12 +170,22 @@ def test_a_sweep_whose_setting_diverges_shows_it():
 
 
 def rewrite_curves(directory, change) -> None:
-    """`curves.csv` in `directory` as `change(header, rows)` makes it, lists of cells."""
+    """`curves.csv` in `directory` as `change(header, rows)` makes it, lists of cells, and its
+    digest in `sweep.json`: a pair that belongs together, whose curves are wrong."""
     path = directory / "curves.csv"
     with open(path, newline="") as f:
         header, *rows = list(csv.reader(f))
     with open(path, "w", newline="") as f:
         csv.writer(f).writerows(change(header, rows))
+    rewrite_record(directory, "curves_sha256", hashlib.sha256(path.read_bytes()).hexdigest())
+
+
+def rewrite_record(directory, key, value) -> None:
+    """`sweep.json` in `directory` with `key` set to `value`, or removed if `value` is None."""
+    path = directory / "sweep.json"
+    record = json.loads(path.read_text())
+    record.pop(key) if value is None else record.update({key: value})
+    path.write_text(json.dumps(record))
 
 
 def test_curves_are_read_by_run_and_update_in_any_order(tmp_path):
@@ -216,6 +229,82 @@ def test_malformed_curves_are_refused_saying_what_is_wrong(tmp_path, change, mat
     rewrite_curves(tmp_path, change)
     with pytest.raises(ValueError, match=re.escape(str(tmp_path / "curves.csv")) + ".*" + match):
         SweepResult.read(tmp_path)
+
+
+def refused(directory, name, message, capsys) -> None:
+    """Reading the sweep in `directory` raises a ValueError that starts with the path of its
+    file `name` and says `message`; ``fppo-jax table`` prints that as its one line of error."""
+    with pytest.raises(ValueError) as raised:
+        SweepResult.read(directory)
+    error = str(raised.value)
+    assert error.startswith(str(directory / name)) and message in error, error
+    assert main(["table", str(directory)]) == 2
+    assert capsys.readouterr() == ("", f"fppo-jax: error: {error}\n")
+
+
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        (lambda t: t[: len(t) // 2], " is not valid JSON (Unterminated string"),
+        (lambda t: "\udcff" + t, " is not valid JSON ('utf-8' codec can't decode byte 0xff"),
+        (lambda t: "[1, 2]", " holds a list, not a sweep's record (an object)"),
+        (
+            lambda t: t.replace('"runs"', '"rungs"').replace('"diverged"', '"x"'),
+            " has no runs, diverged",
+        ),
+        (
+            lambda t: t.replace("1.3", '"1.3"'),
+            '"alpha": "1.3..., not a list of settings, each a variant and numbers',
+        ),
+        (
+            lambda t: t.replace('"setting": 2', '"setting": 3'),
+            ", not a list of runs, each a setting (an index into settings) and a seed",
+        ),
+        (
+            lambda t: t.replace('"diverged": [0, ', '"diverged": ['),
+            ": diverged is [3, 2, 4, 2, 3, 0, 0, 0], not a list of one integer per run",
+        ),
+        (
+            lambda t: t.replace('"seeds": [0', '"seeds": [null'),
+            ": seeds is [null, 1, 2], not a list of integers",
+        ),
+        (
+            lambda t: t.replace('"env"', '"task"'),
+            ': config is {"task": "cartpole"}, not an object naming the env',
+        ),
+        (
+            lambda t: t.replace('"train_seconds": 0.0', '"train_seconds": "0"'),
+            ': train_seconds is "0", not a number',
+        ),
+        (
+            lambda t: t.replace('"curves_sha256": "', '"curves_sha256": "x'),
+            ", not a SHA-256 digest in hex",
+        ),
+    ],
+)
+def test_a_damaged_sweep_json_is_refused_saying_what_is_wrong(tmp_path, damage, message, capsys):
+    sweep_by_hand().write(tmp_path)
+    path = tmp_path / "sweep.json"
+    text = json.dumps(json.loads(path.read_text()))  # on one line, to edit
+    path.write_bytes(damage(text).encode(errors="surrogateescape"))
+    refused(tmp_path, "sweep.json", message, capsys)
+
+
+def test_curves_not_written_with_the_sweep_json_beside_them_are_refused(tmp_path, capsys):
+    # A sweep stopped between its two renames: the newer curves.csv, the older sweep.json. The
+    # curves are whole and of the same runs, so only the digest tells the pair apart.
+    older, newer = sweep_by_hand(), sweep_by_hand()
+    newer.metrics["average_return"] = newer.metrics["average_return"] + 1
+    older.write(tmp_path)
+    newer.write(tmp_path / "newer")
+    (tmp_path / "newer" / "curves.csv").replace(tmp_path / "curves.csv")
+    message = (
+        f" is not the curves.csv that {tmp_path / 'sweep.json'} was written with (its SHA-256 "
+        "digest differs from the one recorded there): the two are not one sweep's results"
+    )
+    refused(tmp_path, "curves.csv", message, capsys)
+    rewrite_record(tmp_path, "curves_sha256", None)  # nor is a record without the digest read
+    refused(tmp_path, "sweep.json", " has no curves_sha256", capsys)
 
 
 def test_every_variant_trains_with_continuous_actions():

@@ -43,7 +43,8 @@ def main() -> None:
         f"- Machine: {platform.upper()} ({jax.devices()[0].device_kind}), jax {jax.__version__}",
         f"- Command: `python experiments/ablation.py {' '.join(sys.argv[1:])}`",
         f"- α ∈ {ALPHAS} (FPPO-LP), k ∈ {KS} (FPPO-QP), {args.seeds} seeds, "
-        f"{args.steps:,} steps, `paper` preset; each task one sweep.",
+        f"{args.steps:,} steps, `paper` preset (learning rate annealed linearly to 0, as "
+        "baselines' ppo2 MuJoCo defaults); each task one sweep.",
         "",
     ]
     for task in args.tasks:

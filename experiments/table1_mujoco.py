@@ -32,7 +32,7 @@ import jax
 import matplotlib
 
 from fppo_jax import sweep
-from fppo_jax.config import describe, preset_config
+from fppo_jax.config import describe, preset_config, task_preset
 from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, choose_backend
 from fppo_jax.results import SweepResult
 
@@ -94,14 +94,15 @@ def figure(result: SweepResult, path: Path) -> None:
 
 def report(args: argparse.Namespace, directory: Path, backend: str) -> Path:
     """The Markdown table of every task recorded under `directory`, beside the paper's."""
-    config = preset_config("paper", total_steps=args.steps)
+    config = preset_config("paper", total_steps=args.steps, **task_preset("paper", MUJOCO_TASKS[0]))
     done = [task for task in MUJOCO_TASKS if (directory / task / "run.json").exists()]
     pending = [task for task in MUJOCO_TASKS if task not in done]
     lines = [
         f"# Table 1, MuJoCo rows, on {backend}",
         "",
-        f"- Protocol (SPEC §2): {describe(config, 'paper')} per run; Table 2's α and k; each "
-        "task's runs (variants × seeds) are one sweep, one compiled program.",
+        f"- Protocol (SPEC §2): {describe(config, 'paper')} per run (baselines' ppo2 MuJoCo "
+        "defaults, which the paper's baselines used); Table 2's α and k; each task's runs "
+        "(variants × seeds) are one sweep, one compiled program.",
         "- Max average return: the maximum over updates of the seed-mean of the "
         "last-100-episode average return, ± the std across seeds there, over the seeds that "
         "did not diverge (`seeds` says how many, and how many diverged). Escape: the fraction "

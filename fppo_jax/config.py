@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.envs import lookup
+from fppo_jax.envs import MUJOCO_TASKS, lookup
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import EPSILON, VARIANTS, Objective, objective, real
 
@@ -155,6 +155,18 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+# baselines' ppo2, whose PPO the paper compares against (SPEC §2), anneals the learning rate
+# linearly to 0 with its MuJoCo defaults (`lr=lambda f: 3e-4 * f`) and keeps it constant
+# elsewhere (it has no defaults of its own for classic control). The paper does not say it
+# departed from them, so its preset does the same, task by task.
+ANNEALED_IN_PAPER: tuple[str, ...] = MUJOCO_TASKS
+
+
+def task_preset(preset: str, task: str | None) -> dict[str, Any]:
+    """What `preset` sets for `task` beyond its shape: the paper's learning-rate schedule."""
+    return {"anneal_learning_rate": True} if preset == "paper" and task in ANNEALED_IN_PAPER else {}
+
+
 def preset_config(preset: str, **overrides: Any) -> TrainConfig:
     """The :class:`TrainConfig` of preset `preset` ("paper" or "massive"), with `overrides`."""
     if preset not in PRESETS:
@@ -238,8 +250,8 @@ def resolve_config(
     also_valid: tuple[str, ...] = (),
     preset: str = "paper",
 ) -> TrainConfig:
-    """The checked TrainConfig of `preset` and `overrides`, with the task's step budget by
-    default."""
+    """The checked TrainConfig of `preset` and `overrides`, with the task's step budget and
+    the preset's learning-rate schedule for it (:func:`task_preset`) by default."""
     task = lookup(env) if isinstance(env, str) else None  # an unknown name is refused here
     unknown = sorted(set(overrides) - set(CONFIG_FIELDS))
     if unknown:
@@ -247,7 +259,7 @@ def resolve_config(
             f"unknown setting {', '.join(unknown)}; valid: "
             + ", ".join([*CONFIG_FIELDS, *also_valid])
         )
-    values = dict(overrides)
+    values = {**task_preset(preset, task.name if task else None), **overrides}
     if total_steps is not None:
         values["total_steps"] = total_steps
     elif "total_steps" not in values:
@@ -284,7 +296,8 @@ def as_float(x: jax.Array) -> float:
 def describe(config: TrainConfig, preset: str | None = None) -> str:
     """One run's length and shape, in words."""
     prefix = "" if preset is None else f"preset {preset}, "
-    return f"{prefix}{config.num_updates} updates × {describe_update(config)}"
+    schedule = ", learning rate annealed linearly to 0" if config.anneal_learning_rate else ""
+    return f"{prefix}{config.num_updates} updates × {describe_update(config)}{schedule}"
 
 
 def describe_update(config: TrainConfig) -> str:

@@ -17,7 +17,7 @@ from fppo_jax import (
     make_train,
     train,
 )
-from fppo_jax.config import preset_config
+from fppo_jax.config import describe, preset_config, resolve_config
 from fppo_jax.envs import Discrete, Step
 from fppo_jax.trainer import RETURN_WINDOW, _average_return, _push_returns
 
@@ -208,6 +208,18 @@ def test_reset_pool_is_cycled_and_default_resets_are_fresh(pool):
         assert np.all(starts[0] != starts[1])
     with pytest.raises(ValueError, match="resets_per_rollout must be a positive integer"):
         TrainConfig(resets_per_rollout=0)
+
+
+def test_the_paper_preset_anneals_the_learning_rate_on_mujoco_tasks_only():
+    # baselines' ppo2: `lr=lambda f: 3e-4 * f` with its MuJoCo defaults, constant elsewhere.
+    for task in ("hopper", "walker2d", "halfcheetah", "ant", "reacher", "swimmer"):
+        config = resolve_config(task, None, {})
+        assert config.anneal_learning_rate and config.total_steps == 1_000_000
+        assert describe(config, "paper").endswith("learning rate annealed linearly to 0")
+    assert not resolve_config("hopper", None, {"anneal_learning_rate": False}).anneal_learning_rate
+    assert not resolve_config("hopper", None, {}, preset="massive").anneal_learning_rate
+    for task in ("cartpole", "acrobot", "mountaincar", "gymnax/Pendulum-v1"):
+        assert not resolve_config(task, None, {}).anneal_learning_rate
 
 
 def test_presets_set_the_shape_and_overrides_win():

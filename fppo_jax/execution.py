@@ -1,12 +1,15 @@
 """Running a training program: compiled once, then called in equal chunks of updates.
 
 One run, or many vmapped along a leading run axis. Every chunk, and every group of runs of the
-same size, reuses the one compiled program; what the host does between chunks is the driver's
-(:mod:`fppo_jax.driver`).
+same size, reuses the one compiled program, and so does a later run in the same process with
+the same static configuration, environment object and array shapes (hyperparameters are
+traced: their values are not part of the shape). What the host does between chunks is the
+driver's (:mod:`fppo_jax.driver`).
 """
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import time
 from collections.abc import Callable, Iterator
@@ -19,6 +22,8 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from fppo_jax.config import Hyperparameters
 from fppo_jax.distributed import input_sharding, place, state_shardings
 from fppo_jax.trainer import Trainer, TrainState
+
+PROGRAMS_KEPT = 8  # compiled programs kept for reuse, the most recently used first
 
 
 def updates_per_call(num_updates: int, calls: int) -> int:
@@ -35,7 +40,39 @@ class Program:
     run: Callable[[TrainState, Hyperparameters], tuple[TrainState, Any]]
     runs: int | None  # None: unbatched
     updates_per_call: int
-    compile_seconds: float
+    compile_seconds: float  # spent compiling it for this run: 0 when reused
+
+
+class _Programs:
+    """Compiled programs by what they were compiled for: the static configuration, the
+    environment (by identity: each entry keeps it alive), the inputs' tree structure, shapes
+    and dtypes, the chunk length and the mesh. A trainer's networks follow from its
+    configuration and environment, so equal keys make equal programs."""
+
+    def __init__(self) -> None:
+        self.entries: collections.OrderedDict[tuple, tuple[Any, Program]] = (
+            collections.OrderedDict()
+        )
+
+    @staticmethod
+    def key(trainer: Trainer, inputs: tuple, updates_per_call: int, mesh: Mesh | None) -> tuple:
+        leaves, treedef = jax.tree.flatten(inputs)
+        shapes = tuple((x.shape, str(x.dtype)) for x in leaves)
+        return (trainer.config, id(trainer.env), treedef, shapes, updates_per_call, mesh)
+
+    def get(self, key: tuple) -> Program | None:
+        if key not in self.entries:
+            return None
+        self.entries.move_to_end(key)
+        return self.entries[key][1]
+
+    def add(self, key: tuple, program: Program) -> None:
+        self.entries[key] = (program.trainer.env, program)
+        while len(self.entries) > PROGRAMS_KEPT:
+            self.entries.popitem(last=False)
+
+
+_PROGRAMS = _Programs()
 
 
 def compile_program(
@@ -47,7 +84,12 @@ def compile_program(
 ) -> Program:
     """Compile `trainer` for these keys and hyperparameters (a leading run axis if `keys` has
     one), running `updates_per_call` updates per call, on `mesh` if given (see
-    :mod:`fppo_jax.distributed`) or on the default device."""
+    :mod:`fppo_jax.distributed`) or on the default device; or reuse the program compiled for
+    the same (see :class:`_Programs`)."""
+    key = _Programs.key(trainer, (keys, hps), updates_per_call, mesh)
+    compiled = _PROGRAMS.get(key)
+    if compiled is not None:
+        return dataclasses.replace(compiled, trainer=trainer, compile_seconds=0.0)
     init = trainer.init
 
     def run(state: TrainState, hp: Hyperparameters) -> tuple[TrainState, Any]:
@@ -82,7 +124,9 @@ def compile_program(
             (placed, inputs),
         )
     seconds = time.perf_counter() - start
-    return Program(trainer, compiled_init, compiled_run, runs, updates_per_call, seconds)
+    program = Program(trainer, compiled_init, compiled_run, runs, updates_per_call, seconds)
+    _PROGRAMS.add(key, program)
+    return program
 
 
 @dataclasses.dataclass(frozen=True)

@@ -35,7 +35,10 @@ def print_progress(p: Progress) -> None:
     """The default progress line, on stderr."""
     if p.elapsed == 0:
         resumed = f"; resuming at update {p.update}" if p.update else ""
-        print(f"compiled in {p.compile_seconds:.1f} s{resumed}", file=sys.stderr, flush=True)
+        compiled = "reusing the compiled program"
+        if p.compile_seconds:
+            compiled = f"compiled in {p.compile_seconds:.1f} s"
+        print(f"{compiled}{resumed}", file=sys.stderr, flush=True)
         return
     avg = "-" if math.isnan(p.average_return) else f"{p.average_return:.1f}"
     print(

@@ -290,3 +290,44 @@ def test_numpy_integers_are_integers():
 def test_seeds_are_checked_before_anything_is_made(seeds, message):
     with pytest.raises(ValueError, match=re.escape(message)):
         sweep("cartpole", {"variant": "ppo"}, seeds=seeds)
+
+
+class _Compilations:
+    """Counts XLA compilations while it is entered."""
+
+    def __enter__(self) -> list[str]:
+        self.events: list[str] = []
+        jax.monitoring.register_event_duration_secs_listener(self._heard)
+        return self.events
+
+    def __exit__(self, *exc: object) -> None:
+        jax.monitoring.unregister_event_duration_listener(self._heard)
+
+    def _heard(self, event: str, duration: float, **kwargs: object) -> None:
+        if event == "/jax/core/compile/backend_compile_duration":
+            self.events.append(event)
+
+
+def test_a_repeated_train_or_sweep_with_the_same_shapes_compiles_nothing():
+    first = train(**RUN)
+    assert first.compile_seconds > 0
+    with _Compilations() as compiled:
+        again = train(**{**RUN, "variant": "fppo-qp", "seed": 7, "learning_rate": 1e-3})
+    assert compiled == [] and again.compile_seconds == 0
+    assert not np.array_equal(again.metrics["policy_loss"], first.metrics["policy_loss"])
+    # A shape that differs is compiled for.
+    with _Compilations() as compiled:
+        train(**{**RUN, "num_envs": 8})
+    assert compiled
+
+    grid = {"variant": ["ppo", "fppo-lp"]}
+    sweep("cartpole", grid, seeds=2, total_steps=RUN["total_steps"], **TINY)
+    with _Compilations() as compiled:
+        other = sweep(
+            "cartpole",
+            {"variant": ["tr-ppo", "fppo-qp"]},
+            seeds=[5, 6],
+            total_steps=RUN["total_steps"],
+            **TINY,
+        )
+    assert compiled == [] and other.compile_seconds == 0

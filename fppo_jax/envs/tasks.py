@@ -8,7 +8,9 @@ Adapters are imported inside the factories, so that a task pays only for its own
 
 from __future__ import annotations
 
+import collections
 import dataclasses
+import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -218,12 +220,33 @@ def describe_backend(backend: str, why: str) -> str:
 
 def make_env(name: str, backend: str = "auto") -> Environment:
     """The registered or namespaced task `name` (see :func:`lookup`) on `backend` (see
-    :data:`BACKENDS` and :func:`choose_backend`)."""
+    :data:`BACKENDS` and :func:`choose_backend`). Environments hold no state of their own, so
+    one object is made per task and backend and shared: a later run on it reuses the training
+    program compiled for it (:mod:`fppo_jax.execution`)."""
+    lookup(name)
+    return _made(name, choose_backend(name, backend)[0])
+
+
+@functools.lru_cache(maxsize=64)
+def _made(name: str, backend: str) -> Environment:
     task = lookup(name)
-    chosen, _ = choose_backend(name, backend)
-    if chosen == "native" and task.native:
+    if backend == "native" and task.native:
         return _native(task.native)()
     return task.make()
+
+
+# A foreign environment's adapter, by the foreign object's identity (kept alive here, so that
+# its id is not reused): the same object gives the same adapter.
+_ADAPTERS: collections.OrderedDict[int, tuple[Any, Environment]] = collections.OrderedDict()
+_ADAPTERS_KEPT = 16
+
+
+def _adapter(env: Any, make: Callable[[], Environment]) -> Environment:
+    if id(env) not in _ADAPTERS:
+        _ADAPTERS[id(env)] = (env, make())
+        while len(_ADAPTERS) > _ADAPTERS_KEPT:
+            _ADAPTERS.popitem(last=False)
+    return _ADAPTERS[id(env)][1]
 
 
 def as_environment(env: str | Environment | Any, backend: str = "auto") -> Environment:
@@ -235,11 +258,11 @@ def as_environment(env: str | Environment | Any, backend: str = "auto") -> Envir
     from fppo_jax.envs.gymnax import GymnaxEnvironment, is_gymnax_env
 
     if is_gymnax_env(env):
-        return GymnaxEnvironment(env, env.default_params)
+        return _adapter(env, lambda: GymnaxEnvironment(env, env.default_params))
     from fppo_jax.envs import mjx
 
     if mjx.is_brax_env(env):
-        return mjx.BraxEnvironment(env)
+        return _adapter(env, lambda: mjx.BraxEnvironment(env))
     if isinstance(env, Environment):
         return env
     raise TypeError(

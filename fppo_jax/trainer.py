@@ -288,13 +288,18 @@ class Trainer:
         )
         return batch, traj, envs, obs_stats, return_stats
 
-    def escape_by_epoch(self, state: TrainState, hp: Hyperparameters) -> jax.Array:
+    def escape_by_epoch(
+        self, state: TrainState, hp: Hyperparameters, batch: Batch | None = None
+    ) -> jax.Array:
         """SPEC §3 for the next update from `state`: the fraction of its batch in R+ ∪ R- after
         each of its epochs, [num_epochs] (before the first, every ratio is 1 and none is).
         The batch and the minibatch order are those :meth:`update` would use, so variants
-        given the same state are compared on the same samples."""
+        given the same state are compared on the same samples. Environments stepped outside
+        JAX (native MuJoCo) give a new batch at every rollout: collect it once
+        (:meth:`collect`) and pass it as `batch` to compare variants on it."""
         _, rollout_key, epochs_key = jax.random.split(state.key, 3)
-        batch, *_ = self.collect(state, hp, rollout_key)
+        if batch is None:
+            batch = self.collect(state, hp, rollout_key)[0]
         return self._epochs(state, hp, batch, epochs_key, track_escape=True)[3]
 
     def network_input(self, stats: RunningStats, obs: jax.Array) -> jax.Array:

@@ -129,6 +129,22 @@ def test_a_resumed_native_run_restarts_its_environments_and_keeps_its_learning(t
     assert int(resumed.state.num_episodes) > int(stopped.state.num_episodes)
 
 
+def test_variants_are_compared_on_one_collected_batch(swimmer_run):
+    trainer, hp, run = swimmer_run
+    state = run(jax.random.key(0), hp)[0]
+    collect = jax.jit(trainer.collect)
+    first, second = (
+        collect(state, hp, jax.random.key(1))[0],
+        collect(state, hp, jax.random.key(1))[0],
+    )
+    # The pool has gone on: the same state and key roll out other samples.
+    assert not np.allclose(first.obs, second.obs)
+    probe = jax.jit(trainer.escape_by_epoch)
+    lp = hyperparameters("fppo-lp", alpha=1.1)
+    np.testing.assert_array_equal(probe(state, lp, first), probe(state, lp, first))
+    assert probe(state, lp, first).shape == (TINY["num_epochs"],)
+
+
 def test_restart_envs_keeps_everything_learnt_and_starts_new_episodes(swimmer_run):
     trainer, hp, run = swimmer_run
     state = run(jax.random.key(0), hp)[0]

@@ -256,3 +256,8 @@ def test_escape_by_epoch_ends_where_the_update_does(tiny):
     assert ((by_epoch >= 0) & (by_epoch <= 1)).all() and by_epoch.max() > 0.05
     # The same batch and minibatch order as the update: its last epoch is the update's result.
     np.testing.assert_allclose(by_epoch[-1], metrics.negative_fraction_after, atol=1e-6)
+    # Given the batch the update collects, the same epochs.
+    rollout_key = jax.random.split(state.key, 3)[1]
+    batch = jax.jit(trainer.collect)(state, hp, rollout_key)[0]
+    given = jax.jit(trainer.escape_by_epoch)(state, hp, batch)
+    np.testing.assert_array_equal(given, by_epoch)

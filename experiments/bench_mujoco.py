@@ -204,6 +204,7 @@ def main() -> None:
     parser.add_argument("--updates", type=int, default=40, help="updates timed per trainer")
     parser.add_argument("--mjx-updates", type=int, help="updates timed on MJX (default: --updates)")
     parser.add_argument("--skip-brax", action="store_true", help="leave out (c)")
+    parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
     args = parser.parse_args()
 
     shape = {"num_steps": args.num_steps, "num_minibatches": args.minibatches}
@@ -229,7 +230,8 @@ def main() -> None:
 
     command = " ".join(["python experiments/bench_mujoco.py", *sys.argv[1:]])
     platform_name = jax.devices()[0].platform
-    path = RESULTS / f"bench_mujoco_{args.env}_{config.num_envs}envs_{platform_name}.md"
+    path = args.results / f"bench_mujoco_{args.env}_{config.num_envs}envs_{platform_name}.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
     steps = ", ".join(
         f"{updates * config.samples_per_update:,} env steps on {backend}"
         for backend, updates in timed_updates.items()

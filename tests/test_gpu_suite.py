@@ -1,0 +1,39 @@
+"""experiments/gpu_suite.py: every kind of part run tiny on the CPU (--smoke), and what it
+refuses."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+SUITE = Path(__file__).resolve().parent.parent / "experiments" / "gpu_suite.py"
+
+
+def _suite(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(SUITE), *args], capture_output=True, text=True, timeout=900
+    )
+
+
+def test_the_smoke_suite_runs_every_kind_of_part_and_records_each(tmp_path):
+    done = _suite("--smoke", "--results", str(tmp_path))
+    assert done.returncode == 0, done.stdout + done.stderr
+    record = json.loads((tmp_path / "gpu_suite_cpu.json").read_text())
+    assert list(record) == ["throughput-reacher", "table1-reacher", "ablation-reacher"]
+    assert all(part["status"] == "done" for part in record.values())
+    bench = (tmp_path / "bench_mujoco_reacher_16envs_cpu.md").read_text()
+    for row in ("MJX (a) environment alone", "MJX (b) fppo-jax", "MJX (c) Brax `ppo.train`"):
+        assert row in bench
+    table = (tmp_path / "table1_mujoco_mjx.md").read_text()
+    assert "Tasks done: reacher" in table and "ppo" in table and "fppo-lp" in table
+    assert (tmp_path / "table1_mujoco_mjx" / "reacher" / "curves.csv").exists()
+    assert "α" in (tmp_path / "ablation_mjx" / "ablation.md").read_text()
+    assert "| table1-reacher | done |" in (tmp_path / "gpu_suite_cpu.md").read_text()
+
+
+def test_without_a_gpu_the_full_suite_is_refused_and_unknown_parts_named(tmp_path):
+    refused = _suite("--results", str(tmp_path))
+    assert refused.returncode != 0 and "JAX sees no GPU here" in refused.stderr
+    unknown = _suite("--parts", "table1-pong")
+    assert unknown.returncode != 0 and "unknown part table1-pong; parts: " in unknown.stderr
+    assert not list(tmp_path.iterdir())

@@ -198,3 +198,30 @@ def test_the_cli_trains_natively_and_refuses_many_devices(tmp_path, capsys):
     assert '"backend": "native"' in (out / "config.json").read_text()
     code = main(["train", "--env", "hopper", "--backend", "native", "--devices", "2"])
     assert code == 2 and "devices must be 1" in capsys.readouterr().err
+
+
+def test_a_two_setting_native_sweep_is_one_program_over_one_pool(tmp_path):
+    result = fppo_jax.sweep(
+        "swimmer",
+        {"variant": ["ppo", "fppo-qp"]},
+        seeds=[0, 1],
+        backend="native",
+        total_steps=256,
+        log_dir=tmp_path,
+        **{k: v for k, v in TINY.items() if k != "total_steps"},
+    )
+    assert result.config["backend"] == "native" and result.config["runs_per_call"] == 4
+    assert [(run["setting"], run["seed"]) for run in result.runs] == [
+        (0, 0),
+        (0, 1),
+        (1, 0),
+        (1, 1),
+    ]
+    losses = result.metrics["policy_loss"]
+    assert losses.shape == (4, 2) and np.isfinite(losses).all()
+    # A seed's environments are the same under either setting, and in so short a run no sample
+    # gets past the clip range, where FPPO-QP and PPO differ; the two seeds differ.
+    np.testing.assert_array_equal(losses[0], losses[2])
+    np.testing.assert_array_equal(losses[1], losses[3])
+    assert not np.allclose(losses[0], losses[1])
+    assert '"backend": "native"' in (tmp_path / "sweep.json").read_text()

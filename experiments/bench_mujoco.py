@@ -2,6 +2,7 @@
 Brax's PPO on MJX.
 
     python experiments/bench_mujoco.py --env hopper --shape paper      # CPU: native against MJX
+    python experiments/bench_mujoco.py --env hopper --shape paper --runs 25   # Table 1's sweep
     python experiments/bench_mujoco.py --env hopper --num-envs 128     # CPU, MJX's best shape
     python experiments/bench_mujoco.py --env ant --preset massive --backends mjx     # GPU
 
@@ -18,8 +19,10 @@ for each backend (`--backends`, default native and mjx):
     second call).
 `--shape paper` times the paper preset's own update (8 environments × 256 steps, 32
 minibatches × 10 epochs); otherwise the unroll, minibatches and epochs are the flags'.
-`--mjx-updates` times fewer updates on MJX, which is slow on a CPU. Writes
-experiments/results/bench_mujoco_<env>_<N>envs_<platform>.md.
+`--mjx-updates` times fewer updates on MJX, which is slow on a CPU. `--runs R` trains R runs
+side by side as one sweep in (b) (Table 1 trains 25 per task) and steps R × N environments in
+(a); (c) is then left out. Writes
+experiments/results/bench_mujoco_<env>[_<R>runs]_<N>envs_<platform>.md.
 """
 
 from __future__ import annotations
@@ -150,21 +153,28 @@ def measure(args: argparse.Namespace, backend: str, config, updates: int) -> lis
     total_steps = config.total_steps
     env = make_env(args.env, backend)
     label = {"mjx": "MJX", "native": "native"}[backend]
-    alone = env_alone(env, config.num_envs, config.num_steps, config.num_updates)
+    alone = env_alone(env, args.runs * config.num_envs, config.num_steps, config.num_updates)
     alone_compile, alone_seconds = timed(alone, jax.random.key(0))
-    alone_rate = total_steps / alone_seconds
+    alone_rate = args.runs * total_steps / alone_seconds
     print(f"{label} (a) env alone: {alone_rate:,.0f} steps/s", flush=True)
 
     fields = ("num_envs", "num_steps", "num_minibatches", "num_epochs", "resets_per_rollout")
-    ours = fppo_jax.train(
-        args.env,
-        "ppo",
-        backend=backend,
-        total_steps=total_steps,
-        preset=args.preset,
-        **{name: getattr(config, name) for name in fields},
-    )
-    ours_rate = total_steps / ours.train_seconds
+    shape = {name: getattr(config, name) for name in fields}
+    if args.runs == 1:
+        ours = fppo_jax.train(
+            args.env, "ppo", backend=backend, total_steps=total_steps, preset=args.preset, **shape
+        )
+    else:
+        ours = fppo_jax.sweep(
+            args.env,
+            {"variant": ["ppo"]},
+            seeds=args.runs,
+            backend=backend,
+            total_steps=total_steps,
+            preset=args.preset,
+            **shape,
+        )
+    ours_rate = args.runs * total_steps / ours.train_seconds
     print(f"{label} (b) fppo-jax: {ours_rate:,.0f} steps/s", flush=True)
     rows = [
         (f"{label} (a) environment alone, random actions", alone_rate, alone_compile, "—"),
@@ -175,7 +185,7 @@ def measure(args: argparse.Namespace, backend: str, config, updates: int) -> lis
             f"(b)/(a) = {ours_rate / alone_rate:.2f}",
         ),
     ]
-    if backend == "mjx" and not args.skip_brax:
+    if backend == "mjx" and not args.skip_brax and args.runs == 1:
         brax_rate, brax_wall = brax_ppo(args.env, config, total_steps)
         print(f"MJX (c) Brax PPO: {brax_rate:,.0f} steps/s ({brax_wall:.1f} s in all)", flush=True)
         rows.append(
@@ -204,6 +214,9 @@ def main() -> None:
     parser.add_argument("--updates", type=int, default=40, help="updates timed per trainer")
     parser.add_argument("--mjx-updates", type=int, help="updates timed on MJX (default: --updates)")
     parser.add_argument("--skip-brax", action="store_true", help="leave out (c)")
+    parser.add_argument(
+        "--runs", type=int, default=1, help="runs trained side by side as one sweep (no (c))"
+    )
     parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
     args = parser.parse_args()
 
@@ -230,20 +243,27 @@ def main() -> None:
 
     command = " ".join(["python experiments/bench_mujoco.py", *sys.argv[1:]])
     platform_name = jax.devices()[0].platform
-    path = args.results / f"bench_mujoco_{args.env}_{config.num_envs}envs_{platform_name}.md"
+    runs = f"{args.runs}runs_" if args.runs > 1 else ""
+    path = args.results / f"bench_mujoco_{args.env}_{runs}{config.num_envs}envs_{platform_name}.md"
     path.parent.mkdir(parents=True, exist_ok=True)
     steps = ", ".join(
         f"{updates * config.samples_per_update:,} env steps on {backend}"
         for backend, updates in timed_updates.items()
     )
+    sweep_shape = ""
+    if args.runs > 1:
+        sweep_shape = f" per run, {args.runs} runs as one sweep (env steps/s count them all)"
     lines = [
-        f"# Training throughput on {args.env}, {config.num_envs} environments: "
+        f"# Training throughput on {args.env}, "
+        + (f"{args.runs} runs × " if args.runs > 1 else "")
+        + f"{config.num_envs} environments: "
         + " and ".join(args.backends),
         "",
         f"- Machine: {machine()}; nothing else running",
         f"- Command: `{command}`",
         f"- Date: {datetime.date.today()}",
-        f"- Shape: preset {args.preset}, {describe_update(config)}; {steps}; on MJX one reset "
+        f"- Shape: preset {args.preset}, {describe_update(config)}{sweep_shape}; {steps}; "
+        "on MJX one reset "
         "state per environment per rollout in (a) and (b), Brax's auto-reset in (c); native "
         "environments reset themselves",
         "",

@@ -40,8 +40,10 @@ CALLS = {
         "total_steps": 128 * 3,
     },
 }
+CALLS["native"] = {**CALLS["train"], "env": "swimmer", "backend": "native"}
 OPTIONS = {**TINY, "checkpoint_every": 1, "progress": True}
-UPDATES = {"train": 4, "sweep": 3}  # per run; a checkpoint's step is group · updates + update
+UPDATES = {"train": 4, "sweep": 3, "native": 4}  # per run; a checkpoint's step is
+# group · updates + update
 
 # The attempts, in order, in one checkpoint directory: how each is stopped, and where it must
 # start (the first run and update its callback sees; None: it trains nothing).
@@ -126,7 +128,8 @@ def child(kind, directory, log, cache, *, resume, parked=None, writing=None):
     """A child process training `kind` with checkpoints in `directory`, its output in `log`;
     killed on leaving, if still running. `cache`: the compilation cache, or None for none."""
     call = {**CALLS[kind], **OPTIONS, "checkpoint_dir": str(directory), "resume": resume}
-    spec = {"kind": kind, "call": call, "out": str(log.with_suffix(".npz"))}
+    function = "sweep" if kind == "sweep" else "train"
+    spec = {"kind": function, "call": call, "out": str(log.with_suffix(".npz"))}
     spec.update(parked=parked, writing=writing)
     path = os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
     env = {**os.environ, "PYTHONPATH": path}
@@ -246,3 +249,25 @@ def test_killed_at_every_moment_and_resumed_each_time_ends_as_if_never_stopped(k
             if kind == "train":
                 assert resumed["resumed_from"] == (starts[1] - 1 if starts else UPDATES[kind])
     assert writes_in_progress(directory) == []  # the ones left were written over
+
+
+def test_a_killed_native_run_resumes_in_fresh_environments_with_its_learning_intact(tmp_path):
+    pytest.importorskip("envpool", reason="the native backend's envpool is Linux-only")
+    directory = tmp_path / "checkpoints"
+    whole = attempt("native", tmp_path / "uninterrupted", tmp_path / "whole.log", None, "end", None)
+    assert attempt("native", directory, tmp_path / "killed.log", None, "parked", (0, 2)) is None
+    log = tmp_path / "resumed.log"
+    resumed = attempt("native", directory, log, None, "end", None)
+    # Restored from the checkpoint of update 2, with environments started afresh (their state
+    # lived in envpool, which no checkpoint holds), and said so.
+    assert resumed["resumed_from"] == 2 and first_chunk(log) == (0, 3)
+    assert "resuming at update 2 in fresh environments" in log.read_text()
+    # The updates before the kill are the uninterrupted run's, bit for bit; the ones after go on
+    # from what was learnt but from new episodes, so they are not.
+    for name in ("policy_loss", "value_loss", "entropy"):
+        a, b = resumed[f"metrics/{name}"], whole[f"metrics/{name}"]
+        assert a.shape == b.shape == (UPDATES["native"],)
+        assert a[:2].tobytes() == b[:2].tobytes(), name
+        assert np.isfinite(a).all() and not np.array_equal(a[2:], b[2:]), name
+    samples = TINY["num_envs"] * TINY["num_steps"]
+    assert resumed["state.obs_stats.count"] == pytest.approx(UPDATES["native"] * samples, abs=1e-3)

@@ -42,15 +42,22 @@ import jax.numpy as jnp
 
 import fppo_jax
 from fppo_jax.config import describe_update, preset_config
-from fppo_jax.envs import draw_resets, make_env, resets_itself, where_done
+from fppo_jax.envs import Discrete, draw_resets, make_env, resets_itself, where_done
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def env_alone(env, num_envs: int, num_steps: int, num_rollouts: int):
-    """(a): random actions for num_rollouts × num_steps steps of num_envs environments."""
+    """(a): random actions for num_rollouts × num_steps steps of num_envs environments,
+    restarting ended episodes from one reset state per environment per rollout (native
+    environments restart themselves)."""
     space = env.action_space
-    low, high = jnp.asarray(space.low), jnp.asarray(space.high)
+
+    def random_actions(key: jax.Array, shape: tuple[int, ...]) -> jax.Array:
+        if isinstance(space, Discrete):
+            return jax.random.randint(key, shape, 0, space.n)
+        low, high = jnp.asarray(space.low), jnp.asarray(space.high)
+        return jax.random.uniform(key, (*shape, space.size), minval=low, maxval=high)
 
     own_resets = resets_itself(env)
 
@@ -61,7 +68,7 @@ def env_alone(env, num_envs: int, num_steps: int, num_rollouts: int):
         def rollout(state, key):
             action_key, step_key, reset_key = jax.random.split(key, 3)
             shape = (num_steps, num_envs)
-            actions = jax.random.uniform(action_key, (*shape, space.size), minval=low, maxval=high)
+            actions = random_actions(action_key, shape)
             resets = None if own_resets else draw_resets(env, reset_key, (num_envs,))[0]
 
             def step(state, inputs):

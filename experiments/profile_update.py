@@ -2,8 +2,9 @@
 
     python experiments/profile_update.py [--repeats 200]
 
-Parts: the environment alone (random actions, the same number of steps as a rollout), the
-rollout (policy + environment), the epochs of minibatch updates, and the whole update.
+Parts: the environment alone (random actions, the same number of steps as a rollout, one reset
+state per environment), the rollout (policy + environment), the epochs of minibatch updates,
+and the whole update.
 Settings: PureJaxRL's CartPole (see purejaxrl_settings.py).
 """
 
@@ -16,38 +17,9 @@ import jax
 import jax.numpy as jnp
 import purejaxrl_settings as pjr
 from bench_cartpole import cpu_model
+from bench_mujoco import env_alone
 
 from fppo_jax import make_train
-from fppo_jax.envs import draw_resets, where_done
-
-
-def env_alone(env, num_envs: int, num_steps: int, num_rollouts: int):
-    """Random actions for num_rollouts × num_steps steps of num_envs environments, restarting
-    ended episodes from reset states drawn up front, as the trainer does."""
-
-    def run(key: jax.Array) -> jax.Array:
-        init_key, key = jax.random.split(key)
-        state, _ = draw_resets(env, init_key, (num_envs,))
-
-        def rollout(state, key):
-            action_key, step_key, reset_key = jax.random.split(key, 3)
-            shape = (num_steps, num_envs)
-            actions = jax.random.randint(action_key, shape, 0, env.action_space.n)
-            resets, _ = draw_resets(env, reset_key, shape)
-
-            def step(state, inputs):
-                keys, action, reset = inputs
-                state, out = jax.vmap(env.step)(keys, state, action)
-                return where_done(out.terminated | out.truncated, reset, state), out.reward
-
-            state, rewards = jax.lax.scan(
-                step, state, (jax.random.split(step_key, shape), actions, resets)
-            )
-            return state, rewards.sum()
-
-        return jax.lax.scan(rollout, state, jax.random.split(key, num_rollouts))[1].sum()
-
-    return run
 
 
 def seconds_per_call(fn, *args, repeats, blocks=7):

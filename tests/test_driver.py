@@ -309,25 +309,22 @@ class _Compilations:
 
 
 def test_a_repeated_train_or_sweep_with_the_same_shapes_compiles_nothing():
-    first = train(**RUN)
+    # Layer widths no other test uses: the first call here compiles.
+    run = {**RUN, "hidden_sizes": (24, 24)}
+    first = train(**run)
     assert first.compile_seconds > 0
     with _Compilations() as compiled:
-        again = train(**{**RUN, "variant": "fppo-qp", "seed": 7, "learning_rate": 1e-3})
+        again = train(**{**run, "variant": "fppo-qp", "seed": 7, "learning_rate": 1e-3})
     assert compiled == [] and again.compile_seconds == 0
     assert not np.array_equal(again.metrics["policy_loss"], first.metrics["policy_loss"])
     # A shape that differs is compiled for.
     with _Compilations() as compiled:
-        train(**{**RUN, "num_envs": 8})
+        train(**{**run, "num_envs": 8})
     assert compiled
 
+    settings = {"total_steps": RUN["total_steps"], "hidden_sizes": (24, 24), **TINY}
     grid = {"variant": ["ppo", "fppo-lp"]}
-    sweep("cartpole", grid, seeds=2, total_steps=RUN["total_steps"], **TINY)
+    assert sweep("cartpole", grid, seeds=2, **settings).compile_seconds > 0
     with _Compilations() as compiled:
-        other = sweep(
-            "cartpole",
-            {"variant": ["tr-ppo", "fppo-qp"]},
-            seeds=[5, 6],
-            total_steps=RUN["total_steps"],
-            **TINY,
-        )
+        other = sweep("cartpole", {"variant": ["tr-ppo", "fppo-qp"]}, seeds=[5, 6], **settings)
     assert compiled == [] and other.compile_seconds == 0

@@ -24,10 +24,10 @@ def test_the_smoke_suite_runs_every_kind_of_part_and_records_each(tmp_path):
     bench = (tmp_path / "bench_mujoco_reacher_16envs_cpu.md").read_text()
     for row in ("MJX (a) environment alone", "MJX (b) fppo-jax", "MJX (c) Brax `ppo.train`"):
         assert row in bench
-    table = (tmp_path / "table1_mujoco_mjx.md").read_text()
+    table = (tmp_path / "table1_mujoco_native.md").read_text()
     assert "Tasks done: reacher" in table and "ppo" in table and "fppo-lp" in table
-    assert (tmp_path / "table1_mujoco_mjx" / "reacher" / "curves.csv").exists()
-    assert "α" in (tmp_path / "ablation_mjx" / "ablation.md").read_text()
+    assert (tmp_path / "table1_mujoco_native" / "reacher" / "curves.csv").exists()
+    assert "α" in (tmp_path / "ablation_native" / "ablation.md").read_text()
     assert "| table1-reacher | done |" in (tmp_path / "gpu_suite_cpu.md").read_text()
 
 

@@ -25,6 +25,8 @@ import numpy as np
 import pytest
 from conftest import TINY
 
+from fppo_jax.envs import native
+
 ROOT = Path(__file__).resolve().parents[1]
 
 # Every update is checkpointed and then seen by the callback (checkpoint_every=1); the sweep's
@@ -252,7 +254,8 @@ def test_killed_at_every_moment_and_resumed_each_time_ends_as_if_never_stopped(k
 
 
 def test_a_killed_native_run_resumes_in_fresh_environments_with_its_learning_intact(tmp_path):
-    pytest.importorskip("envpool", reason="the native backend's envpool is Linux-only")
+    if not native.envpool_installed():
+        pytest.skip("the native backend's envpool is Linux-only")
     directory = tmp_path / "checkpoints"
     whole = attempt("native", tmp_path / "uninterrupted", tmp_path / "whole.log", None, "end", None)
     assert attempt("native", directory, tmp_path / "killed.log", None, "parked", (0, 2)) is None

@@ -1,19 +1,24 @@
 """gym's MuJoCo tasks in native MuJoCo (envpool), stepped from inside the compiled program."""
 
+import os
+import subprocess
+import sys
+import textwrap
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
-pytest.importorskip("envpool", reason="the native backend's envpool is Linux-only")
-
-import envpool
 
 import fppo_jax
 from fppo_jax import TrainConfig, hyperparameters, make_env, make_train
 from fppo_jax.cli import main
 from fppo_jax.envs import Box, choose_backend, native
 from fppo_jax.envs.native import NativeEnvironment
+
+if not native.envpool_installed():
+    pytest.skip("the native backend's envpool is Linux-only", allow_module_level=True)
+envpool = native.import_envpool()
 
 TINY = {"total_steps": 256, "num_envs": 4, "num_steps": 32, "num_minibatches": 2, "num_epochs": 2}
 
@@ -225,3 +230,20 @@ def test_a_two_setting_native_sweep_is_one_program_over_one_pool(tmp_path):
     np.testing.assert_array_equal(losses[1], losses[3])
     assert not np.allclose(losses[0], losses[1])
     assert '"backend": "native"' in (tmp_path / "sweep.json").read_text()
+
+
+def test_the_native_backend_leaves_the_process_environment_as_it_was():
+    # envpool's own import sets MPLBACKEND=Agg, which silences every figure a script or a
+    # notebook kernel started from this process would show.
+    code = textwrap.dedent("""
+        import os
+        import fppo_jax
+        before = dict(os.environ)
+        fppo_jax.make_env("reacher", "native")
+        fppo_jax.envs.native.import_envpool()
+        print(sorted(k for k in {*before, *os.environ} if before.get(k) != os.environ.get(k)))
+    """)
+    env = {k: v for k, v in os.environ.items() if k != "MPLBACKEND"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"

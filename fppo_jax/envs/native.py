@@ -26,6 +26,7 @@ import dataclasses
 import importlib.util
 import os
 import threading
+from types import ModuleType
 from typing import Any, NamedTuple
 
 import jax
@@ -45,6 +46,20 @@ def envpool_installed() -> bool:
 def require_envpool() -> None:
     if not envpool_installed():
         raise ValueError(f"the native backend steps MuJoCo through envpool: {INSTALL}")
+
+
+def import_envpool() -> ModuleType:
+    """envpool, without the process-wide settings its import makes: envpool 1.2 sets
+    MPLBACKEND=Agg (and MPLCONFIGDIR, TF_CPP_MIN_LOG_LEVEL, ...) in the environment, which
+    would silence matplotlib's figures in this process and in every process it starts."""
+    require_envpool()
+    saved = dict(os.environ)
+    import envpool
+
+    for name in set(os.environ) - set(saved):
+        del os.environ[name]
+    os.environ.update({n: v for n, v in saved.items() if os.environ.get(n) != v})
+    return envpool
 
 
 class NativeState(NamedTuple):
@@ -98,9 +113,7 @@ class NativeEnvironment:
     resets_itself = True
 
     def __post_init__(self) -> None:
-        require_envpool()
-        import envpool
-
+        envpool = import_envpool()
         if self.task_id not in envpool.list_all_envs():
             raise ValueError(f"envpool has no task {self.task_id!r}")
         spec = envpool.make_spec(self.task_id)
@@ -141,8 +154,7 @@ class NativeEnvironment:
         return state._replace(steps=state.steps + 1), out
 
     def _host_reset(self, key_data: np.ndarray) -> tuple[NativeState, np.ndarray]:
-        import envpool
-
+        envpool = import_envpool()
         key_data = np.asarray(key_data)
         batch = key_data.shape[:-1]
         seeds = seeds_of(key_data)

@@ -1,0 +1,135 @@
+"""What each of the trainer's extras costs under vmap: the same vmapped program with one extra
+taken out at a time.
+
+    python experiments/profile_vmap.py [--seeds 8] [--steps 500000] [--repeats 3]
+
+PureJaxRL's CartPole workload (`purejaxrl_settings.py`), `--seeds` vmapped seeds, the whole run
+one compiled call. The arms, each compiled apart and timed interleaved (best of `--repeats`):
+- as is;
+- without the escape-speed pass (the policy over the whole batch after the last epoch);
+- with PPO's surrogate alone in the loss (no select over six, and so no per-minibatch KL);
+- without the non-finite guard (the select of the old state after a non-finite update);
+- without the `lax.cond` that skips updates past the run's end (under vmap a select of both);
+- without any of them.
+The arms without an extra are measurements only: what the package computes is the first arm's.
+Writes experiments/results/profile_vmap_<seeds>seeds.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime
+import os
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import purejaxrl_settings as pjr
+from bench_cartpole import cpu_model
+
+import fppo_jax.objectives as objectives
+import fppo_jax.trainer as trainer_module
+from fppo_jax import make_train
+from fppo_jax.trainer import Trainer
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+class WithoutEscape(Trainer):
+    def _escape(self, params, batch, epsilon):
+        return jnp.zeros(()), jnp.zeros(())
+
+
+class WithoutCond(Trainer):
+    def run(self, state, hp, num_updates):
+        return jax.lax.scan(lambda s, _: self.update(s, hp), state, None, length=num_updates)
+
+
+class WithoutAny(WithoutEscape, WithoutCond):
+    pass
+
+
+@contextlib.contextmanager
+def ppo_surrogate_only() -> Iterator[None]:
+    original = objectives.surrogate
+    objectives.surrogate = lambda o, r, a, kl: objectives._ppo(o, r, a, kl)
+    try:
+        yield
+    finally:
+        objectives.surrogate = original
+
+
+@contextlib.contextmanager
+def without_guard() -> Iterator[None]:
+    original = trainer_module._keep_if_finite
+    trainer_module._keep_if_finite = lambda new, old, losses: new
+    try:
+        yield
+    finally:
+        trainer_module._keep_if_finite = original
+
+
+def compiled(kind: type[Trainer], seeds: int, steps: int, *patches) -> object:
+    env, config, hp = pjr.fppo("purejaxrl", steps)
+    base = make_train(config, env)
+    trainer = kind(base.config, base.env, base.networks)
+    hps = jax.tree.map(lambda x: jnp.broadcast_to(x, (seeds, *x.shape)), hp)
+    keys = jax.random.split(jax.random.key(0), seeds)
+    with contextlib.ExitStack() as stack:
+        for patch in patches:
+            stack.enter_context(patch())
+        program = jax.jit(jax.vmap(trainer)).lower(keys, hps).compile()
+    return lambda: program(keys, hps)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=8)
+    parser.add_argument("--steps", type=int, default=500_000)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    n, steps = args.seeds, args.steps
+    arms = {
+        "as is": compiled(Trainer, n, steps),
+        "without the escape-speed pass": compiled(WithoutEscape, n, steps),
+        "PPO's surrogate alone": compiled(Trainer, n, steps, ppo_surrogate_only),
+        "without the non-finite guard": compiled(Trainer, n, steps, without_guard),
+        "without the skip `cond`": compiled(WithoutCond, n, steps),
+        "without any of them": compiled(WithoutAny, n, steps, ppo_surrogate_only, without_guard),
+    }
+    best = dict.fromkeys(arms, float("inf"))
+    for repeat in range(args.repeats):
+        for name, program in arms.items():
+            start = time.perf_counter()
+            jax.block_until_ready(program())
+            best[name] = min(best[name], time.perf_counter() - start)
+        print(f"repeat {repeat + 1}: " + ", ".join(f"{k} {v:.2f} s" for k, v in best.items()))
+    base = best["as is"]
+    command = " ".join(["python experiments/profile_vmap.py", *sys.argv[1:]])
+    lines = [
+        "# What each extra costs under vmap",
+        "",
+        f"- Machine: {cpu_model()}, {os.cpu_count()} cores, no GPU; jax {jax.__version__}; "
+        f"{datetime.date.today()}; nothing else running.",
+        f"- Command: `{command}`",
+        f"- PureJaxRL's CartPole workload, {n} vmapped seeds × {steps:,} steps, one compiled call "
+        f"per arm, interleaved, best of {args.repeats}.",
+        "",
+        "| arm | run (s) | env steps/s | time against as is |",
+        "|---|---|---|---|",
+        *[
+            f"| {name} | {seconds:.2f} | {n * steps / seconds:,.0f} | {seconds / base:.3f} |"
+            for name, seconds in best.items()
+        ],
+    ]
+    path = RESULTS / f"profile_vmap_{n}seeds.md"
+    path.write_text("\n".join(lines) + "\n")
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -52,13 +52,17 @@ def main() -> None:
         print(f"wrote {args.out / name}")
 
 
-def plot_sweeps(directories: list[Path]) -> Figure:
-    """The learning curves of each recorded sweep, side by side."""
+def plot_sweeps(directories: list[Path], columns: int = 3) -> Figure:
+    """The learning curves of each recorded sweep, `columns` to a row."""
+    rows = -(-len(directories) // columns)
+    width = min(columns, len(directories))
     fig, axes = plt.subplots(
-        1, len(directories), figsize=(4 * len(directories), 3.1), layout="constrained"
+        rows, width, figsize=(3.5 * width, 2.7 * rows), layout="constrained", squeeze=False
     )
-    for ax, directory in zip(np.atleast_1d(axes), directories, strict=True):
+    for ax, directory in zip(axes.flat, directories, strict=False):
         plot_curves(SweepResult.read(directory), ax=ax)
+    for ax in axes.flat[len(directories) :]:
+        ax.set_visible(False)
     return fig
 
 

@@ -182,11 +182,12 @@ def measure(args: argparse.Namespace, backend: str, config, updates: int) -> lis
             **shape,
         )
     ours_rate = args.runs * total_steps / ours.train_seconds
+    how = "`train`" if args.runs == 1 else f"`sweep` of {args.runs} runs"
     print(f"{label} (b) fppo-jax: {ours_rate:,.0f} steps/s", flush=True)
     rows = [
         (f"{label} (a) environment alone, random actions", alone_rate, alone_compile, "—"),
         (
-            f"{label} (b) fppo-jax `train` (PPO)",
+            f"{label} (b) fppo-jax {how} (PPO)",
             ours_rate,
             ours.compile_seconds,
             f"(b)/(a) = {ours_rate / alone_rate:.2f}",

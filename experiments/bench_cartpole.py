@@ -53,6 +53,14 @@ def cpu_model() -> str:
     return names[0] if names else platform.processor()
 
 
+def quiet_cpu() -> str:
+    """The machine a CPU benchmark ran on, today, as its results file states it."""
+    return (
+        f"{cpu_model()}, {os.cpu_count()} cores, no GPU; jax {jax.__version__}; "
+        f"{datetime.date.today()}; nothing else running"
+    )
+
+
 def purejaxrl_program(module, workload: str, seeds: int, steps: int) -> Callable[[], object]:
     """PureJaxRL's whole run (vmapped over `seeds`), compiled; a call trains it."""
     train = module.make_train(pjr.purejaxrl(workload, steps))
@@ -120,8 +128,7 @@ def main() -> None:
     lines = [
         "# CartPole training throughput against PureJaxRL, in the same process",
         "",
-        f"- Machine: {cpu_model()}, {os.cpu_count()} cores, no GPU; jax {jax.__version__}; "
-        f"{datetime.date.today()}; nothing else running.",
+        f"- Machine: {quiet_cpu()}.",
         f"- Command: `{command}`",
         "- PureJaxRL's `ppo.py` (patched only for gymnax 1.0) and `fppo_jax.make_train` with the "
         "same settings on gymnax CartPole-v1, no observation or reward normalisation in either; "

@@ -14,13 +14,10 @@ Writes experiments/results/bench_sweep.md.
 from __future__ import annotations
 
 import argparse
-import datetime
-import os
 import time
 from pathlib import Path
 
-import jax
-from bench_cartpole import cpu_model
+from bench_cartpole import quiet_cpu
 
 from fppo_jax import sweep, train
 
@@ -59,8 +56,7 @@ def main() -> None:
     lines = [
         "# A sweep vs the same runs one after another",
         "",
-        f"Machine: {cpu_model()}, {os.cpu_count()} cores, no GPU; jax {jax.__version__}; "
-        f"{datetime.date.today()}; nothing else running.",
+        f"Machine: {quiet_cpu()}.",
         "",
         f"Command: `python experiments/bench_sweep.py --seeds {args.seeds} --steps {args.steps}`",
         "",

@@ -19,17 +19,14 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import datetime
-import os
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import purejaxrl_settings as pjr
-from bench_cartpole import cpu_model
+from bench_cartpole import quiet_cpu, seconds
 
 import fppo_jax.objectives as objectives
 import fppo_jax.trainer as trainer_module
@@ -104,17 +101,14 @@ def main() -> None:
     best = dict.fromkeys(arms, float("inf"))
     for repeat in range(args.repeats):
         for name, program in arms.items():
-            start = time.perf_counter()
-            jax.block_until_ready(program())
-            best[name] = min(best[name], time.perf_counter() - start)
+            best[name] = min(best[name], seconds(program))
         print(f"repeat {repeat + 1}: " + ", ".join(f"{k} {v:.2f} s" for k, v in best.items()))
     base = best["as is"]
     command = " ".join(["python experiments/profile_vmap.py", *sys.argv[1:]])
     lines = [
         "# What each extra costs under vmap",
         "",
-        f"- Machine: {cpu_model()}, {os.cpu_count()} cores, no GPU; jax {jax.__version__}; "
-        f"{datetime.date.today()}; nothing else running.",
+        f"- Machine: {quiet_cpu()}.",
         f"- Command: `{command}`",
         f"- PureJaxRL's CartPole workload, {n} vmapped seeds × {steps:,} steps, one compiled call "
         f"per arm, interleaved, best of {args.repeats}.",

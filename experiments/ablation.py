@@ -1,37 +1,154 @@
-"""The paper's Fig. 6 ablation: FPPO-LP's α and FPPO-QP's k, × seeds, as one program per task.
+"""The paper's Fig. 6 ablation: FPPO-LP's α and FPPO-QP's k, × seeds, each part one program.
 
-    python experiments/ablation.py                                  # Walker2d and Ant
-    python experiments/ablation.py --backend native                 # the same on a CPU
+    python experiments/ablation.py --backend native                     # Walker2d and Ant
+    python experiments/ablation.py --backend native --tasks ant --parts k   # one part
     python experiments/ablation.py --tasks reacher --steps 4096 --seeds 1   # a smoke run
 
-α ∈ {1.1, …, 1.5} and k ∈ {0.1, …, 0.5} (SPEC §2): 10 settings × 5 seeds = 50 runs of 1M
-steps per task, one vmapped sweep (`fppo_jax.sweep`, `paper` preset), chunked automatically to
-fit device memory, on `--backend` (default auto: MJX on a GPU, native MuJoCo on a CPU). Writes,
-per task, <results>/ablation_<backend>/<task>/ (curves.csv, sweep.json, curves.png,
-ablation.png) and a Markdown summary, ablation.md, beside them.
+Each task has two parts, each one vmapped sweep (`fppo_jax.sweep`, `paper` preset) of 5
+settings × 5 seeds × 1M steps, chunked automatically to fit device memory: `alpha`, FPPO-LP
+with α ∈ {1.1, …, 1.5}, and `k`, FPPO-QP with k ∈ {0.1, …, 0.5} (SPEC §2). They run on
+`--backend` (default auto: MJX on a GPU, native MuJoCo on a CPU). As each part ends, its curves
+and run record go to <results>/ablation_<backend>/<task>/<part>/, the task's chart (max average
+return against α and against k, the paper's Fig. 6) to <results>/ablation_<backend>/<task>.png,
+and <results>/ablation_<backend>/ablation.md is written again from every part recorded so far,
+saying which are still to run: a long ablation can go part by part, across sittings.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
+import json
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
-import jax
+import matplotlib
+from matplotlib.axes import Axes
+from table1_mujoco import RECORDED, machine
 
 from fppo_jax import sweep
+from fppo_jax.config import table2
 from fppo_jax.envs import BACKENDS, TASKS, choose_backend
-from fppo_jax.plots import plot_sweep
+from fppo_jax.results import SweepResult
 
-ALPHAS = [1.1, 1.2, 1.3, 1.4, 1.5]
-KS = [0.1, 0.2, 0.3, 0.4, 0.5]
+PARTS = {  # part: the variant and the values of its own hyperparameter (SPEC §2)
+    "alpha": ("fppo-lp", "alpha", [1.1, 1.2, 1.3, 1.4, 1.5]),
+    "k": ("fppo-qp", "k", [0.1, 0.2, 0.3, 0.4, 0.5]),
+}
+TASKS_IN_PAPER = ("walker2d", "ant")
 RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def run_part(task: str, part: str, args: argparse.Namespace, directory: Path) -> None:
+    """One part's sweep, written with its run record to `directory`/<task>/<part>/."""
+    variant, name, values = PARTS[part]
+    start = time.perf_counter()
+    result = sweep(
+        task,
+        {"variant": variant, name: values},
+        seeds=args.seeds,
+        total_steps=args.steps,
+        chunk=args.chunk,
+        backend=args.backend,
+        progress=True,
+    )
+    wall = time.perf_counter() - start
+    result.write(directory / task / part, metrics=RECORDED)
+    record = {
+        "machine": machine(),
+        "date": str(datetime.date.today()),
+        "wall_seconds": round(wall, 1),
+        "command": " ".join(["python experiments/ablation.py", *sys.argv[1:]]),
+    }
+    (directory / task / part / "run.json").write_text(json.dumps(record, indent=1) + "\n")
+
+
+def recorded(directory: Path, task: str) -> list[str]:
+    """The parts of `task` recorded under `directory`."""
+    return [part for part in PARTS if (directory / task / part / "run.json").exists()]
+
+
+def draw(directory: Path, task: str, axes: Sequence[Axes]) -> None:
+    """Each recorded part of `task` on its own Axes: max average return against its
+    hyperparameter, with Table 2's choice marked."""
+    from fppo_jax.plots import plot_ablation
+
+    for ax, part in zip(axes, recorded(directory, task), strict=False):
+        plot_ablation(SweepResult.read(directory / task / part), axes=[ax])
+        variant, name, _ = PARTS[part]
+        chosen = table2(task, variant).get(name)
+        if chosen is not None:
+            ax.axvline(chosen, color="grey", linestyle=":", label=f"Table 2: {name} = {chosen}")
+            ax.legend(fontsize="small")
+
+
+def figure(directory: Path, task: str) -> Path:
+    """`task`'s chart, written to `directory`/<task>.png."""
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    width = len(recorded(directory, task))
+    fig, axes = plt.subplots(1, width, figsize=(5 * width, 4), squeeze=False, layout="constrained")
+    draw(directory, task, axes[0])
+    path = directory / f"{task}.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def report(directory: Path, backend: str) -> Path:
+    """ablation.md: every part recorded under `directory`, and those still to run."""
+    others = sorted(p.name for p in directory.iterdir() if p.is_dir())
+    shown = [*TASKS_IN_PAPER, *(t for t in others if t not in TASKS_IN_PAPER)]
+    done = [f"{t} {p}" for t in shown for p in recorded(directory, t)]
+    pending = [f"{t} {p}" for t in TASKS_IN_PAPER for p in PARTS if f"{t} {p}" not in done]
+    lines = [
+        f"# Fig. 6 ablation on {backend}: FPPO-LP's α and FPPO-QP's k",
+        "",
+        "- Each part is one sweep (one compiled program) of the `paper` preset (learning rate "
+        "annealed linearly to 0, as baselines' ppo2 MuJoCo defaults): `alpha`, FPPO-LP with "
+        f"α ∈ {PARTS['alpha'][2]}; `k`, FPPO-QP with k ∈ {PARTS['k'][2]}.",
+        "- Max average return: the maximum over updates of the seed-mean of the "
+        "last-100-episode average return, ± the std across seeds there, over the seeds that "
+        "did not diverge. The paper's Fig. 6 gives these as a chart only; its Table 2 picks "
+        "the best α and k per task.",
+        f"- Parts done: {', '.join(done) or 'none'}; still to run: {', '.join(pending) or 'none'}.",
+        "",
+    ]
+    for task in shown:
+        parts = recorded(directory, task)
+        if not parts:
+            continue
+        chosen = {**table2(task, "fppo-lp"), **table2(task, "fppo-qp")}
+        lines += [f"## {task}", ""]
+        if chosen:
+            lines += ["Table 2's choice: " + ", ".join(f"{k} = {v}" for k, v in chosen.items())]
+            lines += [""]
+        for part in parts:
+            result = SweepResult.read(directory / task / part)
+            record = json.loads((directory / task / part / "run.json").read_text())
+            lines += [
+                f"### {part}",
+                "",
+                f"{len(result.runs)} runs ({result.config['total_steps']:,} env steps each) in "
+                f"{record['wall_seconds']:,.0f} s ({result.compile_seconds:.0f} s compiling) "
+                f"on {record['machine']}, {record['date']}: `{record['command']}`.",
+                "",
+                result.table(),
+                "",
+            ]
+        lines += [f"![{task}: Fig. 6]({task}.png)", ""]
+    path = directory / "ablation.md"
+    path.write_text("\n".join(lines))
+    return path
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tasks", nargs="+", default=["walker2d", "ant"], choices=list(TASKS))
+    parser.add_argument("--tasks", nargs="+", default=list(TASKS_IN_PAPER), choices=list(TASKS))
+    parser.add_argument("--parts", nargs="+", default=list(PARTS), choices=list(PARTS))
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=1_000_000)
     parser.add_argument("--chunk", type=int, help="runs per compiled call (default: automatic)")
@@ -39,49 +156,14 @@ def main() -> None:
     parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
     args = parser.parse_args()
 
-    platform = jax.devices()[0].platform
-    backend = choose_backend(args.tasks[0], args.backend)[0]
-    out = args.results / f"ablation_{backend}"
-    lines = [
-        "# Fig. 6 ablation: FPPO-LP α and FPPO-QP k",
-        "",
-        f"- Machine: {platform.upper()} ({jax.devices()[0].device_kind}), jax {jax.__version__}; "
-        f"backend {backend}",
-        f"- Command: `python experiments/ablation.py {' '.join(sys.argv[1:])}`",
-        f"- α ∈ {ALPHAS} (FPPO-LP), k ∈ {KS} (FPPO-QP), {args.seeds} seeds, "
-        f"{args.steps:,} steps, `paper` preset (learning rate annealed linearly to 0, as "
-        "baselines' ppo2 MuJoCo defaults); each task one sweep.",
-        "",
-    ]
+    backend, why = choose_backend(args.tasks[0], args.backend)
+    directory = args.results / f"ablation_{backend}"
+    print(f"backend {backend}{' (' + why + ')' if why else ''}; results in {directory}")
     for task in args.tasks:
-        grid = {"variant": ["fppo-lp", "fppo-qp"], "alpha": ALPHAS, "k": KS}
-        start = time.perf_counter()
-        result = sweep(
-            task,
-            grid,
-            seeds=args.seeds,
-            total_steps=args.steps,
-            chunk=args.chunk,
-            backend=args.backend,
-            progress=True,
-        )
-        seconds = time.perf_counter() - start
-        result.write(out / task)
-        plots = plot_sweep(result, out / task)
-        lines += [
-            f"## {task}",
-            "",
-            f"{len(result.runs)} runs in {seconds:.0f} s wall ({result.compile_seconds:.0f} s "
-            f"compiling), {result.config['runs_per_call']} runs per compiled call. Plots: "
-            + ", ".join(f"`{p.relative_to(out)}`" for p in plots),
-            "",
-            result.table(),
-            "",
-        ]
-    path = out / "ablation.md"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines))
-    print(f"wrote {path}")
+        for part in args.parts:
+            run_part(task, part, args, directory)
+            figure(directory, task)
+            print(f"wrote {report(directory, backend)}", flush=True)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,8 @@
   points, from `results/escape_speed/fractions.csv`, which `escape_speed.py` writes.
 - `table1_mujoco.png`: Table 1's MuJoCo learning curves, from the tasks `table1_mujoco.py` has
   recorded (`results/table1_mujoco_<backend>/<task>/`).
+- `ablation.png`: Fig. 6, max average return against FPPO-LP's α and FPPO-QP's k, one row
+  per task `ablation.py` has recorded (`results/ablation_<backend>/<task>/<part>/`).
 
 Nothing is trained.
 """
@@ -20,6 +22,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import ablation
 import matplotlib.pyplot as plt
 import numpy as np
 from escape_speed import CSV_NAME, VARIANTS, read_fractions
@@ -45,6 +48,9 @@ def main() -> None:
     mujoco = sorted(path.parent for path in RESULTS.glob("table1_mujoco*/*/curves.csv"))
     if mujoco:
         figures["table1_mujoco.png"] = plot_sweeps(mujoco)
+    ablations = sorted({path.parent.parent for path in RESULTS.glob("ablation_*/*/*/run.json")})
+    if ablations:
+        figures["ablation.png"] = plot_ablations(ablations)
     args.out.mkdir(parents=True, exist_ok=True)
     for name, fig in figures.items():
         fig.savefig(args.out / name, dpi=DPI)
@@ -63,6 +69,19 @@ def plot_sweeps(directories: list[Path], columns: int = 3) -> Figure:
         plot_curves(SweepResult.read(directory), ax=ax)
     for ax in axes.flat[len(directories) :]:
         ax.set_visible(False)
+    return fig
+
+
+def plot_ablations(tasks: list[Path]) -> Figure:
+    """Each task's recorded ablation parts (`ablation.py`'s <task>/<part>/), one row per task."""
+    width = max(len(ablation.recorded(task.parent, task.name)) for task in tasks)
+    fig, axes = plt.subplots(
+        len(tasks), width, figsize=(4 * width, 3 * len(tasks)), layout="constrained", squeeze=False
+    )
+    for row, task in zip(axes, tasks, strict=True):
+        ablation.draw(task.parent, task.name, row)
+        for ax in row[len(ablation.recorded(task.parent, task.name)) :]:
+            ax.set_visible(False)
     return fig
 
 

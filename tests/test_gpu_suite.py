@@ -27,7 +27,11 @@ def test_the_smoke_suite_runs_every_kind_of_part_and_records_each(tmp_path):
     table = (tmp_path / "table1_mujoco_native.md").read_text()
     assert "Tasks done: reacher" in table and "ppo" in table and "fppo-lp" in table
     assert (tmp_path / "table1_mujoco_native" / "reacher" / "curves.csv").exists()
-    assert "α" in (tmp_path / "ablation_native" / "ablation.md").read_text()
+    ablation = tmp_path / "ablation_native"
+    assert "Parts done: reacher alpha, reacher k;" in (ablation / "ablation.md").read_text()
+    for part in ("alpha", "k"):
+        assert (ablation / "reacher" / part / "curves.csv").exists()
+    assert (ablation / "reacher.png").stat().st_size > 0
     assert "| table1-reacher | done |" in (tmp_path / "gpu_suite_cpu.md").read_text()
 
 

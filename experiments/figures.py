@@ -33,7 +33,7 @@ from fppo_jax.results import SweepResult
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CLASSIC_TASKS = ("cartpole", "acrobot", "mountaincar")
-DPI = 100
+DPI = 90
 
 
 def main() -> None:
@@ -53,7 +53,7 @@ def main() -> None:
         figures["ablation.png"] = plot_ablations(ablations)
     args.out.mkdir(parents=True, exist_ok=True)
     for name, fig in figures.items():
-        fig.savefig(args.out / name, dpi=DPI)
+        fig.savefig(args.out / name, dpi=DPI, pil_kwargs={"optimize": True})
         plt.close(fig)
         print(f"wrote {args.out / name}")
 
@@ -66,7 +66,9 @@ def plot_sweeps(directories: list[Path], columns: int = 3) -> Figure:
         rows, width, figsize=(3.5 * width, 2.7 * rows), layout="constrained", squeeze=False
     )
     for ax, directory in zip(axes.flat, directories, strict=False):
-        plot_curves(SweepResult.read(directory), ax=ax)
+        result = SweepResult.read(directory)
+        plot_curves(result, ax=ax)
+        ax.set_title(f"{result.config['env']} ({len(result.seeds)} seeds, mean ± std)")
     for ax in axes.flat[len(directories) :]:
         ax.set_visible(False)
     return fig

@@ -17,18 +17,14 @@ saying which are still to run: a long ablation can go part by part, across sitti
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
-import sys
-import time
 from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
 from matplotlib.axes import Axes
-from table1_mujoco import RECORDED, machine
+from table1_mujoco import record_sweep
 
-from fppo_jax import sweep
 from fppo_jax.config import table2
 from fppo_jax.envs import BACKENDS, TASKS, choose_backend
 from fppo_jax.results import SweepResult
@@ -44,25 +40,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 def run_part(task: str, part: str, args: argparse.Namespace, directory: Path) -> None:
     """One part's sweep, written with its run record to `directory`/<task>/<part>/."""
     variant, name, values = PARTS[part]
-    start = time.perf_counter()
-    result = sweep(
-        task,
-        {"variant": variant, name: values},
-        seeds=args.seeds,
-        total_steps=args.steps,
-        chunk=args.chunk,
-        backend=args.backend,
-        progress=True,
-    )
-    wall = time.perf_counter() - start
-    result.write(directory / task / part, metrics=RECORDED)
-    record = {
-        "machine": machine(),
-        "date": str(datetime.date.today()),
-        "wall_seconds": round(wall, 1),
-        "command": " ".join(["python experiments/ablation.py", *sys.argv[1:]]),
-    }
-    (directory / task / part / "run.json").write_text(json.dumps(record, indent=1) + "\n")
+    record_sweep(task, {"variant": variant, name: values}, args, directory / task / part)
 
 
 def recorded(directory: Path, task: str) -> list[str]:

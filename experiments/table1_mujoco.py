@@ -61,10 +61,18 @@ def machine() -> str:
 
 def run_task(task: str, args: argparse.Namespace, directory: Path) -> None:
     """One task's sweep, its curves and record, and its figure."""
+    result = record_sweep(task, {"variant": list(args.variants)}, args, directory / task)
+    figure(result, directory / f"{task}.png")
+
+
+def record_sweep(task: str, grid: dict, args: argparse.Namespace, directory: Path) -> SweepResult:
+    """`task`'s sweep of `grid` with the command line's seeds, steps, chunk and backend; its
+    curves (the `RECORDED` metrics) and its run record (machine, date, wall time, command) go
+    to `directory`."""
     start = time.perf_counter()
     result = sweep(
         task,
-        {"variant": list(args.variants)},
+        grid,
         seeds=args.seeds,
         total_steps=args.steps,
         chunk=args.chunk,
@@ -72,15 +80,15 @@ def run_task(task: str, args: argparse.Namespace, directory: Path) -> None:
         progress=True,
     )
     wall = time.perf_counter() - start
-    result.write(directory / task, metrics=RECORDED)
+    result.write(directory, metrics=RECORDED)
     record = {
         "machine": machine(),
         "date": str(datetime.date.today()),
         "wall_seconds": round(wall, 1),
-        "command": " ".join(["python experiments/table1_mujoco.py", *sys.argv[1:]]),
+        "command": " ".join([f"python experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
     }
-    (directory / task / "run.json").write_text(json.dumps(record, indent=1) + "\n")
-    figure(result, directory / f"{task}.png")
+    (directory / "run.json").write_text(json.dumps(record, indent=1) + "\n")
+    return result
 
 
 def figure(result: SweepResult, path: Path) -> None:

@@ -5,6 +5,10 @@ then epochs × shuffled minibatches of the variant's loss. The whole run is a ``
 updates, so ``jax.jit(train_fn)`` compiles it once and ``jax.vmap`` over keys and
 :class:`Hyperparameters` trains seeds and settings side by side. :meth:`Trainer.run` runs a
 chunk of updates from a state, for progress reporting between compiled calls.
+
+Each part of an update runs under a ``jax.named_scope`` (``rollout``, ``advantages``,
+``epochs`` with ``shuffle``, ``minibatches``, ``gradient`` and ``optimizer`` inside, then
+``escape``), so that a profile names the part each compiled operation belongs to.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from fppo_jax.losses import Batch, LossInfo, ppo_loss
 from fppo_jax.networks import Networks, make_networks
 from fppo_jax.normalization import RunningStats
 from fppo_jax.objectives import distance_past_bound, negative_regions
+from fppo_jax.permutation import permutation
 
 RETURN_WINDOW = 100  # episodes in `average_return` (SPEC §2)
 
@@ -221,9 +226,10 @@ class Trainer:
         config = self.config
         key, rollout_key, epochs_key = jax.random.split(state.key, 3)
         batch, traj, envs, obs_stats, return_stats = self.collect(state, hp, rollout_key)
-        (params, opt_state), losses, infos, _ = self._epochs(state, hp, batch, epochs_key)
-
-        negative_fraction, negative_distance = self._escape(params, batch, hp.objective.epsilon)
+        with jax.named_scope("epochs"):
+            (params, opt_state), losses, infos, _ = self._epochs(state, hp, batch, epochs_key)
+        with jax.named_scope("escape"):
+            negative_fraction, negative_distance = self._escape(params, batch, hp.objective.epsilon)
 
         done = traj.terminated | traj.truncated
         recent_returns, num_episodes = _push_returns(
@@ -256,7 +262,8 @@ class Trainer:
         """A rollout and its batch (advantages, targets), with the environments where the
         rollout left them and the updated normaliser statistics."""
         config = self.config
-        traj, envs = self._rollout(state, hp, key)
+        with jax.named_scope("rollout"):
+            traj, envs = self._rollout(state, hp, key)
         obs_stats, return_stats = state.obs_stats, state.return_stats
         if config.normalize_observations:
             obs_stats = obs_stats.update(traj.raw_obs)
@@ -268,16 +275,23 @@ class Trainer:
         # The value to bootstrap from is always that of the observation a step produced, before
         # any reset: V(obs_{t+1}) mid-episode, V(last state) at truncation, and 0 at termination.
         # Computing every value here in one batch keeps the critic out of the sequential rollout.
-        final_obs = self.network_input(state.obs_stats, traj.final_obs)
-        values, next_values = jnp.split(
-            self.networks.values(state.params, jnp.concatenate([traj.obs, final_obs])), 2
-        )
-        advantages, targets = gae(
-            rewards, values, next_values, traj.terminated, traj.truncated, hp.gamma, hp.gae_lambda
-        )
-        # Normalised over the whole batch (baselines does it per minibatch) so that each
-        # sample's sign, and so its region R+ or R-, is fixed for the update.
-        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+        with jax.named_scope("advantages"):
+            final_obs = self.network_input(state.obs_stats, traj.final_obs)
+            values, next_values = jnp.split(
+                self.networks.values(state.params, jnp.concatenate([traj.obs, final_obs])), 2
+            )
+            advantages, targets = gae(
+                rewards,
+                values,
+                next_values,
+                traj.terminated,
+                traj.truncated,
+                hp.gamma,
+                hp.gae_lambda,
+            )
+            # Normalised over the whole batch (baselines does it per minibatch) so that each
+            # sample's sign, and so its region R+ or R-, is fixed for the update.
+            advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
 
         flat = lambda x: x.reshape((config.samples_per_update, *x.shape[2:]))  # noqa: E731
         batch = jax.tree.map(
@@ -410,15 +424,19 @@ class Trainer:
 
         def minibatch_step(carry: tuple, minibatch: Batch) -> tuple[tuple, tuple]:
             params, opt_state = carry
-            (loss, info), grads = value_and_grad(
-                params, minibatch, hp, self.networks, config.clip_value_loss
-            )
-            updates, opt_state = optimizer.update(grads, opt_state, params)
-            return (optax.apply_updates(params, updates), opt_state), (loss, info)
+            with jax.named_scope("gradient"):
+                (loss, info), grads = value_and_grad(
+                    params, minibatch, hp, self.networks, config.clip_value_loss
+                )
+            with jax.named_scope("optimizer"):
+                updates, opt_state = optimizer.update(grads, opt_state, params)
+                params = optax.apply_updates(params, updates)
+            return (params, opt_state), (loss, info)
 
         def epoch(carry: tuple, order: jax.Array) -> tuple[tuple, tuple]:
             shape = (config.num_minibatches, config.minibatch_size)
-            minibatches = jax.tree.map(lambda x: x[order].reshape(shape + x.shape[1:]), batch)
+            with jax.named_scope("minibatches"):
+                minibatches = jax.tree.map(lambda x: x[order].reshape(shape + x.shape[1:]), batch)
             carry, out = jax.lax.scan(minibatch_step, carry, minibatches)
             if track_escape:
                 out = (*out, self._escape(carry[0], batch, hp.objective.epsilon)[0])
@@ -426,7 +444,8 @@ class Trainer:
 
         # Every epoch's shuffle in one batched draw, outside the loop.
         keys = jax.random.split(key, config.num_epochs)
-        orders = jax.vmap(jax.random.permutation, (0, None))(keys, config.samples_per_update)
+        with jax.named_scope("shuffle"):
+            orders = jax.vmap(permutation, (0, None))(keys, config.samples_per_update)
         carry = (state.params, state.opt_state)
         carry, (losses, infos, *escape) = jax.lax.scan(epoch, carry, orders)
         return carry, losses, infos, escape[0] if escape else None

@@ -1,24 +1,29 @@
 """What each of the trainer's extras costs under vmap: the same vmapped program with one extra
 taken out at a time.
 
-    python experiments/profile_vmap.py [--seeds 8] [--steps 500000] [--repeats 3]
+    python experiments/profile_vmap.py [--workload purejaxrl|paper] [--seeds 8]
+        [--steps 500000] [--repeats 3]
 
-PureJaxRL's CartPole workload (`purejaxrl_settings.py`), `--seeds` vmapped seeds, the whole run
-one compiled call. The arms, each compiled apart and timed interleaved (best of `--repeats`):
+One of the CartPole workloads measured against PureJaxRL (`purejaxrl_settings.py`), `--seeds`
+vmapped seeds, the whole run one compiled call. The arms, each compiled apart and timed
+interleaved (best of `--repeats`):
 - as is;
+- with `jax.random.permutation` shuffling the minibatches (as PureJaxRL does) in place of
+  `fppo_jax.permutation`'s packed-key sort;
 - without the escape-speed pass (the policy over the whole batch after the last epoch);
 - with PPO's surrogate alone in the loss (no select over six, and so no per-minibatch KL);
 - without the non-finite guard (the select of the old state after a non-finite update);
 - without the `lax.cond` that skips updates past the run's end (under vmap a select of both);
 - without any of them.
 The arms without an extra are measurements only: what the package computes is the first arm's.
-Writes experiments/results/profile_vmap_<seeds>seeds.md.
+Writes experiments/results/profile_vmap_<workload>_<seeds>seeds.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -61,6 +66,16 @@ def ppo_surrogate_only() -> Iterator[None]:
 
 
 @contextlib.contextmanager
+def jax_permutation() -> Iterator[None]:
+    original = trainer_module.permutation
+    trainer_module.permutation = jax.random.permutation
+    try:
+        yield
+    finally:
+        trainer_module.permutation = original
+
+
+@contextlib.contextmanager
 def without_guard() -> Iterator[None]:
     original = trainer_module._keep_if_finite
     trainer_module._keep_if_finite = lambda new, old, losses: new
@@ -70,8 +85,8 @@ def without_guard() -> Iterator[None]:
         trainer_module._keep_if_finite = original
 
 
-def compiled(kind: type[Trainer], seeds: int, steps: int, *patches) -> object:
-    env, config, hp = pjr.fppo("purejaxrl", steps)
+def compiled(kind: type[Trainer], *patches, workload: str, seeds: int, steps: int) -> object:
+    env, config, hp = pjr.fppo(workload, steps)
     base = make_train(config, env)
     trainer = kind(base.config, base.env, base.networks)
     hps = jax.tree.map(lambda x: jnp.broadcast_to(x, (seeds, *x.shape)), hp)
@@ -85,33 +100,35 @@ def compiled(kind: type[Trainer], seeds: int, steps: int, *patches) -> object:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workload", choices=sorted(pjr.WORKLOADS), default="purejaxrl")
     parser.add_argument("--seeds", type=int, default=8)
     parser.add_argument("--steps", type=int, default=500_000)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    n, steps = args.seeds, args.steps
+    arm = functools.partial(compiled, workload=args.workload, seeds=args.seeds, steps=args.steps)
     arms = {
-        "as is": compiled(Trainer, n, steps),
-        "without the escape-speed pass": compiled(WithoutEscape, n, steps),
-        "PPO's surrogate alone": compiled(Trainer, n, steps, ppo_surrogate_only),
-        "without the non-finite guard": compiled(Trainer, n, steps, without_guard),
-        "without the skip `cond`": compiled(WithoutCond, n, steps),
-        "without any of them": compiled(WithoutAny, n, steps, ppo_surrogate_only, without_guard),
+        "as is": arm(Trainer),
+        "with `jax.random.permutation`'s shuffle (as PureJaxRL's)": arm(Trainer, jax_permutation),
+        "without the escape-speed pass": arm(WithoutEscape),
+        "PPO's surrogate alone": arm(Trainer, ppo_surrogate_only),
+        "without the non-finite guard": arm(Trainer, without_guard),
+        "without the skip `cond`": arm(WithoutCond),
+        "without any of them": arm(WithoutAny, ppo_surrogate_only, without_guard),
     }
     best = dict.fromkeys(arms, float("inf"))
     for repeat in range(args.repeats):
         for name, program in arms.items():
             best[name] = min(best[name], seconds(program))
         print(f"repeat {repeat + 1}: " + ", ".join(f"{k} {v:.2f} s" for k, v in best.items()))
-    base = best["as is"]
+    base, n, steps = best["as is"], args.seeds, args.steps
     command = " ".join(["python experiments/profile_vmap.py", *sys.argv[1:]])
     lines = [
         "# What each extra costs under vmap",
         "",
         f"- Machine: {quiet_cpu()}.",
         f"- Command: `{command}`",
-        f"- PureJaxRL's CartPole workload, {n} vmapped seeds × {steps:,} steps, one compiled call "
-        f"per arm, interleaved, best of {args.repeats}.",
+        f"- {pjr.WORKLOADS[args.workload]['title']}: {n} vmapped seeds × {steps:,} steps, one "
+        f"compiled call per arm, interleaved, best of {args.repeats}.",
         "",
         "| arm | run (s) | env steps/s | time against as is |",
         "|---|---|---|---|",
@@ -120,7 +137,7 @@ def main() -> None:
             for name, seconds in best.items()
         ],
     ]
-    path = RESULTS / f"profile_vmap_{n}seeds.md"
+    path = RESULTS / f"profile_vmap_{args.workload}_{n}seeds.md"
     path.write_text("\n".join(lines) + "\n")
     print(f"wrote {path}")
 

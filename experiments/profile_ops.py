@@ -1,0 +1,188 @@
+"""Where a vmapped run's time goes, operation by operation, from XLA's own trace.
+
+    python experiments/profile_ops.py [--workload purejaxrl|paper] [--seeds 8] [--steps N]
+
+One whole run (`--seeds` vmapped seeds, one compiled call) is traced with `jax.profiler`.
+Each operation XLA's CPU runtime executed is charged its own time (its span less the operations
+it ran inside it, with the end of an asynchronous run) and attributed to the part of the update
+it was compiled from, by the trainer's named scopes (rollout, advantages, epochs: shuffle,
+minibatches, gradient, optimizer; escape), and to its kind (matrix products, sorts, gathers,
+element-wise fusions and the rest). Tracing adds a fixed cost to every operation, which
+inflates the many small ones: the shares are a guide to where time goes, and the untraced
+run's time is stated beside them.
+Writes experiments/results/profile_ops_<workload>_<seeds>seeds.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import re
+import sys
+import tempfile
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import purejaxrl_settings as pjr
+from bench_cartpole import quiet_cpu, seconds
+
+from fppo_jax import make_train
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+# The trainer's named scopes: an operation belongs to the innermost of them on its name path.
+PARTS = (
+    "rollout",
+    "advantages",
+    "epochs",
+    "shuffle",
+    "minibatches",
+    "gradient",
+    "optimizer",
+    "escape",
+)
+KINDS = (
+    ("matrix products", re.compile(r"^(ynn_fusion|dot|.*convolution)")),
+    ("sorts", re.compile(r"^sort")),
+    ("gathers and scatters", re.compile(r"^.*(gather|scatter|dynamic-slice|dynamic-update)")),
+    ("concatenations and copies", re.compile(r"^(.*concatenate|copy|wrapped_copy|transpose)")),
+    ("loops and conditionals", re.compile(r"^(while|cond|conditional|call)")),
+    ("element-wise fusions and reductions", re.compile(r".")),
+)
+# The runtime's own events: dispatching operations and waiting on its threads.
+RUNTIME = ("ThunkExecutor::Execute", "SlinkyThreadPool::Await")
+OUTSIDE = "outside the named parts (the update's bookkeeping, loop carries)"
+
+
+def parts(hlo: str) -> dict[str, str]:
+    """The part of the update each instruction of the optimised program `hlo` was compiled
+    from: the trainer's scopes on its JAX name path (e.g. ``epochs / gradient``), or where XLA
+    kept no name for it, those of the instruction that runs its computation."""
+    computation, where, scopes, caller = "", {}, {}, {}
+    for line in hlo.splitlines():
+        header = re.match(r"^(?:ENTRY )?%?([\w.-]+) \(", line)
+        if header:
+            computation = header.group(1)
+            continue
+        instruction = re.match(r"^\s*(?:ROOT )?%?([\w.-]+) = ", line)
+        if not instruction:
+            continue
+        name = instruction.group(1)
+        where[name] = computation
+        op_name = re.search(r'op_name="([^"]*)"', line)
+        if op_name:
+            path = [re.sub(r"^(transpose\(|jvp\()+|\)+$", "", c) for c in op_name[1].split("/")]
+            named = list(dict.fromkeys(c for c in path if c in PARTS))
+            if named:
+                scopes[name] = " / ".join(named)
+        for called in re.findall(r"(?:calls|body|condition|to_apply)=%?([\w.-]+)", line):
+            caller[called] = name
+        for branches in re.findall(r"branch_computations=\{([^}]*)\}", line):
+            for called in re.findall(r"%?([\w.-]+)", branches):
+                caller[called] = name
+
+    def part(name: str) -> str:
+        while name not in scopes and where.get(name) in caller:
+            name = caller[where[name]]
+        return scopes.get(name, OUTSIDE)
+
+    return {name: part(name) for name in where}
+
+
+def kind_of(name: str) -> str:
+    return next(kind for kind, pattern in KINDS if pattern.match(name))
+
+
+def self_times(trace: jax.profiler.ProfileData) -> collections.Counter:
+    """Each operation's own time (ns) over the trace's XLA runtime threads."""
+    own: collections.Counter = collections.Counter()
+    for plane in trace.planes:
+        for line in plane.lines:
+            if not line.name.startswith("tf_XLAEigen"):
+                continue
+            events = sorted(
+                ((e.start_ns, e.duration_ns, e.name) for e in line.events),
+                key=lambda e: (e[0], -e[1]),
+            )
+            stack: list[tuple[float, float, str]] = []
+            for start, duration, name in events:
+                while stack and stack[-1][0] + stack[-1][1] <= start:
+                    stack.pop()
+                if stack:
+                    own[stack[-1][2]] -= duration
+                own[name] += duration
+                stack.append((start, duration, name))
+    return own
+
+
+def table(title: str, totals: collections.Counter, whole: float) -> list[str]:
+    rows = [f"| {title} | ms | share |", "|---|---|---|"]
+    for name, ns in totals.most_common():
+        rows.append(f"| {name} | {ns / 1e6:,.1f} | {ns / whole:.1%} |")
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workload", choices=sorted(pjr.WORKLOADS), default="purejaxrl")
+    parser.add_argument("--seeds", type=int, default=8)
+    parser.add_argument("--steps", type=int, default=100_000, help="env steps per seed")
+    args = parser.parse_args()
+
+    env, config, hp = pjr.fppo(args.workload, args.steps)
+    trainer = make_train(config, env)
+    hps = jax.tree.map(lambda x: jnp.broadcast_to(x, (args.seeds, *x.shape)), hp)
+    keys = jax.random.split(jax.random.key(0), args.seeds)
+    compiled = jax.jit(jax.vmap(trainer)).lower(keys, hps).compile()
+    part_of = parts(compiled.as_text())
+    untraced = min(seconds(lambda: compiled(keys, hps)) for _ in range(3))
+
+    with tempfile.TemporaryDirectory() as folder:
+        with jax.profiler.trace(folder):
+            jax.block_until_ready(compiled(keys, hps))
+        (path,) = Path(folder).rglob("*.xplane.pb")
+        own = self_times(jax.profiler.ProfileData.from_file(str(path)))
+
+    by_part: collections.Counter = collections.Counter()
+    by_kind: collections.Counter = collections.Counter()
+    by_both: collections.Counter = collections.Counter()
+    for event, ns in own.items():
+        # An operation run asynchronously ends in an event of its own, "end: <name>".
+        name = event.removeprefix("end: ")
+        if name in RUNTIME:
+            part, kind = "the runtime", "dispatching and waiting"
+        else:
+            part, kind = part_of.get(name, OUTSIDE), kind_of(name)
+        by_part[part] += ns
+        by_kind[kind] += ns
+        by_both[f"{part}: {kind}"] += ns
+    whole = sum(own.values())
+
+    command = " ".join(["python experiments/profile_ops.py", *sys.argv[1:]])
+    lines = [
+        f"# Where a vmapped run's time goes: {pjr.WORKLOADS[args.workload]['title']}",
+        "",
+        f"- Machine: {quiet_cpu()}.",
+        f"- Command: `{command}`",
+        f"- {args.seeds} vmapped seeds × {args.steps:,} env steps, one compiled call: "
+        f"{untraced:.2f} s untraced (best of 3, {args.seeds * args.steps / untraced:,.0f} env "
+        f"steps/s). The traced run's operations took {whole / 1e9:.2f} s of thread time in all "
+        "(two runtime threads; tracing inflates small operations).",
+        "",
+        *table("part of the update", by_part, whole),
+        "",
+        *table("kind of operation", by_kind, whole),
+        "",
+        "The ten largest (part: kind):",
+        "",
+        *table("part: kind", collections.Counter(dict(by_both.most_common(10))), whole),
+    ]
+    out = RESULTS / f"profile_ops_{args.workload}_{args.seeds}seeds.md"
+    out.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -28,6 +28,9 @@ import purejaxrl_settings as pjr
 from bench_cartpole import quiet_cpu, seconds
 
 from fppo_jax import make_train
+from fppo_jax.config import Hyperparameters
+from fppo_jax.losses import Batch
+from fppo_jax.trainer import Trainer, TrainState
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -123,6 +126,57 @@ def table(title: str, totals: collections.Counter, whole: float) -> list[str]:
     return rows
 
 
+def matmul_flops_per_step(trainer: Trainer) -> int:
+    """The floating-point operations of one minibatch step's matrix products: the policy's and
+    the value function's forward passes (2·B·in·out per layer) and their backward passes (twice
+    that, less the first layers' input gradients, which nothing needs)."""
+    config, env = trainer.config, trainer.env
+    widths = [env.observation_size, *config.hidden_sizes]
+    heads = (trainer.networks.action_noise(jax.random.key(0), ()).shape[-1], 1)
+    batch = config.minibatch_size
+    forward = sum(
+        2 * batch * sum(a * b for a, b in zip(widths, [*widths[1:], head], strict=True))
+        for head in heads
+    )
+    first_inputs = 2 * (2 * batch * widths[0] * widths[1])
+    return 3 * forward - first_inputs
+
+
+def epochs_rate(
+    trainer: Trainer, hp: Hyperparameters, seeds: int, repeats: int = 20
+) -> tuple[float, float]:
+    """One update's epochs of minibatch steps alone, vmapped over `seeds`, `repeats` times in
+    one compiled call so that the call's own cost is spread: (seconds per update, their matrix
+    products' FLOPs per second)."""
+    config = trainer.config
+    keys = jax.random.split(jax.random.key(1), seeds)
+    hps = jax.tree.map(lambda x: jnp.broadcast_to(x, (seeds, *x.shape)), hp)
+    state = jax.jit(jax.vmap(trainer.init))(keys, hps)
+    batch = jax.jit(jax.vmap(lambda s, h, k: trainer.collect(s, h, k)[0]))(state, hps, keys)
+
+    def repeated(state: TrainState, hp: Hyperparameters, batch: Batch, key: jax.Array):
+        def once(total: jax.Array, key: jax.Array) -> tuple[jax.Array, None]:
+            (params, _), losses, _, _ = trainer._epochs(state, hp, batch, key)
+            # Everything the epochs compute reaches the result, so none of it is left out.
+            leaves = [jnp.sum(leaf) for leaf in jax.tree.leaves(params)]
+            return total + jnp.sum(losses) + sum(leaves), None
+
+        return jax.lax.scan(once, jnp.zeros(()), jax.random.split(key, repeats))[0]
+
+    program = jax.jit(jax.vmap(repeated)).lower(state, hps, batch, keys).compile()
+    best = min(seconds(lambda: program(state, hps, batch, keys)) for _ in range(5)) / repeats
+    steps = config.num_epochs * config.num_minibatches
+    return best, seeds * steps * matmul_flops_per_step(trainer) / best
+
+
+def large_matmul_rate(size: int = 1024) -> float:
+    """FLOPs per second of one `size` × `size` matrix product: what this machine's matrix
+    products reach when they are large."""
+    a = jax.random.normal(jax.random.key(0), (size, size))
+    product = jax.jit(jnp.matmul).lower(a, a).compile()
+    return 2 * size**3 / min(seconds(lambda: product(a, a)) for _ in range(20))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workload", choices=sorted(pjr.WORKLOADS), default="purejaxrl")
@@ -137,6 +191,8 @@ def main() -> None:
     compiled = jax.jit(jax.vmap(trainer)).lower(keys, hps).compile()
     part_of = parts(compiled.as_text())
     untraced = min(seconds(lambda: compiled(keys, hps)) for _ in range(3))
+    epochs_seconds, flop_rate = epochs_rate(trainer, hp, args.seeds)
+    reference_rate = large_matmul_rate()
 
     with tempfile.TemporaryDirectory() as folder:
         with jax.profiler.trace(folder):
@@ -160,15 +216,24 @@ def main() -> None:
     whole = sum(own.values())
 
     command = " ".join(["python experiments/profile_ops.py", *sys.argv[1:]])
+    seeds_vmapped = "one seed" if args.seeds == 1 else f"the {args.seeds} seeds vmapped"
     lines = [
         f"# Where a vmapped run's time goes: {pjr.WORKLOADS[args.workload]['title']}",
         "",
         f"- Machine: {quiet_cpu()}.",
         f"- Command: `{command}`",
-        f"- {args.seeds} vmapped seeds × {args.steps:,} env steps, one compiled call: "
+        f"- {args.seeds} vmapped seed{'s' if args.seeds > 1 else ''} × {args.steps:,} env steps, "
+        "one compiled call: "
         f"{untraced:.2f} s untraced (best of 3, {args.seeds * args.steps / untraced:,.0f} env "
         f"steps/s). The traced run's operations took {whole / 1e9:.2f} s of thread time in all "
         "(two runtime threads; tracing inflates small operations).",
+        f"- One update's epochs alone ({config.num_epochs} × {config.num_minibatches} "
+        f"minibatch steps of {config.minibatch_size} samples, {seeds_vmapped}), "
+        f"untraced (20 in one call): {epochs_seconds * 1e3:.2f} ms each. Their matrix products "
+        f"alone ({matmul_flops_per_step(trainer):,} FLOPs a step and seed: the policy's and value "
+        f"function's forward and backward passes) divided by that time: "
+        f"**{flop_rate / 1e9:.0f} GFLOP/s**; one 1024 × 1024 matrix product runs at "
+        f"{reference_rate / 1e9:.0f} GFLOP/s here.",
         "",
         *table("part of the update", by_part, whole),
         "",

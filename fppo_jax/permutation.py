@@ -1,8 +1,9 @@
 """Random permutations by sorting single packed keys, for shuffling minibatches.
 
-``jax.random.permutation`` sorts (random key, index) pairs: a sort of two operands, which XLA's
-CPU backend runs through its generic comparator, one call per comparison. Packing both into one
-``uint32`` sorts a single operand of a primitive type instead, several times faster::
+``jax.random.permutation`` sorts (random key, index) pairs, a sort of two operands. Packing both
+into one ``uint32`` sorts a single operand instead, which XLA's CPU backend does far faster: with
+it, a whole vmapped training run on CartPole is 1.3× faster on a 2-core CPU
+(``experiments/results/profile_vmap_*``)::
 
     key_i = (random bits_i with their low b bits cleared) | x_i,   b = ⌈log2 n⌉
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import math
 import re
 import sys
 import tempfile
@@ -127,30 +128,27 @@ def table(title: str, totals: collections.Counter, whole: float) -> list[str]:
 
 
 def matmul_flops_per_step(trainer: Trainer) -> int:
-    """The floating-point operations of one minibatch step's matrix products: the policy's and
-    the value function's forward passes (2·B·in·out per layer) and their backward passes (twice
-    that, less the first layers' input gradients, which nothing needs)."""
-    config, env = trainer.config, trainer.env
-    widths = [env.observation_size, *config.hidden_sizes]
-    heads = (trainer.networks.action_noise(jax.random.key(0), ()).shape[-1], 1)
-    batch = config.minibatch_size
-    forward = sum(
-        2 * batch * sum(a * b for a, b in zip(widths, [*widths[1:], head], strict=True))
-        for head in heads
-    )
-    first_inputs = 2 * (2 * batch * widths[0] * widths[1])
-    return 3 * forward - first_inputs
+    """The floating-point operations of one minibatch step's matrix products: the forward pass
+    of every layer of the policy and value function (2·B·in·out each) and the backward passes
+    (twice that, less the first layers' input gradients, which nothing needs)."""
+    params = trainer.networks.init(jax.random.key(0), trainer.env.observation_size)
+    kernels = [
+        (jax.tree_util.keystr(path), leaf.shape)
+        for path, leaf in jax.tree_util.tree_leaves_with_path(params)
+        if path[-1].key == "kernel"
+    ]
+    flops = {name: 2 * trainer.config.minibatch_size * math.prod(shape) for name, shape in kernels}
+    first_layers = sum(f for name, f in flops.items() if "Dense_0" in name)
+    return 3 * sum(flops.values()) - first_layers
 
 
 def epochs_rate(
-    trainer: Trainer, hp: Hyperparameters, seeds: int, repeats: int = 20
+    trainer: Trainer, keys: jax.Array, hps: Hyperparameters, repeats: int = 20
 ) -> tuple[float, float]:
-    """One update's epochs of minibatch steps alone, vmapped over `seeds`, `repeats` times in
-    one compiled call so that the call's own cost is spread: (seconds per update, their matrix
-    products' FLOPs per second)."""
+    """One update's epochs of minibatch steps alone, vmapped over the seeds of `keys` and
+    `hps`, `repeats` times in one compiled call so that the call's own cost is spread: (seconds
+    per update, their matrix products' FLOPs per second)."""
     config = trainer.config
-    keys = jax.random.split(jax.random.key(1), seeds)
-    hps = jax.tree.map(lambda x: jnp.broadcast_to(x, (seeds, *x.shape)), hp)
     state = jax.jit(jax.vmap(trainer.init))(keys, hps)
     batch = jax.jit(jax.vmap(lambda s, h, k: trainer.collect(s, h, k)[0]))(state, hps, keys)
 
@@ -166,7 +164,7 @@ def epochs_rate(
     program = jax.jit(jax.vmap(repeated)).lower(state, hps, batch, keys).compile()
     best = min(seconds(lambda: program(state, hps, batch, keys)) for _ in range(5)) / repeats
     steps = config.num_epochs * config.num_minibatches
-    return best, seeds * steps * matmul_flops_per_step(trainer) / best
+    return best, len(keys) * steps * matmul_flops_per_step(trainer) / best
 
 
 def large_matmul_rate(size: int = 1024) -> float:
@@ -191,7 +189,7 @@ def main() -> None:
     compiled = jax.jit(jax.vmap(trainer)).lower(keys, hps).compile()
     part_of = parts(compiled.as_text())
     untraced = min(seconds(lambda: compiled(keys, hps)) for _ in range(3))
-    epochs_seconds, flop_rate = epochs_rate(trainer, hp, args.seeds)
+    epochs_seconds, flop_rate = epochs_rate(trainer, keys, hps)
     reference_rate = large_matmul_rate()
 
     with tempfile.TemporaryDirectory() as folder:

@@ -25,8 +25,8 @@ import argparse
 import contextlib
 import functools
 import sys
-from collections.abc import Iterator
 from pathlib import Path
+from unittest import mock
 
 import jax
 import jax.numpy as jnp
@@ -55,34 +55,16 @@ class WithoutAny(WithoutEscape, WithoutCond):
     pass
 
 
-@contextlib.contextmanager
-def ppo_surrogate_only() -> Iterator[None]:
-    original = objectives.surrogate
-    objectives.surrogate = lambda o, r, a, kl: objectives._ppo(o, r, a, kl)
-    try:
-        yield
-    finally:
-        objectives.surrogate = original
-
-
-@contextlib.contextmanager
-def jax_permutation() -> Iterator[None]:
-    original = trainer_module.permutation
-    trainer_module.permutation = jax.random.permutation
-    try:
-        yield
-    finally:
-        trainer_module.permutation = original
-
-
-@contextlib.contextmanager
-def without_guard() -> Iterator[None]:
-    original = trainer_module._keep_if_finite
-    trainer_module._keep_if_finite = lambda new, old, losses: new
-    try:
-        yield
-    finally:
-        trainer_module._keep_if_finite = original
+# Each a context manager factory that swaps one piece of the package for the arm's compilation.
+ppo_surrogate_only = functools.partial(
+    mock.patch.object, objectives, "surrogate", lambda o, r, a, kl: objectives._ppo(o, r, a, kl)
+)
+jax_permutation = functools.partial(
+    mock.patch.object, trainer_module, "permutation", jax.random.permutation
+)
+without_guard = functools.partial(
+    mock.patch.object, trainer_module, "_keep_if_finite", lambda new, old, losses: new
+)
 
 
 def compiled(kind: type[Trainer], *patches, workload: str, seeds: int, steps: int) -> object:

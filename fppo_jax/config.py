@@ -54,6 +54,30 @@ def check_seed(seed: object) -> int:
     return int(seed)
 
 
+def parse_seeds(text: str) -> list[int]:
+    """Seeds written on a command line: ``20`` (seeds 0 … 19), ``10:20`` (seeds 10 … 19, as
+    Python's ``range(10, 20)``) or a comma list such as ``0,3,7``; checked, and distinct."""
+    try:
+        if ":" in text:
+            start, stop = (int(part) for part in text.split(":"))
+            seeds = list(range(start, stop))
+        elif "," in text:
+            seeds = [int(part) for part in text.split(",")]
+        else:
+            seeds = list(range(positive_int("the number of seeds", int(text))))
+    except ValueError as error:
+        if "must be" in str(error):
+            raise
+        raise ValueError(
+            f"seeds {text!r} are not a count (20), a range (10:20) or a list (0,3,7)"
+        ) from None
+    if not seeds:
+        raise ValueError(f"seeds {text!r} name no seed (a range start:stop needs start < stop)")
+    if len(set(seeds)) < len(seeds):
+        raise ValueError(f"seeds {text!r} repeat a seed")
+    return [check_seed(seed) for seed in seeds]
+
+
 def check_variant(variant: object) -> str:
     if variant not in VARIANTS:
         raise ValueError(f"unknown variant {variant!r}; valid variants: {', '.join(VARIANTS)}")

@@ -1,0 +1,149 @@
+"""Does FPPO beat PPO? One part of the seed study: a task's variants × a range of seeds, recorded.
+
+    python experiments/study.py --task hopper --seeds 0:10                 # PPO, FPPO-LP, FPPO-QP
+    python experiments/study.py --task cartpole --seeds 0:50 --variants all --protocol unnormalised
+    python experiments/study.py --task reacher --seeds 0:2 --steps 8192 --results /tmp/smoke
+
+A part is one sweep (one compiled program) of `--variants` × `--seeds` on `--task`, with the
+`paper` preset, Table 2's α and k and the paper's budget (100k steps on the classic tasks, 1M on
+MuJoCo). Run seed s starts from ``jax.random.key(s)`` whatever else the part holds, so parts
+with disjoint seeds are samples of one study and are merged by what reads them
+(``experiments/verdict.py``). Protocols: ``paper`` is the project's default (observation and
+reward normalisation everywhere); ``unnormalised`` is baselines' classic-control protocol
+(no VecNormalize: baselines wraps only its MuJoCo runs).
+
+Each part goes to <results>/study/<task>/<protocol>/<part>/ (`curves.csv`, `sweep.json`,
+`run.json` with the machine, date, wall time, command and the commit it ran at), written into a
+fresh directory and renamed into place whole. A part already recorded is refused unless
+`--force`: the study's records are never replaced by accident.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+
+from fppo_jax import sweep
+from fppo_jax.config import parse_seeds
+from fppo_jax.envs import MUJOCO_TASKS
+from fppo_jax.objectives import VARIANTS
+
+RESULTS = Path(__file__).resolve().parent / "results"
+CLASSIC_TASKS = ("cartpole", "acrobot", "mountaincar")
+STUDIED = ("ppo", "fppo-lp", "fppo-qp")
+PAPER_VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
+# What the verdict reads: the curves stay small enough to keep in the repository.
+RECORDED = ("env_steps", "average_return", "negative_fraction_before", "negative_fraction_after")
+PROTOCOLS = {
+    "paper": {},
+    "unnormalised": {"normalize_observations": False, "normalize_rewards": False},
+}
+
+
+def machine() -> str:
+    device = jax.devices()[0]
+    kind = "" if device.platform == "cpu" else f" {device.device_kind}"
+    return (
+        f"{device.platform.upper()}{kind}, {os.cpu_count()} CPU cores "
+        f"({platform.processor() or platform.machine()}), jax {jax.__version__}"
+    )
+
+
+def commit() -> str:
+    """The commit the code ran at, and whether the tree differed from it."""
+    here = Path(__file__).resolve().parent
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--", "../fppo_jax"],
+            cwd=here,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + (" with uncommitted changes to fppo_jax/" if dirty else "")
+
+
+def part_name(variants: list[str], seeds: list[int]) -> str:
+    contiguous = seeds == list(range(seeds[0], seeds[0] + len(seeds)))
+    span = f"{seeds[0]}-{seeds[-1]}" if contiguous else ",".join(map(str, seeds))
+    return f"seeds-{span}_{'+'.join(variants)}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", required=True, choices=[*CLASSIC_TASKS, *MUJOCO_TASKS])
+    parser.add_argument("--seeds", type=parse_seeds, required=True, help="20, 10:20 or 0,3,7")
+    parser.add_argument(
+        "--variants",
+        nargs="+",
+        default=list(STUDIED),
+        help=f"variants, or 'all' for {', '.join(PAPER_VARIANTS)} (default: {', '.join(STUDIED)})",
+    )
+    parser.add_argument("--protocol", default="paper", choices=list(PROTOCOLS))
+    parser.add_argument("--steps", type=int, help="env steps per run (default: the paper's)")
+    parser.add_argument("--backend", default=None, help="default: native on MuJoCo, else auto")
+    parser.add_argument("--chunk", type=int, help="runs per compiled call (default: automatic)")
+    parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
+    parser.add_argument("--force", action="store_true", help="replace a part already recorded")
+    args = parser.parse_args()
+    variants = list(PAPER_VARIANTS) if args.variants == ["all"] else args.variants
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        parser.error(f"unknown variant {', '.join(unknown)}; valid: {', '.join(VARIANTS)}")
+    backend = args.backend or ("native" if args.task in MUJOCO_TASKS else "auto")
+
+    directory = args.results / "study" / args.task / args.protocol / part_name(variants, args.seeds)
+    if directory.exists() and not args.force:
+        sys.exit(
+            f"{directory} is already recorded (its sweep.json and curves.csv are a part of the "
+            "study); pass --force to replace it, or --results DIR to record elsewhere"
+        )
+    print(f"part: {directory}", flush=True)
+    start = time.perf_counter()
+    result = sweep(
+        args.task,
+        {"variant": variants},
+        seeds=args.seeds,
+        total_steps=args.steps,
+        chunk=args.chunk,
+        backend=backend,
+        progress=True,
+        **PROTOCOLS[args.protocol],
+    )
+    wall = time.perf_counter() - start
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=".part-", dir=directory.parent))
+    result.write(staging, metrics=RECORDED)
+    record = {
+        "machine": machine(),
+        "date": str(datetime.date.today()),
+        "wall_seconds": round(wall, 1),
+        "protocol": args.protocol,
+        "commit": commit(),
+        "command": " ".join([f"python experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
+    }
+    (staging / "run.json").write_text(json.dumps(record, indent=1) + "\n")
+    if directory.exists():  # --force
+        shutil.rmtree(directory)
+    staging.rename(directory)
+    print(f"wrote {directory} ({wall:,.0f} s)", flush=True)
+
+
+if __name__ == "__main__":
+    main()

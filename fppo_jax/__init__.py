@@ -4,7 +4,9 @@ The surrogate objective is a pure function of traced data (:func:`objective`), a
 training run is one compiled function of its key and hyperparameters (:func:`make_train`), so
 seeds, variants and their hyperparameters vmap into one program. :func:`train` runs one
 policy, checkpointed and resumable; :func:`sweep` runs a grid of settings × seeds as one
-program; :func:`load_policy` reads a trained policy back, saved or from its checkpoints.
+program; :func:`load_policy` reads a trained policy back, saved or from its checkpoints;
+:func:`merge` joins sweeps of other seeds into one, and :mod:`fppo_jax.statistics` compares
+settings with interval estimates.
 """
 
 import os
@@ -29,7 +31,7 @@ from fppo_jax.evaluation import evaluate
 from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective
 from fppo_jax.policy import Policy
 from fppo_jax.progress import Progress
-from fppo_jax.results import SweepResult, TrainingDiverged, TrainResult
+from fppo_jax.results import SweepResult, TrainingDiverged, TrainResult, merge
 from fppo_jax.sweep import expand_grid, sweep
 from fppo_jax.trainer import METRICS, Metrics, Trainer, TrainState, make_train
 
@@ -59,6 +61,7 @@ __all__ = [
     "load_policy",
     "make_env",
     "make_train",
+    "merge",
     "negative_regions",
     "objective",
     "sweep",

@@ -1,6 +1,6 @@
 """The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``eval`` (and render)
-a saved or checkpointed policy, ``table`` and ``plot`` a sweep's results, ``list`` the tasks and
-variants."""
+a saved or checkpointed policy, ``table``, ``compare``, ``merge`` and ``plot`` sweeps' results,
+``list`` the tasks and variants."""
 
 from __future__ import annotations
 
@@ -23,13 +23,15 @@ from fppo_jax.config import (
     TABLE2,
     TrainConfig,
     describe_update,
+    parse_seeds,
     preset_config,
 )
 from fppo_jax.distributed import initialize, is_main_process
 from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, NAMESPACES, TASKS, make_env
 from fppo_jax.files import writable_directory
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
-from fppo_jax.results import SweepResult, TrainingDiverged
+from fppo_jax.results import SweepResult, TrainingDiverged, merge
+from fppo_jax.statistics import CONFIDENCE, ENDPOINTS, STATISTICS
 from fppo_jax.sweep import sweep
 
 
@@ -37,6 +39,23 @@ def _positive_int(text: str) -> int:
     value = int(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def _seeds(text: str) -> list[int]:
+    try:
+        return parse_seeds(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def _confidence(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"a confidence level in (0, 1) such as 0.95, got {text}")
     return value
 
 
@@ -137,6 +156,21 @@ def _add_backend_flag(command: argparse.ArgumentParser, default: str | None) -> 
         help="what runs a MuJoCo task: "
         + "; ".join(f"{name}: {text}" for name, text in BACKENDS.items())
         + (f" (default: {default})" if default else " (default: the run's own)"),
+    )
+
+
+def _add_score_flags(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--endpoint",
+        default="final",
+        choices=list(ENDPOINTS),
+        help="each run's score: " + "; ".join(f"{k}: {v}" for k, v in ENDPOINTS.items()),
+    )
+    command.add_argument(
+        "--ci",
+        type=_confidence,
+        default=CONFIDENCE,
+        help=f"the confidence intervals' level (default: {CONFIDENCE})",
     )
 
 
@@ -313,7 +347,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     for name, text in HYPERPARAMETER_HELP.items():
         grid.add_argument(f"--{name.replace('_', '-')}", type=_values, help=text)
-    grid.add_argument("--seeds", type=_positive_int, default=5, help="seeds 0 … N−1 per setting")
+    grid.add_argument(
+        "--seeds",
+        type=_seeds,
+        default=list(range(5)),
+        help="per setting: N (seeds 0 … N−1), a range 10:20 (seeds 10 … 19) or a list 0,3,7 "
+        "(default: 5)",
+    )
     grid.add_argument(
         "--chunk", type=_positive_int, help="runs per compiled call (default: what fits in memory)"
     )
@@ -326,8 +366,41 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_run_flags(grid)
 
-    table = commands.add_parser("table", help="print a sweep's Table-1-style summary (Markdown)")
+    table = commands.add_parser(
+        "table",
+        help="print a sweep's summary per setting (Markdown)",
+        description="One row per setting. --stat paper (the default) is Table 1's: the max "
+        "average return (the maximum over updates of the seed-mean curve, ± the sample std "
+        "there), which is biased upward; iqm, mean or median give that statistic of each run's "
+        "--endpoint score with a percentile bootstrap confidence interval, and the sample std.",
+        formatter_class=formatter,
+    )
     table.add_argument("directory", type=Path, help="a sweep's --output directory")
+    table.add_argument("--stat", default="paper", choices=["paper", *STATISTICS])
+    _add_score_flags(table)
+    compare = commands.add_parser(
+        "compare",
+        help="each setting of a sweep against a baseline: probability of improvement, with CIs",
+        description="For every setting but the baseline: the probability that one of its runs "
+        "scores above one of the baseline's (P(X > Y) + ½ P(X = Y)) and the difference in IQM, "
+        "each with a percentile bootstrap confidence interval over both settings' runs.",
+        formatter_class=formatter,
+    )
+    compare.add_argument("directory", type=Path, help="a sweep's --output directory")
+    compare.add_argument(
+        "--baseline", default="ppo", help="a setting's label or a variant (default: ppo)"
+    )
+    _add_score_flags(compare)
+    merged = commands.add_parser(
+        "merge",
+        help="join sweeps of other seeds (parts of one sweep) into one sweep's output",
+        description="Join the runs of sweeps that differ only in their seeds (or settings of the "
+        "same grid) into one curves.csv and sweep.json, which table, compare and plot read. "
+        "Parts of different tasks or protocols, and a run two parts both hold, are refused.",
+        formatter_class=formatter,
+    )
+    merged.add_argument("directories", type=Path, nargs="+", help="sweeps' --output directories")
+    merged.add_argument("--output", type=Path, required=True, help="where the merged sweep goes")
     plot = commands.add_parser(
         "plot", help="write a sweep's learning curves (and α/k chart) as PNG"
     )
@@ -483,6 +556,31 @@ def _eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _table(args: argparse.Namespace) -> int:
+    result = SweepResult.read(args.directory)
+    print(result.table(args.stat, args.endpoint, args.ci))
+    return 0
+
+
+def _compare(args: argparse.Namespace) -> int:
+    result = SweepResult.read(args.directory)
+    print(result.compare(args.baseline, args.endpoint, args.ci))
+    return 0
+
+
+def _merge(args: argparse.Namespace) -> int:
+    if (args.output / "sweep.json").exists():
+        raise ValueError(f"{args.output} already holds a sweep; merge into a new directory")
+    result = merge([SweepResult.read(directory) for directory in args.directories])
+    result.write(args.output, metrics=list(result.metrics))
+    settings, seeds = len(result.settings), len(result.seeds)
+    print(
+        f"merged {len(args.directories)} sweeps: {len(result.runs)} runs ({settings} settings, "
+        f"{seeds} seeds) in {args.output}/curves.csv, sweep.json"
+    )
+    return 0
+
+
 def _plot(args: argparse.Namespace) -> int:
     from fppo_jax.plots import plot_sweep
 
@@ -540,7 +638,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     commands = {
         "train": _train,
         "sweep": _sweep,
-        "table": lambda a: print(SweepResult.read(a.directory).table()) or 0,
+        "table": _table,
+        "compare": _compare,
+        "merge": _merge,
         "plot": _plot,
         "eval": _eval,
         "list": lambda a: _list(),

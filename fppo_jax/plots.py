@@ -1,5 +1,6 @@
 """Figures: every variant's surrogate and slope against the ratio (the paper's Figs. 1 and 3), a
-sweep's learning curves (Figs. 4–5) and α/k chart (Fig. 6), and the escape-speed chart.
+sweep's learning curves (Figs. 4–5) and α/k chart (Fig. 6), the escape-speed chart, and the
+comparisons of :mod:`fppo_jax.statistics` (performance profiles, probabilities of improvement).
 
 Each function draws on the Axes it is given, or on a new figure, and returns the figure. Saving
 is the caller's (``fig.savefig``); :func:`plot_sweep` does it for a sweep's directory. No
@@ -9,7 +10,7 @@ falls back to Agg.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import jax
@@ -20,6 +21,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import PercentFormatter
 
+from fppo_jax import statistics
 from fppo_jax.objectives import EPSILON, VARIANTS, objective
 from fppo_jax.results import SweepResult, labels, max_average_return, nanmean
 
@@ -97,11 +99,21 @@ def plot_objectives(
 
 
 def plot_curves(
-    result: SweepResult, metric: str = "average_return", *, ax: Axes | None = None
+    result: SweepResult,
+    metric: str = "average_return",
+    *,
+    band: str = "std",
+    confidence: float = statistics.CONFIDENCE,
+    ax: Axes | None = None,
 ) -> Figure:
-    """`metric` (the average return unless told) against env steps, one line per setting: the mean
-    over seeds, ± one std as a band. Runs that diverged are left out, as the table leaves them
-    out, and the legend says how many seeds a setting's line is over when some did."""
+    """`metric` (the average return unless told) against env steps, one line per setting.
+    ``band="std"``: the mean over seeds ± one sample std; ``"iqm"``, ``"mean"`` or ``"median"``:
+    that statistic over seeds with its percentile bootstrap band at level `confidence`
+    (:func:`fppo_jax.statistics.curve_interval`). Runs that diverged are left out, as the table
+    leaves them out, and the legend says how many seeds a setting's line is over when some
+    did."""
+    if band != "std":
+        statistics.estimator(band)
     ax = _axes(ax, (7, 4.5))
     for index, name in enumerate(labels(result.settings)):
         if result.setting_runs(index)[1].size:
@@ -110,18 +122,84 @@ def plot_curves(
         if not len(m[metric]):  # every run diverged: in the legend, with no line
             ax.plot([], [], label=name)
             continue
-        mean = nanmean(m[metric], axis=0)
-        # np.nanstd, without its warnings for the updates before any seed finished an episode.
-        std = np.sqrt(nanmean((m[metric] - mean) ** 2, axis=0))
-        (line,) = ax.plot(m["env_steps"][0], mean, label=name)
-        band = (mean - std, mean + std)
-        ax.fill_between(m["env_steps"][0], *band, color=line.get_color(), alpha=0.2, lw=0)
+        if band == "std":
+            line_values = nanmean(m[metric], axis=0)
+            spread = _sample_std(m[metric])
+            low, high = line_values - spread, line_values + spread
+        else:
+            line_values, low, high = statistics.curve_interval(
+                m[metric], band, confidence=confidence
+            )
+        (line,) = ax.plot(m["env_steps"][0], line_values, label=name)
+        ax.fill_between(m["env_steps"][0], low, high, color=line.get_color(), alpha=0.2, lw=0)
     ax.set(xlabel="env steps", ylabel=YLABELS.get(metric, metric))
-    ax.set_title(f"{result.config['env']}: mean ± std over {len(result.seeds)} seeds")
+    shown = (
+        "mean ± sample std"
+        if band == "std"
+        else f"{statistics.STATISTICS[band]}, {confidence:.0%} bootstrap CI"
+    )
+    ax.set_title(f"{result.config['env']}: {shown} over {len(result.seeds)} seeds")
     if metric in FRACTIONS:
         ax.yaxis.set_major_formatter(PercentFormatter(1.0))
     ax.legend(fontsize="small")
     ax.grid(alpha=0.3)
+    return ax.figure
+
+
+def _sample_std(values: np.ndarray) -> np.ndarray:
+    """The sample std over seeds at each update, NaN-ignoring and without all-NaN warnings."""
+    finite = np.isfinite(values)
+    count = finite.sum(axis=0)
+    mean = nanmean(values, axis=0)
+    squares = np.where(finite, (values - mean) ** 2, 0.0).sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 1, np.sqrt(squares / (count - 1)), np.nan)
+
+
+def plot_profiles(
+    scores: Mapping[str, np.ndarray],
+    *,
+    thresholds: np.ndarray | None = None,
+    xlabel: str = "normalised score τ",
+    ax: Axes | None = None,
+) -> Figure:
+    """Performance profiles (Agarwal et al. 2021): for each setting, the fraction of its runs
+    (pooled over tasks, on a normalised scale) whose score exceeds τ, against τ."""
+    ax = _axes(ax, (5.5, 3.8))
+    pooled = {name: np.asarray(x, float).ravel() for name, x in scores.items()}
+    if thresholds is None:
+        every = np.concatenate(list(pooled.values()))
+        every = every[np.isfinite(every)]
+        thresholds = np.linspace(every.min(), every.max(), 201)
+    for name, x in pooled.items():
+        ax.plot(thresholds, statistics.performance_profile(x, thresholds), label=name)
+    ax.set(xlabel=xlabel, ylabel="fraction of runs with score > τ", ylim=(-0.02, 1.02))
+    ax.legend(fontsize="small")
+    ax.grid(alpha=0.3)
+    return ax.figure
+
+
+def plot_improvement(
+    improvements: Mapping[str, tuple[float, float, float]],
+    baseline: str,
+    *,
+    confidence: float = statistics.CONFIDENCE,
+    ax: Axes | None = None,
+) -> Figure:
+    """Probabilities of improvement over `baseline`, one row per name of `improvements` (e.g.
+    ``"fppo-lp, hopper"``), each its ``(point, low, high)``: a dot and its interval, with the
+    line of no difference (0.5)."""
+    ax = _axes(ax, (5.5, 0.45 * len(improvements) + 1.2))
+    names = list(improvements)
+    rows = np.arange(len(names))[::-1]
+    for row, name in zip(rows, names, strict=True):
+        point, low, high = improvements[name]
+        ax.plot([low, high], [row, row], color="C0", lw=3, alpha=0.5, solid_capstyle="butt")
+        ax.plot(point, row, "o", color="C0")
+    ax.axvline(0.5, color="grey", ls="--", lw=1)
+    ax.set_yticks(rows, names)
+    ax.set(xlim=(0, 1), xlabel=f"P(setting > {baseline}), {confidence:.0%} bootstrap CI")
+    ax.grid(alpha=0.3, axis="x")
     return ax.figure
 
 

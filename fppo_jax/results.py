@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from fppo_jax import statistics
 from fppo_jax.checkpoint import save_policy
 from fppo_jax.config import SYMBOLS, VARIANT_SPECIFIC
 from fppo_jax.envs import Environment
@@ -169,12 +170,32 @@ class SweepResult:
         total = kept.size + diverged.size
         return f"{kept.size} of {total} ({diverged.size} diverged)" if diverged.size else f"{total}"
 
-    def table(self) -> str:
-        """Table 1 style, one row per setting, Markdown: the max average return (SPEC §2, mean ±
-        std), the env steps it was reached at, the final average return and the share of samples
-        in R± after the update, all over the seeds whose runs did not diverge. `seeds` says how
-        many that is and how many diverged (:meth:`setting_seeds`); a setting whose runs all
-        diverged reads ``diverged at update N`` (the first of them) instead of figures."""
+    def scores(self, endpoint: str = "final") -> list[np.ndarray]:
+        """Each setting's score per run that did not diverge, by `endpoint` of its average-return
+        curve (:data:`fppo_jax.statistics.ENDPOINTS`)."""
+        return [
+            statistics.endpoint(self.setting_metrics(i)["average_return"], endpoint)
+            for i in range(len(self.settings))
+        ]
+
+    def table(
+        self,
+        statistic: str = "paper",
+        endpoint: str = "final",
+        confidence: float = statistics.CONFIDENCE,
+    ) -> str:
+        """One row per setting, Markdown, over the seeds whose runs did not diverge (`seeds`
+        says how many, and how many diverged: :meth:`setting_seeds`).
+
+        ``statistic="paper"``, Table 1 style: the max average return (the maximum over updates
+        of the seed-mean curve, ± the sample std across seeds there), the env steps it was
+        reached at, the final average return and the share of samples in R± after the update; a
+        setting whose runs all diverged reads ``diverged at update N`` instead of figures.
+        Otherwise `statistic` (``iqm``, ``mean`` or ``median``) of each run's `endpoint` score,
+        with its percentile bootstrap interval at level `confidence`, and the sample std
+        (:mod:`fppo_jax.statistics`)."""
+        if statistic != "paper":
+            return self._interval_table(statistic, endpoint, confidence)
         lines = [
             "| setting | seeds | max average return | at env steps | final average return "
             "| in R± after update |",
@@ -190,6 +211,68 @@ class SweepResult:
             lines.append(f"| {name} | {self.setting_seeds(index)} | {' | '.join(figures)} |")
         return "\n".join(lines)
 
+    def _interval_table(self, statistic: str, endpoint: str, confidence: float) -> str:
+        statistics.estimator(statistic)
+        level = f"{confidence:.0%} CI"
+        lines = [
+            f"| setting | seeds | {statistics.STATISTICS[statistic]} of the {endpoint} score "
+            f"[{level}] | sample std |",
+            "|---|---|---|---|",
+        ]
+        scores = self.scores(endpoint)
+        for index, name in enumerate(labels(self.settings)):
+            point, low, high = statistics.interval(scores[index], statistic, confidence=confidence)
+            std = statistics.sample_std(scores[index])
+            figures = "–" if np.isnan(point) else f"{point:.1f} [{low:.1f}, {high:.1f}]"
+            spread = "–" if np.isnan(std) else f"{std:.1f}"
+            lines.append(f"| {name} | {self.setting_seeds(index)} | {figures} | {spread} |")
+        return "\n".join(lines)
+
+    def compare(
+        self,
+        baseline: str = "ppo",
+        endpoint: str = "final",
+        confidence: float = statistics.CONFIDENCE,
+    ) -> str:
+        """Every other setting against `baseline` (a setting's label, e.g. ``ppo`` or
+        ``fppo-lp α=1.3``, or a variant that only one setting has), Markdown: the probability
+        that a run of the setting scores above a run of the baseline, and the difference in
+        IQM, each with its bootstrap interval at level `confidence`, on `endpoint` scores
+        (:func:`fppo_jax.statistics.compare`)."""
+        names = labels(self.settings)
+        index = self.setting_index(baseline)
+        scores = self.scores(endpoint)
+        level = f"{confidence:.0%} CI"
+        lines = [
+            f"Against {names[index]} ({self.setting_seeds(index)} seeds), {endpoint} return "
+            f"({statistics.ENDPOINTS[endpoint]}):",
+            "",
+            f"| setting | seeds | P(setting > {names[index]}) [{level}] "
+            f"| IQM difference [{level}] |",
+            "|---|---|---|---|",
+        ]
+        for other, name in enumerate(names):
+            if other == index:
+                continue
+            result = statistics.compare(scores[other], scores[index], confidence=confidence)
+            cells = [
+                "–" if np.isnan(point) else f"{point:{form}} [{low:{form}}, {high:{form}}]"
+                for (point, low, high), form in zip(result.values(), (".2f", ".1f"), strict=True)
+            ]
+            lines.append(f"| {name} | {self.setting_seeds(other)} | {' | '.join(cells)} |")
+        return "\n".join(lines)
+
+    def setting_index(self, name: str) -> int:
+        """The setting called `name`: its label (:func:`labels`), or a variant only it has."""
+        names = labels(self.settings)
+        if name in names:
+            return names.index(name)
+        matches = [i for i, s in enumerate(self.settings) if s["variant"] == name]
+        if len(matches) == 1:
+            return matches[0]
+        found = "several settings" if matches else "no setting"
+        raise ValueError(f"{found} of the sweep called {name!r}; its settings: {', '.join(names)}")
+
     def _figures(self, runs: np.ndarray) -> list[str]:
         """The table's figures over `runs`, "–" for what is not known (no episode finished, a
         metric not recorded)."""
@@ -200,7 +283,7 @@ class SweepResult:
         final = nanmean(returns[:, -1])
         fraction = self.metrics.get("negative_fraction_after")
         return [
-            f"{best:.1f} ± {std:.1f}",
+            f"{best:.1f}" if np.isnan(std) else f"{best:.1f} ± {std:.1f}",  # one seed: no spread
             f"{int(self.metrics['env_steps'][runs[0], at]):,}",
             f"{final:.1f}" if np.isfinite(final) else "–",
             "–" if fraction is None else f"{np.mean(fraction[runs]):.2%}",
@@ -271,6 +354,60 @@ class SweepResult:
             compile_seconds=record["compile_seconds"],
             train_seconds=record["train_seconds"],
         )
+
+
+# What may differ between parts of one sweep: which seeds each ran, and how many runs per call.
+PART_FIELDS = ("seeds", "runs_per_call")
+
+
+def merge(parts: Sequence[SweepResult]) -> SweepResult:
+    """One sweep of the runs of `parts`, sweeps of the same task and protocol that ran other
+    seeds (or other settings of the same grid): what ``table``, ``compare`` and ``plot`` read as
+    if one process had run them all. A ``ValueError`` names the configuration field on which two
+    parts differ, a (setting, seed) run that two parts both hold, and metrics not in every part
+    are left out."""
+    if not parts:
+        raise ValueError("merge needs at least one sweep")
+    first = parts[0]
+    common = {k: v for k, v in first.config.items() if k not in PART_FIELDS}
+    for number, part in enumerate(parts[1:], start=2):
+        other = {k: v for k, v in part.config.items() if k not in PART_FIELDS}
+        differ = sorted(k for k in common.keys() | other.keys() if common.get(k) != other.get(k))
+        if differ:
+            field = differ[0]
+            raise ValueError(
+                f"sweep {number} is not a part of the same sweep as sweep 1: its {field} is "
+                f"{other.get(field)!r}, sweep 1's {common.get(field)!r}"
+            )
+    settings: list[dict[str, Any]] = []
+    runs: list[dict[str, Any]] = []
+    for part in parts:
+        for setting in part.settings:
+            if setting not in settings:
+                settings.append(setting)
+        for run in part.runs:
+            setting = settings.index(part.settings[run["setting"]])
+            runs.append({"setting": setting, "seed": run["seed"]})
+    seen: dict[tuple[int, int], int] = {}
+    names = labels(settings)
+    for run in runs:
+        key = (run["setting"], run["seed"])
+        seen[key] = seen.get(key, 0) + 1
+    repeated = [f"{names[s]} seed {seed}" for (s, seed), count in seen.items() if count > 1]
+    if repeated:
+        raise ValueError(f"more than one part holds the run {', '.join(repeated[:5])}")
+    metrics = [name for name in first.metrics if all(name in p.metrics for p in parts)]
+    seeds = list(dict.fromkeys(seed for part in parts for seed in part.seeds))
+    return SweepResult(
+        settings=settings,
+        seeds=seeds,
+        runs=runs,
+        metrics={name: np.concatenate([p.metrics[name] for p in parts]) for name in metrics},
+        diverged=np.concatenate([np.asarray(p.diverged, np.int64) for p in parts]),
+        config={**first.config, "seeds": seeds},
+        compile_seconds=sum(p.compile_seconds for p in parts),
+        train_seconds=sum(p.train_seconds for p in parts),
+    )
 
 
 def _integer(value: Any) -> bool:
@@ -425,13 +562,15 @@ def _few(numbers: set[int] | list[int]) -> str:
 
 
 def max_average_return(average_return: np.ndarray) -> tuple[float, float, int]:
-    """SPEC §2 on [seed, update]: the maximum over updates of the seed-mean curve, the std across
-    seeds at that update, and the update's index (NaN, NaN, −1 if no episode ever finished)."""
+    """The paper's statistic on [seed, update]: the maximum over updates of the seed-mean curve,
+    the sample std (ddof 1) across seeds at that update, and the update's index (NaN, NaN, −1 if
+    no episode ever finished). It is biased upward, by an amount that differs between settings:
+    compare settings on an endpoint chosen in advance (:mod:`fppo_jax.statistics`)."""
     curve = nanmean(average_return, axis=0)
     if not np.isfinite(curve).any():
         return np.nan, np.nan, -1
     best = int(np.nanargmax(curve))
-    return float(curve[best]), float(np.nanstd(average_return[:, best])), best
+    return float(curve[best]), statistics.sample_std(average_return[:, best]), best
 
 
 def nanmean(x: np.ndarray, axis: int | None = None) -> np.ndarray:

@@ -14,8 +14,10 @@ from fppo_jax.plots import (
     plot_ablation,
     plot_curves,
     plot_escape_speed,
+    plot_improvement,
     plot_objective,
     plot_objectives,
+    plot_profiles,
     plot_sweep,
 )
 from fppo_jax.results import SweepResult
@@ -64,6 +66,9 @@ def test_each_plot_returns_a_new_figure(result):
         plot_curves(result, "negative_fraction_after"),
         plot_ablation(result),
         plot_escape_speed(ESCAPE, ["ppo", "fppo-lp", "fppo-qp"]),
+        plot_curves(result, band="iqm"),
+        plot_profiles({"ppo": np.arange(5.0), "fppo-lp": np.arange(5.0) + 1}),
+        plot_improvement({"fppo-lp, hopper": (0.6, 0.4, 0.8)}, "ppo"),
     ]
     assert all(isinstance(fig, Figure) for fig in figures)
     assert len(set(map(id, figures))) == len(figures)
@@ -75,6 +80,8 @@ def test_each_plot_draws_on_the_axes_it_is_given(result):
         lambda ax: plot_curves(result, ax=ax),
         lambda ax: plot_ablation(result, axes=[ax]),
         lambda ax: plot_escape_speed(ESCAPE, ["ppo", "fppo-lp", "fppo-qp"], ax=ax),
+        lambda ax: plot_profiles({"ppo": np.arange(3.0)}, ax=ax),
+        lambda ax: plot_improvement({"a": (0.5, 0.4, 0.6)}, "ppo", ax=ax),
     ):
         fig, ax = plt.subplots()
         assert draw(ax) is fig and ax.lines
@@ -100,6 +107,32 @@ def test_runs_that_diverged_are_left_out_of_the_curves_and_counted_as_the_table_
     for index in range(3):
         row = result.table().splitlines()[2 + index]
         assert row.split(" | ")[1] == result.setting_seeds(index)
+
+
+def test_curve_bands_are_the_sample_std_or_a_bootstrap_interval():
+    result = sweep_by_hand()  # tr-ppo's three runs: [10, 20, 30], [20, 40, 60], [30, 60, 90]
+    ax = plot_curves(result).axes[0]
+    band = ax.collections[-1].get_paths()[0].vertices[:, 1]
+    assert "mean ± sample std" in ax.get_title()
+    assert band.max() == pytest.approx(60 + np.std([30, 60, 90], ddof=1))
+    ax = plot_curves(result, band="median", confidence=0.9).axes[0]
+    assert "median, 90% bootstrap CI" in ax.get_title()
+    lines = {line.get_label(): line for line in ax.lines}
+    np.testing.assert_array_equal(lines["tr-ppo δ=0.02"].get_ydata(), [20, 40, 60])
+    band = ax.collections[-1].get_paths()[0].vertices[:, 1]
+    assert band.min() >= 10 and band.max() <= 90  # resampled runs stay within the runs
+    with pytest.raises(ValueError, match="unknown statistic 'sd'"):
+        plot_curves(result, band="sd")
+
+
+def test_a_profile_falls_from_every_run_to_none():
+    scores = {"ppo": np.array([0.0, 0.5, 1.0])}
+    ax = plot_profiles(scores, thresholds=np.array([-1, 0.5, 2])).axes[0]
+    np.testing.assert_array_equal(ax.lines[0].get_ydata(), [1.0, 1 / 3, 0.0])
+    ax = plot_improvement({"x": (0.7, 0.6, 0.8), "y": (0.3, 0.1, 0.5)}, "ppo").axes[0]
+    ticks = dict(zip([t.get_text() for t in ax.get_yticklabels()], ax.get_yticks(), strict=True))
+    assert ticks == {"x": 1, "y": 0}  # the first on top
+    assert "P(setting > ppo)" in ax.get_xlabel()
 
 
 def test_runs_that_diverged_are_left_out_of_the_ablation_chart(result):

@@ -1,0 +1,308 @@
+"""Statistics of training runs that a reviewer accepts: endpoints, interval estimates, comparisons.
+
+Following Agarwal et al. (2021), *Deep reinforcement learning at the edge of the statistical
+precipice* (NeurIPS), whose library, rliable, these reproduce on ``scipy.stats``:
+
+- a run's score is an **endpoint** of its learning curve (:data:`ENDPOINTS`);
+- a setting is summarised by a point estimate of its runs' scores — the mean, the median or
+  the **interquartile mean** (IQM: the mean of the middle 50%, ``scipy.stats.trim_mean(x,
+  0.25)``) — with a **percentile bootstrap** confidence interval over its runs;
+- two settings are compared by the **probability of improvement** P(X > Y) + ½ P(X = Y), the
+  Mann–Whitney U statistic over n·m, and by the difference of their IQMs, each with a bootstrap
+  interval that resamples both settings' runs independently;
+- across tasks, scores are first normalised per task, and resampling is **stratified**: each
+  task's runs are resampled among themselves (scipy's bootstrap of several independent samples).
+
+Spreads are sample standard deviations (``ddof=1``). Every interval is seeded, so it repeats.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+from scipy import stats
+
+CONFIDENCE = 0.95
+RESAMPLES = 2000
+
+# A run's score from its curve of the last-100-episode average return, [run, update].
+ENDPOINTS: dict[str, str] = {
+    "final": "the last-100-episode average return after the last update",
+    "max": "the largest last-100-episode average return after any update (the run's best)",
+    "auc": "the area under the learning curve: the average return averaged over updates",
+}
+STATISTICS: dict[str, str] = {
+    "iqm": "IQM",
+    "mean": "mean",
+    "median": "median",
+}
+
+
+def endpoint(curves: np.ndarray, name: str = "final") -> np.ndarray:
+    """Each run's score (:data:`ENDPOINTS`) from `curves`, [run, update]. Updates before a run's
+    first finished episode (NaN) are left out of ``max`` and ``auc``; a run with no finished
+    episode scores NaN."""
+    curves = np.asarray(curves, dtype=float)
+    if name not in ENDPOINTS:
+        raise ValueError(f"unknown endpoint {name!r}; valid endpoints: {', '.join(ENDPOINTS)}")
+    if curves.ndim != 2:
+        raise ValueError(f"curves must be [run, update], got shape {curves.shape}")
+    if name == "final":
+        return curves[:, -1]
+    finite = np.isfinite(curves)
+    filled = np.where(finite, curves, 0.0)
+    counts = finite.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if name == "max":
+            best = np.where(finite, curves, -np.inf).max(axis=1)
+            return np.where(counts > 0, best, np.nan)
+        return np.where(counts > 0, filled.sum(axis=1) / counts, np.nan)
+
+
+def iqm(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    """The interquartile mean: the mean after ⌊n/4⌋ of the n values are cut from each end, as
+    ``scipy.stats.trim_mean(x, 0.25)`` (and so rliable) computes it; NaNs are left out first."""
+    x = np.moveaxis(np.asarray(x, dtype=float), axis, -1)
+    ordered = np.sort(x, axis=-1)  # NaNs last
+    n = np.isfinite(x).sum(axis=-1, keepdims=True)
+    cut = n // 4
+    position = np.arange(x.shape[-1])
+    kept = (position >= cut) & (position < n - cut)
+    with np.errstate(invalid="ignore"):
+        return np.sum(np.where(kept, ordered, 0.0), axis=-1) / kept.sum(axis=-1)
+
+
+def _mean(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all NaN: stays NaN
+        return np.nanmean(x, axis=axis)
+
+
+def _median(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(x, axis=axis)
+
+
+ESTIMATORS: dict[str, Callable[..., np.ndarray]] = {"iqm": iqm, "mean": _mean, "median": _median}
+
+
+def estimator(name: str) -> Callable[..., np.ndarray]:
+    """The point estimate called `name` (:data:`STATISTICS`), as ``f(x, axis=-1)``."""
+    if name not in ESTIMATORS:
+        raise ValueError(f"unknown statistic {name!r}; valid statistics: {', '.join(STATISTICS)}")
+    return ESTIMATORS[name]
+
+
+def sample_std(x: np.ndarray) -> float:
+    """The sample standard deviation (``ddof=1``; NaN for fewer than two values)."""
+    x = _finite(x)
+    return float(np.std(x, ddof=1)) if x.size > 1 else float("nan")
+
+
+def _finite(x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x, dtype=float).ravel()
+    return x[np.isfinite(x)]
+
+
+def _check_confidence(confidence: float) -> float:
+    if not 0 < confidence < 1:
+        raise ValueError(f"the confidence level must be in (0, 1), got {confidence!r}")
+    return float(confidence)
+
+
+def bootstrap(
+    samples: Sequence[np.ndarray],
+    statistic: Callable[..., np.ndarray],
+    *,
+    confidence: float = CONFIDENCE,
+    resamples: int = RESAMPLES,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """`statistic` of the independent `samples` and its percentile bootstrap interval at level
+    `confidence`: each sample is resampled with replacement among its own values (a stratified
+    bootstrap when the samples are tasks). `statistic(*samples, axis=-1)` must be vectorised.
+    Non-finite values are dropped first; a sample left empty gives NaNs."""
+    confidence = _check_confidence(confidence)
+    samples = [_finite(s) for s in samples]
+    if any(s.size == 0 for s in samples):
+        return float("nan"), float("nan"), float("nan")
+    point = float(statistic(*samples, axis=-1))
+    if all(np.ptp(s) == 0 for s in samples):  # nothing to resample: the interval is the point
+        return point, point, point
+    result = stats.bootstrap(
+        samples,
+        statistic,
+        n_resamples=resamples,
+        confidence_level=confidence,
+        method="percentile",
+        vectorized=True,
+        paired=False,
+        rng=np.random.default_rng(seed),
+    )
+    low, high = result.confidence_interval
+    return point, float(low), float(high)
+
+
+def interval(
+    x: np.ndarray,
+    statistic: str = "iqm",
+    *,
+    confidence: float = CONFIDENCE,
+    resamples: int = RESAMPLES,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """A setting's `statistic` (:data:`STATISTICS`) of its runs' scores `x`, with its percentile
+    bootstrap interval: ``(point, low, high)``."""
+    f = estimator(statistic)
+    return bootstrap([x], f, confidence=confidence, resamples=resamples, seed=seed)
+
+
+def curve_interval(
+    curves: np.ndarray,
+    statistic: str = "iqm",
+    *,
+    confidence: float = CONFIDENCE,
+    resamples: int = 1000,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`statistic` of `curves` [run, update] over runs at every update, with a percentile
+    bootstrap band: each resample draws runs (whole curves) with replacement, the same draw for
+    every update. NaN (a run with no finished episode yet) is left out of its update."""
+    confidence = _check_confidence(confidence)
+    f = estimator(statistic)
+    curves = np.asarray(curves, dtype=float)
+    runs = np.random.default_rng(seed).integers(0, len(curves), (resamples, len(curves)))
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # updates before any episode: NaN
+        point = f(curves.T, axis=-1)
+        draws = f(np.moveaxis(curves[runs], -2, -1), axis=-1)  # [resample, update]
+        tail = 100 * (1 - confidence) / 2
+        low, high = np.nanpercentile(draws, [tail, 100 - tail], axis=0)
+    return point, low, high
+
+
+def probability_of_improvement(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+    """P(X > Y) + ½ P(X = Y) for a score X of `x`'s setting and Y of `y`'s, from all n·m pairs:
+    the Mann–Whitney U statistic of `x` over n·m (Agarwal et al. 2021, Sect. 4)."""
+    x, y = np.moveaxis(np.asarray(x, float), axis, -1), np.moveaxis(np.asarray(y, float), axis, -1)
+    difference = x[..., :, None] - y[..., None, :]
+    return np.mean((difference > 0) + 0.5 * (difference == 0), axis=(-2, -1))
+
+
+def compare(
+    x: np.ndarray,
+    y: np.ndarray,
+    *,
+    confidence: float = CONFIDENCE,
+    resamples: int = RESAMPLES,
+    seed: int = 0,
+) -> dict[str, tuple[float, float, float]]:
+    """`x`'s runs against `y`'s: the probability of improvement and the difference in IQM
+    (x − y), each ``(point, low, high)`` with a bootstrap interval over both settings' runs."""
+    kwargs = {"confidence": confidence, "resamples": resamples, "seed": seed}
+    return {
+        "probability_of_improvement": bootstrap([x, y], probability_of_improvement, **kwargs),
+        "iqm_difference": bootstrap(
+            [x, y], lambda a, b, axis=-1: iqm(a, axis) - iqm(b, axis), **kwargs
+        ),
+    }
+
+
+def normalise(scores: np.ndarray, low: float, high: float) -> np.ndarray:
+    """Scores on a task's own scale mapped so that `low` is 0 and `high` is 1."""
+    if not np.isfinite(low) or not np.isfinite(high) or high == low:
+        raise ValueError(f"normalising needs two different finite scores, got {low} and {high}")
+    return (np.asarray(scores, float) - low) / (high - low)
+
+
+def _pooled(statistic: Callable[..., np.ndarray]) -> Callable[..., np.ndarray]:
+    """`statistic` of every task's normalised scores pooled, as ``f(*tasks, axis=-1)``."""
+
+    def pooled(*tasks: np.ndarray, axis: int = -1) -> np.ndarray:
+        return statistic(np.concatenate(tasks, axis=axis), axis=axis)
+
+    return pooled
+
+
+def optimality_gap(x: np.ndarray, axis: int = -1, threshold: float = 1.0) -> np.ndarray:
+    """The mean shortfall of normalised scores below `threshold`: mean(max(0, threshold − x))."""
+    return np.mean(threshold - np.minimum(x, threshold), axis=axis)
+
+
+AGGREGATES: dict[str, Callable[..., np.ndarray]] = {
+    "iqm": iqm,
+    "mean": _mean,
+    "median": _median,
+    "optimality_gap": optimality_gap,
+}
+
+
+def aggregate(
+    tasks: Sequence[np.ndarray],
+    statistic: str = "iqm",
+    *,
+    confidence: float = CONFIDENCE,
+    resamples: int = RESAMPLES,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """`statistic` (:data:`AGGREGATES`) of one setting's normalised scores pooled over `tasks`
+    (one array of runs per task), with a stratified bootstrap interval."""
+    if statistic not in AGGREGATES:
+        raise ValueError(f"unknown aggregate {statistic!r}; valid: {', '.join(AGGREGATES)}")
+    f = _pooled(AGGREGATES[statistic])
+    return bootstrap(tasks, f, confidence=confidence, resamples=resamples, seed=seed)
+
+
+def aggregate_improvement(
+    pairs: Sequence[tuple[np.ndarray, np.ndarray]],
+    *,
+    confidence: float = CONFIDENCE,
+    resamples: int = RESAMPLES,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """The probability of improvement averaged over tasks, one ``(x, y)`` pair of run scores per
+    task (no normalisation needed: it compares ranks within each task), with a stratified
+    bootstrap interval that resamples every task's runs of both settings independently."""
+
+    def mean_over_tasks(*samples: np.ndarray, axis: int = -1) -> np.ndarray:
+        values = [
+            probability_of_improvement(x, y, axis)
+            for x, y in zip(samples[::2], samples[1::2], strict=True)
+        ]
+        return np.mean(values, axis=0)
+
+    samples = [s for pair in pairs for s in pair]
+    return bootstrap(
+        samples, mean_over_tasks, confidence=confidence, resamples=resamples, seed=seed
+    )
+
+
+def performance_profile(scores: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
+    """The fraction of runs whose normalised score exceeds each of `thresholds` (Agarwal et al.
+    2021, Sect. 4: the score distribution's tail, run by run)."""
+    scores = _finite(scores)
+    return np.mean(scores[None, :] > np.asarray(thresholds, float)[:, None], axis=1)
+
+
+def summarise(
+    scores: Mapping[str, np.ndarray],
+    statistic: str = "iqm",
+    *,
+    confidence: float = CONFIDENCE,
+    seed: int = 0,
+) -> dict[str, dict[str, float]]:
+    """For each setting's run scores: the `statistic` with its interval, and the sample std."""
+    summary = {}
+    for name, x in scores.items():
+        point, low, high = interval(x, statistic, confidence=confidence, seed=seed)
+        summary[name] = {
+            "point": point,
+            "low": low,
+            "high": high,
+            "std": sample_std(x),
+            "n": int(_finite(x).size),
+        }
+    return summary

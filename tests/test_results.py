@@ -1,0 +1,136 @@
+"""A sweep's results: its statistics tables, comparisons against a baseline, and merged parts."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from helpers import sweep_by_hand
+
+from fppo_jax import METRICS, SweepResult, sweep
+from fppo_jax.cli import main
+from fppo_jax.results import max_average_return, merge
+
+TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2, "total_steps": 256}
+
+
+def two_settings(shift: float = 100.0, seeds: int = 8) -> SweepResult:
+    """PPO and FPPO-LP over `seeds` seeds, FPPO-LP's final returns `shift` above PPO's."""
+    settings = [{"variant": "ppo"}, {"variant": "fppo-lp", "alpha": 1.3}]
+    runs = [{"setting": s, "seed": seed} for s in range(2) for seed in range(seeds)]
+    final = np.concatenate([np.arange(seeds), np.arange(seeds) + shift])
+    curves = np.stack([np.linspace(0, f, 4) for f in final])
+    metrics = {name: np.zeros_like(curves) for name in METRICS}
+    metrics.update(average_return=curves, env_steps=np.tile(np.arange(1, 5) * 64, (len(runs), 1)))
+    return SweepResult(
+        settings=settings,
+        seeds=list(range(seeds)),
+        runs=runs,
+        metrics=metrics,
+        diverged=np.zeros(len(runs), np.int64),
+        config={"env": "cartpole", "seeds": list(range(seeds)), "runs_per_call": len(runs)},
+        compile_seconds=1.0,
+        train_seconds=2.0,
+    )
+
+
+def test_the_paper_statistic_shows_the_sample_std():
+    returns = np.array([[0.0, 10.0], [0.0, 20.0], [0.0, 60.0]])
+    best, std, at = max_average_return(returns)
+    assert (best, at) == (30.0, 1)
+    assert std == pytest.approx(np.std([10, 20, 60], ddof=1))
+
+
+def test_an_interval_table_gives_each_setting_its_statistic_and_interval():
+    result = two_settings()
+    rows = result.table("iqm", "final").splitlines()
+    assert rows[0] == "| setting | seeds | IQM of the final score [95% CI] | sample std |"
+    ppo, lp = rows[2].split(" | "), rows[3].split(" | ")
+    assert ppo[:2] == ["| ppo", "8"] and lp[:2] == ["| fppo-lp α=1.3", "8"]
+    assert ppo[2].startswith("3.5 [") and lp[2].startswith("103.5 [")  # IQM of 0…7 is 3.5
+    assert ppo[3] == f"{np.std(np.arange(8), ddof=1):.1f} |"
+    assert result.table("mean", "auc", 0.9).splitlines()[0].endswith("[90% CI] | sample std |")
+    with pytest.raises(ValueError, match="unknown statistic 'mode'"):
+        result.table("mode")
+
+
+def test_a_table_leaves_diverged_runs_out_of_the_interval():
+    rows = sweep_by_hand().table("mean").splitlines()[2:]
+    assert rows[0].startswith("| ppo | 1 of 3 (2 diverged) | 20.0 [20.0, 20.0] |")
+    assert rows[1] == "| fppo-lp α=1.3 | 0 of 3 (3 diverged) | – | – |"
+
+
+def test_compare_against_a_baseline():
+    text = two_settings().compare("ppo")
+    assert "Against ppo (8 seeds), final return" in text
+    row = text.splitlines()[-1].split(" | ")
+    assert row[:3] == ["| fppo-lp α=1.3", "8", "1.00 [1.00, 1.00]"]  # every pair improves
+    point, interval = row[3].split(" [")
+    low, high = map(float, interval.rstrip("] |").split(", "))
+    assert float(point) == 100.0 and low < 100 < high
+    close = two_settings(shift=0.5).compare("fppo-lp")  # ppo against fppo-lp, a near tie
+    point, interval = close.splitlines()[-1].split(" | ")[2].split(" [")
+    low, high = map(float, interval.rstrip("]").split(", "))
+    assert float(point) < 0.5 and low < 0.5 < high
+    with pytest.raises(ValueError, match="no setting of the sweep called 'tr-ppo'"):
+        two_settings().compare("tr-ppo")
+
+
+def test_parts_of_one_sweep_merge_into_the_one_process_sweep(tmp_path):
+    grid = {"variant": ["ppo", "fppo-qp"]}
+    whole = sweep("cartpole", grid, seeds=[0, 1, 2], **TINY)
+    parts = [sweep("cartpole", grid, seeds=s, **TINY) for s in ([0, 2], [1])]
+    merged = merge(parts)
+    assert merged.settings == whole.settings
+    assert sorted(map(tuple, (r.values() for r in merged.runs))) == sorted(
+        map(tuple, (r.values() for r in whole.runs))
+    )
+    assert merged.seeds == [0, 2, 1] and merged.config["seeds"] == [0, 2, 1]
+    for i, run in enumerate(merged.runs):
+        j = whole.runs.index(run)
+        for name in METRICS:  # float tolerance over the first updates, as sweep and train
+            np.testing.assert_allclose(
+                merged.metrics[name][i, :2], whole.metrics[name][j, :2], rtol=1e-4, atol=1e-6
+            )
+    merged.write(tmp_path / "merged")
+    back = SweepResult.read(tmp_path / "merged")
+    assert back.table("iqm") == merged.table("iqm")
+
+
+def test_merge_refuses_other_protocols_and_repeated_runs():
+    a, b = two_settings(), two_settings()
+    with pytest.raises(ValueError, match="ppo seed 0, ppo seed 1"):
+        merge([a, b])
+    other = dataclasses.replace(b, config={**b.config, "normalize_rewards": False})
+    with pytest.raises(ValueError, match=r"sweep 2 .* normalize_rewards is False, sweep 1's None"):
+        merge([a, other])
+    with pytest.raises(ValueError, match="at least one"):
+        merge([])
+
+
+def test_merge_joins_settings_and_seeds_from_the_command_line(tmp_path, capsys):
+    first = two_settings()
+    second = dataclasses.replace(
+        first,
+        seeds=[8, 9],
+        runs=[{"setting": 0, "seed": 8}, {"setting": 1, "seed": 9}],
+        metrics={k: v[:2] for k, v in first.metrics.items()},
+        diverged=np.zeros(2, np.int64),
+        config={**first.config, "seeds": [8, 9], "runs_per_call": 2},
+    )
+    first.write(tmp_path / "a")
+    second.write(tmp_path / "b")
+    out = tmp_path / "merged"
+    assert main(["merge", str(tmp_path / "a"), str(tmp_path / "b"), "--output", str(out)]) == 0
+    assert "merged 2 sweeps: 18 runs (2 settings, 10 seeds)" in capsys.readouterr().out
+    merged = SweepResult.read(out)
+    assert [merged.setting_seeds(i) for i in range(2)] == ["9", "9"]
+    assert main(["merge", str(tmp_path / "a"), "--output", str(out)]) == 2
+    assert "already holds a sweep" in capsys.readouterr().err
+    assert main(["table", str(out), "--stat", "median", "--endpoint", "max", "--ci", "0.8"]) == 0
+    assert "median of the max score [80% CI]" in capsys.readouterr().out
+    assert main(["compare", str(out), "--baseline", "fppo-lp"]) == 0
+    # ppo's finals 0…7 and 0 against fppo-lp's 100…107 and 1: 6 pairs above, 1 tie, of 81
+    assert f"| ppo | 9 | {6.5 / 81:.2f} [" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["table", str(out), "--ci", "95"])
+    assert "a confidence level in (0, 1)" in capsys.readouterr().err

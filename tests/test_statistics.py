@@ -141,3 +141,14 @@ def test_the_iqm_leaves_nans_out():
     x = np.array([np.nan, 1.0, 2.0, 3.0, 4.0, 100.0, np.nan])
     assert statistics.iqm(x) == pytest.approx(stats.trim_mean(x[1:6], 0.25))
     assert np.isnan(statistics.iqm(np.full(3, np.nan)))
+
+
+def test_the_paper_statistic_s_difference_and_its_interval():
+    rng = np.random.default_rng(8)
+    x = rng.normal(size=(10, 5)) + np.arange(5)  # best at the last update, about 4
+    y = rng.normal(size=(12, 5))
+    point, low, high = statistics.max_average_difference(x, y, seed=2)
+    assert point == pytest.approx(x.mean(0).max() - y.mean(0).max())
+    assert low < point < high
+    assert statistics.max_average_difference(x, y, seed=2) == (point, low, high)
+    assert statistics.max_average_difference(x, x[::-1])[0] == 0.0

@@ -1,0 +1,314 @@
+"""The seed study's verdict: does FPPO beat PPO? Every recorded part, merged, with its statistics.
+
+    python experiments/verdict.py                       # results/study.md and its figures
+    python experiments/verdict.py --results /tmp/smoke  # a smoke run's parts (study.py --results)
+
+Reads every part that `study.py` recorded under <results>/study/<task>/<protocol>/, merges the
+parts of each task and protocol (`fppo_jax.merge`, which refuses parts whose protocol differs,
+naming the field) and writes <results>/study.md and <results>/study/*.png. Decided before any
+part ran, and stated in the report: the primary endpoint is each run's final return (its
+last-100-episode average after the last update), the secondary the area under its learning
+curve (the average return averaged over updates, for "fast"); the paper's max average return
+is shown beside them, with an interval for its gap to PPO, since it is biased upward by a
+different amount per variant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from table1_classic import PAPER as PAPER_CLASSIC
+from table1_mujoco import PAPER as PAPER_MUJOCO
+from table1_mujoco import PAPER_VARIANTS
+
+from fppo_jax import SweepResult, merge, statistics
+from fppo_jax.envs import MUJOCO_TASKS
+from fppo_jax.plots import plot_curves, plot_improvement, plot_profiles
+from fppo_jax.results import labels, max_average_return
+
+RESULTS = Path(__file__).resolve().parent / "results"
+CLASSIC_TASKS = tuple(PAPER_CLASSIC)
+PAPER = {**PAPER_CLASSIC, **PAPER_MUJOCO}  # Table 1, in PAPER_VARIANTS' order
+BASELINE = "ppo"
+CHALLENGERS = ("fppo-lp", "fppo-qp")
+# What the study sets out to record: (variants, seeds per variant, protocols) per task.
+PLAN = {
+    **{task: (PAPER_VARIANTS, 50, ("paper", "unnormalised")) for task in CLASSIC_TASKS},
+    **{task: (("ppo", "fppo-lp", "fppo-qp"), 20, ("paper",)) for task in MUJOCO_TASKS},
+}
+PROTOCOLS = {
+    "paper": "the project's protocol: observation and reward normalisation",
+    "unnormalised": "baselines' classic-control protocol: no normalisation",
+}
+DPI = 80
+
+
+def recorded(results: Path, task: str, protocol: str) -> tuple[SweepResult | None, list[dict]]:
+    """The merged parts of `task` under `protocol`, and each part's run record."""
+    directories = sorted(p.parent for p in (results / "study" / task / protocol).glob("*/run.json"))
+    if not directories:
+        return None, []
+    records = [json.loads((d / "run.json").read_text()) for d in directories]
+    return merge([SweepResult.read(d) for d in directories]), records
+
+
+def by_variant(result: SweepResult) -> dict[str, int]:
+    return {setting["variant"]: index for index, setting in enumerate(result.settings)}
+
+
+def interval_text(values: tuple[float, float, float], form: str = ".1f") -> str:
+    point, low, high = values
+    return "–" if np.isnan(point) else f"{point:{form}} [{low:{form}}, {high:{form}}]"
+
+
+def outcome(probability: tuple[float, float, float]) -> str:
+    """What the interval of a probability of improvement says, in words."""
+    _, low, high = probability
+    if low > 0.5:
+        return "better"
+    if high < 0.5:
+        return "worse"
+    return "not resolved"
+
+
+def task_section(task: str, protocol: str, result: SweepResult, records: list[dict]) -> list[str]:
+    index = by_variant(result)
+    names = labels(result.settings)
+    final, area = result.scores("final"), result.scores("auc")
+    wall = sum(r["wall_seconds"] for r in records)
+    commits = sorted({r["commit"] for r in records})
+    lines = [
+        f"### {task}, {protocol} protocol",
+        "",
+        f"{len(records)} part{'s' if len(records) > 1 else ''}, {len(result.runs)} runs of "
+        f"{result.config['total_steps']:,} env steps, {wall / 3600:.2f} h in all on "
+        f"{records[0]['machine']}; commit {', '.join(c[:12] for c in commits)}.",
+        "",
+        "| variant | runs | IQM final [95% CI] | IQM AUC [95% CI] | sample std final "
+        "| max average return ± sample std | paper (Table 1) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for variant, i in index.items():
+        best, std, _ = max_average_return(result.setting_metrics(i)["average_return"])
+        paper = PAPER[task][PAPER_VARIANTS.index(variant)]
+        lines.append(
+            f"| {names[i]} | {result.setting_seeds(i)} "
+            f"| {interval_text(statistics.interval(final[i]))} "
+            f"| {interval_text(statistics.interval(area[i]))} "
+            f"| {statistics.sample_std(final[i]):.1f} | {best:.1f} ± {std:.1f} | {paper} |"
+        )
+    if BASELINE not in index:
+        return [*lines, ""]
+    base = index[BASELINE]
+    lines += [
+        "",
+        f"Against {BASELINE}: P(variant > {BASELINE}) on final returns and on AUC, the "
+        "difference in IQM of final returns, and the difference in the paper's statistic "
+        "beside the paper's own gap (all 95% bootstrap CIs).",
+        "",
+        "| variant | P(> ppo), final | outcome | P(> ppo), AUC | Δ IQM final "
+        "| Δ max average return | paper's Δ | paper's Δ in the CI |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    paper_base = PAPER[task][PAPER_VARIANTS.index(BASELINE)]
+    curves = {v: result.setting_metrics(i)["average_return"] for v, i in index.items()}
+    for variant, i in index.items():
+        if i == base:
+            continue
+        on_final = statistics.compare(final[i], final[base])
+        on_area = statistics.compare(area[i], area[base])
+        gap = statistics.max_average_difference(curves[variant], curves[BASELINE])
+        paper_gap = PAPER[task][PAPER_VARIANTS.index(variant)] - paper_base
+        inside = "yes" if gap[1] <= paper_gap <= gap[2] else "no"
+        probability = on_final["probability_of_improvement"]
+        lines.append(
+            f"| {names[i]} | {interval_text(probability, '.2f')} | {outcome(probability)} "
+            f"| {interval_text(on_area['probability_of_improvement'], '.2f')} "
+            f"| {interval_text(on_final['iqm_difference'])} | {interval_text(gap)} "
+            f"| {paper_gap:+.1f} | {inside} |"
+        )
+    return [*lines, ""]
+
+
+def aggregate_section(results: dict[str, SweepResult]) -> tuple[list[str], dict, dict]:
+    """Across the MuJoCo tasks that have every studied variant: the probability of improvement
+    averaged over tasks and the IQM of normalised final returns, with stratified CIs."""
+    tasks = {
+        t: r
+        for t, r in results.items()
+        if t in MUJOCO_TASKS and {BASELINE, *CHALLENGERS} <= set(by_variant(r))
+    }
+    if not tasks:
+        return [], {}, {}
+    lines = [
+        f"### Across the MuJoCo tasks ({', '.join(tasks)})",
+        "",
+        "Normalised score: 0 is the task's untrained policy (the mean over every run of its "
+        "first recorded average return), 1 is PPO's IQM final return on the task. Intervals "
+        "are stratified bootstraps: each task's runs are resampled among themselves.",
+        "",
+        "| variant | mean P(> ppo) over tasks, final | outcome | mean P(> ppo), AUC "
+        "| IQM of normalised final returns | optimality gap (τ = 1) |",
+        "|---|---|---|---|---|---|",
+    ]
+    normalised: dict[str, list[np.ndarray]] = {v: [] for v in (BASELINE, *CHALLENGERS)}
+    improvements = {}
+    for result in tasks.values():
+        index, final = by_variant(result), result.scores("final")
+        first = [_first_finite(row) for row in result.metrics["average_return"]]
+        low, high = float(np.nanmean(first)), statistics.iqm(final[index[BASELINE]])
+        for variant in normalised:
+            normalised[variant].append(statistics.normalise(final[index[variant]], low, high))
+    for variant in (BASELINE, *CHALLENGERS):
+        cells = []
+        if variant != BASELINE:
+            for endpoint in ("final", "auc"):
+                pairs = []
+                for result in tasks.values():
+                    index, scores = by_variant(result), result.scores(endpoint)
+                    pairs.append((scores[index[variant]], scores[index[BASELINE]]))
+                value = statistics.aggregate_improvement(pairs)
+                cells.append(interval_text(value, ".2f"))
+                if endpoint == "final":
+                    improvements[f"{variant}, all tasks"] = value
+                    cells.append(outcome(value))
+        else:
+            cells = ["–", "–", "–"]
+        cells.append(interval_text(statistics.aggregate(normalised[variant], "iqm"), ".2f"))
+        gap = statistics.aggregate(normalised[variant], "optimality_gap")
+        cells.append(interval_text(gap, ".2f"))
+        lines.append(f"| {variant} | {' | '.join(cells)} |")
+    return [*lines, ""], improvements, normalised
+
+
+def _first_finite(row: np.ndarray) -> float:
+    finite = row[np.isfinite(row)]
+    return float(finite[0]) if finite.size else np.nan
+
+
+def figures(results: dict[str, SweepResult], out: Path, protocol: str) -> Path:
+    """Each task's learning curves under `protocol`: IQM with its 95% bootstrap band."""
+    tasks = list(results)
+    columns = min(3, len(tasks))
+    rows = -(-len(tasks) // columns)
+    fig, axes = plt.subplots(
+        rows, columns, figsize=(3.6 * columns, 2.8 * rows), layout="constrained", squeeze=False
+    )
+    for ax, task in zip(axes.flat, tasks, strict=False):
+        plot_curves(results[task], band="iqm", ax=ax)
+        seeds = len(results[task].seeds)
+        ax.set_title(f"{task} ({seeds} seeds; IQM, 95% CI)", fontsize="medium")
+        ax.legend(fontsize="x-small")
+    for ax in axes.flat[len(tasks) :]:
+        ax.set_visible(False)
+    path = out / f"curves_{protocol}.png"
+    fig.savefig(path, dpi=DPI, pil_kwargs={"optimize": True})
+    plt.close(fig)
+    return path
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results", type=Path, default=RESULTS, help="where the parts are")
+    args = parser.parse_args()
+    out = args.results / "study"
+    preamble = [
+        "# Does FPPO beat PPO? The seed study",
+        "",
+        "Written by `python experiments/verdict.py` from the parts `experiments/study.py` "
+        "recorded (each part's command is in its `run.json`).",
+        "",
+        "- Endpoints, fixed before the study ran: **final return** (primary: each run's "
+        "last-100-episode average return after its last update) and the **area under the "
+        "curve** (secondary: the average return averaged over updates). The paper's max "
+        "average return (the maximum over updates of the seed-mean curve) is shown beside "
+        "them; it is biased upward, by an amount that differs between variants.",
+        "- Statistics (`fppo_jax.statistics`, after Agarwal et al. 2021): IQM with a 95% "
+        "percentile bootstrap CI (2,000 resamples, seeded); P(X > Y) + ½ P(X = Y) over all "
+        "pairs of runs (probability of improvement) with a bootstrap CI that resamples both "
+        "variants' runs; `outcome` is *better* or *worse* where that CI excludes 0.5, "
+        "*not resolved* otherwise. No correction for the number of comparisons is applied: "
+        "read a single *better* among many rows with that in mind.",
+        "- Runs: seed s starts from `jax.random.key(s)`; Table 2's α and k; the `paper` preset "
+        "(8 envs × 256 steps, 32 minibatches × 10 epochs, Adam 3e-4, annealed on MuJoCo); MuJoCo "
+        "tasks on native MuJoCo (envpool, gym's v3 tasks; Reacher v2), so absolute returns are "
+        "not the paper's (MuJoCo 1.5, gym v2).",
+        "",
+    ]
+    sections, done, missing = [], [], []
+    merged: dict[str, dict[str, SweepResult]] = {p: {} for p in PROTOCOLS}
+    for task, (variants, seeds, protocols) in PLAN.items():
+        for protocol in protocols:
+            result, records = recorded(args.results, task, protocol)
+            have = {} if result is None else by_variant(result)
+            counts = {
+                v: len(result.setting_runs(have[v])[0]) + len(result.setting_runs(have[v])[1])
+                if v in have
+                else 0
+                for v in variants
+            }
+            short = {v: n for v, n in counts.items() if n < seeds}
+            label = f"{task} ({protocol})"
+            if result is None:
+                missing.append(f"{label}: not started")
+            elif short:
+                missing.append(
+                    f"{label}: " + ", ".join(f"{v} {n} of {seeds} seeds" for v, n in short.items())
+                )
+            else:
+                done.append(label)
+            if result is not None:
+                merged[protocol][task] = result
+                sections += task_section(task, protocol, result, records)
+    head = [
+        "## Where the study stands",
+        "",
+        f"- Complete: {', '.join(done) or 'nothing yet'}.",
+        f"- Still to run: {'; '.join(missing) or 'nothing'}.",
+        "",
+        "## Per task",
+        "",
+    ]
+    aggregate, improvements, normalised = aggregate_section(merged["paper"])
+    lines = preamble + head + sections
+    if aggregate:
+        lines += ["## Aggregate", "", *aggregate]
+    out.mkdir(parents=True, exist_ok=True)
+    pictures = [figures(results, out, p) for p, results in merged.items() if results]
+    for task, result in merged["paper"].items():
+        index, final = by_variant(result), result.scores("final")
+        if BASELINE in index:
+            for variant in CHALLENGERS:
+                if variant in index:
+                    value = statistics.compare(final[index[variant]], final[index[BASELINE]])
+                    improvements[f"{variant}, {task}"] = value["probability_of_improvement"]
+    if improvements:
+        fig = plot_improvement(dict(sorted(improvements.items())), BASELINE)
+        fig.savefig(out / "improvement.png", dpi=DPI, bbox_inches="tight")
+        plt.close(fig)
+        pictures.append(out / "improvement.png")
+    if normalised:
+        fig = plot_profiles(
+            {v: np.concatenate(x) for v, x in normalised.items()},
+            thresholds=np.linspace(-0.5, 2.0, 251),
+            xlabel="normalised final return τ (1 = PPO's IQM on the task)",
+        )
+        fig.savefig(out / "profiles.png", dpi=DPI, bbox_inches="tight")
+        plt.close(fig)
+        pictures.append(out / "profiles.png")
+    lines += ["## Figures", ""]
+    lines += [f"![{p.stem}](study/{p.name})" for p in pictures]
+    path = args.results / "study.md"
+    path.write_text("\n".join(lines) + "\n")
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,49 @@
+"""experiments/study.py and verdict.py: parts recorded whole, never replaced unasked, merged into
+the verdict; all in a temporary directory."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
+
+
+def _run(script: str, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(EXPERIMENTS / script), *args],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        cwd=EXPERIMENTS,
+    )
+
+
+def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
+    tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
+    for seeds in ("0:3", "3:6"):
+        done = _run("study.py", *tiny, "--seeds", seeds, "--variants", "ppo", "fppo-lp")
+        assert done.returncode == 0, done.stdout + done.stderr
+    parts = tmp_path / "study" / "cartpole" / "paper"
+    assert sorted(p.name for p in parts.iterdir()) == [
+        "seeds-0-2_ppo+fppo-lp",
+        "seeds-3-5_ppo+fppo-lp",
+    ]
+    record = json.loads((parts / "seeds-3-5_ppo+fppo-lp" / "run.json").read_text())
+    assert record["protocol"] == "paper" and "--seeds 3:6" in record["command"]
+    curves = (parts / "seeds-0-2_ppo+fppo-lp" / "curves.csv").read_bytes()
+
+    again = _run("study.py", *tiny, "--seeds", "0:3", "--variants", "ppo", "fppo-lp")
+    assert again.returncode != 0 and "is already recorded" in again.stderr
+    assert (parts / "seeds-0-2_ppo+fppo-lp" / "curves.csv").read_bytes() == curves
+
+    verdict = _run("verdict.py", "--results", str(tmp_path))
+    assert verdict.returncode == 0, verdict.stdout + verdict.stderr
+    text = (tmp_path / "study.md").read_text()
+    assert "### cartpole, paper protocol" in text
+    assert "2 parts, 12 runs of 4,096 env steps" in text
+    assert "| fppo-lp α=1.3 | 0." in text  # its probability of improvement over ppo
+    assert "cartpole (paper): fppo-lp 6 of 50 seeds" in text
+    assert "hopper (paper): not started" in text
+    assert (tmp_path / "study" / "curves_paper.png").stat().st_size > 0
+    assert (tmp_path / "study" / "improvement.png").stat().st_size > 0

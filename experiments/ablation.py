@@ -89,7 +89,7 @@ def report(directory: Path, backend: str) -> Path:
         "annealed linearly to 0, as baselines' ppo2 MuJoCo defaults): `alpha`, FPPO-LP with "
         f"α ∈ {PARTS['alpha'][2]}; `k`, FPPO-QP with k ∈ {PARTS['k'][2]}.",
         "- Max average return: the maximum over updates of the seed-mean of the "
-        "last-100-episode average return, ± the std across seeds there, over the seeds that "
+        "last-100-episode average return, ± the sample std across seeds there, over the seeds that "
         "did not diverge. The paper's Fig. 6 gives these as a chart only; its Table 2 picks "
         "the best α and k per task.",
         f"- Parts done: {', '.join(done) or 'none'}; still to run: {', '.join(pending) or 'none'}.",

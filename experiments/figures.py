@@ -4,10 +4,10 @@
 
 - `objectives.png`: every variant's surrogate and slope against the ratio for A > 0 and A < 0,
   R+ and R- shaded (the paper's Figs. 1 and 3). Computed; it takes seconds.
-- `table1_classic.png`: Table 1's classic-control learning curves (5 variants, mean ± std over
-  5 seeds), from `results/table1_classic/<task>/`, which `table1_classic.py` writes.
+- `table1_classic.png`: Table 1's classic-control learning curves (5 variants, mean ± sample
+  std over 5 seeds), from `results/table1_classic/<task>/`, which `table1_classic.py` writes.
 - `escape_speed.png`: per task, the share of one batch in R+ ∪ R- after each epoch under PPO,
-  FPPO-LP and FPPO-QP from the same states and samples, mean ± std over seeds and update
+  FPPO-LP and FPPO-QP from the same states and samples, mean ± sample std over seeds and update
   points, from `results/escape_speed/fractions.csv`, which `escape_speed.py` writes.
 - `table1_mujoco.png`: Table 1's MuJoCo learning curves, from the tasks `table1_mujoco.py` has
   recorded (`results/table1_mujoco_<backend>/<task>/`).
@@ -68,7 +68,7 @@ def plot_sweeps(directories: list[Path], columns: int = 3) -> Figure:
     for ax, directory in zip(axes.flat, directories, strict=False):
         result = SweepResult.read(directory)
         plot_curves(result, ax=ax)
-        ax.set_title(f"{result.config['env']} ({len(result.seeds)} seeds, mean ± std)")
+        ax.set_title(f"{result.config['env']} ({len(result.seeds)} seeds, mean ± sample std)")
     for ax in axes.flat[len(directories) :]:
         ax.set_visible(False)
     return fig

@@ -62,7 +62,7 @@ def main() -> None:
         f"seeds 0–{args.seeds - 1}. Each task's {runs} runs are one sweep (one compiled program).",
         "",
         "Max average return: the maximum over updates of the seed-mean of the last-100-episode "
-        "average return, ± the std across seeds at that update (the update's env steps in "
+        "average return, ± the sample std across seeds at that update (the update's env steps in "
         "brackets). Escape: `negative_fraction_after`, the fraction of each update's batch left "
         "in R+ ∪ R- after its last epoch, averaged over the run and the seeds (first-epoch value "
         "in brackets).",

@@ -112,7 +112,7 @@ def report(args: argparse.Namespace, directory: Path, backend: str) -> Path:
         "defaults, which the paper's baselines used); Table 2's α and k; each task's runs "
         "(variants × seeds) are one sweep, one compiled program.",
         "- Max average return: the maximum over updates of the seed-mean of the "
-        "last-100-episode average return, ± the std across seeds there, over the seeds that "
+        "last-100-episode average return, ± the sample std across seeds there, over the seeds that "
         "did not diverge (`seeds` says how many, and how many diverged). Escape: the fraction "
         "of each update's batch left in R+ ∪ R- after its last epoch, averaged over the run.",
         f"- Tasks done: {', '.join(done) or 'none'}; still to run: {', '.join(pending) or 'none'}.",

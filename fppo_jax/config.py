@@ -164,7 +164,8 @@ class TrainConfig:
 
 
 PRESETS: dict[str, dict[str, Any]] = {
-    # SPEC §2, baselines' ppo2: 2048 samples per update from 8 environments × 256 steps.
+    # baselines' ppo2 batch: 2048 samples per update, 32 minibatches, 10 epochs. Its MuJoCo runs
+    # collect them from 1 environment × 2048 steps; here 8 × 256, the same batch in shorter unrolls.
     "paper": {"num_envs": 8, "num_steps": 256, "num_minibatches": 32, "num_epochs": 10},
     # Thousands of environments in lockstep with short unrolls and large minibatches (as Brax
     # and MuJoCo Playground train), for throughput on a GPU: 32,768 samples per update, one

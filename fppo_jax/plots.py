@@ -234,7 +234,7 @@ def plot_ablation(result: SweepResult, *, axes: Sequence[Axes] | None = None) ->
             label = variant + _lost(result, chosen)
             ax.errorbar(x, best, yerr=std, marker="o", capsize=3, label=label)
         ax.set(xlabel=key, ylabel="max average return")
-        ax.set_title(f"{result.config['env']}: mean ± std over {len(result.seeds)} seeds")
+        ax.set_title(f"{result.config['env']}: mean ± sample std over {len(result.seeds)} seeds")
         ax.legend(fontsize="small")
         ax.grid(alpha=0.3)
     return axes[0].figure
@@ -254,16 +254,16 @@ def plot_escape_speed(
     """The paper's mechanism: the share of one batch in R+ ∪ R- after each epoch of an update,
     one line per variant, all from the same states. `fractions` is [state, variant, epoch], as
     :meth:`fppo_jax.Trainer.escape_by_epoch` vmapped over states and variants gives it; the line
-    is the mean over states, the band ± one std."""
+    is the mean over states, the band ± one sample std."""
     ax = _axes(ax, (6, 4))
     fractions = np.asarray(fractions)
     epochs = np.arange(1, fractions.shape[-1] + 1)
     for i, variant in enumerate(variants):
-        mean, std = fractions[:, i].mean(0), fractions[:, i].std(0)
+        mean, std = fractions[:, i].mean(0), fractions[:, i].std(0, ddof=1)
         (line,) = ax.plot(epochs, mean, marker="o", ms=3, label=variant)
         ax.fill_between(epochs, mean - std, mean + std, color=line.get_color(), alpha=0.15, lw=0)
     ax.set(xlabel="epoch", ylabel=IN_NEGATIVE_REGIONS)
-    ax.set_title(f"one batch, epoch by epoch: mean ± std over {len(fractions)} states")
+    ax.set_title(f"one batch, epoch by epoch: mean ± sample std over {len(fractions)} states")
     ax.yaxis.set_major_formatter(PercentFormatter(1.0))
     ax.legend(fontsize="small")
     ax.grid(alpha=0.3)

@@ -183,9 +183,9 @@ def aggregate_section(results: dict[str, SweepResult]) -> tuple[list[str], dict,
                     cells.append(outcome(value))
         else:
             cells = ["–", "–", "–"]
-        cells.append(interval_text(statistics.aggregate(normalised[variant], "iqm"), ".2f"))
+        cells.append(interval_text(statistics.aggregate(normalised[variant], "iqm"), ".3f"))
         gap = statistics.aggregate(normalised[variant], "optimality_gap")
-        cells.append(interval_text(gap, ".2f"))
+        cells.append(interval_text(gap, ".3f"))
         lines.append(f"| {variant} | {' | '.join(cells)} |")
     return [*lines, ""], improvements, normalised
 

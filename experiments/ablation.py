@@ -2,7 +2,7 @@
 
     python experiments/ablation.py --backend native                     # Walker2d and Ant
     python experiments/ablation.py --backend native --tasks ant --parts k   # one part
-    python experiments/ablation.py --tasks reacher --steps 4096 --seeds 1   # a smoke run
+    python experiments/ablation.py --tasks reacher --steps 4096 --seeds 1 --results /tmp/smoke
 
 Each task has two parts, each one vmapped sweep (`fppo_jax.sweep`, `paper` preset) of 5
 settings × 5 seeds × 1M steps, chunked automatically to fit device memory: `alpha`, FPPO-LP
@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
+from common import add_record_flags, refuse_to_replace
 from matplotlib.axes import Axes
 from table1_mujoco import record_sweep
 
@@ -34,7 +35,6 @@ PARTS = {  # part: the variant and the values of its own hyperparameter (SPEC §
     "k": ("fppo-qp", "k", [0.1, 0.2, 0.3, 0.4, 0.5]),
 }
 TASKS_IN_PAPER = ("walker2d", "ant")
-RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def run_part(task: str, part: str, args: argparse.Namespace, directory: Path) -> None:
@@ -131,11 +131,12 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=1_000_000)
     parser.add_argument("--chunk", type=int, help="runs per compiled call (default: automatic)")
     parser.add_argument("--backend", default="auto", choices=list(BACKENDS))
-    parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
+    add_record_flags(parser)
     args = parser.parse_args()
 
     backend, why = choose_backend(args.tasks[0], args.backend)
     directory = args.results / f"ablation_{backend}"
+    refuse_to_replace([directory / t / p for t in args.tasks for p in args.parts], args.force)
     print(f"backend {backend}{' (' + why + ')' if why else ''}; results in {directory}")
     for task in args.tasks:
         for part in args.parts:

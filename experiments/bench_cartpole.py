@@ -30,6 +30,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import purejaxrl_settings as pjr
+from common import refuse_to_replace
 
 from fppo_jax import make_train
 
@@ -97,7 +98,9 @@ def main() -> None:
     parser.add_argument("--purejaxrl", type=Path, default=PUREJAXRL, help="its ppo.py's folder")
     parser.add_argument("--quick", action="store_true", help="a tenth of the steps, 1 repeat")
     parser.add_argument("--output", type=Path, default=RESULTS / "bench_cartpole.md")
+    parser.add_argument("--force", action="store_true", help="replace results already recorded")
     args = parser.parse_args()
+    refuse_to_replace([args.output], args.force)
     if not (args.purejaxrl / "ppo.py").exists():
         sys.exit(f"PureJaxRL's ppo.py is not in {args.purejaxrl}: pass --purejaxrl DIR")
     sys.path.insert(0, str(args.purejaxrl))

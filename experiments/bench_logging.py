@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import os
-import platform
 import sys
 import tempfile
 from pathlib import Path
 
 import jax
 import numpy as np
+from common import add_record_flags, machine, refuse_to_replace
 
 import fppo_jax
 from fppo_jax.progress import print_progress
@@ -51,21 +50,15 @@ def arms(chunks: int, per_call: int, scratch: Path) -> dict[str, dict]:
     }
 
 
-def machine() -> str:
-    with open("/proc/cpuinfo") as f:
-        names = [line.split(":", 1)[1].strip() for line in f if line.startswith("model name")]
-    device = jax.devices()[0]
-    kind = "no GPU" if device.platform == "cpu" else device.device_kind
-    cpu = names[0] if names else platform.processor()
-    return f"{cpu}, {os.cpu_count()} cores, {kind}; jax {jax.__version__}"
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=500_000)
     parser.add_argument("--chunks", type=int, default=20)
     parser.add_argument("--repeats", type=int, default=3)
+    add_record_flags(parser)
     args = parser.parse_args()
+    path = args.results / "bench_logging.md"
+    refuse_to_replace([path], args.force)
 
     num_updates = args.steps // 2048
     per_call = -(-num_updates // args.chunks)
@@ -119,8 +112,8 @@ def main() -> None:
         "an asynchronous orbax save; the next call is dispatched before that work starts, so "
         "the two overlap.",
     ]
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "bench_logging.md").write_text("\n".join(lines) + "\n")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

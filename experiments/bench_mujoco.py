@@ -31,14 +31,13 @@ import argparse
 import dataclasses
 import datetime
 import functools
-import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+from common import add_record_flags, machine, refuse_to_replace
 
 import fppo_jax
 from fppo_jax.config import describe_update, preset_config
@@ -145,15 +144,6 @@ def brax_ppo(env_name: str, config, total_steps: int) -> tuple[float, float]:
     return rates[-1], wall
 
 
-def machine() -> str:
-    device = jax.devices()[0]
-    name = "" if device.platform == "cpu" else f" {device.device_kind}"
-    return (
-        f"{device.platform.upper()}{name}, {os.cpu_count()} CPU cores "
-        f"({platform.processor() or platform.machine()}), jax {jax.__version__}"
-    )
-
-
 def measure(args: argparse.Namespace, backend: str, config, updates: int) -> list[tuple]:
     """Rows (a), (b) and, on MJX, (c) of one backend: (name, steps/s, compile s, ratio)."""
     config = dataclasses.replace(config, total_steps=updates * config.samples_per_update)
@@ -225,7 +215,7 @@ def main() -> None:
     parser.add_argument(
         "--runs", type=int, default=1, help="runs trained side by side as one sweep (no (c))"
     )
-    parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
+    add_record_flags(parser)
     args = parser.parse_args()
 
     shape = {"num_steps": args.num_steps, "num_minibatches": args.minibatches}
@@ -238,6 +228,10 @@ def main() -> None:
     config = preset_config(
         args.preset, total_steps=probe.samples_per_update, resets_per_rollout=1, **shape
     )
+    platform_name = jax.devices()[0].platform
+    runs = f"{args.runs}runs_" if args.runs > 1 else ""
+    path = args.results / f"bench_mujoco_{args.env}_{runs}{config.num_envs}envs_{platform_name}.md"
+    refuse_to_replace([path], args.force)
     print(f"{args.env}: {describe_update(config)} on {machine()}", flush=True)
     rows, timed_updates = [], {}
     for backend in args.backends:
@@ -250,9 +244,6 @@ def main() -> None:
         rows.append(("native (b) / MJX (b)", None, None, f"{ratio:.1f}×"))
 
     command = " ".join(["python experiments/bench_mujoco.py", *sys.argv[1:]])
-    platform_name = jax.devices()[0].platform
-    runs = f"{args.runs}runs_" if args.runs > 1 else ""
-    path = args.results / f"bench_mujoco_{args.env}_{runs}{config.num_envs}envs_{platform_name}.md"
     path.parent.mkdir(parents=True, exist_ok=True)
     steps = ", ".join(
         f"{updates * config.samples_per_update:,} env steps on {backend}"

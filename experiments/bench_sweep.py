@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from bench_cartpole import quiet_cpu
+from common import refuse_to_replace
 
 from fppo_jax import sweep, train
 
@@ -31,7 +32,9 @@ def main() -> None:
     parser.add_argument(
         "--output", type=Path, default=Path(__file__).parent / "results" / "bench_sweep.md"
     )
+    parser.add_argument("--force", action="store_true", help="replace results already recorded")
     args = parser.parse_args()
+    refuse_to_replace([args.output], args.force)
     runs = len(VARIANTS) * args.seeds
 
     start = time.perf_counter()

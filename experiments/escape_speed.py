@@ -31,6 +31,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+from common import add_record_flags, refuse_to_replace
 
 from fppo_jax import make_env, make_train
 from fppo_jax.config import describe, resolve_config, resolve_hyperparameters
@@ -197,8 +198,9 @@ def main() -> None:
         "--points", nargs="+", type=int, default=[5, 20, 40], help="updates done before a probe"
     )
     parser.add_argument("--backend", default="auto", choices=list(BACKENDS))
-    parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
+    add_record_flags(parser)
     args = parser.parse_args()
+    refuse_to_replace([args.results / CSV_NAME, args.results / "escape_speed.md"], args.force)
     points = sorted(set(args.points))
     measured = [
         measure(task, args.seeds, points, args.backend if task in MUJOCO_TASKS else "auto")

@@ -3,7 +3,7 @@ ends.
 
     python experiments/gpu_suite.py                       # every part, about 25 minutes on one H100
     python experiments/gpu_suite.py --parts throughput-hopper table1-hopper
-    python experiments/gpu_suite.py --smoke --results /tmp/suite   # the same parts, tiny, on a CPU
+    python experiments/gpu_suite.py --smoke          # the same parts, tiny, on a CPU, in a temp dir
 
 Parts (each one of the experiments' own scripts, run in a process of its own, with a time limit
 of `--part-seconds`):
@@ -18,7 +18,9 @@ After each part, <results>/gpu_suite_<platform>.md is written again: every part 
 its status, its time and the last lines it printed. A part that fails or runs out of time is
 recorded as such and the next one runs. `--smoke` runs every kind of part once, on Reacher, at
 sizes a CPU finishes in a minute or two (the throughput part on MJX, the sweeps on native
-MuJoCo): the suite's own test.
+MuJoCo): the suite's own test; it writes to a new temporary directory unless `--results` names
+another, and never into experiments/results. A result already recorded is refused unless
+`--force` (every part's script refuses it too).
 """
 
 from __future__ import annotations
@@ -28,11 +30,13 @@ import datetime
 import json
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
+from common import RESULTS, inside_results, machine, refuse_to_replace
+
 HERE = Path(__file__).resolve().parent
-RESULTS = HERE / "results"
 MUJOCO = ("hopper", "walker2d", "halfcheetah", "ant", "reacher", "swimmer")
 THROUGHPUT_ENVS = (2048, 8192, 32768)
 
@@ -73,13 +77,14 @@ def parts(smoke: bool) -> dict[str, list[list[str]]]:
     return {**throughput, **table1, **ablation}
 
 
-def run_part(commands: list[list[str]], results: Path, seconds: float) -> dict:
-    """Run a part's commands one after another, each given `--results`, within `seconds` in
-    all; its status, time and output's last lines."""
+def run_part(commands: list[list[str]], results: Path, seconds: float, force: bool) -> dict:
+    """Run a part's commands one after another, each given `--results` (and `--force`), within
+    `seconds` in all; its status, time and output's last lines."""
     start, lines, status = time.perf_counter(), [], "done"
     for script, *arguments in commands:
         left = seconds - (time.perf_counter() - start)
         command = [sys.executable, str(HERE / script), *arguments, "--results", str(results)]
+        command += ["--force"] if force else []
         try:
             done = subprocess.run(
                 command, capture_output=True, text=True, timeout=max(left, 1), cwd=HERE.parent
@@ -115,19 +120,20 @@ def report(done: dict[str, dict], path: Path, command: str) -> None:
     (path.with_suffix(".json")).write_text(json.dumps(done, indent=1) + "\n")
 
 
-def machine() -> str:
-    import jax
-
-    device = jax.devices()[0]
-    return f"{device.platform.upper()} {device.device_kind}, jax {jax.__version__}"
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--parts", nargs="+", help="default: every part (see --list)")
     parser.add_argument("--list", action="store_true", help="print the parts and exit")
     parser.add_argument("--smoke", action="store_true", help="tiny parts, for a CPU")
-    parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
+    parser.add_argument(
+        "--results",
+        type=Path,
+        help="where results go (default: experiments/results, or a new temporary directory "
+        "with --smoke)",
+    )
+    parser.add_argument(
+        "--force", action="store_true", help="replace results already recorded there"
+    )
     parser.add_argument("--part-seconds", type=float, default=540, help="each part's time limit")
     args = parser.parse_args()
     planned = parts(args.smoke)
@@ -138,18 +144,26 @@ def main() -> None:
     if unknown:
         sys.exit(f"unknown part {', '.join(unknown)}; parts: {', '.join(planned)}")
     chosen = args.parts or list(planned)
+    if args.smoke and args.results is None:
+        args.results = Path(tempfile.mkdtemp(prefix="fppo-gpu-suite-smoke-"))
+    elif args.smoke and inside_results(args.results):
+        sys.exit(
+            f"--smoke never writes into the recorded results ({RESULTS}); pass another --results"
+        )
+    results = args.results or RESULTS
     import jax
 
     platform = jax.devices()[0].platform
     if platform == "cpu" and not args.smoke:
         sys.exit("JAX sees no GPU here: these parts take hours on a CPU (--smoke runs them tiny)")
-    args.results.mkdir(parents=True, exist_ok=True)
-    path = args.results / f"gpu_suite_{platform}.md"
+    results.mkdir(parents=True, exist_ok=True)
+    path = results / f"gpu_suite_{platform}.md"
+    refuse_to_replace([path], args.force)
     command = " ".join(["python experiments/gpu_suite.py", *sys.argv[1:]])
     done: dict[str, dict] = {}
     for name in chosen:
         print(f"{name}…", flush=True)
-        done[name] = run_part(planned[name], args.results, args.part_seconds)
+        done[name] = run_part(planned[name], results, args.part_seconds, args.force)
         print(f"{name}: {done[name]['status']} in {done[name]['seconds']:.0f} s", flush=True)
         report(done, path, command)
     print(f"wrote {path}")

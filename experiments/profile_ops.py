@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import purejaxrl_settings as pjr
 from bench_cartpole import quiet_cpu, seconds
+from common import add_record_flags, refuse_to_replace
 
 from fppo_jax import make_train
 from fppo_jax.config import Hyperparameters
@@ -180,7 +181,10 @@ def main() -> None:
     parser.add_argument("--workload", choices=sorted(pjr.WORKLOADS), default="purejaxrl")
     parser.add_argument("--seeds", type=int, default=8)
     parser.add_argument("--steps", type=int, default=100_000, help="env steps per seed")
+    add_record_flags(parser)
     args = parser.parse_args()
+    out = args.results / f"profile_ops_{args.workload}_{args.seeds}seeds.md"
+    refuse_to_replace([out], args.force)
 
     env, config, hp = pjr.fppo(args.workload, args.steps)
     trainer = make_train(config, env)
@@ -241,7 +245,7 @@ def main() -> None:
         "",
         *table("part: kind", collections.Counter(dict(by_both.most_common(10))), whole),
     ]
-    out = RESULTS / f"profile_ops_{args.workload}_{args.seeds}seeds.md"
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     print(f"wrote {out}")

@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jnp
 import purejaxrl_settings as pjr
 from bench_cartpole import quiet_cpu, seconds
+from common import add_record_flags, refuse_to_replace
 
 import fppo_jax.objectives as objectives
 import fppo_jax.trainer as trainer_module
@@ -86,7 +87,10 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=8)
     parser.add_argument("--steps", type=int, default=500_000)
     parser.add_argument("--repeats", type=int, default=3)
+    add_record_flags(parser)
     args = parser.parse_args()
+    path = args.results / f"profile_vmap_{args.workload}_{args.seeds}seeds.md"
+    refuse_to_replace([path], args.force)
     arm = functools.partial(compiled, workload=args.workload, seeds=args.seeds, steps=args.steps)
     arms = {
         "as is": arm(Trainer),
@@ -119,7 +123,7 @@ def main() -> None:
             for name, seconds in best.items()
         ],
     ]
-    path = RESULTS / f"profile_vmap_{args.workload}_{n}seeds.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
     print(f"wrote {path}")
 

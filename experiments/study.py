@@ -23,23 +23,19 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import os
-import platform
 import shutil
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-import jax
+from common import add_record_flags, command, machine, refuse_to_replace
 
 from fppo_jax import sweep
 from fppo_jax.config import parse_seeds
 from fppo_jax.envs import MUJOCO_TASKS
 from fppo_jax.objectives import VARIANTS
 
-RESULTS = Path(__file__).resolve().parent / "results"
 CLASSIC_TASKS = ("cartpole", "acrobot", "mountaincar")
 STUDIED = ("ppo", "fppo-lp", "fppo-qp")
 PAPER_VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
@@ -49,15 +45,6 @@ PROTOCOLS = {
     "paper": {},
     "unnormalised": {"normalize_observations": False, "normalize_rewards": False},
 }
-
-
-def machine() -> str:
-    device = jax.devices()[0]
-    kind = "" if device.platform == "cpu" else f" {device.device_kind}"
-    return (
-        f"{device.platform.upper()}{kind}, {os.cpu_count()} CPU cores "
-        f"({platform.processor() or platform.machine()}), jax {jax.__version__}"
-    )
 
 
 def commit() -> str:
@@ -99,8 +86,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, help="env steps per run (default: the paper's)")
     parser.add_argument("--backend", default=None, help="default: native on MuJoCo, else auto")
     parser.add_argument("--chunk", type=int, help="runs per compiled call (default: automatic)")
-    parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
-    parser.add_argument("--force", action="store_true", help="replace a part already recorded")
+    add_record_flags(parser)
     args = parser.parse_args()
     variants = list(PAPER_VARIANTS) if args.variants == ["all"] else args.variants
     unknown = [v for v in variants if v not in VARIANTS]
@@ -109,11 +95,7 @@ def main() -> None:
     backend = args.backend or ("native" if args.task in MUJOCO_TASKS else "auto")
 
     directory = args.results / "study" / args.task / args.protocol / part_name(variants, args.seeds)
-    if directory.exists() and not args.force:
-        sys.exit(
-            f"{directory} is already recorded (its sweep.json and curves.csv are a part of the "
-            "study); pass --force to replace it, or --results DIR to record elsewhere"
-        )
+    refuse_to_replace([directory], args.force)
     print(f"part: {directory}", flush=True)
     start = time.perf_counter()
     result = sweep(
@@ -136,7 +118,7 @@ def main() -> None:
         "wall_seconds": round(wall, 1),
         "protocol": args.protocol,
         "commit": commit(),
-        "command": " ".join([f"python experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
+        "command": command(),
     }
     (staging / "run.json").write_text(json.dumps(record, indent=1) + "\n")
     if directory.exists():  # --force

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from common import refuse_to_replace
 
 from fppo_jax import TrainConfig, sweep
 from fppo_jax.results import max_average_return
@@ -44,7 +45,9 @@ def main() -> None:
     parser.add_argument(
         "--curves", type=Path, default=Path(__file__).parent / "results" / "table1_classic"
     )
+    parser.add_argument("--force", action="store_true", help="replace results already recorded")
     args = parser.parse_args()
+    refuse_to_replace([args.output, *(args.curves / task for task in args.tasks)], args.force)
 
     config = TrainConfig(total_steps=args.steps)
     runs = len(VARIANTS) * args.seeds

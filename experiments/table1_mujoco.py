@@ -22,14 +22,11 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import os
-import platform
-import sys
 import time
 from pathlib import Path
 
-import jax
 import matplotlib
+from common import add_record_flags, command, machine, refuse_to_replace
 
 from fppo_jax import sweep
 from fppo_jax.config import describe, preset_config, task_preset
@@ -47,16 +44,6 @@ PAPER = {  # SPEC §2, Table 1: FPPO-LP, FPPO-QP, PPO, TR-PPO, PPO-RB
 PAPER_VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
 # What the table and the figures read: the curves stay small enough to keep in the repository.
 RECORDED = ("env_steps", "average_return", "negative_fraction_before", "negative_fraction_after")
-RESULTS = Path(__file__).resolve().parent / "results"
-
-
-def machine() -> str:
-    device = jax.devices()[0]
-    kind = "" if device.platform == "cpu" else f" {device.device_kind}"
-    return (
-        f"{device.platform.upper()}{kind}, {os.cpu_count()} CPU cores "
-        f"({platform.processor() or platform.machine()}), jax {jax.__version__}"
-    )
 
 
 def run_task(task: str, args: argparse.Namespace, directory: Path) -> None:
@@ -85,7 +72,7 @@ def record_sweep(task: str, grid: dict, args: argparse.Namespace, directory: Pat
         "machine": machine(),
         "date": str(datetime.date.today()),
         "wall_seconds": round(wall, 1),
-        "command": " ".join([f"python experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]]),
+        "command": command(),
     }
     (directory / "run.json").write_text(json.dumps(record, indent=1) + "\n")
     return result
@@ -153,11 +140,12 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=1_000_000)
     parser.add_argument("--chunk", type=int, help="runs per compiled call (default: automatic)")
-    parser.add_argument("--results", type=Path, default=RESULTS, help="where results go")
+    add_record_flags(parser)
     args = parser.parse_args()
 
     backend, why = choose_backend(args.tasks[0], args.backend)
     directory = args.results / f"table1_mujoco_{backend}"
+    refuse_to_replace([directory / task for task in args.tasks], args.force)
     print(f"backend {backend}{' (' + why + ')' if why else ''}; results in {directory}")
     for task in args.tasks:
         run_task(task, args, directory)

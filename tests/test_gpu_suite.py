@@ -1,12 +1,24 @@
 """experiments/gpu_suite.py: every kind of part run tiny on the CPU (--smoke), and what it
 refuses."""
 
+import hashlib
 import json
 import subprocess
 import sys
 from pathlib import Path
 
-SUITE = Path(__file__).resolve().parent.parent / "experiments" / "gpu_suite.py"
+EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
+SUITE = EXPERIMENTS / "gpu_suite.py"
+
+
+def recorded() -> dict[str, str]:
+    """Every file of experiments/results and its SHA-256."""
+    root = EXPERIMENTS / "results"
+    return {
+        str(path.relative_to(root)): hashlib.sha256(path.read_bytes()).hexdigest()
+        for path in sorted(root.rglob("*"))
+        if path.is_file()
+    }
 
 
 def _suite(*args: str) -> subprocess.CompletedProcess:
@@ -15,9 +27,13 @@ def _suite(*args: str) -> subprocess.CompletedProcess:
     )
 
 
-def test_the_smoke_suite_runs_every_kind_of_part_and_records_each(tmp_path):
-    done = _suite("--smoke", "--results", str(tmp_path))
+def test_the_smoke_suite_runs_every_kind_of_part_and_records_each_in_a_temporary_directory():
+    before = recorded()
+    done = _suite("--smoke")  # no --results: a new temporary directory, never the record
     assert done.returncode == 0, done.stdout + done.stderr
+    assert recorded() == before
+    tmp_path = Path(done.stdout.split("wrote ")[-1].strip()).parent
+    assert tmp_path.name.startswith("fppo-gpu-suite-smoke-")
     record = json.loads((tmp_path / "gpu_suite_cpu.json").read_text())
     assert list(record) == ["throughput-reacher", "table1-reacher", "ablation-reacher"]
     assert all(part["status"] == "done" for part in record.values())
@@ -41,3 +57,24 @@ def test_without_a_gpu_the_full_suite_is_refused_and_unknown_parts_named(tmp_pat
     unknown = _suite("--parts", "table1-pong")
     assert unknown.returncode != 0 and "unknown part table1-pong; parts: " in unknown.stderr
     assert not list(tmp_path.iterdir())
+
+
+def test_smoke_runs_never_write_into_the_record_and_scripts_refuse_to_replace_it(tmp_path):
+    before = recorded()
+    into = _suite("--smoke", "--results", str(EXPERIMENTS / "results" / "smoke"))
+    assert into.returncode != 0 and "never writes into the recorded results" in into.stderr
+    for script, *args in [
+        ("table1_mujoco.py", "--backend", "native", "--tasks", "hopper", "--steps", "2048"),
+        ("ablation.py", "--backend", "native", "--tasks", "ant", "--parts", "k", "--seeds", "1"),
+        ("escape_speed.py", "--tasks", "cartpole", "--seeds", "1"),
+        ("bench_logging.py", "--steps", "4096"),
+    ]:
+        done = subprocess.run(
+            [sys.executable, str(EXPERIMENTS / script), *args],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert done.returncode != 0, script
+        assert "is already recorded: pass --force to replace it, or --results DIR" in done.stderr
+    assert recorded() == before

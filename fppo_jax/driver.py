@@ -96,10 +96,12 @@ class Options:
     only process 0 reports and writes.
 
     `callback(snapshot)` is called between compiled chunks with a :class:`Snapshot`; returning
-    ``False`` stops training there (checkpointed, if checkpoints are on), and the result holds
-    the updates done. Every `eval_every` updates, and at the end, the deterministic policy plays
-    `eval_episodes` episodes and their mean return is recorded as the metric ``eval_return``
-    (NaN between evaluations).
+    ``False`` (or a numpy ``False``, as a comparison of metrics gives) stops training there
+    (checkpointed, if checkpoints are on), and the result holds the updates done; ``True`` or
+    ``None`` goes on, and any other answer is a ``TypeError`` that names it. Every
+    `eval_every` updates, and at the end, the deterministic policy plays `eval_episodes`
+    episodes and their mean return is recorded as the metric ``eval_return`` (NaN between
+    evaluations).
     """
 
     progress: bool | Callable[[Progress], None] = False
@@ -468,7 +470,7 @@ class _Chunks:
         callback = self.options.callback
         if callback is None:
             return False
-        return callback(Snapshot(update, metrics, state, policy, runs)) is False
+        return _stops(callback(Snapshot(update, metrics, state, policy, runs)))
 
     def _check_finite(self, nonfinite: int) -> None:
         """A single run stops at its first non-finite update (a sweep's runs go on)."""
@@ -546,6 +548,19 @@ def _resume_point(restored: Restored) -> _ResumePoint:
         current={name: np.asarray(values) for name, values in current.items()},
         finished={name: np.asarray(v) for name, v in curves.get("finished", {}).items()},
         finished_diverged=np.asarray(curves.get("finished_diverged", []), np.int32),
+    )
+
+
+def _stops(answer: object) -> bool:
+    """Whether a callback's answer stops training: ``False`` (Python's or numpy's) stops, ``True``
+    and ``None`` go on, anything else is a mistake named at its first return."""
+    if answer is None:
+        return False
+    if isinstance(answer, bool | np.bool_):
+        return not answer
+    raise TypeError(
+        f"the callback returned {answer!r} ({type(answer).__name__}); it must return True or "
+        "False (a Python or numpy boolean; False stops training), or None to go on"
     )
 
 

@@ -107,6 +107,20 @@ def test_a_callback_can_stop_a_sweep():
     assert result.metrics["env_steps"].shape == (2, 2)
 
 
+def test_a_numpy_boolean_stops_and_anything_but_a_boolean_or_none_is_named(tmp_path):
+    every = {"checkpoint_dir": tmp_path / "a", "checkpoint_every": 3}
+    # The README's pattern: a comparison of numpy metrics gives numpy's bool.
+    below = train(**RUN, **every, callback=lambda s: s.metrics["env_steps"][-1] < 0)
+    assert below.stopped_at == 3
+    every["checkpoint_dir"] = tmp_path / "b"
+    quiet = train(**RUN, **every, callback=lambda s: None)
+    assert quiet.stopped_at is None and len(quiet.metrics["env_steps"]) == 12
+    for i, answer in enumerate((0, "stop", np.array([True]))):
+        every["checkpoint_dir"] = tmp_path / f"c{i}"
+        with pytest.raises(TypeError, match=r"the callback returned .* it must return True or"):
+            train(**RUN, **every, callback=lambda s, a=answer: a)
+
+
 def test_a_finished_run_goes_on_for_more_steps_as_if_it_had_been_longer(tmp_path):
     short = {**RUN, "total_steps": 128 * 6}
     train(**short, checkpoint_dir=tmp_path)

@@ -8,9 +8,10 @@ import argparse
 import contextlib
 import dataclasses
 import math
+import os
 import sys
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any
@@ -47,6 +48,24 @@ def _seeds(text: str) -> list[int]:
         return parse_seeds(text)
     except ValueError as error:
         raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def _part(text: str) -> tuple[int, int]:
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected K/N such as 2/8, got {text!r}") from None
+    if not 1 <= k <= n:
+        raise argparse.ArgumentTypeError(f"expected K/N with 1 <= K <= N, got {text!r}")
+    return k, n
+
+
+def slurm_part(environ: Mapping[str, str] = os.environ) -> tuple[int, int] | None:
+    """The part of a SLURM job array's task: (its index from 1, the array's task count)."""
+    if "SLURM_ARRAY_TASK_ID" not in environ or "SLURM_ARRAY_TASK_COUNT" not in environ:
+        return None
+    task, first = int(environ["SLURM_ARRAY_TASK_ID"]), int(environ.get("SLURM_ARRAY_TASK_MIN", 0))
+    return task - first + 1, int(environ["SLURM_ARRAY_TASK_COUNT"])
 
 
 def _confidence(text: str) -> float:
@@ -358,6 +377,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--chunk", type=_positive_int, help="runs per compiled call (default: what fits in memory)"
     )
     grid.add_argument(
+        "--part",
+        type=_part,
+        metavar="K/N",
+        help="train only the K-th of N equal shares of the sweep's runs (its run order), e.g. "
+        "one node's share; fppo-jax merge joins the parts. Under a SLURM job array, without "
+        "--part: the array task's share (SLURM_ARRAY_TASK_ID of SLURM_ARRAY_TASK_COUNT)",
+    )
+    grid.add_argument(
         "--data-parallel",
         type=_positive_int,
         metavar="N",
@@ -488,10 +515,12 @@ def _train(args: argparse.Namespace) -> int:
 def _sweep(args: argparse.Namespace) -> int:
     grid = {"variant": args.variant}
     grid.update({name: getattr(args, name) for name in HYPERPARAMETER_HELP if getattr(args, name)})
+    part = args.part or slurm_part()
     result = sweep(
         args.env,
         grid,
         seeds=args.seeds,
+        part=part,
         chunk=args.chunk,
         data_parallel=args.data_parallel,
         backend=args.backend,
@@ -501,8 +530,9 @@ def _sweep(args: argparse.Namespace) -> int:
     if not is_main_process():
         return 0
     runs = len(result.runs)
+    share = "" if part is None else f" (part {part[0]} of {part[1]})"
     print(
-        f"{runs} runs on {result.config['env']} in {result.train_seconds:.1f} s "
+        f"{runs} runs{share} on {result.config['env']} in {result.train_seconds:.1f} s "
         f"(+{result.compile_seconds:.1f} s compiling), {result.config['runs_per_call']} per call"
     )
     print(result.table())

@@ -356,16 +356,18 @@ class SweepResult:
         )
 
 
-# What may differ between parts of one sweep: which seeds each ran, and how many runs per call.
-PART_FIELDS = ("seeds", "runs_per_call")
+# What may differ between parts of one sweep: which seeds and share of its runs each ran, and
+# how many runs per call.
+PART_FIELDS = ("seeds", "runs_per_call", "part")
 
 
 def merge(parts: Sequence[SweepResult]) -> SweepResult:
     """One sweep of the runs of `parts`, sweeps of the same task and protocol that ran other
     seeds (or other settings of the same grid): what ``table``, ``compare`` and ``plot`` read as
     if one process had run them all. A ``ValueError`` names the configuration field on which two
-    parts differ, a (setting, seed) run that two parts both hold, and metrics not in every part
-    are left out."""
+    parts differ and a (setting, seed) run that two parts both hold; for the shares of one sweep
+    (``sweep(..., part=(K, N))``) it also names the runs, and the parts, still missing. Metrics
+    not in every part are left out."""
     if not parts:
         raise ValueError("merge needs at least one sweep")
     first = parts[0]
@@ -396,6 +398,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
     repeated = [f"{names[s]} seed {seed}" for (s, seed), count in seen.items() if count > 1]
     if repeated:
         raise ValueError(f"more than one part holds the run {', '.join(repeated[:5])}")
+    _check_shares(parts, settings, runs)
     metrics = [name for name in first.metrics if all(name in p.metrics for p in parts)]
     seeds = list(dict.fromkeys(seed for part in parts for seed in part.seeds))
     return SweepResult(
@@ -404,10 +407,41 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         runs=runs,
         metrics={name: np.concatenate([p.metrics[name] for p in parts]) for name in metrics},
         diverged=np.concatenate([np.asarray(p.diverged, np.int64) for p in parts]),
-        config={**first.config, "seeds": seeds},
+        config={**{k: v for k, v in first.config.items() if k != "part"}, "seeds": seeds},
         compile_seconds=sum(p.compile_seconds for p in parts),
         train_seconds=sum(p.train_seconds for p in parts),
     )
+
+
+def _check_shares(
+    parts: Sequence[SweepResult], settings: list[dict[str, Any]], runs: list[dict[str, Any]]
+) -> None:
+    """For shares of one sweep (``part`` in their configurations): all of one split, and every
+    run of the whole sweep there."""
+    shares = [p.config.get("part") for p in parts]
+    if all(share is None for share in shares):
+        return
+    if any(share is None for share in shares) or len({share[1] for share in shares}) > 1:
+        raise ValueError(
+            "the sweeps are not shares of one split: their parts are "
+            + ", ".join("whole" if s is None else f"{s[0]} of {s[1]}" for s in shares)
+        )
+    count = shares[0][1]
+    missing_parts = sorted(set(range(1, count + 1)) - {share[0] for share in shares})
+    found = {(run["setting"], run["seed"]) for run in runs}
+    names = labels(settings)
+    missing = [
+        f"{names[i]} seed {seed}"
+        for i in range(len(settings))
+        for seed in parts[0].config["seeds"]
+        if (i, seed) not in found
+    ]
+    if missing:
+        more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
+        which = f"parts {', '.join(map(str, missing_parts))} of {count} are missing: " * bool(
+            missing_parts
+        )
+        raise ValueError(f"{which}the sweep's runs {', '.join(missing[:5])}{more} are not there")
 
 
 def _integer(value: Any) -> bool:

@@ -86,6 +86,7 @@ def sweep(
     preset: str = "paper",
     backend: str = "auto",
     data_parallel: int | None = None,
+    part: tuple[int, int] | None = None,
     **settings: Any,
 ) -> SweepResult:
     """Train every setting of `grid` (see :func:`expand_grid`) with every seed, as one program.
@@ -110,6 +111,11 @@ def sweep(
     `devices` (default: all JAX sees) share the runs of each group, `data_parallel` of them
     (default 1) per run, splitting its environments (see :mod:`fppo_jax.distributed`); runs
     per call are rounded up to a multiple of ``devices / data_parallel``.
+
+    ``part=(K, N)`` trains only the K-th (from 1) of N equal shares of the sweep's runs, taken
+    in its run order (settings × seeds), as one program: the way to split a sweep over a
+    cluster's nodes. Its result and ``sweep.json`` name the part, and :func:`~fppo_jax.merge`
+    joins the N parts into the whole sweep, naming any run still missing.
     """
     options, overrides = Options.split(settings)
     fixed = {name: overrides.pop(name) for name in list(overrides) if name in SWEEPABLE}
@@ -123,6 +129,8 @@ def sweep(
     hps = [resolve_hyperparameters(task=task, **setting)[0] for setting in settings]
     seeds = _seeds(seeds)
     runs = [{"setting": i, "seed": seed} for i in range(len(settings)) for seed in seeds]
+    if part is not None:
+        runs = runs[slice(*part_bounds(part, len(runs)))]
     if chunk is not None:
         positive_int("chunk", chunk)
     if data_parallel is not None:
@@ -133,12 +141,14 @@ def sweep(
     name = environment_name(env, environment)
     grid_values = {key: _as_list(key, v) for key, v in {**grid, **fixed}.items()}
     record = {"env": name, "backend": chosen, "grid": grid_values, "seeds": seeds, "preset": preset}
+    if part is not None:
+        record["part"] = list(part)
     record.update(dataclasses.asdict(config))
 
     def result_of(outcome: Outcome) -> SweepResult:
         return SweepResult(
             settings=settings,
-            seeds=seeds,
+            seeds=list(dict.fromkeys(run["seed"] for run in runs)),
             runs=runs[: len(outcome.diverged)],
             metrics=outcome.metrics,
             diverged=outcome.diverged,
@@ -161,7 +171,9 @@ def sweep(
         record,
         f"sweep on {name}",
         f"sweep on {name}{describe_backend(chosen, why)}: {len(settings)} settings × "
-        f"{len(seeds)} seeds = {len(runs)} runs; "
+        f"{len(seeds)} seeds = {len(settings) * len(seeds)} runs"
+        + ("" if part is None else f", part {part[0]} of {part[1]}: {len(runs)} of them")
+        + "; "
         f"each {describe(config, preset)}",
         runs_per_call=chunk,
         data_parallel=1 if data_parallel is None else data_parallel,
@@ -177,6 +189,24 @@ def sweep(
             file=sys.stderr,
         )
     return result
+
+
+def part_bounds(part: object, num_runs: int) -> tuple[int, int]:
+    """Where the runs of ``part=(K, N)`` start and stop among a sweep's `num_runs` runs: the
+    K-th (from 1) of N shares as equal as they can be, the first ones a run longer."""
+    if (
+        not isinstance(part, tuple | list)
+        or len(part) != 2
+        or not all(isinstance(x, int) and not isinstance(x, bool) for x in part)
+        or not 1 <= part[0] <= part[1]
+    ):
+        raise ValueError(f"part must be (K, N) with 1 <= K <= N, got {part!r}")
+    k, n = part
+    if n > num_runs:
+        raise ValueError(f"part {k} of {n}: the sweep has only {num_runs} runs to share")
+    size, extra = divmod(num_runs, n)
+    start = (k - 1) * size + min(k - 1, extra)
+    return start, start + size + (k <= extra)
 
 
 def _seeds(seeds: int | Sequence[int]) -> list[int]:

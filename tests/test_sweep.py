@@ -1,19 +1,24 @@
 import csv
+import dataclasses
 import hashlib
 import json
 import logging
 import random
 import re
+import subprocess
+import sys
 
 import jax
 import numpy as np
 import pytest
 from helpers import sweep_by_hand
 
-from fppo_jax import METRICS, VARIANTS, SweepResult, expand_grid, sweep, train
+import fppo_jax
+from fppo_jax import METRICS, VARIANTS, SweepResult, expand_grid, merge, sweep, train
 from fppo_jax.cli import main
 
-TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2, "total_steps": 256}
+TINY_SHAPE = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
+TINY = {**TINY_SHAPE, "total_steps": 256}
 
 
 def test_grid_drops_values_a_variant_does_not_take():
@@ -317,3 +322,71 @@ def test_every_variant_trains_with_continuous_actions():
     for name in ("policy_loss", "value_loss", "entropy", "approx_kl"):
         assert np.isfinite(m[name]).all(), name
     assert (m["approx_kl"][:, -1] > 0).all()  # every variant moved its policy
+
+
+def test_parts_share_the_runs_in_run_order():
+    from fppo_jax.sweep import part_bounds
+
+    assert [part_bounds((k, 3), 7) for k in (1, 2, 3)] == [(0, 3), (3, 5), (5, 7)]
+    assert part_bounds((1, 1), 4) == (0, 4)
+    for bad in ((0, 2), (3, 2), (1.0, 2), "1/2", (1, 2, 3)):
+        with pytest.raises(ValueError, match="part must be"):
+            part_bounds(bad, 4)
+    with pytest.raises(ValueError, match="only 2 runs to share"):
+        part_bounds((1, 3), 2)
+
+
+def test_a_slurm_array_task_chooses_its_part():
+    from fppo_jax.cli import slurm_part
+
+    assert slurm_part({}) is None
+    env = {"SLURM_ARRAY_TASK_ID": "3", "SLURM_ARRAY_TASK_COUNT": "4", "SLURM_ARRAY_TASK_MIN": "0"}
+    assert slurm_part(env) == (4, 4)
+    assert slurm_part({**env, "SLURM_ARRAY_TASK_MIN": "1"}) == (3, 4)
+
+
+def test_two_parts_in_two_processes_merge_into_the_one_process_sweep(tmp_path, capsys):
+    flags = ["--env", "cartpole", "--variant", "ppo,fppo-lp", "--seeds", "3", "--steps", "256"]
+    flags += ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+    command = [sys.executable, "-m", "fppo_jax", "sweep", *flags]
+    processes = [
+        subprocess.Popen(
+            [*command, "--part", f"{k}/2", "--output", str(tmp_path / f"part{k}")],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for k in (1, 2)
+    ]
+    outputs = [p.communicate(timeout=600)[0] for p in processes]
+    assert [p.returncode for p in processes] == [0, 0], outputs
+    assert "3 runs (part 1 of 2) on cartpole" in outputs[0]
+    assert "sweep on cartpole: 2 settings × 3 seeds = 6 runs, part 2 of 2: 3 of them" in outputs[1]
+    part2 = SweepResult.read(tmp_path / "part2")
+    assert part2.config["part"] == [2, 2] and part2.seeds == [0, 1, 2]
+    assert [(r["setting"], r["seed"]) for r in part2.runs] == [(1, 0), (1, 1), (1, 2)]
+
+    with pytest.raises(ValueError, match=r"parts 2 of 2 are missing: the sweep's runs fppo-lp"):
+        merge([SweepResult.read(tmp_path / "part1")])
+    parts = [str(tmp_path / "part1"), str(tmp_path / "part2")]
+    assert main(["merge", *parts, "--output", str(tmp_path / "whole")]) == 0
+    merged = SweepResult.read(tmp_path / "whole")
+    assert "part" not in merged.config
+    whole = sweep(
+        "cartpole", {"variant": ["ppo", "fppo-lp"]}, seeds=3, total_steps=256, **TINY_SHAPE
+    )
+    assert merged.runs == whole.runs and merged.settings == whole.settings
+    for name in METRICS:  # to float tolerance over the first updates, as sweep against train
+        np.testing.assert_allclose(
+            merged.metrics[name][:, :2], whole.metrics[name][:, :2], rtol=1e-4, atol=1e-6
+        )
+    other = dataclasses.replace(part2, config={**part2.config, "part": [2, 3]})
+    with pytest.raises(ValueError, match="not shares of one split: their parts are 1 of 2, 2 of 3"):
+        merge([SweepResult.read(tmp_path / "part1"), other])
+
+
+def test_a_part_s_checkpoint_is_not_resumed_as_another_part(tmp_path):
+    shape = {**TINY, "checkpoint_dir": tmp_path}
+    sweep("cartpole", {"variant": "ppo"}, seeds=2, part=(1, 2), **shape)
+    with pytest.raises(fppo_jax.ConfigMismatch, match="part"):
+        sweep("cartpole", {"variant": "ppo"}, seeds=2, part=(2, 2), resume=True, **shape)

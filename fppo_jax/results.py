@@ -291,8 +291,9 @@ class SweepResult:
 
     def write(self, directory: str | Path, metrics: Sequence[str] = METRICS) -> None:
         """`curves.csv` (one row per run and update, a column per name in `metrics`) and
-        `sweep.json` (everything else, and the SHA-256 digest of that `curves.csv`), each whole
-        or not at all. Fewer metrics make a smaller file to keep."""
+        `sweep.json` (everything else, the SHA-256 digest of that `curves.csv` and one of each
+        run's values, by which a re-sorted or filtered `curves.csv` is still known for its
+        sweep's), each whole or not at all. Fewer metrics make a smaller file to keep."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         keys = list(dict.fromkeys(k for s in self.settings for k in s))
@@ -306,6 +307,13 @@ class SweepResult:
                 values = [self.metrics[name][i, u].item() for name in metrics]
                 writer.writerow([*head, u + 1, *values])
         curves = text.getvalue().encode()
+        # Each run's values as a reader parses them back from the text written.
+        digests = [
+            _run_digest(
+                np.array([[float(repr(x)) for x in self.metrics[m][i].tolist()] for m in metrics]).T
+            )
+            for i in range(len(self.runs))
+        ]
         write_atomically(directory / "curves.csv", curves)
         record = {
             "settings": self.settings,
@@ -316,6 +324,8 @@ class SweepResult:
             "compile_seconds": self.compile_seconds,
             "train_seconds": self.train_seconds,
             "curves_sha256": hashlib.sha256(curves).hexdigest(),
+            "digest_columns": list(metrics),
+            "run_digests": digests,
         }
         # Last, and naming the curves it goes with: a process stopped between the two renames
         # leaves a pair that reading refuses, never one that reads as a wrong sweep.
@@ -324,12 +334,14 @@ class SweepResult:
     @classmethod
     def read(cls, directory: str | Path) -> SweepResult:
         """What :meth:`write` wrote: the metrics its `curves.csv` holds, each row placed by its
-        ``run`` and ``update`` columns, so the rows may come in any order. A ``ValueError``
-        naming the file says what is wrong with a ``sweep.json`` that is not JSON or lacks a
-        key or a value of the kind written (:data:`RECORD`), with a `curves.csv` that is not the
-        one ``sweep.json`` was written with (by its digest), and with a `curves.csv` that is
-        not every update of every run of ``sweep.json`` once (a column, a run or an update
-        missing or repeated, a value not a number)."""
+        ``run`` and ``update`` columns and each value by its column's name, so rows and columns
+        may come in any order, and a `curves.csv` filtered to some runs gives those runs (with
+        a warning saying how many of the sweep's it holds). A ``ValueError`` naming the file
+        says what is wrong with a ``sweep.json`` that is not JSON or lacks a key or a value of
+        the kind written (:data:`RECORD`); with a `curves.csv` whose rows for a run are not the
+        ones ``sweep.json`` was written with (by each run's digest: another sweep's curves, or
+        an edited or torn file); and with one that is not every update of each of its runs
+        once (a column, an update missing or repeated, a value not a number)."""
         directory = Path(directory)
         for name in ("sweep.json", "curves.csv"):
             if not (directory / name).is_file():
@@ -337,19 +349,37 @@ class SweepResult:
         record = _read_record(directory / "sweep.json")
         path = directory / "curves.csv"
         curves = path.read_bytes()
-        if hashlib.sha256(curves).hexdigest() != record["curves_sha256"]:
+        whole = hashlib.sha256(curves).hexdigest() == record["curves_sha256"]
+        if not whole and "run_digests" not in record:  # written before runs had digests
             raise ValueError(
                 f"{path} is not the curves.csv that {directory / 'sweep.json'} was written with "
                 "(its SHA-256 digest differs from the one recorded there): the two are not one "
                 "sweep's results, e.g. a sweep stopped between writing them, or a file changed "
                 "since"
             )
+        text = curves.decode(errors="replace")
+        metrics, present = _read_curves(path, text, record["runs"], every_run=whole)
+        if not whole:
+            _check_run_digests(path, directory / "sweep.json", record, metrics, present)
+        num_updates = metrics["env_steps"].shape[1]
+        beyond = [i for i in present if record["diverged"][i] > num_updates]
+        if beyond:
+            raise ValueError(
+                f"{directory / 'sweep.json'}: diverged says run {_few(beyond)} diverged after "
+                f"the last of the {num_updates} updates {path} holds"
+            )
+        if len(present) < len(record["runs"]):
+            warnings.warn(
+                f"{path} holds rows for {len(present)} of the {len(record['runs'])} runs of "
+                f"{directory / 'sweep.json'}: the result is those runs",
+                stacklevel=2,
+            )
         return cls(
             settings=record["settings"],
-            seeds=record["seeds"],
-            runs=record["runs"],
-            metrics=_read_curves(path, curves.decode(errors="replace"), record["runs"]),
-            diverged=np.asarray(record["diverged"], np.int64),
+            seeds=list(dict.fromkeys(record["runs"][i]["seed"] for i in present)),
+            runs=[record["runs"][i] for i in present],
+            metrics=metrics,
+            diverged=np.asarray(record["diverged"], np.int64)[present],
             config=record["config"],
             compile_seconds=record["compile_seconds"],
             train_seconds=record["train_seconds"],
@@ -486,17 +516,29 @@ RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
         lambda v, r: _list_of(v, lambda run: _run(run, len(r["settings"]))),
     ),
     "diverged": (
-        "a list of one integer per run",
-        lambda v, r: _list_of(v, _integer) and len(v) == len(r["runs"]),
+        "a list of one update (from 1, or 0) per run",
+        lambda v, r: _list_of(v, lambda d: _integer(d) and d >= 0) and len(v) == len(r["runs"]),
     ),
     "config": ("an object naming the env", lambda v, r: isinstance(v, dict) and "env" in v),
     "compile_seconds": ("a number", lambda v, r: _number(v)),
     "train_seconds": ("a number", lambda v, r: _number(v)),
-    "curves_sha256": (
-        "a SHA-256 digest in hex",
-        lambda v, r: isinstance(v, str) and len(v) == 64 and set(v) <= set("0123456789abcdef"),
+    "curves_sha256": ("a SHA-256 digest in hex", lambda v, r: _digest(v)),
+}
+# Keys of sweep.json that files written before them lack, checked when there.
+OPTIONAL_RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
+    "digest_columns": (
+        "a list of metric names",
+        lambda v, r: _list_of(v, lambda name: name in METRICS) and "env_steps" in v,
+    ),
+    "run_digests": (
+        "a list of one SHA-256 digest per run",
+        lambda v, r: _list_of(v, _digest) and len(v) == len(r["runs"]) and "digest_columns" in r,
     ),
 }
+
+
+def _digest(value: Any) -> bool:
+    return isinstance(value, str) and len(value) == 64 and set(value) <= set("0123456789abcdef")
 
 
 def _read_record(path: Path) -> dict[str, Any]:
@@ -513,7 +555,8 @@ def _read_record(path: Path) -> dict[str, Any]:
     missing = [key for key in RECORD if key not in record]
     if missing:
         raise ValueError(f"{path} has no {', '.join(missing)}")
-    for key, (expected, valid) in RECORD.items():
+    checks = {**RECORD, **{k: v for k, v in OPTIONAL_RECORD.items() if k in record}}
+    for key, (expected, valid) in checks.items():
         if not valid(record[key], record):
             found = json.dumps(record[key])
             found = found if len(found) <= 60 else found[:57] + "..."
@@ -525,9 +568,12 @@ def _read_record(path: Path) -> dict[str, Any]:
 CURVES_NEEDED = ("run", "update", "env_steps", "average_return")
 
 
-def _read_curves(path: Path, text: str, runs: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
+def _read_curves(
+    path: Path, text: str, runs: Sequence[Mapping[str, Any]], *, every_run: bool = True
+) -> tuple[dict[str, np.ndarray], list[int]]:
     """The metrics of a sweep's `curves.csv` at `path`, whose `text` was read, [run, update],
-    for `runs` (its ``sweep.json``'s); a ``ValueError`` naming the file says what is wrong."""
+    for the runs of `runs` (its ``sweep.json``'s) that it holds (all of them if `every_run`),
+    and those runs' indices; a ``ValueError`` naming the file says what is wrong."""
     with io.StringIO(text, newline="") as f:
         reader = csv.DictReader(f)
         columns = reader.fieldnames or []
@@ -559,25 +605,59 @@ def _read_curves(path: Path, text: str, runs: Sequence[Mapping[str, Any]]) -> di
         raise ValueError(
             f"{path} has rows for run {_few(found - expected)}; sweep.json has {len(runs)} runs"
         )
-    if expected - found:
+    if every_run and expected - found:
         raise ValueError(
             f"{path} has no rows for run {_few(expected - found)} of sweep.json's {len(runs)}"
         )
+    present = sorted(found)
     num_updates = max(update for _, update in cells)
-    for run in range(len(runs)):
+    for run in present:
         lacking = [u for u in range(1, num_updates + 1) if (run, u) not in cells]
         if lacking:
             raise ValueError(
                 f"{path}: run {run} has no update {_few(lacking)} (the file goes to update "
                 f"{num_updates})"
             )
-    at = tuple((np.array(list(cells)) - (0, 1)).T)  # each row's [run, update − 1]
+    row_of = {run: i for i, run in enumerate(present)}
+    at = tuple(np.array([(row_of[run], update - 1) for run, update in cells]).T)
     values = np.array(list(cells.values()))
-    metrics = {name: np.empty((len(runs), num_updates)) for name in names}
+    metrics = {name: np.empty((len(present), num_updates)) for name in names}
     for name, column in zip(names, values.T, strict=True):
         metrics[name][at] = column
     metrics["env_steps"] = metrics["env_steps"].astype(np.int64)
-    return metrics
+    return metrics, present
+
+
+def _run_digest(values: np.ndarray) -> str:
+    """The SHA-256 of one run's values, [update, column], as float64."""
+    return hashlib.sha256(np.ascontiguousarray(values, np.float64).tobytes()).hexdigest()
+
+
+def _check_run_digests(
+    path: Path,
+    record_path: Path,
+    record: Mapping[str, Any],
+    metrics: Mapping[str, np.ndarray],
+    present: Sequence[int],
+) -> None:
+    """Each run that `path` holds has the values `record` (its ``sweep.json``) was written
+    with, whatever the order of rows and columns."""
+    columns = record["digest_columns"]
+    lacking = [name for name in columns if name not in metrics]
+    if lacking:
+        raise ValueError(f"{path} has no {', '.join(lacking)} column, which {record_path} lists")
+    wrong = [
+        run
+        for i, run in enumerate(present)
+        if _run_digest(np.stack([metrics[name][i] for name in columns], axis=1))
+        != record["run_digests"][run]
+    ]
+    if wrong:
+        raise ValueError(
+            f"{path}: the rows of run {_few(wrong)} are not those {record_path} was written with "
+            "(their digests differ): another sweep's curves.csv beside it, or an edited or torn "
+            "file"
+        )
 
 
 def _cell(row: Mapping[str, str], column: str, where: str, kind: type) -> Any:

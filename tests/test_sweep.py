@@ -267,7 +267,8 @@ def refused(directory, name, message, capsys) -> None:
         ),
         (
             lambda t: t.replace('"diverged": [0, ', '"diverged": ['),
-            ": diverged is [3, 2, 4, 2, 3, 0, 0, 0], not a list of one integer per run",
+            ": diverged is [3, 2, 3, 2, 3, 0, 0, 0], not a list of one update (from 1, or 0) "
+            "per run",
         ),
         (
             lambda t: t.replace('"seeds": [0', '"seeds": [null'),
@@ -297,19 +298,62 @@ def test_a_damaged_sweep_json_is_refused_saying_what_is_wrong(tmp_path, damage, 
 
 def test_curves_not_written_with_the_sweep_json_beside_them_are_refused(tmp_path, capsys):
     # A sweep stopped between its two renames: the newer curves.csv, the older sweep.json. The
-    # curves are whole and of the same runs, so only the digest tells the pair apart.
+    # curves are whole and of the same runs, so only the runs' digests tell the pair apart.
     older, newer = sweep_by_hand(), sweep_by_hand()
     newer.metrics["average_return"] = newer.metrics["average_return"] + 1
     older.write(tmp_path)
     newer.write(tmp_path / "newer")
     (tmp_path / "newer" / "curves.csv").replace(tmp_path / "curves.csv")
     message = (
-        f" is not the curves.csv that {tmp_path / 'sweep.json'} was written with (its SHA-256 "
-        "digest differs from the one recorded there): the two are not one sweep's results"
+        ": the rows of run 0, 1, 2, 3, 4 and 4 more are not those "
+        f"{tmp_path / 'sweep.json'} was written with (their digests differ)"
     )
     refused(tmp_path, "curves.csv", message, capsys)
+    rewrite_record(tmp_path, "run_digests", None)  # a record from before runs had digests
+    rewrite_record(tmp_path, "digest_columns", None)
+    refused(tmp_path, "curves.csv", " is not the curves.csv that", capsys)
     rewrite_record(tmp_path, "curves_sha256", None)  # nor is a record without the digest read
     refused(tmp_path, "sweep.json", " has no curves_sha256", capsys)
+
+
+def test_curves_re_sorted_reordered_or_filtered_still_give_their_runs(tmp_path):
+    result = sweep_by_hand()
+    result.write(tmp_path)
+    with open(tmp_path / "curves.csv", newline="") as f:
+        header, *rows = list(csv.reader(f))
+    # As pandas might leave it: columns in another order, rows sorted by another column.
+    order = [header.index(c) for c in reversed(header)]
+    rows = sorted(rows, key=lambda r: (r[header.index("update")], r[header.index("run")]))
+    with open(tmp_path / "curves.csv", "w", newline="") as f:
+        csv.writer(f).writerows([[row[i] for i in order] for row in [header, *rows]])
+    back = SweepResult.read(tmp_path)
+    for name in METRICS:
+        np.testing.assert_array_equal(back.metrics[name], result.metrics[name])
+    assert back.table("iqm") == result.table("iqm")
+    # Filtered to tr-ppo's runs (6, 7, 8): those runs, and a warning that says so.
+    kept = [r for r in rows if r[header.index("run")] in {"6", "7", "8"}]
+    with open(tmp_path / "curves.csv", "w", newline="") as f:
+        csv.writer(f).writerows([header, *kept])
+    with pytest.warns(UserWarning, match="holds rows for 3 of the 9 runs"):
+        only = SweepResult.read(tmp_path)
+    assert only.runs == result.runs[6:] and only.diverged.tolist() == [0, 0, 0]
+    np.testing.assert_array_equal(
+        only.metrics["average_return"], result.metrics["average_return"][6:]
+    )
+    assert only.table().splitlines()[-1] == result.table().splitlines()[-1]
+    # A value changed in one run is caught by that run's digest.
+    kept[0][header.index("average_return")] = "11.0"
+    with open(tmp_path / "curves.csv", "w", newline="") as f:
+        csv.writer(f).writerows([header, *kept])
+    with pytest.raises(ValueError, match="the rows of run 6 are not those"):
+        SweepResult.read(tmp_path)
+
+
+def test_a_diverged_update_past_the_curves_is_refused(tmp_path):
+    sweep_by_hand().write(tmp_path)
+    rewrite_record(tmp_path, "diverged", [0, 3, 2, 3, 2, 9, 0, 0, 0])
+    with pytest.raises(ValueError, match="diverged says run 5 diverged after the last of the 3"):
+        SweepResult.read(tmp_path)
 
 
 def test_every_variant_trains_with_continuous_actions():

@@ -28,7 +28,7 @@ from fppo_jax.config import (
     preset_config,
 )
 from fppo_jax.distributed import initialize, is_main_process
-from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, NAMESPACES, TASKS, make_env
+from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
 from fppo_jax.files import writable_directory
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
 from fppo_jax.results import SweepResult, TrainingDiverged, merge
@@ -468,10 +468,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _train(args: argparse.Namespace) -> int:
-    if args.render:
-        from fppo_jax.render import check_render_path
+    if args.render:  # refused now rather than after training
+        from fppo_jax.render import check_render_path, check_renderable
 
         check_render_path(args.render)
+        check_renderable(args.env)
     if args.save_policy:  # refused now rather than after training
         check_no_saved_policy(args.save_policy)
         writable_directory(args.save_policy)
@@ -556,11 +557,10 @@ def _eval(args: argparse.Namespace) -> int:
             f"the policy's environment {config['env']!r} is not a registered task; load the "
             "policy with fppo_jax.load_policy and evaluate it on your environment"
         )
-    if args.render and config["env"] not in MUJOCO_TASKS:
-        raise ValueError(
-            f"{config['env']} is a classic (gymnax) task, which MuJoCo cannot render; --render "
-            f"takes the policy of a MuJoCo task ({', '.join(MUJOCO_TASKS)})"
-        )
+    if args.render:
+        from fppo_jax.render import check_renderable
+
+        check_renderable(config["env"])
     env = make_env(config["env"], args.backend or config.get("backend", "auto"))
     steps = record["update"] * config["num_envs"] * config["num_steps"]
     source = "saved policy" if record["kind"] == "policy" else "checkpoint"

@@ -37,6 +37,18 @@ def check_render_path(path: str | Path) -> None:
     writable_directory(Path(path).parent)
 
 
+def check_renderable(env: str) -> None:
+    """Raise ValueError, before any training, for a task MuJoCo cannot draw: the classic tasks
+    and gymnax's environments, which have no MuJoCo model."""
+    from fppo_jax.envs import MUJOCO_TASKS, TASKS
+
+    if (env in TASKS and env not in MUJOCO_TASKS) or env.startswith("gymnax/"):
+        raise ValueError(
+            f"{env} is a classic (gymnax) task, which MuJoCo cannot render; --render takes a "
+            f"MuJoCo task ({', '.join(MUJOCO_TASKS)}, or brax/, playground/ and native/ ids)"
+        )
+
+
 def episode_positions(
     env: Environment, policy: Callable[[jax.Array], jax.Array], key: jax.Array, max_steps: int
 ) -> np.ndarray:

@@ -136,12 +136,17 @@ def test_console_entry_point_lists_tasks_and_variants():
     assert "Failed to import" not in out.stdout + out.stderr
 
 
-def test_render_needs_a_picture_format_and_a_mujoco_task(tmp_path, capsys):
+def test_render_needs_a_picture_format_and_a_mujoco_task_before_training(
+    tmp_path, capsys, monkeypatch
+):
+    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
     args = ["train", "--env", "cartpole", "--steps", "2048", "--quiet"]
     assert main([*args, "--render", str(tmp_path / "x.webm")]) == 2
     assert "a .gif (animation) or an .mp4 (video)" in capsys.readouterr().err
-    assert main([*args, "--render", str(tmp_path / "x.png")]) == 2
-    assert "not rendered: GymnaxEnvironment is not a MuJoCo environment" in capsys.readouterr().err
+    for env in ("cartpole", "gymnax/Pendulum-v1"):
+        assert main([*args, "--env", env, "--render", str(tmp_path / "x.png")]) == 2
+        err = capsys.readouterr().err
+        assert f"error: {env} is a classic (gymnax) task, which MuJoCo cannot render" in err
 
 
 def test_outputs_that_cannot_be_written_are_refused_before_training(tmp_path, capsys, monkeypatch):

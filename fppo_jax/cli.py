@@ -68,6 +68,12 @@ def slurm_part(environ: Mapping[str, str] = os.environ) -> tuple[int, int] | Non
     return task - first + 1, int(environ["SLURM_ARRAY_TASK_COUNT"])
 
 
+def _path(text: str) -> Path:
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path: name one ('.' for this directory)")
+    return Path(text)
+
+
 def _confidence(text: str) -> float:
     try:
         value = float(text)
@@ -212,14 +218,14 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
     _add_config_flags(command)
     command.add_argument(
         "--output",
-        type=Path,
+        type=_path,
         help="directory for config.json (at once), metrics.csv and TensorBoard files (as "
         "training goes) and the results",
     )
     command.add_argument("--quiet", action="store_true", help="no progress bar or lines")
     command.add_argument(
         "--checkpoint-dir",
-        type=Path,
+        type=_path,
         metavar="DIR",
         help="save the full training state in DIR every --checkpoint-every updates",
     )
@@ -338,14 +344,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=int, default=0, help="random seed")
     run.add_argument(
         "--render",
-        type=Path,
+        type=_path,
         metavar="PATH",
         help="MuJoCo tasks: save an episode of the trained policy as an .mp4, a .gif or a "
         ".png strip",
     )
     run.add_argument(
         "--save-policy",
-        type=Path,
+        type=_path,
         metavar="DIR",
         help="save the trained policy and the run's configuration in DIR, for fppo-jax eval "
         "and fppo_jax.load_policy",
@@ -402,7 +408,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--endpoint score with a percentile bootstrap confidence interval, and the sample std.",
         formatter_class=formatter,
     )
-    table.add_argument("directory", type=Path, help="a sweep's --output directory")
+    table.add_argument("directory", type=_path, help="a sweep's --output directory")
     table.add_argument("--stat", default="paper", choices=["paper", *STATISTICS])
     _add_score_flags(table)
     compare = commands.add_parser(
@@ -413,7 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
         "each with a percentile bootstrap confidence interval over both settings' runs.",
         formatter_class=formatter,
     )
-    compare.add_argument("directory", type=Path, help="a sweep's --output directory")
+    compare.add_argument("directory", type=_path, help="a sweep's --output directory")
     compare.add_argument(
         "--baseline", default="ppo", help="a setting's label or a variant (default: ppo)"
     )
@@ -426,12 +432,12 @@ def build_parser() -> argparse.ArgumentParser:
         "Parts of different tasks or protocols, and a run two parts both hold, are refused.",
         formatter_class=formatter,
     )
-    merged.add_argument("directories", type=Path, nargs="+", help="sweeps' --output directories")
-    merged.add_argument("--output", type=Path, required=True, help="where the merged sweep goes")
+    merged.add_argument("directories", type=_path, nargs="+", help="sweeps' --output directories")
+    merged.add_argument("--output", type=_path, required=True, help="where the merged sweep goes")
     plot = commands.add_parser(
         "plot", help="write a sweep's learning curves (and α/k chart) as PNG"
     )
-    plot.add_argument("directory", type=Path, help="a sweep's --output directory")
+    plot.add_argument("directory", type=_path, help="a sweep's --output directory")
 
     evaluation = commands.add_parser(
         "eval",
@@ -447,7 +453,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--checkpoint",
         "--policy",
         dest="checkpoint",
-        type=Path,
+        type=_path,
         required=True,
         metavar="DIR",
         help="a checkpoint directory or a saved policy",
@@ -457,7 +463,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--seed", type=int, default=0, help="random seed of the episodes")
     evaluation.add_argument(
         "--render",
-        type=Path,
+        type=_path,
         metavar="PATH",
         help="MuJoCo tasks: save an episode of the deterministic policy as an .mp4, a .gif or "
         "a .png strip",

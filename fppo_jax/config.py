@@ -35,6 +35,8 @@ TABLE2: dict[str, dict[str, float]] = {
 _TABLE2_VARIANTS = {"fppo-lp": "alpha", "fppo-qp": "k"}
 
 VARIANT_SPECIFIC: tuple[str, ...] = ("alpha", "k", "delta")
+# The most env steps a run may take: the compiled program counts them in int32.
+MAX_STEPS = 2**31 - 1
 SYMBOLS = {"alpha": "α", "k": "k", "delta": "δ", "epsilon": "ε"}
 
 
@@ -125,9 +127,17 @@ class TrainConfig:
         if self.resets_per_rollout is not None:
             pool = positive_int("resets_per_rollout", self.resets_per_rollout)
             object.__setattr__(self, "resets_per_rollout", pool)
+        if self.total_steps > MAX_STEPS:
+            raise ValueError(
+                f"total_steps must be at most {MAX_STEPS:,} (the compiled program counts env "
+                f"steps in 32-bit integers), got {self.total_steps:,}"
+            )
         sizes = self.hidden_sizes
-        if isinstance(sizes, str) or not sizes:
-            raise ValueError(f"hidden_sizes must be positive layer widths, got {sizes!r}")
+        if isinstance(sizes, str) or not isinstance(sizes, tuple | list) or not sizes:
+            raise ValueError(
+                f"hidden_sizes must be a sequence of positive layer widths such as (64, 64), "
+                f"got {sizes!r}"
+            )
         widths = tuple(positive_int("each of hidden_sizes", h) for h in sizes)
         object.__setattr__(self, "hidden_sizes", widths)
         for name in (

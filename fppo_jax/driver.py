@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import sys
 import time
 from collections.abc import Callable
@@ -129,6 +130,12 @@ class Options:
         for name in ("checkpoint_every", "eval_every", "devices"):
             if getattr(self, name) is not None:
                 positive_int(name, getattr(self, name))
+        for name in ("checkpoint_dir", "log_dir"):
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, str | os.PathLike):
+                raise ValueError(f"{name} must be a path, got {value!r}")
+            if value is not None and os.fspath(value) == "":
+                raise ValueError(f"{name} is an empty path: name a directory ('.' for this one)")
         if self.checkpoint_dir is None and (self.resume or self.checkpoint_every is not None):
             flag = "resume" if self.resume else "checkpoint_every"
             raise ValueError(f"{flag} needs a checkpoint directory")

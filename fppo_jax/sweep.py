@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import jax
@@ -70,7 +70,8 @@ def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[s
 
 
 def _as_list(name: str, values: Any) -> list:
-    values = [values] if isinstance(values, str | int | float) else list(values)
+    scalar = isinstance(values, str | int | float) or not isinstance(values, Iterable)
+    values = [values] if scalar else list(values)
     if not values:
         raise ValueError(f"the grid gives {name} no values")
     return values

@@ -16,6 +16,7 @@ from helpers import assert_bitwise_equal
 import fppo_jax
 import fppo_jax.driver
 from fppo_jax import ConfigMismatch, evaluate, make_env, sweep, train
+from fppo_jax.cli import main
 
 RUN = {"env": "cartpole", "variant": "fppo-lp", "seed": 1, "total_steps": 128 * 12, **TINY}
 
@@ -164,11 +165,30 @@ def test_weights_and_biases_missing_is_a_clear_error(monkeypatch):
         ({"callback": 3}, "callback must be a callable"),
         ({"resume": "yes"}, "resume must be True or False"),
         ({"seed": "1"}, "a seed must be an integer"),
+        ({"checkpoint_dir": 5}, "checkpoint_dir must be a path, got 5"),
+        ({"log_dir": ""}, "log_dir is an empty path"),
+        ({"hidden_sizes": 64}, r"hidden_sizes must be a sequence .* got 64"),
+        ({"total_steps": 10**23}, "total_steps must be at most 2,147,483,647"),
     ],
 )
-def test_bad_driver_options_are_refused_before_compiling(options, message):
+def test_bad_driver_options_are_refused_before_compiling(options, message, monkeypatch):
+    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
     with pytest.raises(ValueError, match=message):
         train(**{**RUN, **options})
+
+
+def test_bad_inputs_from_the_command_line_and_python_are_named(capsys):
+    assert main(["train", "--steps", "1" + "0" * 22, "--quiet"]) == 2
+    assert "total_steps must be at most 2,147,483,647" in capsys.readouterr().err
+    for flag in ("--output", "--checkpoint-dir", "--save-policy"):
+        with pytest.raises(SystemExit):
+            main(["train", flag, ""])
+        assert "an empty path: name one" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="learning_rate must be a number, got None"):
+        sweep("cartpole", {"variant": "ppo", "learning_rate": None}, seeds=1, **TINY)
+    pytest.importorskip("envpool")
+    with pytest.raises(ValueError, match="envpool's Pong-v5 is not a MuJoCo task"):
+        make_env("native/Pong-v5")
 
 
 def test_a_finished_sweep_resumed_reports_its_results_again(tmp_path):

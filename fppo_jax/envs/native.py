@@ -117,8 +117,14 @@ class NativeEnvironment:
         if self.task_id not in envpool.list_all_envs():
             raise ValueError(f"envpool has no task {self.task_id!r}")
         spec = envpool.make_spec(self.task_id)
-        (size,) = spec.observation_space.shape
         space = spec.action_space
+        if len(spec.observation_space.shape) != 1 or not hasattr(space, "low"):
+            raise ValueError(
+                f"envpool's {self.task_id} is not a MuJoCo task (its observations have shape "
+                f"{spec.observation_space.shape}, its actions are {type(space).__name__}): "
+                "native/ takes envpool's MuJoCo tasks, e.g. native/Hopper-v4"
+            )
+        (size,) = spec.observation_space.shape
         object.__setattr__(self, "observation_size", int(size))
         object.__setattr__(
             self,

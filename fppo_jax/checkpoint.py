@@ -19,12 +19,10 @@ temporary name and renamed. :func:`load_policy` reads either kind of directory.
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import hashlib
 import io
 import json
 import logging
-import os
 import shutil
 import sys
 import warnings
@@ -37,7 +35,7 @@ import numpy as np
 import orbax.checkpoint as ocp
 from flax.traverse_util import flatten_dict, unflatten_dict
 
-from fppo_jax.files import write_atomically
+from fppo_jax.files import DirectoryBusy, DirectoryLock, write_atomically
 from fppo_jax.policy import Policy
 
 # Orbax reports every save and restore through absl logging at INFO and WARNING.
@@ -228,7 +226,7 @@ class Checkpoints:
         if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
             raise ValueError(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
-        self._lock: int | None = None
+        self._lock: DirectoryLock | None = None
         _ReadsLeftBehind.quieten()
         if self.directory.exists() and not self.directory.is_dir():
             raise ValueError(f"checkpoint directory {self.directory} is a file")
@@ -292,7 +290,10 @@ class Checkpoints:
         policy: Policy | None = None,
     ) -> None:
         """Start writing checkpoint `step`; it completes in the background, and then the
-        checkpoints beyond the newest `keep` are deleted."""
+        checkpoints beyond the newest `keep` are deleted. A checkpoint directory that vanished
+        or was replaced since the run began is :class:`~fppo_jax.files.DirectoryLost`, at once."""
+        if self._lock is not None:
+            self._lock.check()
         host = jax.device_get(
             {_name(i): _storable(leaf) for i, leaf in enumerate(jax.tree.leaves(state))}
         )
@@ -344,30 +345,26 @@ class Checkpoints:
         self._manager.wait_until_finished()
 
     def lock(self) -> None:
-        """Make this the directory's one writer, or raise ``RuntimeError`` naming the process
-        that is. The operating system drops the lock when its holder exits, however it ends,
-        so a killed run's directory is never locked for good."""
-        path = self.directory / ".lock"
-        descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        """Make this the directory's one writer, or raise :class:`CheckpointsUnavailable`
+        naming the process that is (:class:`~fppo_jax.files.DirectoryLock`)."""
         try:
-            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(descriptor, 64, 0).decode(errors="replace").strip() or "unknown"
-            os.close(descriptor)
-            raise CheckpointsUnavailable(
-                f"another process (pid {holder}) is writing checkpoints in {self.directory}; "
-                "wait for it to end, or use another checkpoint directory"
-            ) from None
-        os.ftruncate(descriptor, 0)
-        os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
-        self._lock = descriptor
+            self._lock = DirectoryLock(self.directory, "checkpoints")
+        except DirectoryBusy as error:
+            raise CheckpointsUnavailable(str(error)) from None
 
-    def close(self) -> None:
-        """Finish writing, and let another process write here."""
-        self._manager.close()
-        if self._lock is not None:
-            os.close(self._lock)  # releases the lock
-            self._lock = None
+    def close(self, *, quiet: bool = False) -> None:
+        """Finish writing, and let another process write here. `quiet`, when the run is already
+        failing: a checkpoint still being written that fails too (into a directory that
+        vanished, say) is let go rather than raised over the run's own error."""
+        try:
+            self._manager.close()
+        except Exception:
+            if not quiet:
+                raise
+        finally:
+            if self._lock is not None:
+                self._lock.release()
+                self._lock = None
 
     def _set_aside(self, step: int, error: Exception) -> None:
         damaged = self.directory / "damaged"

@@ -35,6 +35,7 @@ from fppo_jax.distributed import fetch, is_main_process, make_mesh
 from fppo_jax.envs import resets_itself
 from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
+from fppo_jax.files import DirectoryLock
 from fppo_jax.memory import runs_per_call
 from fppo_jax.metric_log import Block, open_logs, prepare_log_dir, require_wandb
 from fppo_jax.policy import Policy, make_policy
@@ -218,13 +219,14 @@ def drive(plan: Plan, options: Options) -> Outcome:
     checkpoints, record = open_checkpoints(
         options.checkpoint_dir, options.resume, options.keep, plan.kind, plan.record
     )
+    outputs, failed = None, True
     try:
         main = is_main_process()
         if options.log_dir is not None and main:
             resumed = None
             if options.resume:  # the run checkpointed, or this one if nothing was yet
                 resumed = plan.record if record is None else record["config"]
-            prepare_log_dir(options.log_dir, resumed)
+            outputs = prepare_log_dir(options.log_dir, resumed)
         size = _group_size(plan, mesh, record, checkpoints)
         per_call = _updates_per_call(options, config.num_updates)
         restored = None
@@ -248,12 +250,18 @@ def drive(plan: Plan, options: Options) -> Outcome:
         program = compile_program(trainer, *_group(plan, 0, size), per_call, mesh)
         with (
             reporter(options.progress if main else False, plan.description) as report,
-            _Chunks(plan, options, program, size, checkpoints, restored, report, main) as chunks,
+            _Chunks(
+                plan, options, program, size, checkpoints, outputs, restored, report, main
+            ) as chunks,
         ):
-            return chunks.train()
+            outcome = chunks.train()
+        failed = False
+        return outcome
     finally:
         if checkpoints:
-            checkpoints.close()
+            checkpoints.close(quiet=failed)
+        if outputs:
+            outputs.release()
 
 
 def _init(plan: Plan) -> Callable:
@@ -330,12 +338,14 @@ class _Chunks:
         program: Program,
         size: int,
         checkpoints: Checkpoints | None,
+        outputs: DirectoryLock | None,
         restored: Restored | None,
         report: Callable[[Progress], None] | None,
         main: bool,
     ):
         self.plan, self.options, self.program, self.size = plan, options, program, size
         self.checkpoints, self.restored, self.report = checkpoints, restored, report
+        self.outputs = outputs  # the log directory, held and watched
         self.after_group = plan.after_group if main else None
         config = plan.trainer.config
         self.num_updates, self.samples = config.num_updates, config.samples_per_update
@@ -416,6 +426,8 @@ class _Chunks:
             first_bad = np.atleast_1d(fetch(state.nonfinite_update))[kept] + 1
             self.diverged = np.concatenate([self.diverged, first_bad])
             if self.after_group:
+                if self.outputs:
+                    self.outputs.check()
                 self.after_group(self._outcome(state, resumed_from, stopped_at))
             if stopped_at is not None:
                 break
@@ -472,6 +484,8 @@ class _Chunks:
             self.checkpoints.save(step, state, curves, record, kept)
             self.saved.append(update)
         runs = range(group * self.size, min((group + 1) * self.size, self.plan.num_runs))
+        if self.outputs:
+            self.outputs.check()  # after the checkpoint: a lost output directory loses no state
         if self.logs:
             self.logs.write(metrics, runs)
         callback = self.options.callback

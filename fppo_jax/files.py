@@ -1,9 +1,11 @@
-"""Output directories checked writable before anything needs them, and files written whole or
-not at all: under a temporary name, then renamed into place, so that a reader, or a process
-killed mid-write, never leaves a half-written file."""
+"""Output directories checked writable before anything needs them, held by one writer and
+watched for vanishing while it writes, and files written whole or not at all: under a temporary
+name, then renamed into place, so that a reader, or a process killed mid-write, never leaves a
+half-written file."""
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import tempfile
@@ -26,6 +28,60 @@ def writable_directory(path: str | Path) -> Path:
     except OSError as error:
         raise ValueError(f"cannot write to {path}: {error.strerror or error}") from None
     return path
+
+
+class DirectoryBusy(ValueError):
+    """Another process is writing in a directory a run would write in."""
+
+
+class DirectoryLost(ValueError):
+    """A directory a run writes in vanished, or was replaced, while the run was writing."""
+
+
+class DirectoryLock:
+    """The one writer of `directory` (holding ``.lock`` in it, ``flock``-ed), from before the
+    first file is written until :meth:`release`; the operating system drops the lock when its
+    holder exits, however it ends. :meth:`check` says, before each write, whether the
+    directory is still the one locked."""
+
+    def __init__(self, directory: str | Path, what: str) -> None:
+        """`what` the directory holds, for messages ("checkpoints", "a run's outputs")."""
+        self.directory, self.what = Path(directory), what
+        descriptor = os.open(self.directory / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(descriptor, 64, 0).decode(errors="replace").strip() or "unknown"
+            os.close(descriptor)
+            raise DirectoryBusy(
+                f"another process (pid {holder}) is writing {what} in {self.directory}; wait "
+                "for it to end, or choose another directory"
+            ) from None
+        os.ftruncate(descriptor, 0)
+        os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
+        self._descriptor: int | None = descriptor
+        self._identity = _identity(self.directory)
+
+    def check(self) -> None:
+        """Raise :class:`DirectoryLost` if the directory is gone or another one stands there."""
+        if _identity(self.directory) != self._identity:
+            raise DirectoryLost(
+                f"{self.directory}, where this run writes {self.what}, vanished or was replaced "
+                "while it ran: what it had written there is lost, and the run stopped"
+            )
+
+    def release(self) -> None:
+        if self._descriptor is not None:
+            os.close(self._descriptor)
+            self._descriptor = None
+
+
+def _identity(directory: Path) -> tuple[int, int] | None:
+    try:
+        status = os.stat(directory)
+    except OSError:
+        return None
+    return (status.st_dev, status.st_ino) if os.path.isdir(directory) else None
 
 
 def write_atomically(path: Path, data: bytes) -> None:

@@ -20,7 +20,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from fppo_jax.files import json_value, writable_directory, write_json
+from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
 
 Block = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
 
@@ -53,12 +53,23 @@ def environment_record() -> dict[str, Any]:
     }
 
 
-def prepare_log_dir(directory: str | Path, resumed: dict[str, Any] | None) -> None:
-    """Make `directory` for a run's logs, or raise ValueError, before anything is compiled: if
-    it cannot be written, or if it holds a run's outputs (:data:`OUTPUTS`), which are never
-    overwritten unasked. Only the run resumed, configured as `resumed`, continues there, when
-    the ``config.json`` there records that configuration."""
+def prepare_log_dir(directory: str | Path, resumed: dict[str, Any] | None) -> DirectoryLock:
+    """Make `directory` for a run's logs and hold it as its one writer, or raise ValueError,
+    before anything is compiled: if it cannot be written, if another process writes there, or
+    if it holds a run's outputs (:data:`OUTPUTS`), which are never overwritten unasked. Only
+    the run resumed, configured as `resumed`, continues there, when the ``config.json`` there
+    records that configuration. The caller releases the lock when the run ends."""
     directory = writable_directory(directory)
+    lock = DirectoryLock(directory, "a run's outputs")
+    try:
+        _check_outputs(directory, resumed)
+    except ValueError:
+        lock.release()
+        raise
+    return lock
+
+
+def _check_outputs(directory: Path, resumed: dict[str, Any] | None) -> None:
     found = [name for name in OUTPUTS if (directory / name).exists()]
     if not found:
         return

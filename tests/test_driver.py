@@ -3,7 +3,9 @@ and a finished run going on for more steps."""
 
 import csv
 import json
+import os
 import re
+import shutil
 import sys
 from pathlib import Path
 
@@ -295,7 +297,7 @@ def test_a_sweep_writes_its_curves_as_each_group_finishes(tmp_path):
         ({"num_envs": 4.0}, "num_envs must be a positive integer, got 4.0"),
         ({"num_envs": True}, "num_envs must be a positive integer, got True"),
         ({"normalize_rewards": "no"}, "normalize_rewards must be True or False, got 'no'"),
-        ({"hidden_sizes": "64"}, "hidden_sizes must be positive layer widths, got '64'"),
+        ({"hidden_sizes": "64"}, "positive layer widths such as (64, 64), got '64'"),
         ({"hidden_sizes": (64, 0)}, "each of hidden_sizes must be a positive integer, got 0"),
         ({"resets_per_rollout": 0}, "resets_per_rollout must be a positive integer, got 0"),
     ],
@@ -362,3 +364,42 @@ def test_a_repeated_train_or_sweep_with_the_same_shapes_compiles_nothing():
     with _Compilations() as compiled:
         other = sweep("cartpole", {"variant": ["tr-ppo", "fppo-qp"]}, seeds=[5, 6], **settings)
     assert compiled == [] and other.compile_seconds == 0
+
+
+def test_one_writer_per_output_directory_from_the_first_moment(tmp_path):
+    from fppo_jax.files import DirectoryLock
+
+    held = DirectoryLock(tmp_path, "a run's outputs")  # as another sweep starting on it would
+    with pytest.raises(ValueError, match=rf"another process \(pid {os.getpid()}\) is writing"):
+        sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=256, **TINY, log_dir=tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".lock"]  # nothing written
+    held.release()
+    sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=256, **TINY, log_dir=tmp_path)
+    assert (tmp_path / "sweep.json").exists()
+
+
+def test_an_output_directory_removed_mid_run_stops_it_checkpointed_and_says_so(tmp_path):
+    logs, checkpoints = tmp_path / "logs", tmp_path / "ckpt"
+
+    def remove_logs(snapshot):
+        if snapshot.update == 3:
+            shutil.rmtree(logs)
+
+    every = {"checkpoint_dir": checkpoints, "checkpoint_every": 3, "log_dir": logs}
+    with pytest.raises(ValueError, match=rf"{logs}, where this run writes a run's outputs, vanish"):
+        train(**RUN, **every, callback=remove_logs)
+    assert not logs.exists()
+    resumed = train(**RUN, checkpoint_dir=checkpoints, resume=True)
+    assert resumed.resumed_from == 6  # the checkpoint after the loss was still written
+
+
+def test_a_checkpoint_directory_replaced_by_a_file_mid_run_stops_it_at_once(tmp_path):
+    checkpoints = tmp_path / "ckpt"
+
+    def replace(snapshot):
+        if snapshot.update == 3:  # moved away whole, while orbax may still write in it
+            checkpoints.rename(tmp_path / "moved")
+            checkpoints.write_text("not a directory")
+
+    with pytest.raises(ValueError, match=rf"{checkpoints}, where this run writes checkpoints"):
+        train(**RUN, checkpoint_dir=checkpoints, checkpoint_every=3, callback=replace)

@@ -111,9 +111,10 @@ def check_same_run(
         )
     saved, current = _jsonable(record["config"]), _jsonable(current)
     longer = current.get("total_steps", 0) > saved.get("total_steps", 0)
-    if longer and kind == "train" and not current.get("anneal_learning_rate"):
+    annealed = [bool(c.get("anneal_learning_rate")) for c in (saved, current)]
+    if longer and kind == "train" and not any(annealed):
         saved = {**saved, "total_steps": current["total_steps"]}
-    elif longer:
+    elif longer and (kind != "train" or all(annealed)):  # else the schedules differ: named below
         why = "its learning rate anneals over the run" if kind == "train" else "it is a sweep"
         raise ConfigMismatch(
             f"{directory} holds a run of {saved['total_steps']:,} steps, which cannot go on to "
@@ -166,12 +167,15 @@ def save_policy(
     return directory
 
 
-def check_no_saved_policy(directory: str | Path, overwrite: bool = False) -> None:
-    """Raise ValueError if `directory` holds a saved policy and not `overwrite`."""
+def check_no_saved_policy(
+    directory: str | Path, overwrite: bool = False, *, replace: str = "pass overwrite=True"
+) -> None:
+    """Raise ValueError if `directory` holds a saved policy and not `overwrite`; the message
+    says how to replace it (`replace`: the Python way unless told)."""
     if not overwrite and (Path(directory) / POLICY_FILE).exists():
         raise ValueError(
-            f"{directory} already holds a saved policy; pass overwrite=True to replace it, or "
-            "choose another directory"
+            f"{directory} already holds a saved policy; {replace} to replace it, or choose "
+            "another directory"
         )
 
 
@@ -187,6 +191,11 @@ def read_policy(directory: str | Path) -> tuple[Policy, dict[str, Any]]:
     """The policy in `directory` and the record of its run (``config``, ``update``, ``kind``:
     ``"policy"`` for a saved policy, ``"train"`` for a checkpoint)."""
     directory = Path(directory)
+    if directory.is_file():
+        raise FileNotFoundError(
+            f"{directory} is a file: name the directory that holds a saved policy "
+            f"({POLICY_FILE} and {ARRAYS_FILE}) or a run's checkpoints"
+        )
     if not directory.is_dir():
         raise FileNotFoundError(f"policy or checkpoint directory {directory} not found")
     if (directory / POLICY_FILE).exists():

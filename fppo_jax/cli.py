@@ -17,7 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from fppo_jax.api import train
-from fppo_jax.checkpoint import CheckpointsUnavailable, DamagedCheckpoint, check_no_saved_policy
+from fppo_jax.checkpoint import (
+    ARRAYS_FILE,
+    POLICY_FILE,
+    CheckpointsUnavailable,
+    DamagedCheckpoint,
+    check_no_saved_policy,
+)
 from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
     PRESETS,
@@ -480,7 +486,9 @@ def _train(args: argparse.Namespace) -> int:
         check_render_path(args.render)
         check_renderable(args.env)
     if args.save_policy:  # refused now rather than after training
-        check_no_saved_policy(args.save_policy)
+        check_no_saved_policy(
+            args.save_policy, replace=f"remove its {POLICY_FILE} and {ARRAYS_FILE}"
+        )
         writable_directory(args.save_policy)
     optimisation = {
         name: getattr(args, name)

@@ -59,8 +59,8 @@ def runs_per_call(
     if need > budget:
         raise MemoryError(
             f"one run needs about {need / 2**30:.2f} GiB and {budget / 2**30:.2f} GiB (half the "
-            "free memory of a device) is available: lower num_envs, num_steps or "
-            "resets_per_rollout"
+            "free memory of a device) is available: lower num_envs, num_steps, "
+            "resets_per_rollout or hidden_sizes (each layer's width)"
         )
     fit = math.floor(budget / need) * across
     return min(wanted, max(across, fit - fit % across))

@@ -223,7 +223,10 @@ def test_cli_saves_the_trained_policy_and_refuses_before_training_to_overwrite_i
     saved = (tmp_path / "policy.json").read_bytes()
     assert main(flags) == 2
     out, err = capsys.readouterr()
-    assert "already holds a saved policy" in err and "updates" not in out  # nothing trained
+    assert "already holds a saved policy; remove its policy.json and policy.npz to" in err
+    assert "overwrite=True" not in err and "updates" not in out  # no such flag; nothing trained
+    with pytest.raises(FileNotFoundError, match=r"policy\.json is a file: name the directory"):
+        load_policy(tmp_path / "policy.json")
     assert (tmp_path / "policy.json").read_bytes() == saved
 
 

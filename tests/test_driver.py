@@ -139,6 +139,15 @@ def test_going_on_is_refused_where_the_learning_rate_schedule_depends_on_the_bud
     train(**short, checkpoint_dir=tmp_path)
     with pytest.raises(ConfigMismatch, match="its learning rate anneals over the run"):
         train(**{**short, "total_steps": 128 * 12}, checkpoint_dir=tmp_path, resume=True)
+    # A run that did not anneal, resumed with annealing: the schedules differ, and are named.
+    constant = {**RUN, "total_steps": 128 * 6}
+    train(**constant, checkpoint_dir=tmp_path / "constant")
+    with pytest.raises(ConfigMismatch, match=r"anneal_learning_rate \(checkpoint False, now True"):
+        train(
+            **{**constant, "total_steps": 128 * 12, "anneal_learning_rate": True},
+            checkpoint_dir=tmp_path / "constant",
+            resume=True,
+        )
 
 
 def test_weights_and_biases_logs_offline(tmp_path, monkeypatch):

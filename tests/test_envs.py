@@ -193,7 +193,8 @@ class Broken:
     [
         (
             "size",
-            r"reset's observation: expected shape \(5,\) and a float dtype; found shape \(4,\)",
+            r"reset's observation: expected shape \(5,\) \(the environment's observation_size\) "
+            r"and a float dtype; found shape \(4,\)",
         ),
         ("tuple", r"step must return \(next state, Step\(obs, reward, terminated, truncated\)\)"),
         ("reward", r"step's reward: expected shape \(\) and a numeric dtype; found shape \(2,\)"),

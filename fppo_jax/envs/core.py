@@ -126,7 +126,7 @@ def check_environment(env: Environment) -> None:
         raise TypeError(f"action_space must be a Discrete or a Box, got {space!r}")
     key = jax.random.key(0)
     state, obs = jax.eval_shape(env.reset, key)
-    _expect("reset's observation", obs, (size,), jnp.floating)
+    _expect("reset's observation", obs, (size,), jnp.floating, OBSERVATION_SIZE)
     action = (
         jax.ShapeDtypeStruct((), jnp.int32)
         if isinstance(space, Discrete)
@@ -142,20 +142,25 @@ def check_environment(env: Environment) -> None:
     next_state, step = out
     if jax.tree.structure(next_state) != jax.tree.structure(state):
         raise TypeError("step's next state must have the structure of reset's state")
-    _expect("step's obs", step.obs, (size,), jnp.floating)
+    _expect("step's obs", step.obs, (size,), jnp.floating, OBSERVATION_SIZE)
     _expect("step's reward", step.reward, (), jnp.number)
     _expect("step's terminated", step.terminated, (), jnp.bool_)
     _expect("step's truncated", step.truncated, (), jnp.bool_)
     if resets_itself(env):
-        _expect("step's next_obs", step.next_obs, (size,), jnp.floating)
+        _expect("step's next_obs", step.next_obs, (size,), jnp.floating, OBSERVATION_SIZE)
     elif step.next_obs is not None:
         raise TypeError("step's next_obs is for environments that reset themselves only")
 
 
-def _expect(name: str, value: Any, shape: tuple[int, ...], kind: Any) -> None:
+OBSERVATION_SIZE = " (the environment's observation_size)"
+
+
+def _expect(name: str, value: Any, shape: tuple[int, ...], kind: Any, why: str = "") -> None:
     found_shape = getattr(value, "shape", None)
     dtype = getattr(value, "dtype", None)
     if found_shape != shape or dtype is None or not jnp.issubdtype(dtype, kind):
         expected = {jnp.floating: "float", jnp.number: "numeric", jnp.bool_: "bool"}[kind]
         found = f"shape {found_shape}, dtype {dtype}" if dtype is not None else type(value).__name__
-        raise TypeError(f"{name}: expected shape {shape} and a {expected} dtype; found {found}")
+        raise TypeError(
+            f"{name}: expected shape {shape}{why} and a {expected} dtype; found {found}"
+        )

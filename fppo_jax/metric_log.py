@@ -21,6 +21,7 @@ import jax
 import numpy as np
 
 from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
+from fppo_jax.trainer import METRICS
 
 Block = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
 
@@ -165,8 +166,9 @@ class MetricLog:
         return self._writers[run]
 
     def _write_csv(self, runs: range, metrics: dict[str, np.ndarray]) -> None:
-        if self._columns is None:
-            self._columns = list(metrics)
+        if self._columns is None:  # METRICS' order, then the host's (eval_return), however
+            # the metrics came (a checkpoint restores them in another order)
+            self._columns = sorted(metrics, key=lambda m: (m not in METRICS, _rank(m)))
             self._rows.writerow((["run"] if self._batched else []) + self._columns)
         for index, run in enumerate(runs):
             values = _of_run(metrics, index, self._batched)
@@ -177,6 +179,10 @@ class MetricLog:
             self._rows.writerows([run, *row] if self._batched else row for row in rows)
             self._written[run] = count
         self._csv.flush()
+
+
+def _rank(metric: str) -> tuple[int, str]:
+    return (METRICS.index(metric), "") if metric in METRICS else (0, metric)
 
 
 def require_wandb() -> Any:

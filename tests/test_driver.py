@@ -412,3 +412,13 @@ def test_a_checkpoint_directory_replaced_by_a_file_mid_run_stops_it_at_once(tmp_
 
     with pytest.raises(ValueError, match=rf"{checkpoints}, where this run writes checkpoints"):
         train(**RUN, checkpoint_dir=checkpoints, checkpoint_every=3, callback=replace)
+
+
+def test_metrics_csv_keeps_its_columns_in_order_across_a_resume(tmp_path):
+    driven = {"checkpoint_dir": tmp_path / "ckpt", "log_dir": tmp_path / "logs", "eval_every": 3}
+    train(**{**RUN, "total_steps": 128 * 6}, **driven)
+    header = (tmp_path / "logs" / "metrics.csv").read_text().splitlines()[0]
+    assert header.split(",") == [*fppo_jax.METRICS, "eval_return"]
+    train(**RUN, **driven, resume=True)  # goes on to 12 updates, rewriting metrics.csv
+    lines = (tmp_path / "logs" / "metrics.csv").read_text().splitlines()
+    assert lines[0] == header and len(lines) == 13

@@ -86,7 +86,32 @@ class Policy:
         if description["normalize_observations"]:
             stats = RunningStats(**{k: jnp.asarray(v) for k, v in arrays["obs_stats"].items()})
         params = jax.tree.map(lambda x: jnp.asarray(np.asarray(x)), arrays["params"])
-        return cls(params, stats, action_space, tuple(description["hidden_sizes"]))
+        policy = cls(params, stats, action_space, tuple(description["hidden_sizes"]))
+        policy._check_shapes()
+        return policy
+
+    def _check_shapes(self) -> None:
+        """Raise ValueError unless the parameters are those of the network the action space and
+        hidden sizes make (a description edited apart from its arrays, say)."""
+        networks = make_networks(self.action_space, self.hidden_sizes)
+        obs = jax.ShapeDtypeStruct((self.observation_size,), jnp.float32)
+        expected = jax.eval_shape(networks.policy.init, jax.random.key(0), obs)
+        shapes = {
+            jax.tree_util.keystr(path): tuple(leaf.shape)
+            for path, leaf in jax.tree_util.tree_leaves_with_path(expected)
+        }
+        found = {
+            jax.tree_util.keystr(path): tuple(np.shape(leaf))
+            for path, leaf in jax.tree_util.tree_leaves_with_path(self.params)
+        }
+        if shapes != found:
+            where = sorted(set(shapes) ^ set(found)) or [k for k in shapes if shapes[k] != found[k]]
+            name = where[0]
+            raise ValueError(
+                f"its arrays are not those of a {list(self.hidden_sizes)} network for its action "
+                f"space: {name} is {found.get(name, 'missing')}, expected "
+                f"{shapes.get(name, 'none')}"
+            )
 
 
 _act = jax.jit(Policy.act)

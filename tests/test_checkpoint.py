@@ -248,6 +248,25 @@ def test_a_saved_gaussian_policy_round_trips_bit_for_bit(tmp_path):
     np.testing.assert_array_equal(again(obs, key), policy(obs, key))
 
 
+@pytest.mark.parametrize(
+    "edit, found",
+    [
+        (lambda d: d["action_space"].update(low=[-1.0] * 3, high=[1.0] * 3), "network for its"),
+        (lambda d: d.update(hidden_sizes=[16]), "['Dense_0']['bias'] is (8,), expected (16,)"),
+    ],
+)
+def test_a_policy_json_edited_apart_from_its_arrays_is_refused_at_load(tmp_path, edit, found):
+    save_gaussian_policy(tmp_path)
+    path = tmp_path / "policy.json"
+    saved = json.loads(path.read_text())
+    edit(saved["policy"])
+    path.write_text(json.dumps(saved))
+    with pytest.raises(
+        ValueError, match=rf"saved policy in {tmp_path} is damaged .*{re.escape(found)}"
+    ):
+        load_policy(tmp_path)
+
+
 @pytest.mark.parametrize("how", ["truncated", "replaced"])
 def test_a_damaged_saved_policy_is_reported_naming_its_directory(tmp_path, how):
     policy = save_gaussian_policy(tmp_path)

@@ -53,6 +53,17 @@ class Policy:
         return action
 
     def __call__(self, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
+        """:meth:`act`, compiled; a concrete observation holding NaN or infinity is refused,
+        since no action follows from it (:meth:`act` itself stays pure, for ``jit``)."""
+        if not isinstance(obs, jax.core.Tracer):
+            values = np.asarray(obs, np.float32)
+            bad = np.argwhere(~np.isfinite(values))
+            if bad.size:
+                raise ValueError(
+                    f"the observation holds {values[tuple(bad[0])]} at index "
+                    f"{tuple(int(i) for i in bad[0])} ({len(bad)} non-finite values in all): "
+                    "no action follows from it"
+                )
         return _act(self, obs, key)
 
     def describe(self) -> dict[str, Any]:

@@ -248,6 +248,16 @@ def test_a_saved_gaussian_policy_round_trips_bit_for_bit(tmp_path):
     np.testing.assert_array_equal(again(obs, key), policy(obs, key))
 
 
+def test_a_policy_refuses_a_non_finite_observation_saying_where(tmp_path):
+    policy = save_gaussian_policy(tmp_path)
+    obs = np.zeros((4, 3), np.float32)
+    obs[2, 1] = np.nan
+    with pytest.raises(ValueError, match=r"holds nan at index \(2, 1\) \(1 non-finite"):
+        policy(obs)
+    assert policy(np.zeros(3)).shape == (2,)
+    assert jax.jit(lambda o: policy(o))(jnp.zeros(3)).shape == (2,)  # inside jit: no check
+
+
 @pytest.mark.parametrize(
     "edit, found",
     [

@@ -23,6 +23,7 @@ import hashlib
 import io
 import json
 import logging
+import os
 import shutil
 import sys
 import warnings
@@ -237,8 +238,11 @@ class Checkpoints:
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
         _ReadsLeftBehind.quieten()
-        if self.directory.exists() and not self.directory.is_dir():
-            raise ValueError(f"checkpoint directory {self.directory} is a file")
+        if os.path.lexists(self.directory) and not self.directory.is_dir():
+            raise ValueError(
+                f"checkpoint directory {self.directory} is not a directory (a file, or a link "
+                "that leads to none)"
+            )
         # Orbax deletes the checkpoints beyond `keep` only after a new one is committed, in the
         # background thread that finishes the save.
         self._manager = ocp.CheckpointManager(

@@ -24,7 +24,9 @@ def writable_directory(path: str | Path) -> Path:
         with tempfile.TemporaryFile(dir=path):
             pass
     except FileExistsError:
-        raise ValueError(f"cannot write to {path}: it is a file, not a directory") from None
+        raise ValueError(
+            f"cannot write to {path}: it is not a directory (a file, or a link that leads to none)"
+        ) from None
     except OSError as error:
         raise ValueError(f"cannot write to {path}: {error.strerror or error}") from None
     return path

@@ -243,11 +243,19 @@ def compiled(*_):
 
 
 def test_a_log_dir_that_cannot_be_written_is_refused_before_compiling(tmp_path, monkeypatch):
+    loop = tmp_path / "checkpoint-loop"
+    loop.symlink_to(loop)
+    with pytest.raises(ValueError, match=r"is not a directory .*a link that leads to none"):
+        train(**RUN, checkpoint_dir=loop)
     monkeypatch.setattr(fppo_jax.driver, "compile_program", compiled)
     file = tmp_path / "file"
     file.write_text("")
-    # Directories that no one can make, whatever the permissions: a file, and one under a file.
-    for path, why in [(file, "it is a file, not a directory"), (file / "sub", "Not a directory")]:
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)
+    # Directories that no one can make, whatever the permissions: a file, one under a file, and
+    # a link that leads to itself.
+    cases = [(file, "it is not a directory"), (file / "sub", "Not a directory")]
+    for path, why in [*cases, (loop, "it is not a directory")]:
         with pytest.raises(ValueError, match=f"cannot write to {path}: {why}"):
             train(**RUN, log_dir=path)
         with pytest.raises(ValueError, match=f"cannot write to {path}: {why}"):

@@ -83,6 +83,19 @@ def open_checkpoints(
     try:
         checkpoints.lock()
         record = checkpoints.latest_record()
+        if record is None and checkpoints.steps():  # never a silent fresh start
+            if not resume:
+                raise ValueError(
+                    f"{checkpoints.directory} already holds checkpoints (none of whose records "
+                    "can be read); choose another directory"
+                )
+            for step in reversed(checkpoints.steps()):
+                checkpoints._set_aside(step, ValueError("its record cannot be read"))
+            raise CheckpointsUnavailable(
+                f"no checkpoint in {checkpoints.directory} is intact (each was moved to "
+                f"{checkpoints.directory / 'damaged'}); nothing was restored. To start "
+                "afresh, remove the directory or choose another"
+            )
         if record is not None and not resume:
             raise ValueError(
                 f"{checkpoints.directory} already holds checkpoints; pass resume=True (--resume) "
@@ -238,6 +251,7 @@ class Checkpoints:
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
         _ReadsLeftBehind.quieten()
+        _UNREADABLE_METADATA.install()
         if os.path.lexists(self.directory) and not self.directory.is_dir():
             raise ValueError(
                 f"checkpoint directory {self.directory} is not a directory (a file, or a link "
@@ -393,6 +407,22 @@ class Checkpoints:
             DamagedCheckpoint,
             stacklevel=3,
         )
+
+
+class _UnreadableMetadata(logging.Filter):
+    """Drops orbax's log line for each damaged checkpoint's metadata file, once per look at the
+    directory: the damaged checkpoint is reported once, by this module, as such."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith("Failed to json parse Metadata file")
+
+    def install(self) -> None:
+        logger = logging.getLogger("absl")
+        if self not in logger.filters:
+            logger.addFilter(self)
+
+
+_UNREADABLE_METADATA = _UnreadableMetadata()
 
 
 class _ReadsLeftBehind:

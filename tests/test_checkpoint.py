@@ -545,3 +545,21 @@ def test_a_fallback_checkpoint_is_checked_against_the_run_too(tmp_path):
         pytest.raises(ConfigMismatch, match=r"seed \(checkpoint 4, now 3\)"),
     ):
         train(**run, checkpoint_dir=tmp_path / "mine", resume=True, checkpoint_every=2)
+
+
+def test_checkpoints_whose_every_file_is_garbage_are_set_aside_never_a_fresh_start(tmp_path, capfd):
+    flags = ["train", "--quiet", "--checkpoint-dir", str(tmp_path), "--checkpoint-every", "1"]
+    flags += ["--steps", "512", "--num-envs", "4", "--num-steps", "32", "--minibatches", "4"]
+    assert main([*flags, "--epochs", "2"]) == 0
+    for path in tmp_path.glob("[0-9]*/**/*"):
+        if path.is_file():
+            path.write_text("garbage\n")
+    capfd.readouterr()
+    assert main([*flags, "--epochs", "2"]) == 2  # without --resume: refused, nothing written
+    assert "already holds checkpoints (none of whose records can be read)" in capfd.readouterr().err
+    assert main([*flags, "--epochs", "2", "--resume"]) == 2
+    err = capfd.readouterr().err
+    assert err.count("is damaged (ValueError: its record cannot be read)") == 3
+    assert f"error: no checkpoint in {tmp_path} is intact" in err
+    assert "Failed to json parse" not in err and "Traceback" not in err
+    assert sorted(p.name for p in (tmp_path / "damaged").iterdir()) == ["2", "3", "4"]

@@ -19,7 +19,7 @@ Spreads are sample standard deviations (``ddof=1``). Every interval is seeded, s
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy import stats
@@ -318,24 +318,3 @@ def performance_profile(scores: np.ndarray, thresholds: np.ndarray) -> np.ndarra
     2021, Sect. 4: the score distribution's tail, run by run)."""
     scores = _finite(scores)
     return np.mean(scores[None, :] > np.asarray(thresholds, float)[:, None], axis=1)
-
-
-def summarise(
-    scores: Mapping[str, np.ndarray],
-    statistic: str = "iqm",
-    *,
-    confidence: float = CONFIDENCE,
-    seed: int = 0,
-) -> dict[str, dict[str, float]]:
-    """For each setting's run scores: the `statistic` with its interval, and the sample std."""
-    summary = {}
-    for name, x in scores.items():
-        point, low, high = interval(x, statistic, confidence=confidence, seed=seed)
-        summary[name] = {
-            "point": point,
-            "low": low,
-            "high": high,
-            "std": sample_std(x),
-            "n": int(_finite(x).size),
-        }
-    return summary

@@ -201,7 +201,7 @@ def _add_score_flags(command: argparse.ArgumentParser) -> None:
         "--ci",
         type=_confidence,
         default=CONFIDENCE,
-        help=f"the confidence intervals' level (default: {CONFIDENCE})",
+        help="the confidence intervals' level",
     )
 
 
@@ -381,9 +381,8 @@ def build_parser() -> argparse.ArgumentParser:
     grid.add_argument(
         "--seeds",
         type=_seeds,
-        default=list(range(5)),
-        help="per setting: N (seeds 0 … N−1), a range 10:20 (seeds 10 … 19) or a list 0,3,7 "
-        "(default: 5)",
+        default="5",  # parsed by _seeds, shown as typed
+        help="per setting: N (seeds 0 … N−1), a range 10:20 (seeds 10 … 19) or a list 0,3,7",
     )
     grid.add_argument(
         "--chunk", type=_positive_int, help="runs per compiled call (default: what fits in memory)"
@@ -415,7 +414,13 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=formatter,
     )
     table.add_argument("directory", type=_path, help="a sweep's --output directory")
-    table.add_argument("--stat", default="paper", choices=["paper", *STATISTICS])
+    table.add_argument(
+        "--stat",
+        default="paper",
+        choices=["paper", *STATISTICS],
+        help="paper: Table 1's max average return; or that statistic of each run's score, "
+        "with its bootstrap CI",
+    )
     _add_score_flags(table)
     compare = commands.add_parser(
         "compare",
@@ -426,9 +431,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=formatter,
     )
     compare.add_argument("directory", type=_path, help="a sweep's --output directory")
-    compare.add_argument(
-        "--baseline", default="ppo", help="a setting's label or a variant (default: ppo)"
-    )
+    compare.add_argument("--baseline", default="ppo", help="a setting's label or a variant")
     _add_score_flags(compare)
     merged = commands.add_parser(
         "merge",

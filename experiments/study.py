@@ -97,6 +97,7 @@ def main() -> None:
     directory = args.results / "study" / args.task / args.protocol / part_name(variants, args.seeds)
     refuse_to_replace([directory], args.force)
     print(f"part: {directory}", flush=True)
+    code = commit()  # the code that trains, whatever is committed while it runs
     start = time.perf_counter()
     result = sweep(
         args.task,
@@ -117,7 +118,7 @@ def main() -> None:
         "date": str(datetime.date.today()),
         "wall_seconds": round(wall, 1),
         "protocol": args.protocol,
-        "commit": commit(),
+        "commit": code,
         "command": command(),
     }
     (staging / "run.json").write_text(json.dumps(record, indent=1) + "\n")

@@ -151,11 +151,13 @@ def test_going_on_is_refused_where_the_learning_rate_schedule_depends_on_the_bud
 
 
 def test_weights_and_biases_logs_offline(tmp_path, monkeypatch):
-    pytest.importorskip("wandb")
+    wandb = pytest.importorskip("wandb")
     monkeypatch.setenv("WANDB_MODE", "offline")
     monkeypatch.setenv("WANDB_SILENT", "true")
     monkeypatch.setenv("WANDB_DIR", str(tmp_path))
     train(**RUN, wandb_project="fppo-test", log_dir=tmp_path)
+    # W&B's service writes the run file on its own schedule; teardown waits until it has.
+    wandb.teardown()
     (record,) = Path(tmp_path).glob("wandb/offline-run-*/run-*.wandb")
     data = record.read_bytes()
     for name in (b"average_return", b"negative_fraction_after", b"fppo-lp"):

@@ -160,7 +160,8 @@ class Options:
 @dataclasses.dataclass(frozen=True)
 class Plan:
     """What to train: `keys` is one key (one run, unbatched) or a [run] array of them, with
-    `hps` alike; `record` is the configuration that checkpoints and outputs record.
+    `hps` alike; `record` is the configuration that checkpoints and outputs record, and `runs`
+    (a batched plan's only) each run's setting and seed, which its logs name it by.
     `runs_per_call` fixes a sweep's group size (None: as many as fit in memory), and
     `data_parallel` the devices each run's environments are split over. `after_group`, if
     given, is called on the process that writes with the :class:`Outcome` of the runs finished
@@ -173,9 +174,14 @@ class Plan:
     record: dict[str, Any]
     description: str  # a few words, for the progress bar
     header: str  # a line, printed before compiling when progress is shown
+    runs: tuple[dict[str, Any], ...] | None = None
     runs_per_call: int | None = None
     data_parallel: int | None = None
     after_group: Callable[[Outcome], None] | None = None
+
+    def __post_init__(self) -> None:
+        if (self.runs is None) == self.batched or (self.runs and len(self.runs) != self.num_runs):
+            raise ValueError("a batched plan names each of its runs, and only a batched one")
 
     @property
     def batched(self) -> bool:
@@ -359,7 +365,7 @@ class _Chunks:
         self.logs = None
         if main:
             self.logs = open_logs(
-                options.log_dir, options.wandb_project, plan.record, plan.batched, self._restored()
+                options.log_dir, options.wandb_project, plan.record, plan.runs, self._restored()
             )
 
     def __enter__(self) -> _Chunks:

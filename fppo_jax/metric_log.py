@@ -3,7 +3,7 @@ TensorBoard event files, and optionally Weights & Biases.
 
 One run logs its metrics as they are. A sweep's runs log theirs side by side: ``metrics.csv``
 gains a leading ``run`` column, TensorBoard gets one directory per run (``tensorboard/run-007``)
-and W&B one panel prefix per run.
+and W&B one run per run, grouped by the sweep.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import csv
 import json
 import os
 import platform
+import secrets
 from collections.abc import Sequence
 from importlib import metadata
 from pathlib import Path
@@ -198,36 +199,65 @@ def require_wandb() -> Any:
 
 class WandbLog:
     """The same scalars in Weights & Biases (``pip install wandb``; ``WANDB_MODE=offline``
-    works without an account or a network). A sweep's runs are prefixed ``run-007/``."""
+    works without an account or a network), plotted against ``env_steps``.
 
-    def __init__(self, project: str, config: dict[str, Any], batched: bool, directory: Any):
-        wandb = require_wandb()
-        self._batched = batched
+    One run is one W&B run. A sweep's runs are one W&B run each, grouped by the sweep (W&B's
+    ``group``), each named by its index, setting and seed and holding them in its config; a
+    run's W&B run is finished once its group of runs is done."""
+
+    def __init__(
+        self,
+        project: str,
+        config: dict[str, Any],
+        runs: Sequence[dict[str, Any]] | None,
+        directory: Any,
+    ):
+        self._wandb = require_wandb()
+        self._project, self._config, self._runs = project, config, runs
+        self._directory = str(directory) if directory is not None else None
+        self._group = None if runs is None else f"sweep-{secrets.token_hex(4)}"
+        self._open: dict[int, Any] = {}
         self._written: dict[int, int] = {}
-        self._run = wandb.init(
-            project=project,
-            config=config,
-            dir=str(directory) if directory is not None else None,
-            reinit="create_new",
-        )
-        self._run.define_metric("env_steps")
-        self._run.define_metric("*", step_metric="env_steps")
+
+    def _run(self, index: int) -> Any:
+        if index not in self._open:
+            config, name = self._config, None
+            if self._runs is not None:
+                setting = self._runs[index]
+                config = {**config, **setting, "run": index}
+                name = f"run-{index:03d} " + " ".join(f"{k}={v}" for k, v in setting.items())
+            run = self._wandb.init(
+                project=self._project,
+                config=config,
+                name=name,
+                group=self._group,
+                dir=self._directory,
+                reinit="create_new",
+            )
+            run.define_metric("env_steps")
+            run.define_metric("*", step_metric="env_steps")
+            self._open[index] = run
+        return self._open[index]
 
     def write(self, metrics: dict[str, np.ndarray], runs: range) -> None:
+        for done in set(self._open) - set(runs):  # an earlier group's runs are complete
+            self._open.pop(done).finish()
         for index, run in enumerate(runs):
-            values = _of_run(metrics, index, self._batched)
-            prefix = f"run-{run:03d}/" if self._batched else ""
+            values = _of_run(metrics, index, self._runs is not None)
+            logged = self._run(run)
             for u in range(self._written.get(run, 0), len(values["env_steps"])):
                 row = {
-                    f"{prefix}{name}": float(series[u])
+                    name: float(series[u])
                     for name, series in values.items()
                     if name != "env_steps" and np.isfinite(series[u])
                 }
-                self._run.log({"env_steps": int(values["env_steps"][u]), **row})
+                logged.log({"env_steps": int(values["env_steps"][u]), **row})
             self._written[run] = len(values["env_steps"])
 
     def close(self) -> None:
-        self._run.finish()
+        for run in self._open.values():
+            run.finish()
+        self._open.clear()
 
 
 class Logs:
@@ -249,20 +279,21 @@ def open_logs(
     directory: str | Path | None,
     wandb_project: str | None,
     config: dict[str, Any],
-    batched: bool,
+    runs: Sequence[dict[str, Any]] | None,
     previous: Sequence[Block] = (),
 ) -> Logs | None:
     """The logs asked for (None if none): `directory` gets ``config.json`` (`config` with the
     versions and devices) at once, then ``metrics.csv`` and TensorBoard files as training goes;
-    `wandb_project` names a W&B project."""
+    `wandb_project` names a W&B project. `runs` is a sweep's runs (each one's setting and
+    seed), None for a single run."""
     record = {**config, **environment_record()}
     sinks: list[MetricLog | WandbLog] = []
     if directory is not None:
         Path(directory).mkdir(parents=True, exist_ok=True)
         write_json(Path(directory) / "config.json", record)
-        sinks.append(MetricLog(directory, record, batched, previous))
+        sinks.append(MetricLog(directory, record, runs is not None, previous))
     if wandb_project is not None:
-        sinks.append(WandbLog(wandb_project, record, batched, directory))
+        sinks.append(WandbLog(wandb_project, record, runs, directory))
     return Logs(sinks) if sinks else None
 
 

@@ -176,6 +176,7 @@ def sweep(
         + ("" if part is None else f", part {part[0]} of {part[1]}: {len(runs)} of them")
         + "; "
         f"each {describe(config, preset)}",
+        runs=tuple({**settings[run["setting"]], "seed": run["seed"]} for run in runs),
         runs_per_call=chunk,
         data_parallel=1 if data_parallel is None else data_parallel,
         after_group=None if options.log_dir is None else write_finished,

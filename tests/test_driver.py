@@ -164,6 +164,39 @@ def test_weights_and_biases_logs_offline(tmp_path, monkeypatch):
         assert name in data
 
 
+def test_weights_and_biases_logs_each_run_of_a_sweep_as_one_run_grouped(tmp_path, monkeypatch):
+    wandb = pytest.importorskip("wandb")
+    monkeypatch.setenv("WANDB_MODE", "offline")
+    monkeypatch.setenv("WANDB_SILENT", "true")
+    grid = {"variant": ["ppo", "fppo-qp"]}
+    sweep(
+        "cartpole",
+        grid,
+        seeds=[0, 7],
+        chunk=2,
+        total_steps=128 * 2,
+        **TINY,
+        wandb_project="fppo-test",
+        log_dir=tmp_path,
+    )
+    wandb.teardown()
+    records = [p.read_bytes() for p in sorted(tmp_path.glob("wandb/offline-run-*/run-*.wandb"))]
+    assert len(records) == 4  # one W&B run per run of the sweep
+    groups = {re.search(rb"sweep-[a-z0-9]+", data).group() for data in records}
+    assert len(groups) == 1  # all in the sweep's group
+    names = sorted(
+        re.search(rb"run-00\d variant=[a-z-]+ [^\x00-\x1f]*seed=\d", d).group() for d in records
+    )
+    assert names == [
+        b"run-000 variant=ppo seed=0",
+        b"run-001 variant=ppo seed=7",
+        b"run-002 variant=fppo-qp k=0.4 seed=0",
+        b"run-003 variant=fppo-qp k=0.4 seed=7",
+    ]
+    for data in records:
+        assert b"average_return" in data and b"run-00" in data
+
+
 def test_weights_and_biases_missing_is_a_clear_error(monkeypatch):
     monkeypatch.setitem(sys.modules, "wandb", None)
     with pytest.raises(ImportError, match=r"pip install 'fppo-jax\[wandb\]'"):

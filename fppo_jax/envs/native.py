@@ -170,7 +170,7 @@ class NativeEnvironment:
             env_type="gymnasium",
             num_envs=count,
             env_seed=seeds,
-            num_threads=min(count, os.cpu_count() or 1),
+            num_threads=min(count, usable_cores()),
         )
         obs, info = pool.reset()
         number = _POOLS.add(pool)
@@ -201,6 +201,15 @@ class NativeEnvironment:
             rows = np.flatnonzero(pools == number)
             _step_pool(_POOLS[int(number)], slots[rows], actions[rows], rows, out)
         return Step(*(x.reshape(*batch, *x.shape[1:]) for x in out))
+
+
+def usable_cores() -> int:
+    """The cores this process may run on: a cluster job's share (its CPU affinity), not the
+    whole node's count."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
 
 
 def seeds_of(key_data: np.ndarray) -> list[int]:

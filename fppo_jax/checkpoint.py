@@ -259,12 +259,17 @@ class Checkpoints:
             )
         # Orbax deletes the checkpoints beyond `keep` only after a new one is committed, in the
         # background thread that finishes the save.
-        self._manager = ocp.CheckpointManager(
-            self.directory,
-            options=ocp.CheckpointManagerOptions(
-                max_to_keep=keep, create=True, enable_async_checkpointing=True
-            ),
+        options = ocp.CheckpointManagerOptions(
+            max_to_keep=keep, create=True, enable_async_checkpointing=True
         )
+        if jax.process_count() > 1:  # this process alone writes here (the driver's process 0)
+            alone = {jax.process_index()}
+            options.multiprocessing_options = ocp.options.MultiprocessingOptions(
+                primary_host=jax.process_index(), active_processes=alone
+            )
+            options.create = False  # orbax creates it with every process only
+            self.directory.mkdir(parents=True, exist_ok=True)
+        self._manager = ocp.CheckpointManager(self.directory, options=options)
 
     def steps(self) -> list[int]:
         """Steps of the complete checkpoints, oldest first."""

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import pickle
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -111,10 +113,49 @@ def place(tree: Any, shardings: Any) -> Any:
 
 def fetch(x: jax.Array) -> np.ndarray:
     """`x` on the host, whole, even where its shards live on other processes' devices (a
-    restored state is on the host already)."""
+    restored state is on the host already). In a multi-process run every process calls it."""
     if not isinstance(x, jax.Array) or x.is_fully_addressable:
         return np.asarray(x)
     return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+
+
+def fetch_tree(tree: Any) -> Any:
+    """Every leaf of `tree` on the host (:func:`fetch`), PRNG keys as keys of host data."""
+
+    def one(x: Any) -> Any:
+        if isinstance(x, jax.Array) and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
+            return jax.random.wrap_key_data(fetch(jax.random.key_data(x)))
+        return fetch(x)
+
+    return jax.tree.map(one, tree)
+
+
+def on_main_process(work: Callable[[], Any]) -> Any:
+    """`work()` done by process 0 alone, its result (or the exception it raised) handed to
+    every process of a multi-process run, which all call this; in one process, `work()`.
+
+    This is how a run's files stay with one writer: process 0 reads its checkpoints, and
+    the others learn what it read, or the error it met, from it."""
+    if jax.process_count() == 1:
+        return work()
+    outcome: tuple[Any, BaseException | None] = (None, None)
+    if is_main_process():
+        try:
+            outcome = (work(), None)
+        except Exception as error:
+            outcome = (None, error)
+    result, error = _from_main_process(outcome)
+    if error is not None:
+        raise error
+    return result
+
+
+def _from_main_process(value: Any) -> Any:
+    """Process 0's `value` on every process (pickled, then broadcast as bytes)."""
+    data = np.frombuffer(pickle.dumps(value), np.uint8) if is_main_process() else None
+    size = int(multihost_utils.broadcast_one_to_all(np.int32(0 if data is None else data.size)))
+    buffer = data if data is not None else np.zeros(size, np.uint8)
+    return pickle.loads(np.asarray(multihost_utils.broadcast_one_to_all(buffer)).tobytes())
 
 
 def is_main_process() -> bool:

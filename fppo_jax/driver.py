@@ -31,7 +31,13 @@ from fppo_jax.checkpoint import (
     open_checkpoints,
 )
 from fppo_jax.config import Hyperparameters, positive_int
-from fppo_jax.distributed import fetch, is_main_process, make_mesh
+from fppo_jax.distributed import (
+    fetch,
+    fetch_tree,
+    is_main_process,
+    make_mesh,
+    on_main_process,
+)
 from fppo_jax.envs import resets_itself
 from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
@@ -95,7 +101,8 @@ class Options:
 
     `devices`: how many of the devices JAX sees (default: all; one for native MuJoCo, which
     steps on the host) share the runs (see :mod:`fppo_jax.distributed`). In a multi-process run
-    only process 0 reports and writes.
+    only process 0 reports and writes, checkpoints included: every process hands it its part
+    of the state to save, and it hands each its part back on resuming.
 
     `callback(snapshot)` is called between compiled chunks with a :class:`Snapshot`; returning
     ``False`` (or a numpy ``False``, as a comparison of metrics gives) stops training there
@@ -220,33 +227,31 @@ def drive(plan: Plan, options: Options) -> Outcome:
             )
         devices = 1
     mesh = make_mesh(devices, config.num_envs, plan.data_parallel)
-    if options.checkpoint_dir is not None and jax.process_count() > 1:
-        raise ValueError("checkpoints are written by single-process runs only")
-    checkpoints, record = open_checkpoints(
-        options.checkpoint_dir, options.resume, options.keep, plan.kind, plan.record
-    )
+    main = is_main_process()
+    checkpoints: Checkpoints | None = None
+
+    def open_on_main() -> dict[str, Any] | None:
+        nonlocal checkpoints
+        checkpoints, record = open_checkpoints(
+            options.checkpoint_dir, options.resume, options.keep, plan.kind, plan.record
+        )
+        return record
+
+    # Process 0 alone holds the checkpoints; the others learn their record, or the error met.
+    record = on_main_process(open_on_main)
     outputs, failed = None, True
     try:
-        main = is_main_process()
         if options.log_dir is not None and main:
             resumed = None
             if options.resume:  # the run checkpointed, or this one if nothing was yet
                 resumed = plan.record if record is None else record["config"]
             outputs = prepare_log_dir(options.log_dir, resumed)
-        size = _group_size(plan, mesh, record, checkpoints)
+        size = _group_size(plan, mesh, record, options.checkpoint_dir)
         per_call = _updates_per_call(options, config.num_updates)
         restored = None
         if record is not None:
             like = jax.eval_shape(_init(plan), *_group(plan, 0, size))
-            restored = checkpoints.restore(
-                like, lambda r: check_same_run(r, plan.kind, plan.record, checkpoints.directory)
-            )
-            if restored is None:  # never a silent fresh start: the user decides
-                raise CheckpointsUnavailable(
-                    f"no checkpoint in {checkpoints.directory} is intact (each was moved to "
-                    f"{checkpoints.directory / 'damaged'}); nothing was restored. To start "
-                    "afresh, remove the directory or choose another"
-                )
+            restored = on_main_process(lambda: _restore(checkpoints, like, plan))
         if options.progress is True and main:
             where = f" on {mesh.size} devices" if mesh else ""
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
@@ -270,22 +275,37 @@ def drive(plan: Plan, options: Options) -> Outcome:
             outputs.release()
 
 
+def _restore(checkpoints: Checkpoints, like: Any, plan: Plan) -> Restored:
+    """The newest intact checkpoint of this run, or an error: never a silent fresh start."""
+    directory = checkpoints.directory
+    restored = checkpoints.restore(
+        like, lambda r: check_same_run(r, plan.kind, plan.record, directory)
+    )
+    if restored is None:
+        raise CheckpointsUnavailable(
+            f"no checkpoint in {directory} is intact (each was moved to {directory / 'damaged'}"
+            "); nothing was restored. To start afresh, remove the directory or choose another"
+        )
+    return restored
+
+
 def _init(plan: Plan) -> Callable:
     return jax.vmap(plan.trainer.init) if plan.batched else plan.trainer.init
 
 
 def _group_size(
-    plan: Plan, mesh: Mesh | None, record: dict | None, checkpoints: Checkpoints | None
+    plan: Plan, mesh: Mesh | None, record: dict | None, checkpoint_dir: str | Path | None
 ) -> int:
     """Runs per compiled call: the sweep's chunk, or its recorded one when resuming, rounded
     up to split evenly over the devices that share the runs."""
     if not plan.batched:
         return 1
     chunk = plan.runs_per_call
+    directory = None if checkpoint_dir is None else Path(checkpoint_dir).absolute()
     if record is not None:
         if chunk is not None and chunk != record["runs_per_call"]:
             raise ConfigMismatch(
-                f"{checkpoints.directory} holds a sweep of {record['runs_per_call']} runs "
+                f"{directory} holds a sweep of {record['runs_per_call']} runs "
                 f"per compiled call, not {chunk}; resume without chunk, or with that"
             )
         chunk = record["runs_per_call"]
@@ -293,7 +313,7 @@ def _group_size(
     size = _multiple(min(chunk or plan.num_runs, plan.num_runs), across)
     if record is not None and size != record["runs_per_call"]:
         raise ConfigMismatch(
-            f"{checkpoints.directory} holds a sweep of {record['runs_per_call']} runs per "
+            f"{directory} holds a sweep of {record['runs_per_call']} runs per "
             f"call, which does not split evenly over {across} devices; resume with devices "
             "that divide it"
         )
@@ -478,16 +498,19 @@ class _Chunks:
         policy: Policy,
     ) -> bool:
         """Checkpoint, logs and the callback; True to stop."""
-        if self.checkpoints:
-            record = {"kind": self.plan.kind, "config": self.plan.record, "group": group}
-            record.update(update=update, runs_per_call=self.size)
-            curves: dict[str, Any] = {"current": metrics}
-            if self.finished:
-                curves["finished"] = _join(self.finished)
-                curves["finished_diverged"] = self.diverged
-            step = group * self.num_updates + update
-            kept = None if self.plan.batched else policy  # load_policy reads one run's
-            self.checkpoints.save(step, state, curves, record, kept)
+        if self.options.checkpoint_dir is not None:
+            host = fetch_tree(state)  # every process takes part; process 0 writes
+            if self.checkpoints:
+                record = {"kind": self.plan.kind, "config": self.plan.record, "group": group}
+                record.update(update=update, runs_per_call=self.size)
+                curves: dict[str, Any] = {"current": metrics}
+                if self.finished:
+                    curves["finished"] = _join(self.finished)
+                    curves["finished_diverged"] = self.diverged
+                step = group * self.num_updates + update
+                # load_policy reads one run's
+                kept = None if self.plan.batched else make_policy(self.plan.trainer, host)
+                self.checkpoints.save(step, host, curves, record, kept)
             self.saved.append(update)
         runs = range(group * self.size, min((group + 1) * self.size, self.plan.num_runs))
         if self.outputs:
@@ -504,11 +527,12 @@ class _Chunks:
         if nonfinite < 0:
             return
         where = None
-        if self.checkpoints:
-            self.checkpoints.wait()
+        if self.options.checkpoint_dir is not None:
+            if self.checkpoints:
+                self.checkpoints.wait()
             where = (
                 f"The last good checkpoint, at update {self.saved[-1]}, is in "
-                f"{self.checkpoints.directory}"
+                f"{Path(self.options.checkpoint_dir).absolute()}"
                 if self.saved
                 else "No checkpoint was written before it"
             )

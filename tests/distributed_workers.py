@@ -3,8 +3,11 @@ runtime are fixed when JAX starts).
 
     python tests/distributed_workers.py devices OUT.npz   # with 4 CPU devices
     python tests/distributed_workers.py process OUT.npz   # one of a jax.distributed group
+    CHECKPOINTS=DIR [KILL_AT=3] python tests/distributed_workers.py process OUT.npz
 """
 
+import os
+import signal
 import sys
 
 import numpy as np
@@ -56,7 +59,10 @@ def devices(out: str) -> None:
 
 
 def process(out: str) -> None:
-    """Join the group described by the JAX_* variables, train, save the parameters."""
+    """Join the group described by the JAX_* variables, train, save the parameters.
+
+    With CHECKPOINTS set, checkpoint every update there and resume from what is there; with
+    KILL_AT set too, kill this process (SIGKILL) once that update is done."""
     from fppo_jax import distributed
 
     distributed.initialize()
@@ -64,7 +70,19 @@ def process(out: str) -> None:
 
     import fppo_jax
 
-    run = fppo_jax.train("cartpole", "fppo-lp", total_steps=256 * 4, **SMALL)
+    checkpoints = {}
+    if "CHECKPOINTS" in os.environ:
+        checkpoints = {"checkpoint_dir": os.environ["CHECKPOINTS"], "resume": True}
+        checkpoints["checkpoint_every"] = 1
+    if "KILL_AT" in os.environ:
+        kill_at = int(os.environ["KILL_AT"])
+
+        def kill(snapshot):
+            if snapshot.update >= kill_at:
+                os.kill(os.getpid(), signal.SIGKILL)
+
+        checkpoints["callback"] = kill
+    run = fppo_jax.train("cartpole", "fppo-lp", total_steps=256 * 6, **SMALL, **checkpoints)
     leaves = flat(run.params)
     np.savez(
         out,
@@ -72,6 +90,7 @@ def process(out: str) -> None:
         policy_loss=run.metrics["policy_loss"],
         process=jax.process_index(),
         devices=len(jax.devices()),
+        resumed_from=run.resumed_from,
     )
 
 

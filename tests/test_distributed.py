@@ -84,27 +84,63 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_two_processes_train_one_run_to_identical_parameters(tmp_path):
-    env = {
+def train_in_two_processes(where: Path, **env: str) -> list[subprocess.Popen]:
+    """Two processes of one jax.distributed group training one run (see
+    distributed_workers.process), writing where/process0.npz and where/process1.npz."""
+    where.mkdir(parents=True, exist_ok=True)
+    group = {
         "JAX_COORDINATOR_ADDRESS": f"127.0.0.1:{free_port()}",
         "JAX_NUM_PROCESSES": "2",
         "XLA_FLAGS": "--xla_force_host_platform_device_count=1",
     }
-    outs = [tmp_path / f"process{i}.npz" for i in range(2)]
-    workers = [
-        run_worker("process", out, JAX_PROCESS_ID=str(i), **env) for i, out in enumerate(outs)
+    return [
+        run_worker("process", where / f"process{i}.npz", JAX_PROCESS_ID=str(i), **group, **env)
+        for i in range(2)
     ]
+
+
+def results_of(where: Path, workers: list[subprocess.Popen]) -> list[dict[str, np.ndarray]]:
     for worker in workers:
         finish(worker)
-    first, second = (dict(np.load(out)) for out in outs)
+    return [dict(np.load(where / f"process{i}.npz")) for i in range(2)]
+
+
+def killed_then_resumed(tmp_path: Path) -> list[dict[str, np.ndarray]]:
+    """Two processes checkpointing every update, both killed after update 3, then two new
+    ones resuming from the checkpoints to the end."""
+    checkpoints = str(tmp_path / "checkpoints")
+    killed = train_in_two_processes(tmp_path / "killed", CHECKPOINTS=checkpoints, KILL_AT="3")
+    for worker in killed:
+        output, _ = worker.communicate(timeout=600)
+        assert worker.returncode != 0, output[-3000:]  # killed, not finished
+    steps = sorted(int(p.name) for p in Path(checkpoints).iterdir() if p.name.isdigit())
+    assert steps and steps[-1] >= 2, steps  # one writer: process 0's checkpoints, complete
+    resumed = train_in_two_processes(tmp_path / "resumed", CHECKPOINTS=checkpoints)
+    return results_of(tmp_path / "resumed", resumed)
+
+
+def test_two_processes_killed_resume_from_checkpoints_to_identical_parameters(tmp_path):
+    first, second = killed_then_resumed(tmp_path)
     assert (int(first["process"]), int(second["process"])) == (0, 1)
     assert int(first["devices"]) == int(second["devices"]) == 2  # one per process
+    assert int(first["resumed_from"]) == int(second["resumed_from"]) >= 2
     assert first.keys() == second.keys()
     for key in first:
         if key != "process":
             np.testing.assert_array_equal(first[key], second[key], err_msg=key)
     # And the same learning as one process on one device, to float32 rounding.
-    alone = fppo_jax.train("cartpole", "fppo-lp", total_steps=256 * 4, **SMALL)
+    alone = fppo_jax.train("cartpole", "fppo-lp", total_steps=256 * 6, **SMALL)
     np.testing.assert_allclose(first["policy_loss"], alone.metrics["policy_loss"], atol=1e-6)
     for i, leaf in enumerate(flat(alone.params)):
         np.testing.assert_allclose(first[f"arr_{i}"], leaf, rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_two_processes_killed_and_resumed_end_as_if_never_stopped(tmp_path):
+    whole = train_in_two_processes(tmp_path / "whole")
+    resumed = killed_then_resumed(tmp_path)
+    uninterrupted = results_of(tmp_path / "whole", whole)
+    for after, before in zip(resumed, uninterrupted, strict=True):
+        for key in before:
+            if key != "resumed_from":
+                np.testing.assert_array_equal(after[key], before[key], err_msg=key)

@@ -12,6 +12,8 @@ settings with interval estimates.
 import os
 import sys
 
+__version__ = "0.1.0"
+
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
     # MuJoCo picks its OpenGL backend once, when first imported; without a display only an
     # off-screen one (EGL) can render. A backend the user chose is kept.

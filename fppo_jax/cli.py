@@ -16,6 +16,7 @@ from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any
 
+from fppo_jax import __version__
 from fppo_jax.api import train
 from fppo_jax.checkpoint import (
     ARRAYS_FILE,
@@ -35,6 +36,7 @@ from fppo_jax.config import (
 )
 from fppo_jax.distributed import initialize, is_main_process
 from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
+from fppo_jax.extras import install_hint
 from fppo_jax.files import writable_directory
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
 from fppo_jax.results import SweepResult, TrainingDiverged, merge
@@ -263,7 +265,7 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
     command.add_argument(
         "--wandb-project",
         metavar="NAME",
-        help="also log to this Weights & Biases project (pip install 'fppo-jax[wandb]'; "
+        help=f"also log to this Weights & Biases project ({install_hint('wandb')}; "
         "WANDB_MODE=offline works without an account)",
     )
     command.add_argument(
@@ -330,6 +332,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Train PPO and its fast variants (FPPO-LP, FPPO-QP, TR-PPO, PPO-RB, TR-PPO-RB) "
         "with a fully jitted JAX trainer.",
     )
+    parser.add_argument("--version", action="version", version=f"fppo-jax {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
     formatter = _Defaults
 

@@ -92,7 +92,7 @@ class Options:
     writable before compiling; one that holds a run's outputs is refused, unless `resume`
     continues the run whose ``config.json`` it is (the checkpoint's, or this run's if there is
     no checkpoint yet). `wandb_project` logs the same to Weights & Biases
-    (``pip install 'fppo-jax[wandb]'``).
+    (the ``wandb`` extra).
 
     Environments whose state lives outside JAX (native MuJoCo) cannot be checkpointed: a
     resumed run goes on from the restored policy, optimiser and normalisers with every

@@ -21,6 +21,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from fppo_jax.extras import install_hint
 from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
 from fppo_jax.trainer import METRICS
 
@@ -192,7 +193,7 @@ def require_wandb() -> Any:
         import wandb
     except ImportError:
         raise ImportError(
-            "wandb_project needs Weights & Biases: pip install 'fppo-jax[wandb]'"
+            f"wandb_project needs Weights & Biases: {install_hint('wandb')}"
         ) from None
     return wandb
 

@@ -54,6 +54,18 @@ def test_unknown_variant_is_rejected_by_the_parser(capsys):
     assert "invalid choice: 'sppo'" in capsys.readouterr().err
 
 
+def test_version_is_the_installed_package_s(capsys):
+    from importlib import metadata
+
+    import fppo_jax
+
+    assert fppo_jax.__version__ == metadata.version("fppo-jax")
+    with pytest.raises(SystemExit) as exit:
+        main(["--version"])
+    assert exit.value.code == 0
+    assert capsys.readouterr().out == f"fppo-jax {fppo_jax.__version__}\n"
+
+
 def test_help_documents_every_flag():
     text = build_parser()._subparsers._group_actions[0].choices["train"].format_help()
     for flag in [

@@ -34,8 +34,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.envs.core import Box, Step
+from fppo_jax.extras import install_hint
 
-INSTALL = "pip install 'fppo-jax[native]' (envpool, Linux only)"
+INSTALL = f"{install_hint('native')}; envpool, Linux only"
 MAX_POOLS = 16  # pools kept alive at once: training's, and a few evaluations' beside it
 
 

@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from fppo_jax.envs.core import Box, Step, Timed, limited_step
+from fppo_jax.extras import install_hint
 
 
 def _registry() -> ModuleType:
@@ -25,8 +26,8 @@ def _registry() -> ModuleType:
         from mujoco_playground import registry
     except ImportError as error:
         raise ImportError(
-            "MuJoCo Playground is not installed: pip install 'fppo-jax[playground]' "
-            "(or pip install playground)"
+            f"MuJoCo Playground is not installed: {install_hint('playground')}, or pip "
+            "install playground"
         ) from error
     return registry
 

@@ -24,6 +24,7 @@ from fppo_jax.checkpoint import (
     CheckpointsUnavailable,
     DamagedCheckpoint,
     check_no_saved_policy,
+    load_policy,
 )
 from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
@@ -481,6 +482,27 @@ def build_parser() -> argparse.ArgumentParser:
         "a .png strip",
     )
 
+    export = commands.add_parser(
+        "export",
+        help="write a trained policy as an ONNX model",
+        description="Write the deterministic policy saved in DIR (or that of the newest "
+        "checkpoint in DIR) as an ONNX model: input `observation` [batch, size] float32, output "
+        f"`action` (see fppo_jax.onnx_export). Needs the onnx extra: {install_hint('onnx')}.",
+        formatter_class=formatter,
+    )
+    export.add_argument(
+        "--policy",
+        "--checkpoint",
+        dest="checkpoint",
+        type=_path,
+        required=True,
+        metavar="DIR",
+        help="a saved policy or a checkpoint directory",
+    )
+    export.add_argument(
+        "--onnx", type=_path, required=True, metavar="FILE", help="the model file to write"
+    )
+
     commands.add_parser("list", help="list the tasks and the variants")
     return parser
 
@@ -681,6 +703,16 @@ def _warnings_as_lines() -> Iterator[None]:
         yield
 
 
+def _export(args: argparse.Namespace) -> int:
+    from fppo_jax.onnx_export import export_onnx
+
+    if os.path.lexists(args.onnx):
+        raise ValueError(f"{args.onnx} already exists; remove it or choose another path")
+    writable_directory(Path(args.onnx).parent)
+    print(f"wrote {export_onnx(load_policy(args.checkpoint), args.onnx)}")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if getattr(args, "distributed", False):
@@ -693,6 +725,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "merge": _merge,
         "plot": _plot,
         "eval": _eval,
+        "export": _export,
         "list": lambda a: _list(),
     }
     with _warnings_as_lines():
@@ -701,6 +734,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         except (
             ValueError,
             FileNotFoundError,
+            ImportError,
             MemoryError,
             TrainingDiverged,
             CheckpointsUnavailable,

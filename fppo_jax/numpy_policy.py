@@ -1,0 +1,109 @@
+"""A saved policy run with numpy alone: no JAX, no fppo-jax.
+
+This file imports nothing but the standard library and numpy, so it can be copied beside other
+code (deployment, an evaluation harness) and used there on its own::
+
+    from numpy_policy import NumpyPolicy
+    policy = NumpyPolicy.load("runs/policy")   # policy.json + policy.npz (TrainResult.save)
+    action = policy(observation)               # one observation or a batch
+
+It computes what ``fppo_jax.Policy`` computes for the most likely action, in float32:
+observations normalised with the statistics training ended with, ``clip((x − μ) /
+sqrt(σ² + 1e-8), −10, 10)`` (when training normalised them); then tanh hidden layers and a
+linear head; then the arg max of the logits (discrete actions) or the Gaussian's mean clipped
+to the action bounds (continuous ones). The arrays are checked against the SHA-256 digest
+``policy.json`` records, so a damaged or edited ``policy.npz`` is refused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+POLICY_FILE, ARRAYS_FILE = "policy.json", "policy.npz"
+_NETWORK = "params/params/MLP_0"
+
+
+@dataclasses.dataclass(frozen=True)
+class NumpyPolicy:
+    """The deterministic policy of a saved run: `layers` are the (kernel, bias) pairs of the
+    network, hidden ones first; `obs_mean` and `obs_var` the observation statistics (None
+    when training used raw observations); `low` and `high` the action bounds (None for
+    discrete actions)."""
+
+    layers: tuple[tuple[np.ndarray, np.ndarray], ...]
+    obs_mean: np.ndarray | None
+    obs_var: np.ndarray | None
+    low: np.ndarray | None
+    high: np.ndarray | None
+
+    @property
+    def observation_size(self) -> int:
+        return int(self.layers[0][0].shape[0])
+
+    @property
+    def discrete(self) -> bool:
+        return self.low is None
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        """The most likely action for an observation (an int) or a batch of them."""
+        x = np.asarray(observation, np.float32)
+        if x.shape[-1:] != (self.observation_size,):
+            raise ValueError(
+                f"the policy takes observations of size {self.observation_size} (the last "
+                f"axis), got shape {x.shape}"
+            )
+        if not np.isfinite(x).all():
+            raise ValueError("the observation holds NaN or infinity: no action follows from it")
+        if self.obs_mean is not None:
+            scale = np.sqrt(self.obs_var + np.float32(1e-8))
+            x = np.clip((x - self.obs_mean) / scale, -10.0, 10.0).astype(np.float32)
+        *hidden, (kernel, bias) = self.layers
+        for w, b in hidden:
+            x = np.tanh(x @ w + b)
+        out = x @ kernel + bias
+        if self.discrete:
+            return np.argmax(out, axis=-1)
+        return np.clip(out, self.low, self.high)
+
+    @classmethod
+    def load(cls, directory: str | Path) -> NumpyPolicy:
+        """The policy saved in `directory` (``policy.json`` and ``policy.npz``)."""
+        directory = Path(directory)
+        description = json.loads((directory / POLICY_FILE).read_text())
+        with np.load(directory / ARRAYS_FILE, allow_pickle=False) as npz:
+            arrays = dict(npz)
+        if digest(arrays) != description["digest"]:
+            raise ValueError(
+                f"{directory / ARRAYS_FILE} does not match the digest in {POLICY_FILE}: damaged "
+                "or edited"
+            )
+        policy = description["policy"]
+        depth = len(policy["hidden_sizes"])
+        layers = tuple(
+            (arrays[f"{_NETWORK}/Dense_{i}/kernel"], arrays[f"{_NETWORK}/Dense_{i}/bias"])
+            for i in range(depth + 1)
+        )
+        mean = var = None
+        if policy["normalize_observations"]:
+            mean, var = arrays["obs_stats/mean"], arrays["obs_stats/var"]
+        space = policy["action_space"]
+        low = high = None
+        if "discrete" not in space:
+            low, high = (np.asarray(space[k], np.float32) for k in ("low", "high"))
+        return cls(layers, mean, var, low, high)
+
+
+def digest(arrays: dict[str, np.ndarray]) -> str:
+    """The SHA-256 digest that ``policy.json`` records of the arrays of ``policy.npz``: each
+    array in the order of its name, its name, dtype and shape, then its bytes."""
+    sha = hashlib.sha256()
+    for name in sorted(arrays):
+        leaf = np.ascontiguousarray(arrays[name])
+        sha.update(f"[{name!r}] {leaf.dtype} {leaf.shape}".encode())
+        sha.update(leaf.tobytes())
+    return sha.hexdigest()

@@ -1,0 +1,79 @@
+"""A trained policy as an ONNX model, for runtimes without JAX (the ``onnx`` extra).
+
+The model computes the deterministic policy, as ``Policy(obs)`` does: from an input
+``observation`` (float32, ``[batch, observation_size]``), the observation normalised with the
+statistics training ended with, ``clip((x − μ) / sqrt(σ² + 1e-8), −10, 10)`` (when training
+normalised them), then tanh hidden layers and a linear head, then ``action``: the arg max of
+the logits (int64) for discrete actions, or the Gaussian's mean clipped to the action bounds
+(float32) for continuous ones. Opset 17, standard operators only.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fppo_jax.envs import Discrete
+from fppo_jax.extras import install_hint
+from fppo_jax.policy import Policy
+
+OPSET = 17
+
+
+def export_onnx(policy: Policy, path: str | Path) -> Path:
+    """Write `policy`'s deterministic action as an ONNX model to `path`; returns the path."""
+    try:
+        import onnx
+        from onnx import TensorProto, helper, numpy_helper
+    except ImportError:
+        raise ImportError(
+            f"exporting to ONNX needs the onnx package: {install_hint('onnx')}"
+        ) from None
+    constants: list[Any] = []
+    nodes: list[Any] = []
+
+    def constant(name: str, value: Any) -> str:
+        constants.append(numpy_helper.from_array(np.asarray(value, np.float32), name))
+        return name
+
+    def node(op: str, inputs: list[str], output: str, **attributes: Any) -> str:
+        nodes.append(helper.make_node(op, inputs, [output], **attributes))
+        return output
+
+    x = "observation"
+    if policy.obs_stats is not None:
+        stats = policy.obs_stats
+        scale = np.sqrt(np.asarray(stats.var, np.float32) + np.float32(1e-8))
+        x = node("Sub", [x, constant("obs_mean", stats.mean)], "centred")
+        x = node("Div", [x, constant("obs_scale", scale)], "scaled")
+        bounds = [constant("clip_low", -10.0), constant("clip_high", 10.0)]
+        x = node("Clip", [x, *bounds], "normalised")
+    layers = policy.params["params"]["MLP_0"]
+    for i in range(len(policy.hidden_sizes) + 1):
+        dense = layers[f"Dense_{i}"]
+        x = node("MatMul", [x, constant(f"kernel_{i}", dense["kernel"])], f"product_{i}")
+        x = node("Add", [x, constant(f"bias_{i}", dense["bias"])], f"layer_{i}")
+        if i < len(policy.hidden_sizes):
+            x = node("Tanh", [x], f"hidden_{i}")
+    space = policy.action_space
+    if isinstance(space, Discrete):
+        node("ArgMax", [x], "action", axis=-1, keepdims=0)
+        action = helper.make_tensor_value_info("action", TensorProto.INT64, ["batch"])
+    else:
+        x = node("Max", [x, constant("action_low", space.low)], "above_low")
+        node("Min", [x, constant("action_high", space.high)], "action")
+        action = helper.make_tensor_value_info(
+            "action", TensorProto.FLOAT, ["batch", len(space.low)]
+        )
+    observation = helper.make_tensor_value_info(
+        "observation", TensorProto.FLOAT, ["batch", policy.observation_size]
+    )
+    graph = helper.make_graph(nodes, "fppo_jax_policy", [observation], [action], constants)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)])
+    model.producer_name = "fppo-jax"
+    onnx.checker.check_model(model)
+    path = Path(path)
+    onnx.save(model, path)
+    return path

@@ -319,8 +319,14 @@ def resolve_hyperparameters(
 
 
 def environment_name(env: Any, environment: Any) -> str:
-    """The name a run records for its environment: the task's, or the adapter's class."""
-    return env if isinstance(env, str) else type(getattr(environment, "env", environment)).__name__
+    """The name a run records for its environment: the task's, the environment's own name (a
+    Gymnasium environment's), or the adapter's class."""
+    if isinstance(env, str):
+        return env
+    named = getattr(environment, "name", None)
+    return (
+        named if isinstance(named, str) else type(getattr(environment, "env", environment)).__name__
+    )
 
 
 def as_float(x: jax.Array) -> float:

@@ -468,9 +468,9 @@ class _Chunks:
         if not resets_itself(trainer.env):
             return state
         print(
-            f"resuming at update {update} in fresh environments: native MuJoCo's state is not "
-            "checkpointed, so each environment starts a new episode here (not bitwise the run "
-            "that never stopped)",
+            f"resuming at update {update} in fresh environments: the environments' state lives "
+            "outside JAX (native MuJoCo, Gymnasium) and is not checkpointed, so each starts a "
+            "new episode here (not bitwise the run that never stopped)",
             file=sys.stderr,
         )
         restart = jax.vmap(trainer.restart_envs) if self.plan.batched else trainer.restart_envs

@@ -92,11 +92,21 @@ def test_acrobot_episode_limit_is_500():
 REGISTERED = "cartpole, acrobot, mountaincar, hopper, walker2d, halfcheetah, ant, reacher, swimmer"
 
 
-@pytest.mark.parametrize("name", ["cartpol", "gym/CartPole-v1", "gymnax/", "Pendulum-v1"])
-def test_an_unknown_name_lists_the_registered_tasks_and_the_namespaces(name):
+@pytest.mark.parametrize(
+    "name, suggested",
+    [
+        ("cartpol", ""),
+        ("gym/CartPole-v1", ""),
+        ("gymnax/", ""),
+        ("Pendulum-v1", "; did you mean gymnax/Pendulum-v1 or gymnasium/Pendulum-v1?"),
+        ("Hopper-v4", "; did you mean gymnasium/Hopper-v4?"),
+    ],
+)
+def test_an_unknown_name_lists_the_registered_tasks_and_the_namespaces(name, suggested):
     message = (
         f"unknown environment {name!r}; registered: {REGISTERED}; "
-        "namespaced: gymnax/<id>, brax/<id>, playground/<id>, native/<id>"
+        "namespaced: gymnax/<id>, brax/<id>, playground/<id>, native/<id>, gymnasium/<id>"
+        + suggested
     )
     with pytest.raises(ValueError) as error:
         lookup(name)
@@ -110,7 +120,7 @@ def test_lookup_gives_registered_and_namespaced_tasks():
     task = lookup("brax/humanoid")
     assert task.name == "brax/humanoid" and task.total_steps == 100_000
     assert task.description == "humanoid from the brax namespace"
-    assert set(NAMESPACES) == {"gymnax", "brax", "playground", "native"}
+    assert set(NAMESPACES) == {"gymnax", "brax", "playground", "native", "gymnasium"}
     with pytest.raises(TypeError, match="expected a registered environment name"):
         as_environment(42)
 

@@ -1,6 +1,7 @@
 """Environments: the interface the trainer steps (:mod:`.core`), one module per adapter
 (:mod:`.gymnax`; :mod:`.mjx`: Brax on MJX and Swimmer on MJX itself; :mod:`.playground`:
-MuJoCo Playground; :mod:`.native`: gym's MuJoCo tasks in native MuJoCo through envpool) and
+MuJoCo Playground; :mod:`.native`: gym's MuJoCo tasks in native MuJoCo through envpool;
+:mod:`.gymnasium`: Gymnasium environments stepped on the host) and
 the task registry with its namespaces and backends (:mod:`.tasks`).
 
 Only the interface, the gymnax adapter (which imports gymnax on first use) and the registry

@@ -13,6 +13,7 @@ from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,6 +70,24 @@ def resets_itself(env: Environment) -> bool:
     already the new episode's, and its step gives `next_obs`), as an environment must whose
     state lives outside JAX: then the trainer draws no reset states for it."""
     return bool(getattr(env, "resets_itself", False))
+
+
+class HostState(NamedTuple):
+    """The JAX side of an environment that lives on the host (native MuJoCo, Gymnasium):
+    which host-side pool and which of its slots it is, and the steps it has taken:
+    a pure callback given the same arguments twice may be run once, so every step's must
+    differ."""
+
+    pool: jax.Array
+    slot: jax.Array
+    steps: jax.Array
+
+
+def seeds_of(key_data: np.ndarray) -> list[int]:
+    """One seed (a 31-bit C int, as envpool takes) per key of `key_data` [..., words], from its
+    words: how a host-side environment is seeded from its own key."""
+    words = np.asarray(key_data).reshape(-1, key_data.shape[-1]).astype(np.uint64)
+    return [int(s) for s in (words[:, 0] * np.uint64(0x9E3779B1) ^ words[:, -1]) % 2**31]
 
 
 class Timed(NamedTuple):

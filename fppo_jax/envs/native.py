@@ -27,13 +27,13 @@ import importlib.util
 import os
 import threading
 from types import ModuleType
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.envs.core import Box, Step
+from fppo_jax.envs.core import Box, HostState, Step, seeds_of
 from fppo_jax.extras import install_hint
 
 INSTALL = f"{install_hint('native')}; envpool, Linux only"
@@ -61,16 +61,6 @@ def import_envpool() -> ModuleType:
         del os.environ[name]
     os.environ.update({n: v for n, v in saved.items() if os.environ.get(n) != v})
     return envpool
-
-
-class NativeState(NamedTuple):
-    """Which envpool pool and which of its slots an environment is, and the steps it has taken:
-    a pure callback given the same arguments twice may be run once, so every step's must
-    differ."""
-
-    pool: jax.Array
-    slot: jax.Array
-    steps: jax.Array
 
 
 class _Pools:
@@ -134,18 +124,16 @@ class NativeEnvironment:
         )
         object.__setattr__(self, "max_episode_steps", int(spec.config.max_episode_steps))
 
-    def reset(self, key: jax.Array) -> tuple[NativeState, jax.Array]:
+    def reset(self, key: jax.Array) -> tuple[HostState, jax.Array]:
         shapes = (
-            NativeState(_int32(()), _int32(()), _int32(())),
+            HostState(_int32(()), _int32(()), _int32(())),
             jax.ShapeDtypeStruct((self.observation_size,), jnp.float32),
         )
         return jax.pure_callback(
             self._host_reset, shapes, jax.random.key_data(key), vmap_method="broadcast_all"
         )
 
-    def step(
-        self, key: jax.Array, state: NativeState, action: jax.Array
-    ) -> tuple[NativeState, Step]:
+    def step(self, key: jax.Array, state: HostState, action: jax.Array) -> tuple[HostState, Step]:
         obs = jax.ShapeDtypeStruct((self.observation_size,), jnp.float32)
         flag = jax.ShapeDtypeStruct((), jnp.bool_)
         shapes = Step(obs, jax.ShapeDtypeStruct((), jnp.float32), flag, flag, obs)
@@ -160,7 +148,7 @@ class NativeEnvironment:
         )
         return state._replace(steps=state.steps + 1), out
 
-    def _host_reset(self, key_data: np.ndarray) -> tuple[NativeState, np.ndarray]:
+    def _host_reset(self, key_data: np.ndarray) -> tuple[HostState, np.ndarray]:
         envpool = import_envpool()
         key_data = np.asarray(key_data)
         batch = key_data.shape[:-1]
@@ -179,7 +167,7 @@ class NativeEnvironment:
         first = np.empty_like(obs)
         first[info["env_id"]] = obs
         return (
-            NativeState(
+            HostState(
                 np.full(batch, number, np.int32), slots.reshape(batch), np.zeros(batch, np.int32)
             ),
             first.reshape(*batch, -1).astype(np.float32),
@@ -211,12 +199,6 @@ def usable_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
-
-
-def seeds_of(key_data: np.ndarray) -> list[int]:
-    """One envpool seed (a 31-bit C int) per key of `key_data` [..., words], from its words."""
-    words = np.asarray(key_data).reshape(-1, key_data.shape[-1]).astype(np.uint64)
-    return [int(s) for s in (words[:, 0] * np.uint64(0x9E3779B1) ^ words[:, -1]) % 2**31]
 
 
 def _step_pool(

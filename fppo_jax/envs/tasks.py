@@ -1,5 +1,6 @@
 """The task registry: named tasks with the paper's settings, names by namespace
-(``gymnax/<id>``, ``brax/<name>``, ``playground/<Name>``, ``native/<id>``), the backends that
+(``gymnax/<id>``, ``brax/<name>``, ``playground/<Name>``, ``native/<id>``,
+``gymnasium/<id>``), the backends that
 run them, and what turns a name or a foreign environment into an
 :class:`~fppo_jax.envs.core.Environment`.
 
@@ -51,6 +52,15 @@ def _playground(name: str) -> Callable[[], Environment]:
         from fppo_jax.envs.playground import playground_environment
 
         return playground_environment(name)
+
+    return make
+
+
+def _gymnasium(env_id: str) -> Callable[[], Environment]:
+    def make() -> Environment:
+        from fppo_jax.envs.gymnasium import gymnasium_environment
+
+        return gymnasium_environment(env_id)
 
     return make
 
@@ -136,8 +146,16 @@ NAMESPACES: dict[str, str] = {
     "playground": "a MuJoCo Playground environment on MJX, its own episode limit "
     "(playground/CartpoleBalance)",
     "native": "any envpool MuJoCo task in native MuJoCo, its own episode limit (native/Hopper-v4)",
+    "gymnasium": "any registered Gymnasium environment, stepped on the host, its own episode "
+    "limit (gymnasium/CartPole-v1)",
 }
-_NAMESPACE_BACKENDS = {"gymnax": "gymnax", "brax": "mjx", "playground": "mjx", "native": "native"}
+_NAMESPACE_BACKENDS = {
+    "gymnax": "gymnax",
+    "brax": "mjx",
+    "playground": "mjx",
+    "native": "native",
+    "gymnasium": "gymnasium",
+}
 _NAMESPACED_FORMS = ", ".join(f"{namespace}/<id>" for namespace in NAMESPACES)
 
 _FACTORIES: dict[str, Callable[[str], Callable[[], Environment]]] = {
@@ -145,6 +163,7 @@ _FACTORIES: dict[str, Callable[[str], Callable[[], Environment]]] = {
     "brax": _brax,
     "playground": _playground,
     "native": _native,
+    "gymnasium": _gymnasium,
 }
 
 
@@ -162,8 +181,26 @@ def lookup(name: str) -> Task:
         return Task(name, _FACTORIES[namespace](env_id), 100_000, description, backend)
     raise ValueError(
         f"unknown environment {name!r}; registered: {', '.join(TASKS)}; "
-        f"namespaced: {_NAMESPACED_FORMS}"
+        f"namespaced: {_NAMESPACED_FORMS}{_suggestion(name)}"
     )
+
+
+def _suggestion(name: str) -> str:
+    """For an id that a namespace knows, given without it: the namespaced names it may mean."""
+    import importlib.util
+
+    found = []
+    if importlib.util.find_spec("gymnax") is not None:
+        import gymnax
+
+        if name in gymnax.registered_envs:
+            found.append(f"gymnax/{name}")
+    if importlib.util.find_spec("gymnasium") is not None:
+        import gymnasium
+
+        if name in gymnasium.registry:
+            found.append(f"gymnasium/{name}")
+    return f"; did you mean {' or '.join(found)}?" if found else ""
 
 
 BACKENDS: dict[str, str] = {
@@ -185,7 +222,10 @@ def choose_backend(env: str | Any, backend: str = "auto") -> tuple[str, str]:
     if not isinstance(env, str):
         if backend != "auto":
             raise ValueError("backend applies to tasks given by name; this environment runs as is")
-        return str(getattr(env, "backend", "custom")), ""
+        from fppo_jax.envs.gymnasium import is_gymnasium_env_class
+
+        default = "gymnasium" if is_gymnasium_env_class(env) else "custom"
+        return str(getattr(env, "backend", default)), ""
     task = lookup(env)
     if backend == "auto":
         if not task.native:
@@ -251,7 +291,9 @@ def _adapter(env: Any, make: Callable[[], Environment]) -> Environment:
 
 def as_environment(env: str | Environment | Any, backend: str = "auto") -> Environment:
     """A registered or namespaced name (on `backend`), a gymnax environment (default
-    parameters), a Brax ``Env`` (1000-step episodes) or an :class:`Environment`."""
+    parameters), a Brax ``Env`` (1000-step episodes), a ``gymnasium.Env`` subclass (see
+    :func:`~fppo_jax.envs.gymnasium.gymnasium_environment` for other Gymnasium environments)
+    or an :class:`Environment`."""
     if isinstance(env, str):
         return make_env(env, backend)
     choose_backend(env, backend)
@@ -263,11 +305,16 @@ def as_environment(env: str | Environment | Any, backend: str = "auto") -> Envir
 
     if mjx.is_brax_env(env):
         return _adapter(env, lambda: mjx.BraxEnvironment(env))
+    from fppo_jax.envs.gymnasium import gymnasium_environment, is_gymnasium_env_class
+
+    if is_gymnasium_env_class(env):
+        return _adapter(env, lambda: gymnasium_environment(env))
     if isinstance(env, Environment):
         return env
     raise TypeError(
         f"expected a registered environment name ({', '.join(TASKS)}), a namespaced one "
         f"({_NAMESPACED_FORMS}), a gymnax or Brax "
-        "environment, or an object with observation_size, action_space, reset and step; got "
-        + type(env).__name__
+        "environment, a gymnasium.Env subclass (fppo_jax.envs.gymnasium.gymnasium_environment "
+        "takes any function that makes one), or an object with observation_size, action_space, "
+        "reset and step; got " + type(env).__name__
     )

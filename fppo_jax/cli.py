@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import json
 import math
 import os
 import sys
@@ -189,7 +190,7 @@ def _add_backend_flag(command: argparse.ArgumentParser, default: str | None) -> 
         choices=list(BACKENDS),
         help="what runs a MuJoCo task: "
         + "; ".join(f"{name}: {text}" for name, text in BACKENDS.items())
-        + (f" (default: {default})" if default else " (default: the run's own)"),
+        + ("" if default else " (default: the run's own)"),
     )
 
 
@@ -232,6 +233,13 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
         "training goes) and the results",
     )
     command.add_argument("--quiet", action="store_true", help="no progress bar or lines")
+    command.add_argument(
+        "--config",
+        type=_path,
+        metavar="FILE",
+        help="settings from FILE (JSON, or YAML: .yaml/.yml), a run's own config.json for one: "
+        "its run again; flags given beside it override it, and an unknown key is refused",
+    )
     command.add_argument(
         "--checkpoint-dir",
         type=_path,
@@ -335,6 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"fppo-jax {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
+    parser.set_defaults(commands=commands.choices)
     formatter = _Defaults
 
     run = commands.add_parser(
@@ -378,7 +387,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=formatter,
     )
     grid.add_argument(
-        "--variant", type=_names, default=["fppo-lp"], help="variants, e.g. ppo,fppo-lp,fppo-qp"
+        "--variant", type=_names, default="fppo-lp", help="variants, e.g. ppo,fppo-lp,fppo-qp"
     )
     for name, text in HYPERPARAMETER_HELP.items():
         grid.add_argument(f"--{name.replace('_', '-')}", type=_values, help=text)
@@ -713,8 +722,57 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+# What a run's config.json records beside its settings (metric_log.environment_record).
+RECORD_ONLY = ("versions", "platform")
+
+
+def settings_file(path: Path, command: argparse.ArgumentParser) -> dict[str, Any]:
+    """The settings in `path` (JSON or YAML) as defaults of `command`'s flags: a run's own
+    ``config.json`` (train) or a sweep's (sweep, its grid as the grid's flags), or a file of
+    flag names written by hand. Raises ValueError naming any key that is not a setting."""
+    text = Path(path).read_text()
+    try:
+        if Path(path).suffix in (".yaml", ".yml"):
+            import yaml
+
+            settings = yaml.safe_load(text)
+        else:
+            settings = json.loads(text)
+    except ImportError:
+        raise ValueError(f"{path}: reading YAML needs PyYAML (pip install pyyaml)") from None
+    except Exception as error:
+        raise ValueError(f"{path} cannot be read as settings: {error}") from None
+    if not isinstance(settings, dict):
+        raise ValueError(f"{path} must hold a mapping of settings, got {type(settings).__name__}")
+    settings = {k: v for k, v in settings.items() if k not in RECORD_ONLY}
+    if isinstance(settings.get("devices"), list):  # the record's device kinds, not a count
+        del settings["devices"]
+    settings.update(settings.pop("grid", None) or {})
+    if "runs_per_call" in settings:
+        settings["chunk"] = settings.pop("runs_per_call")
+    if isinstance(settings.get("part"), list):
+        settings["part"] = tuple(settings["part"])
+    valid = set(vars(command.parse_args([]))) - {"commands", "command", "config"}
+    unknown = sorted(set(settings) - valid)
+    if unknown:
+        raise ValueError(
+            f"{path}: unknown setting{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
+            f"valid: {', '.join(sorted(valid))}"
+        )
+    return settings
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "config", None) is not None:
+        command = args.commands[args.command]
+        try:
+            command.set_defaults(**settings_file(args.config, command))
+        except (ValueError, FileNotFoundError) as error:
+            print(f"fppo-jax: error: {error}", file=sys.stderr)
+            return 2
+        args = parser.parse_args(argv)
     if getattr(args, "distributed", False):
         initialize()
     commands = {

@@ -3,10 +3,12 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from helpers import sweep_by_hand
 
 import fppo_jax.driver
+from fppo_jax import SweepResult
 from fppo_jax.cli import build_parser, main
 
 TINY_FLAGS = ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
@@ -40,6 +42,35 @@ def test_train_writes_metrics_config_and_summary(tmp_path, capsys):
     config = json.loads((tmp_path / "config.json").read_text())
     assert config["variant"] == "fppo-qp" and config["k"] == 0.3 and config["num_envs"] == 4
     assert (tmp_path / "summary.txt").read_text().startswith("fppo-qp on cartpole")
+
+
+def test_a_recorded_run_reruns_from_its_config_and_flags_override_it(tmp_path, capsys):
+    first = ["train", "--variant", "fppo-qp", "--k", "0.3", "--steps", "384", "--seed", "1"]
+    assert main([*first, *TINY_FLAGS, "--output", str(tmp_path / "a"), "--quiet"]) == 0
+    config = str(tmp_path / "a" / "config.json")
+    assert main(["train", "--config", config, "--output", str(tmp_path / "b"), "--quiet"]) == 0
+    metrics = [(tmp_path / run / "metrics.csv").read_text() for run in ("a", "b")]
+    assert metrics[0] == metrics[1]  # the same run again, bit for bit
+    again = ["train", "--config", config, "--seed", "2", "--output", str(tmp_path / "c")]
+    assert main([*again, "--quiet"]) == 0
+    rerun = json.loads((tmp_path / "c" / "config.json").read_text())
+    assert (rerun["seed"], rerun["k"], rerun["num_envs"]) == (2, 0.3, 4)
+    capsys.readouterr()
+    (tmp_path / "bad.yaml").write_text("env: cartpole\ncolour: 3\n")
+    assert main(["train", "--config", str(tmp_path / "bad.yaml")]) == 2
+    assert "bad.yaml: unknown setting colour; valid: alpha, " in capsys.readouterr().err
+
+
+def test_a_recorded_sweep_reruns_from_its_config(tmp_path):
+    flags = ["sweep", "--variant", "ppo,fppo-qp", "--k", "0.2,0.4", "--seeds", "2"]
+    flags += ["--steps", "256", *TINY_FLAGS, "--quiet"]
+    assert main([*flags, "--output", str(tmp_path / "a")]) == 0
+    config = str(tmp_path / "a" / "config.json")
+    assert main(["sweep", "--config", config, "--output", str(tmp_path / "b"), "--quiet"]) == 0
+    curves = [SweepResult.read(tmp_path / run) for run in ("a", "b")]
+    assert curves[0].runs == curves[1].runs and len(curves[0].runs) == 6
+    for name, values in curves[0].metrics.items():
+        np.testing.assert_array_equal(values, curves[1].metrics[name], err_msg=name)
 
 
 def test_out_of_range_hyperparameter_is_an_error_not_a_traceback(capsys):

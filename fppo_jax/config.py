@@ -338,7 +338,13 @@ def describe(config: TrainConfig, preset: str | None = None) -> str:
     """One run's length and shape, in words."""
     prefix = "" if preset is None else f"preset {preset}, "
     schedule = ", learning rate annealed linearly to 0" if config.anneal_learning_rate else ""
-    return f"{prefix}{config.num_updates} updates × {describe_update(config)}{schedule}"
+    trained = config.num_updates * config.samples_per_update
+    budget = (
+        ""
+        if trained == config.total_steps
+        else f" = {trained:,} env steps (whole updates of the {config.total_steps:,} asked)"
+    )
+    return f"{prefix}{config.num_updates} updates × {describe_update(config)}{budget}{schedule}"
 
 
 def describe_update(config: TrainConfig) -> str:

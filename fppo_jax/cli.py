@@ -15,7 +15,7 @@ import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from fppo_jax import __version__
 from fppo_jax.api import train
@@ -159,11 +159,11 @@ _PARSERS = {"int": _positive_int, "int | None": _positive_int, "tuple[int, ...]"
 def _add_config_flags(command: argparse.ArgumentParser) -> None:
     """A flag per :class:`TrainConfig` field, named after it, over the preset's value."""
     group = command.add_argument_group(
-        "run shape", "TrainConfig's fields; each defaults to the preset's value"
+        "run shape", "TrainConfig's fields; each defaults to the preset's value, shown per preset"
     )
     for field in dataclasses.fields(TrainConfig):
         flag, alias = "--" + field.name.replace("_", "-"), ALIASES.get(field.name)
-        text = field.metadata["help"]
+        text = field.metadata["help"] + _preset_values(field.name, field.default)
         if field.type == "bool":
             group.add_argument(
                 flag, dest=field.name, action=argparse.BooleanOptionalAction, help=text
@@ -181,6 +181,25 @@ def _add_config_flags(command: argparse.ArgumentParser) -> None:
             continue
         flags = [flag, alias] if alias else [flag]
         group.add_argument(*flags, dest=field.name, type=_PARSERS[field.type], help=text)
+
+
+def _preset_values(name: str, default: Any) -> str:
+    """What a field is unless given, for its help: per preset where a preset sets it
+    (" (paper: 8; massive: 2048)"), else its default, where it is worth reading."""
+    if name == "total_steps":
+        return ""  # its help names its default: the task's budget
+    if name == "anneal_learning_rate":
+        return " (default: on for the MuJoCo tasks under the paper preset, else off)"
+    set_by = {preset: shape[name] for preset, shape in PRESETS.items() if name in shape}
+    if set_by:
+        return " (" + "; ".join(f"{preset}: {_shown(v)}" for preset, v in set_by.items()) + ")"
+    if isinstance(default, bool):
+        return f" (default: {'on' if default else 'off'})"
+    return "" if default is None else f" (default: {_shown(default)})"
+
+
+def _shown(value: Any) -> str:
+    return ",".join(map(str, value)) if isinstance(value, tuple | list) else str(value)
 
 
 def _add_backend_flag(command: argparse.ArgumentParser, default: str | None) -> None:
@@ -326,6 +345,13 @@ HYPERPARAMETER_HELP = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """A command's parser whose errors are one line, pointing at --help, not the usage."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 class _Defaults(argparse.ArgumentDefaultsHelpFormatter):
     """Shows a flag's default where it has one worth reading (not None, not off)."""
 
@@ -342,7 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
         "with a fully jitted JAX trainer.",
     )
     parser.add_argument("--version", action="version", version=f"fppo-jax {__version__}")
-    commands = parser.add_subparsers(dest="command", required=True)
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     parser.set_defaults(commands=commands.choices)
     formatter = _Defaults
 
@@ -351,8 +377,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="train one policy",
         description="Train one policy and print progress and a summary. FPPO-LP's alpha and "
         "FPPO-QP's k default to the paper's Table 2 for the task; other variants' "
-        "hyperparameters to the paper's values. --output DIR gets metrics.csv and TensorBoard "
-        "event files (tensorboard/) as training goes, then config.json and summary.txt. "
+        "hyperparameters to the paper's values. --output DIR gets config.json at once, "
+        "metrics.csv and TensorBoard event files (tensorboard/) as training goes, then "
+        "summary.txt. "
         "--checkpoint-dir DIR saves the full state as it goes; run the same command with "
         "--resume to continue a stopped run exactly where its last checkpoint left it.",
         formatter_class=formatter,

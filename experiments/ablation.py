@@ -6,7 +6,7 @@
 
 Each task has two parts, each one vmapped sweep (`fppo_jax.sweep`, `paper` preset) of 5
 settings × 5 seeds × 1M steps, chunked automatically to fit device memory: `alpha`, FPPO-LP
-with α ∈ {1.1, …, 1.5}, and `k`, FPPO-QP with k ∈ {0.1, …, 0.5} (SPEC §2). They run on
+with α ∈ {1.1, …, 1.5}, and `k`, FPPO-QP with k ∈ {0.1, …, 0.5} (the paper's Fig. 6). They run on
 `--backend` (default auto: MJX on a GPU, native MuJoCo on a CPU). As each part ends, its curves
 and run record go to <results>/ablation_<backend>/<task>/<part>/, the task's chart (max average
 return against α and against k, the paper's Fig. 6) to <results>/ablation_<backend>/<task>.png,
@@ -30,7 +30,7 @@ from fppo_jax.config import table2
 from fppo_jax.envs import BACKENDS, TASKS, choose_backend
 from fppo_jax.results import SweepResult
 
-PARTS = {  # part: the variant and the values of its own hyperparameter (SPEC §2)
+PARTS = {  # part: the variant and the values of its own hyperparameter (the paper's Fig. 6)
     "alpha": ("fppo-lp", "alpha", [1.1, 1.2, 1.3, 1.4, 1.5]),
     "k": ("fppo-qp", "k", [0.1, 0.2, 0.3, 0.4, 0.5]),
 }

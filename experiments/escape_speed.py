@@ -1,6 +1,6 @@
-"""The escape speed on the same data (SPEC §3): after each epoch of one update, the fraction of
-its batch in R+ ∪ R- under PPO, FPPO-LP and FPPO-QP, the three from the same state, batch and
-minibatch order.
+"""The escape speed on the same data (the paper's mechanism): after each epoch of one update, the
+fraction of its batch in R+ ∪ R- under PPO, FPPO-LP and FPPO-QP, the three from the same state,
+batch and minibatch order.
 
     python experiments/escape_speed.py                  # CartPole, Acrobot, Hopper, Walker2d
     python experiments/escape_speed.py --tasks cartpole --seeds 2 --points 2 4 --results /tmp/e
@@ -135,7 +135,7 @@ def below_ppo(fractions: np.ndarray) -> list[float]:
 def report(measured: Sequence[Measured], command: str) -> str:
     device = jax.devices()[0]
     lines = [
-        "# Escape speed on the same data (SPEC §3)",
+        "# Escape speed on the same data",
         "",
         f"- Machine: {device.platform.upper()}, {os.cpu_count()} CPU cores "
         f"({platform.processor() or platform.machine()}), jax {jax.__version__}; "

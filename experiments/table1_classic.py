@@ -2,15 +2,14 @@
 
     python experiments/table1_classic.py [--tasks cartpole acrobot mountaincar] [--seeds 5]
 
-Each task's 25 runs (variants × seeds) are one sweep: one vmapped, compiled program. "Max
-average return" follows SPEC §2: per seed, the mean return of the last 100 finished episodes
-after every update; averaged over seeds; the maximum of that curve, ± the standard deviation
-across seeds at that update; runs that diverged are left out, and counted beside their
-variant, as `fppo-jax table` does. Writes experiments/results/table1_classic.md, with the escape-
-speed comparison (SPEC §3) beside it, and each task's curves (`SweepResult.write`, with the
-metrics the table and the figures use) to experiments/results/table1_classic/<task>/, which
-`fppo-jax plot` and experiments/figures.py read.
-"""
+Each task's 25 runs (variants × seeds) are one sweep: one vmapped, compiled program. "Max average
+return" is the paper's: per seed, the mean return of the last 100 finished episodes after every
+update; averaged over seeds; the maximum of that curve, ± the standard deviation across seeds at
+that update; runs that diverged are left out, and counted beside their variant, as `fppo-jax table`
+does. Writes experiments/results/table1_classic.md, with the escape-speed comparison (the paper's
+mechanism) beside it, and each task's curves (`SweepResult.write`, with the metrics the table and
+the figures use) to experiments/results/table1_classic/<task>/, which `fppo-jax plot` and
+experiments/figures.py read."""
 
 from __future__ import annotations
 
@@ -27,7 +26,7 @@ from fppo_jax.results import max_average_return
 # What the table and the figures read: the curves stay small enough to keep in the repository.
 RECORDED = ("env_steps", "average_return", "negative_fraction_before", "negative_fraction_after")
 VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
-PAPER = {  # SPEC §2, Table 1
+PAPER = {  # the paper's Table 1
     "cartpole": (200.0, 200.0, 200.0, 192.7, 200.0),
     "acrobot": (-84.2, -82.0, -88.7, -86.8, -89.2),
     "mountaincar": (-130.6, -131.0, -143.3, -140.2, -146.2),
@@ -57,7 +56,8 @@ def main() -> None:
         "Command: `python experiments/table1_classic.py "
         f"--tasks {' '.join(args.tasks)} --seeds {args.seeds} --steps {args.steps}`",
         "",
-        f"Protocol (SPEC §2): {config.num_updates} updates × {config.samples_per_update} samples "
+        f"Protocol (the paper's): {config.num_updates} updates × "
+        f"{config.samples_per_update} samples "
         f"({config.num_envs} envs × {config.num_steps} steps) = "
         f"{config.num_updates * config.samples_per_update:,} env steps per run, "
         f"{config.num_minibatches} minibatches, {config.num_epochs} epochs, Adam 3e-4, γ 0.99, "

@@ -6,15 +6,14 @@ sweep, on the backend asked for.
     python experiments/table1_mujoco.py --backend native --steps 8192 --seeds 1 \\
         --variants ppo --tasks reacher --results /tmp/smoke                        # a smoke run
 
-Each task's runs (all five variants × seeds 0–4 by default, Table 2's α and k, the `paper`
-preset of SPEC §2) are one vmapped, compiled program (`fppo_jax.sweep`). As each task ends, its
+Each task's runs (all five variants × seeds 0–4 by default, Table 2's α and k, the `paper` preset:
+the paper's protocol) are one vmapped, compiled program (`fppo_jax.sweep`). As each task ends, its
 curves (`SweepResult.write`, the metrics the table and figures read) and its run record go to
 <results>/table1_mujoco_<backend>/<task>/, its learning curves (mean ± std over seeds, every
-variant) to <results>/table1_mujoco_<backend>/<task>.png, and <results>/
-table1_mujoco_<backend>.md is written again from every task recorded so far, saying which are
-still to run: a long reproduction can go task by task, across sittings. Neither MJX nor envpool
-is the paper's MuJoCo 1.5 with gym v2, so absolute returns differ; what should agree is how the
-variants compare.
+variant) to <results>/table1_mujoco_<backend>/<task>.png, and <results>/table1_mujoco_<backend>.md
+is written again from every task recorded so far, saying which are still to run: a long reproduction
+can go task by task, across sittings. Neither MJX nor envpool is the paper's MuJoCo 1.5 with gym v2,
+so absolute returns differ; what should agree is how the variants compare.
 """
 
 from __future__ import annotations
@@ -33,7 +32,7 @@ from fppo_jax.config import describe, preset_config, task_preset
 from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, choose_backend
 from fppo_jax.results import SweepResult
 
-PAPER = {  # SPEC §2, Table 1: FPPO-LP, FPPO-QP, PPO, TR-PPO, PPO-RB
+PAPER = {  # the paper's Table 1: FPPO-LP, FPPO-QP, PPO, TR-PPO, PPO-RB
     "walker2d": (4030.4, 3893.4, 3368.5, 3279.8, 2858.4),
     "ant": (2778.8, 3323.6, 2024.3, 2013.0, 2640.1),
     "reacher": (-6.1, -6.5, -7.6, -6.0, -7.8),
@@ -95,7 +94,7 @@ def report(args: argparse.Namespace, directory: Path, backend: str) -> Path:
     lines = [
         f"# Table 1, MuJoCo rows, on {backend}",
         "",
-        f"- Protocol (SPEC §2): {describe(config, 'paper')} per run (baselines' ppo2 MuJoCo "
+        f"- Protocol (the paper's): {describe(config, 'paper')} per run (baselines' ppo2 MuJoCo "
         "defaults, which the paper's baselines used); Table 2's α and k; each task's runs "
         "(variants × seeds) are one sweep, one compiled program.",
         "- Max average return: the maximum over updates of the seed-mean of the "

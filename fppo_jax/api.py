@@ -40,19 +40,18 @@ def train(
     """Train one policy with `variant` on `env` and return its metrics, parameters and policy.
 
     `env` is a registered name (:data:`fppo_jax.envs.TASKS`), a gymnax environment or an
-    :class:`~fppo_jax.envs.Environment`. For a registered task, FPPO-LP's α and FPPO-QP's k
-    default to the paper's Table 2 and `total_steps` to the paper's budget. `preset` names the
-    run's shape (:data:`fppo_jax.config.PRESETS`): ``"paper"`` (SPEC §2: 8 environments × 256
-    steps) or ``"massive"`` (2048 environments × 16 steps, for a GPU). `backend` runs a MuJoCo
-    task on ``"mjx"`` or in ``"native"`` MuJoCo (envpool, gym's own version of the task), or
-    ``"auto"``: MJX with a GPU or TPU, native on a CPU (:data:`fppo_jax.envs.BACKENDS`).
-    `settings` are
-    :class:`TrainConfig` fields (``num_envs``, ``num_steps``, ``num_minibatches``, …),
-    optimisation settings (``learning_rate``, ``gamma``, ``gae_lambda``, ``entropy_coef``,
-    ``value_coef``, ``max_grad_norm``) and how the run is driven
-    (:class:`~fppo_jax.driver.Options`: ``progress``, ``checkpoint_dir``, ``resume``,
-    ``checkpoint_every``, ``keep``, ``log_dir``, ``devices``, ``callback``, ``eval_every``,
-    ``eval_episodes``, ``wandb_project``). Everything is checked before compiling.
+    :class:`~fppo_jax.envs.Environment`. For a registered task, FPPO-LP's α and FPPO-QP's k default
+    to the paper's Table 2 and `total_steps` to the paper's budget. `preset` names the run's shape
+    (:data:`fppo_jax.config.PRESETS`): ``"paper"`` (the paper's protocol: 8 environments × 256
+    steps) or ``"massive"`` (2048 environments × 16 steps, for a GPU). `backend` runs a MuJoCo task
+    on ``"mjx"`` or in ``"native"`` MuJoCo (envpool, gym's own version of the task), or ``"auto"``:
+    MJX with a GPU or TPU, native on a CPU (:data:`fppo_jax.envs.BACKENDS`). `settings` are
+    :class:`TrainConfig` fields (``num_envs``, ``num_steps``, ``num_minibatches``, …), optimisation
+    settings (``learning_rate``, ``gamma``, ``gae_lambda``, ``entropy_coef``, ``value_coef``,
+    ``max_grad_norm``) and how the run is driven (:class:`~fppo_jax.driver.Options`: ``progress``,
+    ``checkpoint_dir``, ``resume``, ``checkpoint_every``, ``keep``, ``log_dir``, ``devices``,
+    ``callback``, ``eval_every``, ``eval_episodes``, ``wandb_project``). Everything is checked
+    before compiling.
 
     Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite (the last
     good checkpoint stays on disk).

@@ -3,7 +3,7 @@
 :class:`TrainConfig` fixes array shapes and program structure; changing it recompiles.
 :class:`Hyperparameters` is a pytree of arrays passed into the compiled program, so seeds and
 hyperparameters (variants included) can be vmapped without recompiling.
-Defaults follow the paper's protocol, OpenAI baselines' ppo2 (SPEC §2), and the paper's Table 2
+Defaults follow the paper's protocol (OpenAI baselines' ppo2 settings) and the paper's Table 2
 (:data:`TABLE2`). Every default and every check of a run's settings lives here, so that
 ``train``, ``sweep`` and the command line resolve them alike.
 """
@@ -22,7 +22,7 @@ from fppo_jax.envs import MUJOCO_TASKS, lookup
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import EPSILON, VARIANTS, Objective, objective, real
 
-# The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task (SPEC §1).
+# The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task.
 TABLE2: dict[str, dict[str, float]] = {
     **{task: {"alpha": 1.3, "k": 0.4} for task in ("cartpole", "acrobot", "mountaincar")},
     "hopper": {"alpha": 1.3, "k": 0.2},
@@ -190,7 +190,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-# baselines' ppo2, whose PPO the paper compares against (SPEC §2), anneals the learning rate
+# baselines' ppo2, whose PPO the paper compares against, anneals the learning rate
 # linearly to 0 with its MuJoCo defaults (`lr=lambda f: 3e-4 * f`) and keeps it constant
 # elsewhere (it has no defaults of its own for classic control). The paper does not say it
 # departed from them, so its preset does the same, task by task.

@@ -191,7 +191,7 @@ def _fppo_lp(o: Objective, r: jax.Array, a: jax.Array, kl: jax.Array) -> jax.Arr
 def _fppo_qp(o: Objective, r: jax.Array, a: jax.Array, kl: jax.Array) -> jax.Array:
     lo, hi = 1 - o.epsilon, 1 + o.epsilon
     r_plus, r_minus = negative_regions(r, a, o.epsilon)
-    # SPEC §1: the paper's Eq. 22 prints `+ k(lo - r)²` for R+, which makes F ≥ r so that the
+    # The paper's Eq. 22 prints `+ k(lo - r)²` for R+, which makes F ≥ r so that the
     # min keeps rA and nothing is pulled. Its Eq. 21 and proof (Eq. 23) give `r - k(lo - r)²`.
     # The distance is masked before it is squared: an unselected branch's infinite square
     # would turn the select's zero gradient into NaN.

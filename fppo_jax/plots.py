@@ -209,9 +209,10 @@ def ablation_keys(result: SweepResult) -> list[str]:
 
 
 def plot_ablation(result: SweepResult, *, axes: Sequence[Axes] | None = None) -> Figure:
-    """Max average return (SPEC §2) against each swept hyperparameter (:func:`ablation_keys`), one
-    panel per hyperparameter (on `axes` if given) and one line per variant. Runs that diverged
-    are left out, as the table leaves them out, and the legend says how many did."""
+    """Max average return (the paper's statistic) against each swept hyperparameter
+    (:func:`ablation_keys`), one panel per hyperparameter (on `axes` if given) and one line per
+    variant. Runs that diverged are left out, as the table leaves them out, and the legend says how
+    many did."""
     keys = ablation_keys(result)
     if not keys:
         raise ValueError("no numeric hyperparameter takes several values in this sweep")

@@ -38,7 +38,7 @@ from fppo_jax.normalization import RunningStats
 from fppo_jax.objectives import distance_past_bound, negative_regions
 from fppo_jax.permutation import permutation
 
-RETURN_WINDOW = 100  # episodes in `average_return` (SPEC §2)
+RETURN_WINDOW = 100  # episodes in `average_return` (the paper's average return)
 
 
 @jax.tree_util.register_dataclass
@@ -69,7 +69,7 @@ class TrainState:
     key: jax.Array
 
 
-# Loss diagnostics averaged over the first epoch only, and their metrics' names. SPEC §3, escape
+# Loss diagnostics averaged over the first epoch only, and their metrics' names. The escape
 # speed: the fraction of the batch in R+ ∪ R- as each minibatch meets it before training on it.
 _FIRST_EPOCH = {"negative_fraction": "negative_fraction_before"}
 
@@ -78,8 +78,8 @@ METRICS: tuple[str, ...] = (
     "average_return",  # mean return of the last 100 finished episodes (NaN before any)
     # Each of LossInfo's diagnostics, averaged over the update.
     *(_FIRST_EPOCH.get(name, name) for name in LossInfo._fields),
-    # SPEC §3, under the parameters after the last epoch: the fraction of the batch in R+ ∪ R-,
-    # and how far past the bound those samples sit on average.
+    # The escape speed, under the parameters after the last epoch: the fraction of the batch in
+    # R+ ∪ R-, and how far past the bound those samples sit on average.
     "negative_fraction_after",
     "negative_distance_after",
 )
@@ -305,8 +305,8 @@ class Trainer:
     def escape_by_epoch(
         self, state: TrainState, hp: Hyperparameters, batch: Batch | None = None
     ) -> jax.Array:
-        """SPEC §3 for the next update from `state`: the fraction of its batch in R+ ∪ R- after
-        each of its epochs, [num_epochs] (before the first, every ratio is 1 and none is).
+        """The escape speed of the next update from `state`: the fraction of its batch in R+ ∪ R-
+        after each of its epochs, [num_epochs] (before the first, every ratio is 1 and none is).
         The batch and the minibatch order are those :meth:`update` would use, so variants
         given the same state are compared on the same samples. Environments stepped outside
         JAX (native MuJoCo) give a new batch at every rollout: collect it once
@@ -324,7 +324,7 @@ class Trainer:
         self, params: dict, batch: Batch, epsilon: jax.Array
     ) -> tuple[jax.Array, jax.Array]:
         """The fraction of the batch in R+ ∪ R- under `params`, and how far past the bound those
-        samples sit on average (SPEC §3)."""
+        samples sit on average (the escape speed's measures)."""
         dist = self.networks.distribution(params, batch.obs)
         ratio = jnp.exp(dist.log_prob(batch.action) - batch.log_prob)
         r_plus, r_minus = negative_regions(ratio, batch.advantage, epsilon)

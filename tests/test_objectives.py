@@ -1,4 +1,5 @@
-"""Every variant's value and slope against SPEC §1, region by region."""
+"""Every variant's value and slope against the paper's definitions (Eq. 22 with its sign
+corrected), region by region."""
 
 import jax
 import jax.numpy as jnp
@@ -18,7 +19,7 @@ def value_and_slope(obj, r, a, kl=0.0):
     return float(value), float(slope)
 
 
-# (variant, hyperparameters, r, A, KL, expected value, expected slope), from SPEC §1.
+# (variant, hyperparameters, r, A, KL, expected value, expected slope), by the paper's definitions.
 alpha, k, rb, delta = 1.3, 0.4, 0.3, 0.035
 CASES = [
     # PPO: slope A inside, 0 where clipped, A in R± (the min keeps rA).

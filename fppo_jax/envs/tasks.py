@@ -76,8 +76,8 @@ def _native(task_id: str) -> Callable[[], Environment]:
 
 @dataclasses.dataclass(frozen=True)
 class Task:
-    """A named task and its default step budget: the paper's, for a registered task (SPEC §1;
-    SPEC §2). `backend` names what runs `make`'s environment; `native`, if given, is the
+    """A named task and its default step budget: the paper's, for a registered task.
+    `backend` names what runs `make`'s environment; `native`, if given, is the
     envpool id of the same task in native MuJoCo (gym's own version of it)."""
 
     name: str

@@ -15,6 +15,7 @@ from fppo_jax.config import (
     resolve_config,
     resolve_hyperparameters,
 )
+from fppo_jax.distributed import is_main_process
 from fppo_jax.driver import Options, Plan, drive
 from fppo_jax.envs import Environment, as_environment, choose_backend, describe_backend
 from fppo_jax.objectives import EPSILON
@@ -51,7 +52,8 @@ def train(
     ``max_grad_norm``) and how the run is driven (:class:`~fppo_jax.driver.Options`: ``progress``,
     ``checkpoint_dir``, ``resume``, ``checkpoint_every``, ``keep``, ``log_dir``, ``devices``,
     ``callback``, ``eval_every``, ``eval_episodes``, ``wandb_project``). Everything is checked
-    before compiling.
+    before compiling. With ``log_dir``, the run's ``summary.txt`` is written there at the end,
+    beside the ``config.json``, ``metrics.csv`` and TensorBoard files written as it trains.
 
     Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite (the last
     good checkpoint stays on disk).
@@ -77,7 +79,7 @@ def train(
     header = f"{description}{describe_backend(chosen, why)}: {describe(config, preset)}"
     plan = Plan("train", trainer, jax.random.key(seed), hp, record, description, header)
     outcome = drive(plan, options)
-    return TrainResult(
+    result = TrainResult(
         metrics=outcome.metrics,
         params=outcome.state.params,
         config=record,
@@ -89,3 +91,6 @@ def train(
         resumed_from=outcome.resumed_from,
         stopped_at=outcome.stopped_at,
     )
+    if options.log_dir is not None and is_main_process():
+        result.write(options.log_dir)  # summary.txt, beside what the driver wrote
+    return result

@@ -575,8 +575,7 @@ def _train(args: argparse.Namespace) -> int:
     if not is_main_process():
         return 0
     print(result.summary())
-    if args.output:
-        result.write(args.output)
+    if args.output:  # written by train
         print(f"wrote {args.output}/config.json, metrics.csv, tensorboard/, summary.txt")
     if args.save_policy:
         print(f"wrote {result.save(args.save_policy)}/policy.json, policy.npz")

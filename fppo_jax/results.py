@@ -18,7 +18,7 @@ import numpy as np
 from fppo_jax import statistics
 from fppo_jax.checkpoint import save_policy
 from fppo_jax.config import SYMBOLS, VARIANT_SPECIFIC
-from fppo_jax.envs import Environment
+from fppo_jax.envs import Environment, resets_itself
 from fppo_jax.files import write_atomically, write_json
 from fppo_jax.policy import Policy
 from fppo_jax.trainer import METRICS, TrainState
@@ -94,7 +94,7 @@ class TrainResult:
         trained = steps - self.resumed_from * samples
         speed = f"{trained / self.train_seconds:,.0f} env steps/s" if trained else "nothing left"
         resumed = f", resumed at update {self.resumed_from}" if self.resumed_from else ""
-        if resumed and c.get("backend") == "native":
+        if resumed and resets_itself(self.env):
             resumed += " in fresh environments"
         if self.stopped_at is not None:
             resumed += f", stopped by the callback at update {self.stopped_at}"
@@ -172,9 +172,15 @@ class SweepResult:
 
     def scores(self, endpoint: str = "final") -> list[np.ndarray]:
         """Each setting's score per run that did not diverge, by `endpoint` of its average-return
-        curve (:data:`fppo_jax.statistics.ENDPOINTS`)."""
+        curve, or of its evaluation returns for ``eval`` (:data:`fppo_jax.statistics.ENDPOINTS`)."""
+        metric = "eval_return" if endpoint == "eval" else "average_return"
+        if metric not in self.metrics:
+            raise ValueError(
+                "the eval endpoint needs evaluations, and this sweep recorded none: train it "
+                "with eval_every (--eval-every)"
+            )
         return [
-            statistics.endpoint(self.setting_metrics(i)["average_return"], endpoint)
+            statistics.endpoint(self.setting_metrics(i)[metric], endpoint)
             for i in range(len(self.settings))
         ]
 
@@ -289,11 +295,15 @@ class SweepResult:
             "–" if fraction is None else f"{np.mean(fraction[runs]):.2%}",
         ]
 
-    def write(self, directory: str | Path, metrics: Sequence[str] = METRICS) -> None:
-        """`curves.csv` (one row per run and update, a column per name in `metrics`) and
+    def write(self, directory: str | Path, metrics: Sequence[str] | None = None) -> None:
+        """`curves.csv` (one row per run and update, a column per name in `metrics`: by default
+        every metric recorded, the trainer's and the host's such as ``eval_return``) and
         `sweep.json` (everything else, the SHA-256 digest of that `curves.csv` and one of each
         run's values, by which a re-sorted or filtered `curves.csv` is still known for its
         sweep's), each whole or not at all. Fewer metrics make a smaller file to keep."""
+        if metrics is None:
+            metrics = [*(m for m in METRICS if m in self.metrics)]
+            metrics += sorted(set(self.metrics) - set(METRICS))
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         keys = list(dict.fromkeys(k for s in self.settings for k in s))
@@ -358,7 +368,8 @@ class SweepResult:
                 "since"
             )
         text = curves.decode(errors="replace")
-        metrics, present = _read_curves(path, text, record["runs"], every_run=whole)
+        keys = {key for setting in record["settings"] for key in setting}
+        metrics, present = _read_curves(path, text, record["runs"], keys, every_run=whole)
         if not whole:
             _check_run_digests(path, directory / "sweep.json", record, metrics, present)
         num_updates = metrics["env_steps"].shape[1]
@@ -528,7 +539,7 @@ RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
 OPTIONAL_RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
     "digest_columns": (
         "a list of metric names",
-        lambda v, r: _list_of(v, lambda name: name in METRICS) and "env_steps" in v,
+        lambda v, r: _list_of(v, lambda name: isinstance(name, str)) and "env_steps" in v,
     ),
     "run_digests": (
         "a list of one SHA-256 digest per run",
@@ -569,11 +580,17 @@ CURVES_NEEDED = ("run", "update", "env_steps", "average_return")
 
 
 def _read_curves(
-    path: Path, text: str, runs: Sequence[Mapping[str, Any]], *, every_run: bool = True
+    path: Path,
+    text: str,
+    runs: Sequence[Mapping[str, Any]],
+    keys: set[str],
+    *,
+    every_run: bool = True,
 ) -> tuple[dict[str, np.ndarray], list[int]]:
-    """The metrics of a sweep's `curves.csv` at `path`, whose `text` was read, [run, update],
-    for the runs of `runs` (its ``sweep.json``'s) that it holds (all of them if `every_run`),
-    and those runs' indices; a ``ValueError`` naming the file says what is wrong."""
+    """The metrics of a sweep's `curves.csv` at `path`, whose `text` was read, [run, update]:
+    every column but the run's, its seed's, its setting's (`keys`) and the update's, for the
+    runs of `runs` (its ``sweep.json``'s) that it holds (all of them if `every_run`), and
+    those runs' indices; a ``ValueError`` naming the file says what is wrong."""
     with io.StringIO(text, newline="") as f:
         reader = csv.DictReader(f)
         columns = reader.fieldnames or []
@@ -581,6 +598,7 @@ def _read_curves(
         if missing:
             raise ValueError(f"{path} has no {', '.join(missing)} column")
         names = [name for name in METRICS if name in columns]
+        names += [c for c in columns if c not in {*METRICS, *keys, "run", "seed", "update"}]
         cells: dict[tuple[int, int], list[float]] = {}
         for row in reader:
             where = f"{path}, line {reader.line_num}"

@@ -32,6 +32,7 @@ ENDPOINTS: dict[str, str] = {
     "final": "the last-100-episode average return after the last update",
     "max": "the largest last-100-episode average return after any update (the run's best)",
     "auc": "the area under the learning curve: the average return averaged over updates",
+    "eval": "the last evaluation's return (eval_every): the deterministic policy's mean return",
 }
 STATISTICS: dict[str, str] = {
     "iqm": "IQM",
@@ -41,9 +42,10 @@ STATISTICS: dict[str, str] = {
 
 
 def endpoint(curves: np.ndarray, name: str = "final") -> np.ndarray:
-    """Each run's score (:data:`ENDPOINTS`) from `curves`, [run, update]. Updates before a run's
+    """Each run's score (:data:`ENDPOINTS`) from `curves`, [run, update]: the average return's,
+    or for ``eval`` the evaluation return's (NaN between evaluations). Updates before a run's
     first finished episode (NaN) are left out of ``max`` and ``auc``; a run with no finished
-    episode scores NaN."""
+    episode (or no evaluation) scores NaN."""
     curves = np.asarray(curves, dtype=float)
     if name not in ENDPOINTS:
         raise ValueError(f"unknown endpoint {name!r}; valid endpoints: {', '.join(ENDPOINTS)}")
@@ -52,6 +54,9 @@ def endpoint(curves: np.ndarray, name: str = "final") -> np.ndarray:
     if name == "final":
         return curves[:, -1]
     finite = np.isfinite(curves)
+    if name == "eval":
+        last = np.where(finite.any(axis=1), curves.shape[1] - 1 - np.argmax(finite[:, ::-1], 1), 0)
+        return np.where(finite.any(axis=1), curves[np.arange(len(curves)), last], np.nan)
     filled = np.where(finite, curves, 0.0)
     counts = finite.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -97,6 +97,20 @@ def test_a_sweep_logs_every_run_and_its_evaluations(tmp_path):
         "ppo",
         "fppo-qp",
     ]
+    # curves.csv carries the host's metrics too: the evaluations reach tables and plots.
+    back = fppo_jax.SweepResult.read(tmp_path)
+    np.testing.assert_array_equal(back.metrics["eval_return"], result.metrics["eval_return"])
+    last = [scores.tolist() for scores in back.scores("eval")]
+    assert last == [result.metrics["eval_return"][2 * i : 2 * i + 2, 3].tolist() for i in (0, 1)]
+    assert "| ppo |" in back.table("iqm", "eval")
+    with pytest.raises(ValueError, match="recorded none: train it with eval_every"):
+        sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=128, **TINY).scores("eval")
+
+
+def test_train_with_a_log_dir_writes_the_summary_as_the_cli_does(tmp_path):
+    result = train(**RUN, log_dir=tmp_path)
+    assert (tmp_path / "summary.txt").read_text() == result.summary() + "\n"
+    assert {p.name for p in tmp_path.iterdir()} >= {"config.json", "metrics.csv", "summary.txt"}
 
 
 def test_a_callback_can_stop_a_sweep():

@@ -152,3 +152,9 @@ def test_the_paper_statistic_s_difference_and_its_interval():
     assert low < point < high
     assert statistics.max_average_difference(x, y, seed=2) == (point, low, high)
     assert statistics.max_average_difference(x, x[::-1])[0] == 0.0
+
+
+def test_the_eval_endpoint_is_each_run_s_last_evaluation():
+    nan = np.nan
+    curves = np.array([[nan, 3.0, nan, 5.0], [nan, 2.0, nan, nan], [nan, nan, nan, nan]])
+    np.testing.assert_array_equal(statistics.endpoint(curves, "eval"), [5.0, 2.0, nan])

@@ -3,25 +3,19 @@ orbax atomically and in the background, and verified when read back.
 
 ``<directory>/<step>/`` holds four items: ``state`` (every array of the training state, PRNG
 keys as their raw data), ``curves`` (the metrics of every update so far), ``policy`` (what
-:func:`load_policy` needs) and ``record`` (JSON: the run's configuration, the policy's
-description and a SHA-256 digest of each array item). Orbax writes a step into a
+:func:`~fppo_jax.saved_policy.load_policy` needs) and ``record`` (JSON: the run's
+configuration, the policy's description and a SHA-256 digest of each array item). Orbax writes a step into a
 temporary directory and renames it once complete, so a killed process leaves whole checkpoints
 only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
 checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old
 checkpoints are deleted only after a newer one is complete.
 
-A trained policy can also be saved on its own (:func:`save_policy`, ``TrainResult.save``):
-``<directory>/policy.json`` (its description, the run's configuration and a SHA-256 digest of
-its arrays) and ``<directory>/policy.npz`` (the arrays, named by their paths), each written to a
-temporary name and renamed. :func:`load_policy` reads either kind of directory.
+Saved policies, a trained policy on its own, are :mod:`fppo_jax.saved_policy`'s.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import io
-import json
 import logging
 import os
 import shutil
@@ -34,9 +28,8 @@ from typing import Any
 import jax
 import numpy as np
 import orbax.checkpoint as ocp
-from flax.traverse_util import flatten_dict, unflatten_dict
 
-from fppo_jax.files import DirectoryBusy, DirectoryLock, write_atomically
+from fppo_jax.files import DirectoryBusy, DirectoryLock, first_line, json_value, tree_digest
 from fppo_jax.policy import Policy
 
 # Orbax reports every save and restore through absl logging at INFO and WARNING.
@@ -123,7 +116,7 @@ def check_same_run(
         raise ConfigMismatch(
             f"{directory} holds the checkpoints of a {record.get('kind')}, not of a {kind}"
         )
-    saved, current = _jsonable(record["config"]), _jsonable(current)
+    saved, current = json_value(record["config"]), json_value(current)
     longer = current.get("total_steps", 0) > saved.get("total_steps", 0)
     annealed = [bool(c.get("anneal_learning_rate")) for c in (saved, current)]
     if longer and kind == "train" and not any(annealed):
@@ -145,101 +138,6 @@ def check_same_run(
             + "; ".join(differing)
             + ". Resume with the checkpoint's settings, or use another checkpoint directory."
         )
-
-
-POLICY_FILE, ARRAYS_FILE = "policy.json", "policy.npz"
-
-
-def save_policy(
-    directory: str | Path,
-    policy: Policy,
-    record: dict[str, Any],
-    *,
-    overwrite: bool = False,
-) -> Path:
-    """Write `policy` and `record` (the run's ``config`` and its ``update``) to `directory` as
-    ``policy.json`` and ``policy.npz``; a saved policy already there is refused unless
-    `overwrite`. Returns the directory."""
-    directory = Path(directory)
-    check_no_saved_policy(directory, overwrite)
-    directory.mkdir(parents=True, exist_ok=True)
-    arrays = flatten_dict(jax.device_get(policy.arrays()), sep="/")
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
-    saved = {
-        **record,
-        "kind": "policy",
-        "policy": policy.describe(),
-        "digest": _digest(arrays),
-    }
-    # policy.json last: it marks the directory as a saved policy, and an overwrite killed
-    # between the two renames leaves arrays that fail its digest, never a wrong policy.
-    write_atomically(directory / ARRAYS_FILE, buffer.getvalue())
-    write_atomically(
-        directory / POLICY_FILE, (json.dumps(_jsonable(saved), indent=2) + "\n").encode()
-    )
-    return directory
-
-
-def check_no_saved_policy(
-    directory: str | Path, overwrite: bool = False, *, replace: str = "pass overwrite=True"
-) -> None:
-    """Raise ValueError if `directory` holds a saved policy and not `overwrite`; the message
-    says how to replace it (`replace`: the Python way unless told)."""
-    if not overwrite and (Path(directory) / POLICY_FILE).exists():
-        raise ValueError(
-            f"{directory} already holds a saved policy; {replace} to replace it, or choose "
-            "another directory"
-        )
-
-
-def load_policy(directory: str | Path) -> Policy:
-    """The trained policy in `directory`, as a :class:`~fppo_jax.policy.Policy`: an inference
-    function of raw observations that needs neither the trainer nor the environment.
-    `directory` holds a saved policy (``TrainResult.save``) or the checkpoints of
-    :func:`fppo_jax.train` (``checkpoint_dir``), whose newest readable one is used."""
-    return read_policy(directory)[0]
-
-
-def read_policy(directory: str | Path) -> tuple[Policy, dict[str, Any]]:
-    """The policy in `directory` and the record of its run (``config``, ``update``, ``kind``:
-    ``"policy"`` for a saved policy, ``"train"`` for a checkpoint)."""
-    directory = Path(directory)
-    if directory.is_file():
-        raise FileNotFoundError(
-            f"{directory} is a file: name the directory that holds a saved policy "
-            f"({POLICY_FILE} and {ARRAYS_FILE}) or a run's checkpoints"
-        )
-    if not directory.is_dir():
-        raise FileNotFoundError(f"policy or checkpoint directory {directory} not found")
-    if (directory / POLICY_FILE).exists():
-        return _read_saved_policy(directory)
-    checkpoints = Checkpoints(directory)
-    try:
-        if not checkpoints.steps():
-            raise FileNotFoundError(
-                f"{directory} holds neither a saved policy ({POLICY_FILE} and {ARRAYS_FILE}) "
-                "nor checkpoints"
-            )
-        return checkpoints.policy()
-    finally:
-        checkpoints.close()
-
-
-def _read_saved_policy(directory: Path) -> tuple[Policy, dict[str, Any]]:
-    try:
-        saved = json.loads((directory / POLICY_FILE).read_text())
-        with np.load(directory / ARRAYS_FILE, allow_pickle=False) as npz:
-            arrays = dict(npz)
-        if _digest(arrays) != saved["digest"]:
-            raise ValueError("its arrays do not match the digest written with them")
-        policy = Policy.from_parts(saved["policy"], unflatten_dict(arrays, sep="/"))
-    except Exception as error:  # any failure to read back is damage
-        raise ValueError(
-            f"the saved policy in {directory} is damaged ({type(error).__name__}: "
-            f"{_first_line(error)})"
-        ) from error
-    return policy, saved
 
 
 class Checkpoints:
@@ -335,12 +233,12 @@ class Checkpoints:
         record = {
             **record,
             "policy": policy.describe() if policy is not None else None,
-            "digests": {name: _digest(value) for name, value in arrays.items()},
+            "digests": {name: tree_digest(value) for name, value in arrays.items()},
         }
         # Orbax waits for the previous save to finish before it starts this one.
         items = {name: ocp.args.StandardSave(value) for name, value in arrays.items()}
         started = self._manager.save(
-            step, args=_args(**items, record=ocp.args.JsonSave(_jsonable(record)))
+            step, args=_args(**items, record=ocp.args.JsonSave(json_value(record)))
         )
         if not started:
             raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
@@ -356,7 +254,7 @@ class Checkpoints:
             except Exception as error:  # try the previous one
                 warnings.warn(
                     f"checkpoint at step {step} in {self.directory} could not be read "
-                    f"({type(error).__name__}: {_first_line(error)}); trying the previous one",
+                    f"({type(error).__name__}: {first_line(error)}); trying the previous one",
                     DamagedCheckpoint,
                     stacklevel=2,
                 )
@@ -407,7 +305,7 @@ class Checkpoints:
         self._manager.reload()
         warnings.warn(
             f"checkpoint at step {step} in {self.directory} is damaged "
-            f"({type(error).__name__}: {_first_line(error)}); moved to {target}, trying the "
+            f"({type(error).__name__}: {first_line(error)}); moved to {target}, trying the "
             "previous one",
             DamagedCheckpoint,
             stacklevel=3,
@@ -489,29 +387,5 @@ def _from_storable(x: np.ndarray, like: Any) -> Any:
 
 
 def _verify(name: str, arrays: Any, record: dict[str, Any]) -> None:
-    if _digest(arrays) != record["digests"][name]:
+    if tree_digest(arrays) != record["digests"][name]:
         raise ValueError(f"its {name} arrays do not match the digest written with them")
-
-
-def _digest(arrays: Any) -> str:
-    sha = hashlib.sha256()
-    for path, leaf in jax.tree_util.tree_flatten_with_path(arrays)[0]:
-        leaf = np.ascontiguousarray(leaf)
-        sha.update(f"{jax.tree_util.keystr(path)} {leaf.dtype} {leaf.shape}".encode())
-        sha.update(leaf.tobytes())
-    return sha.hexdigest()
-
-
-def _jsonable(value: Any) -> Any:
-    return json.loads(json.dumps(value, default=_to_json))
-
-
-def _to_json(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
-
-
-def _first_line(error: Exception) -> str:
-    text = str(error).strip()
-    return text.splitlines()[0][:200] if text else "no message"

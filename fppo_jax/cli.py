@@ -19,14 +19,7 @@ from typing import Any, NoReturn
 
 from fppo_jax import __version__
 from fppo_jax.api import train
-from fppo_jax.checkpoint import (
-    ARRAYS_FILE,
-    POLICY_FILE,
-    CheckpointsUnavailable,
-    DamagedCheckpoint,
-    check_no_saved_policy,
-    load_policy,
-)
+from fppo_jax.checkpoint import CheckpointsUnavailable, DamagedCheckpoint
 from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
     PRESETS,
@@ -42,6 +35,12 @@ from fppo_jax.extras import install_hint
 from fppo_jax.files import writable_directory
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
 from fppo_jax.results import SweepResult, TrainingDiverged, merge
+from fppo_jax.saved_policy import (
+    ARRAYS_FILE,
+    POLICY_FILE,
+    check_no_saved_policy,
+    load_policy,
+)
 from fppo_jax.statistics import CONFIDENCE, ENDPOINTS, STATISTICS
 from fppo_jax.sweep import sweep
 
@@ -620,8 +619,8 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from fppo_jax.checkpoint import read_policy
     from fppo_jax.evaluation import evaluate
+    from fppo_jax.saved_policy import read_policy
 
     if args.render:
         from fppo_jax.render import check_render_path

@@ -6,12 +6,14 @@ half-written file."""
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import json
 import os
 import tempfile
 from pathlib import Path
 from typing import Any
 
+import jax
 import numpy as np
 
 
@@ -111,3 +113,20 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
+
+
+def tree_digest(arrays: Any) -> str:
+    """The SHA-256 of a tree of arrays: each leaf's path, dtype and shape, then its bytes, in
+    the tree's order (what checkpoints and saved policies record of their arrays)."""
+    sha = hashlib.sha256()
+    for path, leaf in jax.tree_util.tree_flatten_with_path(arrays)[0]:
+        leaf = np.ascontiguousarray(leaf)
+        sha.update(f"{jax.tree_util.keystr(path)} {leaf.dtype} {leaf.shape}".encode())
+        sha.update(leaf.tobytes())
+    return sha.hexdigest()
+
+
+def first_line(error: Exception) -> str:
+    """An error's message, its first line, for a report of what could not be read."""
+    text = str(error).strip()
+    return text.splitlines()[0][:200] if text else "no message"

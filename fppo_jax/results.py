@@ -16,11 +16,11 @@ from typing import Any
 import numpy as np
 
 from fppo_jax import statistics
-from fppo_jax.checkpoint import save_policy
 from fppo_jax.config import SYMBOLS, VARIANT_SPECIFIC
 from fppo_jax.envs import Environment, resets_itself
 from fppo_jax.files import write_atomically, write_json
 from fppo_jax.policy import Policy
+from fppo_jax.saved_policy import save_policy
 from fppo_jax.trainer import METRICS, TrainState
 
 
@@ -69,7 +69,7 @@ class TrainResult:
     def save(self, directory: str | Path, *, overwrite: bool = False) -> Path:
         """Save the trained policy and the run's configuration in `directory`, for
         :func:`fppo_jax.load_policy` and ``fppo-jax eval --checkpoint`` (see
-        :func:`fppo_jax.checkpoint.save_policy`); a saved policy already there is refused
+        :func:`fppo_jax.saved_policy.save_policy`); a saved policy already there is refused
         unless `overwrite`. Returns the directory."""
         record = {"config": self.config, "update": len(self.metrics["env_steps"])}
         return save_policy(directory, self.policy, record, overwrite=overwrite)

@@ -25,7 +25,7 @@ def saved_policies(tmp_path_factory) -> dict:
     import jax
 
     from fppo_jax import train
-    from fppo_jax.checkpoint import save_policy
+    from fppo_jax.saved_policy import save_policy
 
     where = tmp_path_factory.mktemp("policies")
     discrete = train("cartpole", "fppo-lp", total_steps=512, **TINY)

@@ -20,11 +20,12 @@ from tensorboardX.proto.event_pb2 import Event
 
 import fppo_jax
 from fppo_jax import ConfigMismatch, DamagedCheckpoint, TrainingDiverged, load_policy, train
-from fppo_jax.checkpoint import Checkpoints, read_policy, save_policy
+from fppo_jax.checkpoint import Checkpoints
 from fppo_jax.cli import main
 from fppo_jax.envs import Box
 from fppo_jax.normalization import RunningStats
 from fppo_jax.policy import Policy
+from fppo_jax.saved_policy import read_policy, save_policy
 from fppo_jax.trainer import METRICS
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}

@@ -3,8 +3,8 @@ orbax atomically and in the background, and verified when read back.
 
 ``<directory>/<step>/`` holds four items: ``state`` (every array of the training state, PRNG
 keys as their raw data), ``curves`` (the metrics of every update so far), ``policy`` (what
-:func:`~fppo_jax.saved_policy.load_policy` needs) and ``record`` (JSON: the run's
-configuration, the policy's description and a SHA-256 digest of each array item). Orbax writes a step into a
+:func:`~fppo_jax.saved_policy.load_policy` needs) and ``record`` (JSON: the run's configuration,
+the policy's description and a SHA-256 digest of each array item). Orbax writes a step into a
 temporary directory and renames it once complete, so a killed process leaves whole checkpoints
 only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
 checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old

@@ -77,7 +77,8 @@ def measure(task: str, seeds: int, points: Sequence[int], backend: str) -> Measu
     @jax.vmap
     def probe(state):
         rollout_key = jax.random.split(state.key, 3)[1]
-        batch, _, envs, *_ = trainer.collect(state, ppo, rollout_key)
+        collected = trainer.collect(state, ppo, rollout_key)
+        batch, envs = collected.batch, collected.envs
         by_variant = jax.vmap(trainer.escape_by_epoch, in_axes=(None, 0, None))
         return dataclasses.replace(state, envs=envs), by_variant(state, variants, batch)
 

@@ -151,11 +151,11 @@ def epochs_rate(
     per update, their matrix products' FLOPs per second)."""
     config = trainer.config
     state = jax.jit(jax.vmap(trainer.init))(keys, hps)
-    batch = jax.jit(jax.vmap(lambda s, h, k: trainer.collect(s, h, k)[0]))(state, hps, keys)
+    batch = jax.jit(jax.vmap(lambda s, h, k: trainer.collect(s, h, k).batch))(state, hps, keys)
 
     def repeated(state: TrainState, hp: Hyperparameters, batch: Batch, key: jax.Array):
         def once(total: jax.Array, key: jax.Array) -> tuple[jax.Array, None]:
-            (params, _), losses, _, _ = trainer._epochs(state, hp, batch, key)
+            params, _, losses, _, _ = trainer._epochs(state, hp, batch, key)
             # Everything the epochs compute reaches the result, so none of it is left out.
             leaves = [jnp.sum(leaf) for leaf in jax.tree.leaves(params)]
             return total + jnp.sum(losses) + sum(leaves), None

@@ -103,6 +103,30 @@ class Transition(NamedTuple):
     episode_return: jax.Array
 
 
+class Collected(NamedTuple):
+    """A rollout and what follows from it: the update's batch (advantages and targets
+    included), the trajectory, the environments where it left them, and the normalisers'
+    statistics with its samples."""
+
+    batch: Batch
+    trajectory: Transition
+    envs: Envs
+    obs_stats: RunningStats
+    return_stats: RunningStats
+
+
+class Trained(NamedTuple):
+    """What an update's epochs leave: the parameters and the optimiser's state, each
+    minibatch step's loss and diagnostics [epoch, minibatch], and (when tracked) the fraction
+    of the batch in R+ ∪ R- after each epoch."""
+
+    params: Any
+    opt_state: Any
+    losses: jax.Array
+    infos: LossInfo
+    escape_by_epoch: jax.Array | None
+
+
 def make_optimizer(hp: Hyperparameters, config: TrainConfig) -> optax.GradientTransformation:
     """Global-norm clipping then Adam (ε = 1e-5), one optimiser for policy and value.
 
@@ -227,7 +251,7 @@ class Trainer:
         key, rollout_key, epochs_key = jax.random.split(state.key, 3)
         batch, traj, envs, obs_stats, return_stats = self.collect(state, hp, rollout_key)
         with jax.named_scope("epochs"):
-            (params, opt_state), losses, infos, _ = self._epochs(state, hp, batch, epochs_key)
+            params, opt_state, losses, infos, _ = self._epochs(state, hp, batch, epochs_key)
         with jax.named_scope("escape"):
             negative_fraction, negative_distance = self._escape(params, batch, hp.objective.epsilon)
 
@@ -256,9 +280,7 @@ class Trainer:
         )
         return _keep_if_finite(new_state, state, losses), metrics
 
-    def collect(
-        self, state: TrainState, hp: Hyperparameters, key: jax.Array
-    ) -> tuple[Batch, Transition, Envs, RunningStats, RunningStats]:
+    def collect(self, state: TrainState, hp: Hyperparameters, key: jax.Array) -> Collected:
         """A rollout and its batch (advantages, targets), with the environments where the
         rollout left them and the updated normaliser statistics."""
         config = self.config
@@ -300,7 +322,7 @@ class Trainer:
                 traj.obs, traj.action, traj.log_prob, values, advantages, targets, traj.distribution
             ),
         )
-        return batch, traj, envs, obs_stats, return_stats
+        return Collected(batch, traj, envs, obs_stats, return_stats)
 
     def escape_by_epoch(
         self, state: TrainState, hp: Hyperparameters, batch: Batch | None = None
@@ -313,8 +335,8 @@ class Trainer:
         (:meth:`collect`) and pass it as `batch` to compare variants on it."""
         _, rollout_key, epochs_key = jax.random.split(state.key, 3)
         if batch is None:
-            batch = self.collect(state, hp, rollout_key)[0]
-        return self._epochs(state, hp, batch, epochs_key, track_escape=True)[3]
+            batch = self.collect(state, hp, rollout_key).batch
+        return self._epochs(state, hp, batch, epochs_key, track_escape=True).escape_by_epoch
 
     def network_input(self, stats: RunningStats, obs: jax.Array) -> jax.Array:
         """Raw observations as the networks see them (normalised with `stats` if configured)."""
@@ -415,9 +437,8 @@ class Trainer:
         batch: Batch,
         key: jax.Array,
         track_escape: bool = False,
-    ) -> tuple[tuple, jax.Array, LossInfo, jax.Array | None]:
-        """Epochs × shuffled minibatches: (parameters and optimiser state, losses, infos, and
-        with `track_escape` the fraction of the batch in R+ ∪ R- after each epoch)."""
+    ) -> Trained:
+        """Epochs × shuffled minibatches, tracking the escape speed by epoch if asked."""
         config = self.config
         optimizer = make_optimizer(hp, config)
         value_and_grad = jax.value_and_grad(ppo_loss, has_aux=True)
@@ -447,8 +468,8 @@ class Trainer:
         with jax.named_scope("shuffle"):
             orders = jax.vmap(permutation, (0, None))(keys, config.samples_per_update)
         carry = (state.params, state.opt_state)
-        carry, (losses, infos, *escape) = jax.lax.scan(epoch, carry, orders)
-        return carry, losses, infos, escape[0] if escape else None
+        (params, opt_state), (losses, infos, *escape) = jax.lax.scan(epoch, carry, orders)
+        return Trained(params, opt_state, losses, infos, escape[0] if escape else None)
 
 
 def make_train(config: TrainConfig, env: Environment) -> Trainer:

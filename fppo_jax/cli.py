@@ -30,6 +30,7 @@ from fppo_jax.config import (
     preset_config,
 )
 from fppo_jax.distributed import initialize, is_main_process
+from fppo_jax.driver import Options
 from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
 from fppo_jax.extras import install_hint
 from fppo_jax.files import writable_directory
@@ -43,6 +44,9 @@ from fppo_jax.saved_policy import (
 )
 from fppo_jax.statistics import CONFIDENCE, ENDPOINTS, STATISTICS
 from fppo_jax.sweep import sweep
+
+# The host options' defaults, declared once, with the options.
+_OPTION_DEFAULTS = {field.name: field.default for field in dataclasses.fields(Options)}
 
 
 def _positive_int(text: str) -> int:
@@ -277,7 +281,10 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
         help="updates between checkpoints (default: a twentieth of the run)",
     )
     command.add_argument(
-        "--keep", type=_positive_int, default=3, help="checkpoints kept (the newest)"
+        "--keep",
+        type=_positive_int,
+        default=_OPTION_DEFAULTS["keep"],
+        help="checkpoints kept (the newest)",
     )
     command.add_argument(
         "--eval-every",
@@ -287,7 +294,10 @@ def _add_run_flags(command: argparse.ArgumentParser) -> None:
         "policy's mean return over --eval-episodes episodes",
     )
     command.add_argument(
-        "--eval-episodes", type=_positive_int, default=10, help="episodes per evaluation"
+        "--eval-episodes",
+        type=_positive_int,
+        default=_OPTION_DEFAULTS["eval_episodes"],
+        help="episodes per evaluation",
     )
     command.add_argument(
         "--wandb-project",
@@ -336,7 +346,7 @@ HYPERPARAMETER_HELP = {
     "alpha": "FPPO-LP pulling factor (>= 1), or the RB variants' rollback coefficient (>= 0)",
     "k": "FPPO-QP quadratic coefficient (>= 0)",
     "delta": "TR variants' KL bound (> 0)",
-    "epsilon": "clip range, 0 < epsilon < 1 (default 0.2)",
+    "epsilon": f"clip range, 0 < epsilon < 1 (default {EPSILON:g})",
     **{
         name: name.replace("_", " ") + f" (default {v:g})"
         for name, v in HYPERPARAMETER_DEFAULTS.items()
@@ -506,7 +516,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="a checkpoint directory or a saved policy",
     )
-    evaluation.add_argument("--episodes", type=_positive_int, default=10, help="episodes each")
+    evaluation.add_argument(
+        "--episodes",
+        type=_positive_int,
+        default=_OPTION_DEFAULTS["eval_episodes"],
+        help="episodes each",
+    )
     _add_backend_flag(evaluation, None)
     evaluation.add_argument("--seed", type=int, default=0, help="random seed of the episodes")
     evaluation.add_argument(

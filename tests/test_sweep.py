@@ -435,3 +435,24 @@ def test_a_part_s_checkpoint_is_not_resumed_as_another_part(tmp_path):
     sweep("cartpole", {"variant": "ppo"}, seeds=2, part=(1, 2), **shape)
     with pytest.raises(fppo_jax.ConfigMismatch, match="part"):
         sweep("cartpole", {"variant": "ppo"}, seeds=2, part=(2, 2), resume=True, **shape)
+
+
+def test_a_stopped_part_resumes_from_its_checkpoint_as_if_never_stopped(tmp_path):
+    grid, shape = {"variant": ["ppo", "fppo-lp"]}, {**TINY, "total_steps": 128 * 4}
+    whole = sweep("cartpole", grid, seeds=2, part=(2, 2), **shape)
+    stopped = sweep(
+        "cartpole",
+        grid,
+        seeds=2,
+        part=(2, 2),
+        checkpoint_dir=tmp_path,
+        callback=lambda snapshot: snapshot.update < 2,  # preempted after update 2
+        **shape,
+    )
+    assert stopped.metrics["env_steps"].shape[1] == 2
+    resumed = sweep(
+        "cartpole", grid, seeds=2, part=(2, 2), checkpoint_dir=tmp_path, resume=True, **shape
+    )
+    assert resumed.runs == whole.runs and resumed.config["part"] == [2, 2]
+    for name, values in whole.metrics.items():
+        np.testing.assert_array_equal(resumed.metrics[name], values, err_msg=name)

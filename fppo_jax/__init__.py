@@ -26,10 +26,10 @@ from fppo_jax.checkpoint import (
     DamagedCheckpoint,
 )
 from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters
-from fppo_jax.driver import Snapshot
 from fppo_jax.envs import TASKS, Environment, make_env
 from fppo_jax.evaluation import evaluate
 from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective
+from fppo_jax.options import Snapshot
 from fppo_jax.policy import Policy
 from fppo_jax.progress import Progress
 from fppo_jax.results import SweepResult, TrainingDiverged, TrainResult, merge

@@ -16,9 +16,10 @@ from fppo_jax.config import (
     resolve_hyperparameters,
 )
 from fppo_jax.distributed import is_main_process
-from fppo_jax.driver import Options, Plan, drive
+from fppo_jax.driver import Plan, drive
 from fppo_jax.envs import Environment, as_environment, choose_backend, describe_backend
 from fppo_jax.objectives import EPSILON
+from fppo_jax.options import Options
 from fppo_jax.policy import make_policy
 from fppo_jax.results import TrainResult
 from fppo_jax.trainer import make_train
@@ -49,7 +50,7 @@ def train(
     MJX with a GPU or TPU, native on a CPU (:data:`fppo_jax.envs.BACKENDS`). `settings` are
     :class:`TrainConfig` fields (``num_envs``, ``num_steps``, ``num_minibatches``, …), optimisation
     settings (``learning_rate``, ``gamma``, ``gae_lambda``, ``entropy_coef``, ``value_coef``,
-    ``max_grad_norm``) and how the run is driven (:class:`~fppo_jax.driver.Options`: ``progress``,
+    ``max_grad_norm``) and how the run is driven (:class:`~fppo_jax.options.Options`: ``progress``,
     ``checkpoint_dir``, ``resume``, ``checkpoint_every``, ``keep``, ``log_dir``, ``devices``,
     ``callback``, ``eval_every``, ``eval_episodes``, ``wandb_project``). Everything is checked
     before compiling. With ``log_dir``, the run's ``summary.txt`` is written there at the end,

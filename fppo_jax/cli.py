@@ -30,11 +30,11 @@ from fppo_jax.config import (
     preset_config,
 )
 from fppo_jax.distributed import initialize, is_main_process
-from fppo_jax.driver import Options
 from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
 from fppo_jax.extras import install_hint
 from fppo_jax.files import writable_directory
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
+from fppo_jax.options import Options
 from fppo_jax.results import SweepResult, TrainingDiverged, merge
 from fppo_jax.saved_policy import (
     ARRAYS_FILE,

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import sys
 import time
 from collections.abc import Callable
@@ -30,7 +29,7 @@ from fppo_jax.checkpoint import (
     check_same_run,
     open_checkpoints,
 )
-from fppo_jax.config import Hyperparameters, positive_int
+from fppo_jax.config import Hyperparameters
 from fppo_jax.distributed import (
     fetch,
     fetch_tree,
@@ -43,125 +42,12 @@ from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
 from fppo_jax.files import DirectoryLock
 from fppo_jax.memory import runs_per_call
-from fppo_jax.metric_log import Block, open_logs, prepare_log_dir, require_wandb
+from fppo_jax.metric_log import Block, open_logs, prepare_log_dir
+from fppo_jax.options import Options, Snapshot
 from fppo_jax.policy import Policy, make_policy
 from fppo_jax.progress import PROGRESS_LINES, Progress, reporter
 from fppo_jax.results import TrainingDiverged
 from fppo_jax.trainer import Trainer, TrainState
-
-
-class Snapshot(NamedTuple):
-    """What a callback sees between compiled chunks.
-
-    `update` counts the updates done; `metrics` holds every update so far (``[run, update]``
-    for a sweep's group of runs, whose indices in the sweep are `runs`); `state` is the
-    training state and `policy` its policy (both batched along runs in a sweep).
-    """
-
-    update: int
-    metrics: dict[str, np.ndarray]
-    state: TrainState
-    policy: Policy
-    runs: range
-
-
-Callback = Callable[[Snapshot], bool | None]
-
-
-@dataclasses.dataclass(frozen=True)
-class Options:
-    """How runs are driven, apart from what they train: the host-side settings that ``train``
-    and ``sweep`` share, as keyword arguments of either. Checked when made, before anything is
-    compiled.
-
-    `progress`: ``True`` shows a progress bar on a terminal, or prints a line per chunk of
-    updates on stderr otherwise; a callable receives a :class:`~fppo_jax.progress.Progress`;
-    ``False`` (with nothing else between chunks) runs the whole training as one compiled call.
-
-    `checkpoint_dir`: save the full training state there every `checkpoint_every` updates
-    (default: a twentieth of the run), keeping the newest `keep` (see
-    :mod:`fppo_jax.checkpoint`). With ``resume=True`` training continues from the newest
-    intact checkpoint there, if any, and ends exactly as if it had never stopped; a checkpoint
-    of a differently configured run is refused with the differing fields named. Without
-    `resume`, a directory that already holds checkpoints is refused, so that none is
-    overwritten. A finished run goes on for more steps when resumed with a larger
-    ``total_steps``, unless its learning rate anneals over the run (refused, with the reason).
-
-    `log_dir`: write ``config.json`` (every setting, the versions and devices) there at once,
-    then ``metrics.csv`` and TensorBoard event files as training goes. It is made and checked
-    writable before compiling; one that holds a run's outputs is refused, unless `resume`
-    continues the run whose ``config.json`` it is (the checkpoint's, or this run's if there is
-    no checkpoint yet). `wandb_project` logs the same to Weights & Biases
-    (the ``wandb`` extra).
-
-    Environments whose state lives outside JAX (native MuJoCo) cannot be checkpointed: a
-    resumed run goes on from the restored policy, optimiser and normalisers with every
-    environment starting a new episode, so it learns on but is not bitwise the run that never
-    stopped (it says so on resuming).
-
-    `devices`: how many of the devices JAX sees (default: all; one for native MuJoCo, which
-    steps on the host) share the runs (see :mod:`fppo_jax.distributed`). In a multi-process run
-    only process 0 reports and writes, checkpoints included: every process hands it its part
-    of the state to save, and it hands each its part back on resuming.
-
-    `callback(snapshot)` is called between compiled chunks with a :class:`Snapshot`; returning
-    ``False`` (or a numpy ``False``, as a comparison of metrics gives) stops training there
-    (checkpointed, if checkpoints are on), and the result holds the updates done; ``True`` or
-    ``None`` goes on, and any other answer is a ``TypeError`` that names it. Every
-    `eval_every` updates, and at the end, the deterministic policy plays `eval_episodes`
-    episodes and their mean return is recorded as the metric ``eval_return`` (NaN between
-    evaluations).
-    """
-
-    progress: bool | Callable[[Progress], None] = False
-    checkpoint_dir: str | Path | None = None
-    resume: bool = False
-    checkpoint_every: int | None = None
-    keep: int = 3
-    log_dir: str | Path | None = None
-    devices: int | None = None
-    callback: Callback | None = None
-    eval_every: int | None = None
-    eval_episodes: int = 10
-    wandb_project: str | None = None
-
-    def __post_init__(self) -> None:
-        for name in ("resume",):
-            if not isinstance(getattr(self, name), bool | np.bool_):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
-        if not (isinstance(self.progress, bool | np.bool_) or callable(self.progress)):
-            raise ValueError(f"progress must be True, False or a callable, got {self.progress!r}")
-        if self.callback is not None and not callable(self.callback):
-            raise ValueError(f"callback must be a callable, got {self.callback!r}")
-        positive_int("keep", self.keep)
-        positive_int("eval_episodes", self.eval_episodes)
-        for name in ("checkpoint_every", "eval_every", "devices"):
-            if getattr(self, name) is not None:
-                positive_int(name, getattr(self, name))
-        for name in ("checkpoint_dir", "log_dir"):
-            value = getattr(self, name)
-            if value is not None and not isinstance(value, str | os.PathLike):
-                raise ValueError(f"{name} must be a path, got {value!r}")
-            if value is not None and os.fspath(value) == "":
-                raise ValueError(f"{name} is an empty path: name a directory ('.' for this one)")
-        if self.checkpoint_dir is None and (self.resume or self.checkpoint_every is not None):
-            flag = "resume" if self.resume else "checkpoint_every"
-            raise ValueError(f"{flag} needs a checkpoint directory")
-        if self.wandb_project is not None:
-            if not isinstance(self.wandb_project, str):
-                raise ValueError(f"wandb_project must be a name, got {self.wandb_project!r}")
-            require_wandb()
-
-    @classmethod
-    def names(cls) -> tuple[str, ...]:
-        return tuple(field.name for field in dataclasses.fields(cls))
-
-    @classmethod
-    def split(cls, settings: dict[str, Any]) -> tuple[Options, dict[str, Any]]:
-        """The options among a run's keyword `settings`, and the settings left."""
-        names = cls.names()
-        options = cls(**{name: value for name, value in settings.items() if name in names})
-        return options, {name: value for name, value in settings.items() if name not in names}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -29,10 +29,11 @@ from fppo_jax.config import (
     resolve_hyperparameters,
     table2,
 )
-from fppo_jax.driver import Options, Outcome, Plan, drive
+from fppo_jax.driver import Outcome, Plan, drive
 from fppo_jax.envs import Environment, as_environment, choose_backend, describe_backend
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import VARIANTS, real
+from fppo_jax.options import Options
 from fppo_jax.results import SweepResult, labels
 from fppo_jax.trainer import make_train
 
@@ -97,7 +98,7 @@ def sweep(
     tolerance over its first updates, then drifts from it (vmapped kernels round differently).
     `preset`, `backend` and `settings` are as in :func:`~fppo_jax.train`: a preset's
     :class:`~fppo_jax.config.TrainConfig`, its fields, fixed values of sweepable
-    hyperparameters, and how the runs are driven (:class:`~fppo_jax.driver.Options`). `chunk`
+    hyperparameters, and how the runs are driven (:class:`~fppo_jax.options.Options`). `chunk`
     is the number of runs per compiled call (default: as many as fit in half the free memory).
     A run that diverges is reported and recorded in ``SweepResult.diverged``; the others go on.
 

@@ -45,9 +45,10 @@ def run_parts(flags: list[str], where: Path, at_once: bool) -> float:
             text=True,
             preexec_fn=None if pinned is None else lambda c=pinned: os.sched_setaffinity(0, c),
         )
-        if not at_once:
+        if at_once:
+            processes.append(process)
+        else:
             finish(process)
-        processes.append(process)
     for process in processes:
         finish(process)
     return time.perf_counter() - start

@@ -86,12 +86,15 @@ def task_section(task: str, protocol: str, result: SweepResult, records: list[di
     final, area = result.scores("final"), result.scores("auc")
     wall = sum(r["wall_seconds"] for r in records)
     commits = sorted({r["commit"] for r in records})
+    # Parts may run on different machines: the same code, rounded differently by each
+    # processor, so each seed is still a sample of one protocol.
+    machines = list(dict.fromkeys(r["machine"] for r in records))
     lines = [
         f"### {task}, {protocol} protocol",
         "",
         f"{len(records)} part{'s' if len(records) > 1 else ''}, {len(result.runs)} runs of "
         f"{result.config['total_steps']:,} env steps, {wall / 3600:.2f} h in all on "
-        f"{records[0]['machine']}; commit {', '.join(c[:12] for c in commits)}.",
+        f"{' and on '.join(machines)}; commit {', '.join(c[:12] for c in commits)}.",
         "",
         "| variant | runs | IQM final [95% CI] | IQM AUC [95% CI] | sample std final "
         "| max average return ± sample std | paper (Table 1) |",

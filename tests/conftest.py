@@ -15,29 +15,62 @@ def tiny() -> dict:
     return dict(TINY)
 
 
+# The longest test files first: each of the two test processes takes a file at a time, so a
+# long one taken last would leave the other process idle at the end.
+LONGEST_FIRST = (
+    "test_gpu_suite.py",
+    "test_distributed.py",
+    "test_faults.py",
+    "test_checkpoint.py",
+    "test_driver.py",
+    "test_mujoco.py",
+    "test_sweep.py",
+    "test_results.py",
+    "test_study.py",
+    "test_trainer.py",
+)
+
+
+def pytest_collection_modifyitems(items: list) -> None:
+    def rank(item) -> int:
+        name = item.path.name
+        return LONGEST_FIRST.index(name) if name in LONGEST_FIRST else len(LONGEST_FIRST)
+
+    items.sort(key=rank)  # stable: a file's own tests keep their order
+
+
 @pytest.fixture(scope="session")
 def saved_policies(tmp_path_factory) -> dict:
-    """A discrete policy (CartPole, observations normalised) and a continuous one (Pendulum,
-    raw observations, its head scaled up so that its actions often reach their bounds), each
-    trained briefly and saved: {"discrete": dir, "continuous": dir}."""
-    import dataclasses
-
+    """A discrete policy (CartPole's sizes, with observation statistics) and a continuous one
+    (Pendulum's, raw observations, its head scaled up so that its actions often reach their
+    bounds), initialised, not trained, and saved: {"discrete": dir, "continuous": dir}."""
     import jax
+    import jax.numpy as jnp
 
-    from fppo_jax import train
+    from fppo_jax.envs import Box, Discrete
+    from fppo_jax.networks import make_networks
+    from fppo_jax.normalization import RunningStats
+    from fppo_jax.policy import Policy
     from fppo_jax.saved_policy import save_policy
 
+    def policy(space, size: int, stats: bool, seed: int) -> Policy:
+        key, mean_key, var_key = jax.random.split(jax.random.key(seed), 3)
+        obs = jnp.zeros((size,))
+        params = make_networks(space, (64, 64)).policy.init(key, obs)
+        params = jax.tree_util.tree_map_with_path(
+            lambda path, x: x * 1000 if "Dense_2" in jax.tree_util.keystr(path) else x, params
+        )
+        obs_stats = None
+        if stats:
+            mean = jax.random.normal(mean_key, (size,))
+            var = jnp.exp(jax.random.normal(var_key, (size,)))
+            obs_stats = RunningStats(mean, var, jnp.asarray(100.0))
+        return Policy(params, obs_stats, space, (64, 64))
+
     where = tmp_path_factory.mktemp("policies")
-    discrete = train("cartpole", "fppo-lp", total_steps=512, **TINY)
-    continuous = train(
-        "gymnax/Pendulum-v1", "ppo", total_steps=512, normalize_observations=False, **TINY
-    )
-    params = jax.tree_util.tree_map_with_path(
-        lambda path, x: x * 1000 if "Dense_2" in jax.tree_util.keystr(path) else x,
-        continuous.policy.params,
-    )
-    bold = dataclasses.replace(continuous.policy, params=params)
-    return {
-        "discrete": discrete.save(where / "discrete"),
-        "continuous": save_policy(where / "continuous", bold, {"config": continuous.config}),
+    made = {
+        "discrete": policy(Discrete(2), 4, True, 0),
+        "continuous": policy(Box((-2.0,), (2.0,)), 3, False, 1),
     }
+    record = {"config": {"env": "a test's"}, "update": 0}
+    return {name: save_policy(where / name, p, record) for name, p in made.items()}

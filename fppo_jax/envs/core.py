@@ -90,6 +90,41 @@ def seeds_of(key_data: np.ndarray) -> list[int]:
     return [int(s) for s in (words[:, 0] * np.uint64(0x9E3779B1) ^ words[:, -1]) % 2**31]
 
 
+class OnHost:
+    """``reset`` and ``step`` of an environment that lives on the host (its class gives
+    `observation_size`, ``_host_reset(key_data)`` and ``_host_step(pool, slot, steps,
+    action)``): each a ``jax.pure_callback`` that vmaps as one host call over every environment
+    of every run (``vmap_method="broadcast_all"``). Such an environment resets itself."""
+
+    resets_itself = True
+    observation_size: int
+
+    def reset(self, key: jax.Array) -> tuple[HostState, jax.Array]:
+        scalar = jax.ShapeDtypeStruct((), jnp.int32)
+        shapes = (
+            HostState(scalar, scalar, scalar),
+            jax.ShapeDtypeStruct((self.observation_size,), jnp.float32),
+        )
+        return jax.pure_callback(
+            self._host_reset, shapes, jax.random.key_data(key), vmap_method="broadcast_all"
+        )
+
+    def step(self, key: jax.Array, state: HostState, action: jax.Array) -> tuple[HostState, Step]:
+        obs = jax.ShapeDtypeStruct((self.observation_size,), jnp.float32)
+        flag = jax.ShapeDtypeStruct((), jnp.bool_)
+        shapes = Step(obs, jax.ShapeDtypeStruct((), jnp.float32), flag, flag, obs)
+        out = jax.pure_callback(
+            self._host_step,
+            shapes,
+            state.pool,
+            state.slot,
+            state.steps,
+            action,
+            vmap_method="broadcast_all",
+        )
+        return state._replace(steps=state.steps + 1), out
+
+
 class Timed(NamedTuple):
     """An environment's own state and the steps taken in its episode, for adapters that keep
     the episode limit themselves."""

@@ -28,11 +28,9 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.envs.core import Box, Discrete, HostState, Step, seeds_of
+from fppo_jax.envs.core import Box, Discrete, HostState, OnHost, Step, seeds_of
 from fppo_jax.extras import install_hint
 
 MAX_POOLS = 16  # pools kept alive at once: training's, and a few evaluations' beside it
@@ -79,7 +77,7 @@ _POOLS = _Pools()
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class GymnasiumEnvironment:
+class GymnasiumEnvironment(OnHost):
     """The Gymnasium environments that `make()` gives (one ``gymnasium.Env`` per call) as an
     :class:`~fppo_jax.envs.core.Environment` that resets itself; `name` names them in errors
     and records."""
@@ -87,7 +85,6 @@ class GymnasiumEnvironment:
     make: Callable[[], Any]
     name: str
     backend = "gymnasium"
-    resets_itself = True
     action_start = 0  # a Discrete space's first action
 
     def __post_init__(self) -> None:
@@ -117,30 +114,6 @@ class GymnasiumEnvironment:
             probe.close()
         object.__setattr__(self, "observation_size", int(observations.shape[0]))
         object.__setattr__(self, "action_space", space)
-
-    def reset(self, key: jax.Array) -> tuple[HostState, jax.Array]:
-        shapes = (
-            HostState(_int32(), _int32(), _int32()),
-            jax.ShapeDtypeStruct((self.observation_size,), jnp.float32),
-        )
-        return jax.pure_callback(
-            self._host_reset, shapes, jax.random.key_data(key), vmap_method="broadcast_all"
-        )
-
-    def step(self, key: jax.Array, state: HostState, action: jax.Array) -> tuple[HostState, Step]:
-        obs = jax.ShapeDtypeStruct((self.observation_size,), jnp.float32)
-        flag = jax.ShapeDtypeStruct((), jnp.bool_)
-        shapes = Step(obs, jax.ShapeDtypeStruct((), jnp.float32), flag, flag, obs)
-        out = jax.pure_callback(
-            self._host_step,
-            shapes,
-            state.pool,
-            state.slot,
-            state.steps,
-            action,
-            vmap_method="broadcast_all",
-        )
-        return state._replace(steps=state.steps + 1), out
 
     def _host_reset(self, key_data: np.ndarray) -> tuple[HostState, np.ndarray]:
         key_data = np.asarray(key_data)
@@ -250,7 +223,3 @@ def is_gymnasium_env_class(env: Any) -> bool:
     import gymnasium
 
     return issubclass(env, gymnasium.Env)
-
-
-def _int32() -> jax.ShapeDtypeStruct:
-    return jax.ShapeDtypeStruct((), jnp.int32)

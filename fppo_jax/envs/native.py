@@ -29,11 +29,9 @@ import threading
 from types import ModuleType
 from typing import Any
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.envs.core import Box, HostState, Step, seeds_of
+from fppo_jax.envs.core import Box, HostState, OnHost, Step, seeds_of
 from fppo_jax.extras import install_hint
 
 INSTALL = f"{install_hint('native')}; envpool, Linux only"
@@ -94,14 +92,13 @@ _POOLS = _Pools()
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class NativeEnvironment:
+class NativeEnvironment(OnHost):
     """The envpool task `task_id` (e.g. ``"Hopper-v3"``) as an
     :class:`~fppo_jax.envs.core.Environment` that resets itself; its episode limit is reported
     as truncation, separately from termination."""
 
     task_id: str
     backend = "native"
-    resets_itself = True
 
     def __post_init__(self) -> None:
         envpool = import_envpool()
@@ -123,30 +120,6 @@ class NativeEnvironment:
             Box(tuple(map(float, space.low)), tuple(map(float, space.high))),
         )
         object.__setattr__(self, "max_episode_steps", int(spec.config.max_episode_steps))
-
-    def reset(self, key: jax.Array) -> tuple[HostState, jax.Array]:
-        shapes = (
-            HostState(_int32(()), _int32(()), _int32(())),
-            jax.ShapeDtypeStruct((self.observation_size,), jnp.float32),
-        )
-        return jax.pure_callback(
-            self._host_reset, shapes, jax.random.key_data(key), vmap_method="broadcast_all"
-        )
-
-    def step(self, key: jax.Array, state: HostState, action: jax.Array) -> tuple[HostState, Step]:
-        obs = jax.ShapeDtypeStruct((self.observation_size,), jnp.float32)
-        flag = jax.ShapeDtypeStruct((), jnp.bool_)
-        shapes = Step(obs, jax.ShapeDtypeStruct((), jnp.float32), flag, flag, obs)
-        out = jax.pure_callback(
-            self._host_step,
-            shapes,
-            state.pool,
-            state.slot,
-            state.steps,
-            action,
-            vmap_method="broadcast_all",
-        )
-        return state._replace(steps=state.steps + 1), out
 
     def _host_reset(self, key_data: np.ndarray) -> tuple[HostState, np.ndarray]:
         envpool = import_envpool()
@@ -224,7 +197,3 @@ def _positions(slots: np.ndarray, answered: np.ndarray) -> np.ndarray:
     """Where each slot of `answered` sits in `slots`."""
     order = np.argsort(slots)
     return order[np.searchsorted(slots, answered, sorter=order)]
-
-
-def _int32(shape: tuple[int, ...]) -> jax.ShapeDtypeStruct:
-    return jax.ShapeDtypeStruct(shape, jnp.int32)

@@ -1,5 +1,8 @@
-"""fppo_jax/envs/gymnasium.py: Gymnasium environments, registered and a user's own, stepped on
-the host from inside the compiled program."""
+"""fppo_jax/envs/gymnasium.py: Gymnasium environments, registered and a user's own, one
+``gymnasium.Env`` each or in vector environments, stepped on the host from inside the compiled
+program."""
+
+import functools
 
 import gymnasium
 import jax
@@ -9,7 +12,7 @@ import pytest
 from conftest import TINY
 
 from fppo_jax import make_env, sweep, train
-from fppo_jax.envs import Discrete, as_environment
+from fppo_jax.envs import Discrete, Step, as_environment, draw_resets
 from fppo_jax.envs.gymnasium import gymnasium_environment
 
 
@@ -54,6 +57,20 @@ def rollout(env, action: int, steps: int):
     return jax.jit(lambda s: jax.lax.scan(step, s, jax.random.split(jax.random.key(1), steps)))(
         state
     )[1]
+
+
+def rollouts(env, actions, steps: int) -> tuple[jax.Array, Step]:
+    """`steps` steps of `len(actions)` environments reset together, the i-th always taking
+    ``actions[i]``: (their first observations, the steps' outcomes [step, environment])."""
+    actions = jnp.asarray(actions)
+    count = len(actions)
+
+    def step(state, key):
+        return jax.vmap(env.step)(jax.random.split(key, count), state, actions)
+
+    state, first = draw_resets(env, jax.random.key(0), (count,))
+    keys = jax.random.split(jax.random.key(1), steps)
+    return first, jax.jit(lambda s: jax.lax.scan(step, s, keys))(state)[1]
 
 
 def test_episodes_end_where_the_environment_says_and_restart_at_once():
@@ -123,6 +140,81 @@ def test_unsupported_spaces_and_unknown_ids_are_refused_naming_what_to_do():
         as_environment(Several)
     with pytest.raises(ValueError, match="no environment 'NoSuchEnv-v0' registered"):
         make_env("gymnasium/NoSuchEnv-v0")
+
+
+@pytest.mark.parametrize("mode", list(gymnasium.vector.AutoresetMode), ids=lambda m: m.name)
+def test_a_vector_environment_s_episodes_end_where_they_say_whatever_its_autoreset_mode(mode):
+    vector = gymnasium.vector.SyncVectorEnv([Corridor, Corridor], autoreset_mode=mode)
+    first, steps = rollouts(as_environment(vector), [1, 0], 12)
+    np.testing.assert_array_equal(np.flatnonzero(steps.terminated[:, 0]) + 1, [3, 6, 9, 12])
+    np.testing.assert_array_equal(np.flatnonzero(steps.truncated[:, 1]) + 1, [5, 10])
+    assert not steps.truncated[:, 0].any() and not steps.terminated[:, 1].any()
+    np.testing.assert_array_equal(steps.obs[[2, 4], [0, 1]], [[3, 3], [0, 5]])  # final, kept
+    np.testing.assert_array_equal(steps.next_obs[[2, 4], [0, 1]], [[0, 0], [0, 0]])  # restarted
+    np.testing.assert_array_equal(steps.reward, 1)  # no action ignored at a reset
+    one_by_one = rollouts(as_environment(Corridor), [1, 0], 12)
+    np.testing.assert_array_equal(first, one_by_one[0])
+    for name, got, alone in zip(Step._fields, steps, one_by_one[1], strict=True):
+        np.testing.assert_array_equal(got, alone, err_msg=name)
+
+
+@pytest.mark.parametrize(
+    "env_id, actions", [("CartPole-v1", [1, 0]), ("Pendulum-v1", [[3.0], [-1.0]])]
+)
+def test_a_vector_environment_s_sub_environments_are_seeded_as_environments_of_their_own(
+    env_id, actions
+):
+    def vector():
+        return gymnasium.make_vec(env_id, 2, vectorization_mode="sync", max_episode_steps=7)
+
+    first, steps = rollouts(gymnasium_environment(vector), actions, 30)
+    one_by_one = rollouts(gymnasium_environment(env_id, max_episode_steps=7), actions, 30)
+    np.testing.assert_array_equal(first, one_by_one[0])
+    for name, got, alone in zip(Step._fields, steps, one_by_one[1], strict=True):
+        np.testing.assert_array_equal(got, alone, err_msg=name)
+    assert (steps.terminated | steps.truncated).sum() >= 4
+    # A sweep's two runs of four environments: a vector environment for each two of each run,
+    # each run's the same as alone.
+    keys = jax.random.split(jax.random.key(2), (2, 4))
+    swept = jax.vmap(jax.vmap(gymnasium_environment(vector).reset))(keys)[1]
+    np.testing.assert_array_equal(
+        swept[1], jax.vmap(gymnasium_environment(vector).reset)(keys[1])[1]
+    )
+    assert len(np.unique(swept.reshape(8, -1), axis=0)) == 8
+
+
+def test_a_vector_environment_trains_and_those_that_cannot_restart_one_alone_are_refused():
+    with pytest.raises(ValueError, match=r'outside the mask.*vectorization_mode="sync"'):
+        train(gymnasium.make_vec("CartPole-v1", 4), "ppo", total_steps=512, **TINY)
+    cartpole = functools.partial(gymnasium.make, "CartPole-v1")
+    unshared = gymnasium.vector.AsyncVectorEnv(
+        [cartpole, cartpole], shared_memory=False, context="spawn"
+    )
+    with pytest.raises(ValueError, match=r"without shared memory.*shared_memory=True"):
+        as_environment(unshared)
+    unshared.close()
+    vector = gymnasium.make_vec("CartPole-v1", 4, vectorization_mode="sync")
+    result = train(vector, "ppo", total_steps=512, **TINY)
+    assert result.config["env"] == "SyncVectorEnv(CartPole-v1, num_envs=4)"
+    assert result.config["backend"] == "gymnasium"
+    returns = result.metrics["average_return"]
+    assert np.isfinite(returns).all() and 8 <= returns[-1] <= 100
+
+
+def test_a_run_takes_vector_environments_whole_and_an_instance_serves_one_batch_at_a_time():
+    def pair():
+        return gymnasium.vector.SyncVectorEnv([Corridor, Corridor])
+
+    with pytest.raises(Exception, match=r"2 sub-environments, which cannot serve 3 .*num_envs=2"):
+        draw_resets(gymnasium_environment(pair), jax.random.key(0), (3,))
+    draw_resets(gymnasium_environment(pair), jax.random.key(0), (3, 4))  # 3 runs of 4: 6 pairs
+    instance = as_environment(pair())
+    with pytest.raises(Exception, match=r"one run of num_envs=2; .* 3 run\(s\) .*pass a function"):
+        draw_resets(instance, jax.random.key(0), (3, 2))
+    training, _ = draw_resets(instance, jax.random.key(0), (2,))
+    draw_resets(instance, jax.random.key(1), (2,))  # an evaluation's, say: it takes the instance
+    with pytest.raises(Exception, match="reset since for another batch"):
+        jax.vmap(instance.step)(jax.random.split(jax.random.key(2), 2), training, jnp.ones(2, int))
 
 
 @pytest.mark.slow

@@ -1,19 +1,47 @@
-"""Gymnasium environments, registered or a user's own, stepped from inside the compiled
-training program.
+"""Gymnasium environments, registered or a user's own, one ``gymnasium.Env`` per environment or
+a user's vector environments, stepped from inside the compiled training program.
 
-As with native MuJoCo (:mod:`.native`), the environments run on the host: each environment of
-a run is one ``gymnasium.Env`` of a host-side pool, and its JAX state is only the pool's
-number and its place in it. ``reset`` and ``step`` are ``jax.pure_callback``\\ s that vmap as
-one call over every environment of every run (``vmap_method="broadcast_all"``), so a sweep
-makes one host call per step of its rollout, whatever its number of runs and environments.
+As with native MuJoCo (:mod:`.native`), the environments run on the host: the JAX state of each
+environment of a run is only the number of a host-side pool and its place in it. ``reset`` and
+``step`` are ``jax.pure_callback``\\ s that vmap as one call over every environment of every run
+(``vmap_method="broadcast_all"``), so a sweep makes one host call per step of its rollout,
+whatever its number of runs and environments.
 
-Each environment is a ``gymnasium.Env`` of its own, not a vector environment, so no
-autoreset mode is involved: the step that ends an episode (``terminated`` or ``truncated``,
-kept apart) resets that environment at once and returns both the episode's final observation,
-which the trainer bootstraps from at truncation, and the new episode's first. Each
-environment is seeded from its own key (its first reset), so a run's environments are the same
-whether it trains alone or in a sweep. Their state lives outside JAX and no checkpoint holds
-it: a restored run starts new episodes in fresh environments, as native MuJoCo's does.
+The step that ends an episode (``terminated`` or ``truncated``, kept apart) gives both the
+episode's final observation, which the trainer bootstraps from at truncation, and the new
+episode's first, which it acts on next: no action is spent on a reset or ignored. Each
+environment is seeded from its own key, so a run's environments are the same whether it trains
+alone or in a sweep. Their state lives outside JAX and no checkpoint holds it: a restored run
+starts new episodes in fresh environments, as native MuJoCo's does.
+
+**One** ``gymnasium.Env`` **per environment** (a registered id, a ``gymnasium.Env`` subclass or
+a function that makes one): the step that ends an episode resets that environment at once. Each
+is seeded at its first reset.
+
+**A vector environment** (``gymnasium.vector.VectorEnv``) of N sub-environments serves N
+environments of one run, so a run's ``num_envs`` (and an evaluation's episodes) must be a
+multiple of N: otherwise an error names both numbers. Given as a function or a subclass that
+makes one, it is made once per N environments of each run, so sweeps work as they do with a
+``gymnasium.Env`` each. Given as an instance, it is the one vector environment there is: it
+serves one run of ``num_envs=N``, a batch of several runs (a sweep's) is refused, naming the
+function to pass instead, and resetting it for another batch (an evaluation during training)
+retires the batch before, whose next step says so. Its autoreset mode,
+``metadata["autoreset_mode"]``, says where an ended episode's observations are:
+
+- ``SAME_STEP``: the step gives the new episode's first observation, and the final one in
+  ``info["final_obs"]``.
+- ``NEXT_STEP`` (Gymnasium's default, and taken where the metadata names none) and
+  ``DISABLED``: the step gives the final observation, and the sub-environments that ended are
+  reset at once, alone (``reset(options={"reset_mask": ended})``), rather than on the next step,
+  which would ignore their action. A vector environment whose masked reset restarts the others
+  too cannot do this and is refused: ``gymnasium.make_vec("CartPole-v1", n)``'s own
+  ``CartPoleVectorEnv`` is one, and ``vectorization_mode="sync"`` makes CartPole a
+  ``SyncVectorEnv`` instead. So is, in ``NEXT_STEP`` mode, an ``AsyncVectorEnv`` without shared
+  memory, whose workers reset an ended sub-environment again on the step after its masked reset.
+
+``SyncVectorEnv`` and ``AsyncVectorEnv`` seed each sub-environment from its own key, as a
+``gymnasium.Env`` of its own is seeded, so the two give the same episodes; another vector
+environment takes one seed, its first sub-environment's.
 
 Observations must be a 1-D ``Box``; actions a ``Discrete`` or a 1-D ``Box`` (an action is
 clipped to its bounds before ``step``). Other spaces are refused, naming the wrapper to use.
@@ -45,26 +73,47 @@ def import_gymnasium() -> Any:
 
 
 class _Pools:
-    """The live pools (lists of ``gymnasium.Env``) by number; the oldest beyond
-    :data:`MAX_POOLS` are closed (a pool is made per reset of a batch of environments: one per
-    run or sweep group, and one per evaluation)."""
+    """The live pools by number: each the environments of one reset of a batch of them (one per
+    run or sweep group, and one per evaluation), ``gymnasium.Env``\\ s or vector environments.
+    The oldest beyond :data:`MAX_POOLS` are closed, except a user's own vector environment
+    instance, which is not ours to close; resetting that instance again retires its pool before,
+    since one instance serves one batch at a time."""
 
     def __init__(self) -> None:
         self.pools: collections.OrderedDict[int, list[Any]] = collections.OrderedDict()
+        self.instances: set[int] = set()  # the live pools of a user's instance
+        self.retired: set[int] = set()
         self.count = 0
         self.lock = threading.Lock()
 
-    def add(self, envs: list[Any]) -> int:
+    def add(self, envs: list[Any], instance: bool = False) -> int:
         with self.lock:
             self.count += 1
+            if instance:
+                for number in [n for n in self.instances if self.pools[n][0] is envs[0]]:
+                    del self.pools[number]
+                    self.instances.remove(number)
+                    self.retired.add(number)
+                self.instances.add(self.count)
             self.pools[self.count] = envs
             while len(self.pools) > MAX_POOLS:
-                for env in self.pools.popitem(last=False)[1]:
-                    env.close()
+                number, dropped = self.pools.popitem(last=False)
+                if number in self.instances:
+                    self.instances.remove(number)
+                else:
+                    for env in dropped:
+                        env.close()
             return self.count
 
     def __getitem__(self, number: int) -> list[Any]:
         with self.lock:
+            if number in self.retired:
+                raise RuntimeError(
+                    f"Gymnasium environment pool {number}: its vector environment instance was "
+                    "reset since for another batch of environments (a sweep's, or an evaluation "
+                    "during training), and one instance serves one batch at a time: pass a "
+                    "function that makes one, gymnasium_environment(lambda: ...)"
+                )
             if number not in self.pools:
                 raise RuntimeError(
                     f"Gymnasium environment pool {number} is closed (only the newest "
@@ -78,27 +127,40 @@ _POOLS = _Pools()
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class GymnasiumEnvironment(OnHost):
-    """The Gymnasium environments that `make()` gives (one ``gymnasium.Env`` per call) as an
-    :class:`~fppo_jax.envs.core.Environment` that resets itself; `name` names them in errors
-    and records."""
+    """The Gymnasium environments that `make()` gives, one ``gymnasium.Env`` or one
+    ``gymnasium.vector.VectorEnv`` per call, as an :class:`~fppo_jax.envs.core.Environment`
+    that resets itself; `name` names them in errors and records. `instance`: `make` gives the
+    same vector environment every time, a user's own (see the module's docstring)."""
 
     make: Callable[[], Any]
     name: str
+    instance: bool = False
     backend = "gymnasium"
     action_start = 0  # a Discrete space's first action
+    vector_size = 0  # sub-environments per vector environment; 0: one gymnasium.Env each
+    same_step = False  # a vector environment's autoreset mode is SAME_STEP
 
     def __post_init__(self) -> None:
         gymnasium = import_gymnasium()
         probe = self.make()
-        if not isinstance(probe, gymnasium.Env):
-            raise TypeError(f"{self.name}: expected a gymnasium.Env, got {type(probe).__name__}")
+        vector = isinstance(probe, gymnasium.vector.VectorEnv)
+        if not vector and not isinstance(probe, gymnasium.Env):
+            raise TypeError(
+                f"{self.name}: expected a gymnasium.Env or a gymnasium.vector.VectorEnv, got "
+                f"{type(probe).__name__}"
+            )
         try:
+            if vector:
+                observations, actions = probe.single_observation_space, probe.single_action_space
+                wrappers = "gymnasium.wrappers.vector.", "gymnasium.vector.VectorActionWrapper"
+            else:
+                observations, actions = probe.observation_space, probe.action_space
+                wrappers = "gymnasium.wrappers.", "gymnasium.ActionWrapper"
             spaces = gymnasium.spaces
-            observations, actions = probe.observation_space, probe.action_space
             if not isinstance(observations, spaces.Box) or len(observations.shape) != 1:
                 raise ValueError(
                     f"{self.name}: observations must be a 1-D Box, got {observations}; wrap the "
-                    "environment in gymnasium.wrappers.FlattenObservation"
+                    f"environment in {wrappers[0]}FlattenObservation"
                 )
             if isinstance(actions, spaces.Discrete):
                 space: Discrete | Box = Discrete(int(actions.n))
@@ -108,37 +170,111 @@ class GymnasiumEnvironment(OnHost):
             else:
                 raise ValueError(
                     f"{self.name}: actions must be Discrete or a 1-D Box, got {actions}; wrap "
-                    "the environment in a gymnasium.ActionWrapper that maps one of those onto it"
+                    f"the environment in a {wrappers[1]} that maps one of those onto it"
                 )
+            if vector:
+                self._check_autoreset(probe)
         finally:
-            probe.close()
+            if not self.instance:
+                probe.close()
         object.__setattr__(self, "observation_size", int(observations.shape[0]))
         object.__setattr__(self, "action_space", space)
+
+    def _check_autoreset(self, vector: Any) -> None:
+        """Take `vector`'s size and autoreset mode, and refuse it where an ended episode cannot
+        restart at once: in NEXT_STEP or DISABLED mode, a reset of one sub-environment alone
+        must leave the others as they were."""
+        from gymnasium.vector import AsyncVectorEnv, AutoresetMode
+
+        mode = AutoresetMode(vector.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP))
+        object.__setattr__(self, "vector_size", int(vector.num_envs))
+        object.__setattr__(self, "same_step", mode == AutoresetMode.SAME_STEP)
+        unwrapped = vector.unwrapped
+        if (
+            mode == AutoresetMode.NEXT_STEP
+            and isinstance(unwrapped, AsyncVectorEnv)
+            and not unwrapped.shared_memory
+        ):
+            # Gymnasium 1.x: its workers clear their pending autoreset on a reset only when
+            # they share memory, so without it each masked reset is followed by another.
+            raise ValueError(
+                f"{self.name}: an AsyncVectorEnv without shared memory, in NEXT_STEP autoreset "
+                "mode, resets an ended sub-environment again on the step after its masked "
+                "reset, ignoring its action; make it with shared_memory=True (the default) or "
+                'autoreset_mode="SameStep"'
+            )
+        if self.same_step or vector.num_envs == 1:
+            return
+        vector.reset(seed=0)
+        stepped = np.array(vector.step(vector.action_space.sample())[0])
+        first_alone = np.arange(vector.num_envs) == 0
+        kept = np.array(vector.reset(options={"reset_mask": first_alone})[0])
+        if not np.array_equal(kept[1:], stepped[1:]):
+            raise ValueError(
+                f"{self.name}: reset(options={{'reset_mask': mask}}) restarts sub-environments "
+                f"outside the mask, so in its {mode.name} autoreset mode an episode that ends "
+                "cannot restart alone without an action ignored on the next step; use a vector "
+                "environment that resets the masked ones alone (gymnasium.vector.SyncVectorEnv "
+                'or AsyncVectorEnv: gymnasium.make_vec(..., vectorization_mode="sync"))'
+            )
 
     def _host_reset(self, key_data: np.ndarray) -> tuple[HostState, np.ndarray]:
         key_data = np.asarray(key_data)
         batch = key_data.shape[:-1]
         seeds = seeds_of(key_data)
-        envs = [self.make() for _ in seeds]
-        first = np.stack(
-            [
-                self._observation(env.reset(seed=seed)[0], "reset")
-                for env, seed in zip(envs, seeds, strict=True)
-            ]
-        )
-        number = _POOLS.add(envs)
-        slots = np.arange(len(envs), dtype=np.int32)
+        if self.vector_size:
+            envs, first = self._reset_vectors(batch, seeds)
+        else:
+            envs = [self.make() for _ in seeds]
+            first = np.stack(
+                [
+                    self._observation(env.reset(seed=seed)[0], "reset")
+                    for env, seed in zip(envs, seeds, strict=True)
+                ]
+            )
+        number = _POOLS.add(envs, self.instance)
+        slots = np.arange(len(seeds), dtype=np.int32)
         state = HostState(
             np.full(batch, number, np.int32), slots.reshape(batch), np.zeros(batch, np.int32)
         )
         return state, first.reshape(*batch, self.observation_size)
+
+    def _reset_vectors(self, batch: tuple[int, ...], seeds: list[int]) -> tuple[list, np.ndarray]:
+        """A vector environment per `vector_size` environments of each run (the last axis of
+        `batch`: a run's environments, or an evaluation's episodes), reset from their seeds."""
+        size = self.vector_size
+        per_run = batch[-1] if batch else 1
+        if per_run % size:
+            raise ValueError(
+                f"{self.name}: its vector environment has {size} sub-environments, which cannot "
+                f"serve {per_run} environments per run (num_envs, or an evaluation's episodes): "
+                f"make them a multiple of {size} (num_envs={size}, say), or make the vector "
+                f"environment with {per_run}"
+            )
+        count = len(seeds) // size
+        if self.instance and count > 1:
+            raise ValueError(
+                f"{self.name} is one vector environment, for one run of num_envs={size}; it "
+                f"cannot serve {len(seeds) // per_run} run(s) of {per_run} environments (a "
+                "sweep's runs, say): pass a function that makes one, "
+                "gymnasium_environment(lambda: gymnasium.make_vec(...)), or its class, and one "
+                f"is made for each {size} environments of each run"
+            )
+        vectors = [self.make() for _ in range(count)]
+        first = [
+            self._observation(
+                _seeded_reset(vector, seeds[i * size : (i + 1) * size]), "reset", size
+            )
+            for i, vector in enumerate(vectors)
+        ]
+        return vectors, np.concatenate(first)
 
     def _host_step(
         self, pool: np.ndarray, slot: np.ndarray, steps: np.ndarray, action: np.ndarray
     ) -> Step:
         batch = np.shape(pool)
         pools, slots = np.asarray(pool).reshape(-1), np.asarray(slot).reshape(-1)
-        actions = np.asarray(action).reshape(len(slots), -1)
+        actions = self._actions(np.asarray(action).reshape(len(slots), -1))
         count = len(slots)
         out = Step(
             obs=np.empty((count, self.observation_size), np.float32),
@@ -147,53 +283,140 @@ class GymnasiumEnvironment(OnHost):
             truncated=np.empty(count, bool),
             next_obs=np.empty((count, self.observation_size), np.float32),
         )
-        for row in range(count):
-            env = _POOLS[int(pools[row])][int(slots[row])]
-            try:
-                obs, reward, terminated, truncated, _ = env.step(self._action(actions[row]))
-            except Exception as error:
-                raise RuntimeError(
-                    f"{self.name}: step raised {type(error).__name__}: {error}"
-                ) from error
+        step = self._step_vectors if self.vector_size else self._step_envs
+        for number in np.unique(pools):
+            rows = np.flatnonzero(pools == number)
+            step(_POOLS[int(number)], slots[rows], actions[rows], rows, out)
+        return Step(*(x.reshape(batch + x.shape[1:]) for x in out))
+
+    def _step_envs(
+        self, envs: list[Any], slots: np.ndarray, actions: np.ndarray, rows: np.ndarray, out: Step
+    ) -> None:
+        """Step `envs`' `slots` (one ``gymnasium.Env`` each) and write `rows` of `out`."""
+        for env_slot, action, row in zip(slots, actions, rows, strict=True):
+            env = envs[env_slot]
+            obs, reward, terminated, truncated, _ = self._step(env, action)
             out.obs[row] = self._observation(obs, "step")
-            if not np.isfinite(reward):
-                raise ValueError(f"{self.name}: step returned the reward {reward}")
+            self._check_reward(reward)
             out.reward[row] = reward
             out.terminated[row] = bool(terminated)
             out.truncated[row] = bool(truncated) and not terminated
             out.next_obs[row] = out.obs[row]
             if terminated or truncated:
                 out.next_obs[row] = self._observation(env.reset()[0], "reset")
-        return Step(*(x.reshape(batch + x.shape[1:]) for x in out))
 
-    def _action(self, action: np.ndarray) -> Any:
-        if isinstance(self.action_space, Discrete):
-            return int(action[0]) + self.action_start
-        space = self.action_space
-        return np.clip(action, space.low, space.high).astype(np.float32)
+    def _step_vectors(
+        self,
+        vectors: list[Any],
+        slots: np.ndarray,
+        actions: np.ndarray,
+        rows: np.ndarray,
+        out: Step,
+    ) -> None:
+        """Step `vectors`, every sub-environment at once, and write `rows` of `out`."""
+        size = self.vector_size
+        order = np.argsort(slots)
+        if not np.array_equal(slots[order], np.arange(len(vectors) * size)):
+            raise RuntimeError(
+                f"{self.name}: a vector environment steps all its sub-environments at once, so a "
+                "step must take every environment that its reset made"
+            )
+        for i, vector in enumerate(vectors):
+            block = order[i * size : (i + 1) * size]
+            self._step_vector(vector, actions[block], rows[block], out)
 
-    def _observation(self, obs: Any, where: str) -> np.ndarray:
-        obs = np.asarray(obs, np.float32)
-        if obs.shape != (self.observation_size,):
+    def _step_vector(self, vector: Any, actions: np.ndarray, rows: np.ndarray, out: Step) -> None:
+        obs, reward, terminated, truncated, info = self._step(vector, actions)
+        obs = self._observation(obs, "step", self.vector_size)
+        self._check_reward(reward)
+        terminated, truncated = np.asarray(terminated, bool), np.asarray(truncated, bool)
+        ended = terminated | truncated
+        final = first = obs
+        if ended.any() and self.same_step:
+            final = obs.copy()
+            final[ended] = self._final_observations(info, ended)
+        elif ended.any():
+            first = obs.copy()
+            reset = vector.reset(options={"reset_mask": ended})[0]
+            first[ended] = self._observation(reset, "reset", self.vector_size)[ended]
+        out.obs[rows] = final
+        out.reward[rows] = reward
+        out.terminated[rows] = terminated
+        out.truncated[rows] = truncated & ~terminated
+        out.next_obs[rows] = first
+
+    def _final_observations(self, info: dict[str, Any], ended: np.ndarray) -> np.ndarray:
+        """The final observations of the episodes that `ended`, from a SAME_STEP step's info."""
+        if "final_obs" not in info:
             raise ValueError(
-                f"{self.name}: {where} returned an observation of shape {obs.shape}, not "
-                f"({self.observation_size},) as its observation space says"
+                f"{self.name}: its autoreset mode is SAME_STEP, but step gave no "
+                "info['final_obs'] for the episodes that ended"
+            )
+        final = np.stack([info["final_obs"][i] for i in np.flatnonzero(ended)])
+        return self._observation(final, "step's info['final_obs']", int(ended.sum()))
+
+    def _step(self, env: Any, action: Any) -> tuple:
+        try:
+            return env.step(action)
+        except Exception as error:
+            raise RuntimeError(
+                f"{self.name}: step raised {type(error).__name__}: {error}"
+            ) from error
+
+    def _actions(self, actions: np.ndarray) -> np.ndarray:
+        """The actions [count, …] as Gymnasium takes them: a Discrete space's from its first
+        action (integers, as its ``sample`` gives), a Box's clipped to its bounds."""
+        if isinstance(self.action_space, Discrete):
+            return actions[:, 0].astype(np.int64) + self.action_start
+        space = self.action_space
+        return np.clip(actions, space.low, space.high).astype(np.float32)
+
+    def _check_reward(self, reward: Any) -> None:
+        if not np.isfinite(reward).all():
+            raise ValueError(f"{self.name}: step returned the reward {reward}")
+
+    def _observation(self, obs: Any, where: str, count: int | None = None) -> np.ndarray:
+        """`obs` checked: one observation, or `count` of them from a vector environment. A copy,
+        since a vector environment may hand back a buffer of its own that its reset rewrites."""
+        obs = np.array(obs, np.float32)
+        shape = (self.observation_size,) if count is None else (count, self.observation_size)
+        if obs.shape != shape:
+            raise ValueError(
+                f"{self.name}: {where} returned observations of shape {obs.shape}, not {shape} "
+                "as its observation space says"
             )
         if not np.isfinite(obs).all():
             raise ValueError(f"{self.name}: {where} returned a non-finite observation {obs}")
         return obs
 
 
-def gymnasium_environment(env: str | Callable[[], Any], **kwargs: Any) -> GymnasiumEnvironment:
-    """A registered Gymnasium id (made with ``gymnasium.make(env, **kwargs)``) or a function
-    that makes one ``gymnasium.Env`` (a ``gymnasium.Env`` subclass, say), for ``train`` and
-    ``sweep``. The same id and arguments give the same environment object, so that a later
-    run reuses the program compiled for it."""
+def _seeded_reset(vector: Any, seeds: list[int]) -> np.ndarray:
+    """The first observations of `vector`, reset from its sub-environments' seeds: one each
+    where it takes them (SyncVectorEnv, AsyncVectorEnv), else the first one."""
+    from gymnasium.vector import AsyncVectorEnv, SyncVectorEnv
+
+    each = isinstance(vector.unwrapped, SyncVectorEnv | AsyncVectorEnv)
+    return vector.reset(seed=seeds if each else seeds[0])[0]
+
+
+def gymnasium_environment(
+    env: str | Callable[[], Any] | Any, **kwargs: Any
+) -> GymnasiumEnvironment:
+    """A registered Gymnasium id (made with ``gymnasium.make(env, **kwargs)``), a function that
+    makes one ``gymnasium.Env`` or one ``gymnasium.vector.VectorEnv`` (a subclass of either, say;
+    called with `kwargs`), or a vector environment itself, for ``train`` and ``sweep`` (see the
+    module's docstring for vector environments). The same id and arguments give the same
+    environment object, so that a later run reuses the program compiled for it."""
     if isinstance(env, str):
         return _registered(env, tuple(sorted(kwargs.items())))
+    if isinstance(env, import_gymnasium().vector.VectorEnv):
+        if kwargs:
+            raise TypeError(f"{env} is made already: keyword arguments are for an id or a function")
+        return GymnasiumEnvironment(lambda: env, str(env), instance=True)
+    name = getattr(env, "__name__", repr(env))
     if kwargs:
-        return GymnasiumEnvironment(lambda: env(**kwargs), getattr(env, "__name__", repr(env)))
-    return GymnasiumEnvironment(env, getattr(env, "__name__", repr(env)))
+        return GymnasiumEnvironment(lambda: env(**kwargs), name)
+    return GymnasiumEnvironment(env, name)
 
 
 _MADE: dict[tuple, GymnasiumEnvironment] = {}
@@ -216,10 +439,15 @@ def _registered(env_id: str, kwargs: tuple) -> GymnasiumEnvironment:
     return _MADE[key]
 
 
-def is_gymnasium_env_class(env: Any) -> bool:
-    """Whether `env` is a ``gymnasium.Env`` subclass (a class, not an instance)."""
-    if importlib.util.find_spec("gymnasium") is None or not isinstance(env, type):
+def is_gymnasium_env(env: Any) -> bool:
+    """Whether `env` is what :func:`gymnasium_environment` takes as it is, without a function
+    around it: a ``gymnasium.Env`` or ``gymnasium.vector.VectorEnv`` subclass (a class), or a
+    vector environment (an instance)."""
+    if importlib.util.find_spec("gymnasium") is None:
         return False
     import gymnasium
 
-    return issubclass(env, gymnasium.Env)
+    kinds = (gymnasium.Env, gymnasium.vector.VectorEnv)
+    return isinstance(env, gymnasium.vector.VectorEnv) or (
+        isinstance(env, type) and issubclass(env, kinds)
+    )

@@ -222,9 +222,9 @@ def choose_backend(env: str | Any, backend: str = "auto") -> tuple[str, str]:
     if not isinstance(env, str):
         if backend != "auto":
             raise ValueError("backend applies to tasks given by name; this environment runs as is")
-        from fppo_jax.envs.gymnasium import is_gymnasium_env_class
+        from fppo_jax.envs.gymnasium import is_gymnasium_env
 
-        default = "gymnasium" if is_gymnasium_env_class(env) else "custom"
+        default = "gymnasium" if is_gymnasium_env(env) else "custom"
         return str(getattr(env, "backend", default)), ""
     task = lookup(env)
     if backend == "auto":
@@ -291,7 +291,8 @@ def _adapter(env: Any, make: Callable[[], Environment]) -> Environment:
 
 def as_environment(env: str | Environment | Any, backend: str = "auto") -> Environment:
     """A registered or namespaced name (on `backend`), a gymnax environment (default
-    parameters), a Brax ``Env`` (1000-step episodes), a ``gymnasium.Env`` subclass (see
+    parameters), a Brax ``Env`` (1000-step episodes), a ``gymnasium.Env`` or
+    ``gymnasium.vector.VectorEnv`` subclass or a vector environment (see
     :func:`~fppo_jax.envs.gymnasium.gymnasium_environment` for other Gymnasium environments)
     or an :class:`Environment`."""
     if isinstance(env, str):
@@ -305,16 +306,17 @@ def as_environment(env: str | Environment | Any, backend: str = "auto") -> Envir
 
     if mjx.is_brax_env(env):
         return _adapter(env, lambda: mjx.BraxEnvironment(env))
-    from fppo_jax.envs.gymnasium import gymnasium_environment, is_gymnasium_env_class
+    from fppo_jax.envs.gymnasium import gymnasium_environment, is_gymnasium_env
 
-    if is_gymnasium_env_class(env):
+    if is_gymnasium_env(env):
         return _adapter(env, lambda: gymnasium_environment(env))
     if isinstance(env, Environment):
         return env
     raise TypeError(
         f"expected a registered environment name ({', '.join(TASKS)}), a namespaced one "
         f"({_NAMESPACED_FORMS}), a gymnax or Brax "
-        "environment, a gymnasium.Env subclass (fppo_jax.envs.gymnasium.gymnasium_environment "
-        "takes any function that makes one), or an object with observation_size, action_space, "
+        "environment, a gymnasium.Env or gymnasium.vector.VectorEnv subclass or a vector "
+        "environment (fppo_jax.envs.gymnasium.gymnasium_environment takes any function that "
+        "makes one), or an object with observation_size, action_space, "
         "reset and step; got " + type(env).__name__
     )

@@ -26,13 +26,14 @@ from fppo_jax.checkpoint import (
     DamagedCheckpoint,
 )
 from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters
+from fppo_jax.driver import TrainingDiverged
 from fppo_jax.envs import TASKS, Environment, make_env
 from fppo_jax.evaluation import evaluate
 from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective
 from fppo_jax.options import Snapshot
 from fppo_jax.policy import Policy
 from fppo_jax.progress import Progress
-from fppo_jax.results import SweepResult, TrainingDiverged, TrainResult, merge
+from fppo_jax.results import SweepResult, TrainResult, merge
 from fppo_jax.saved_policy import load_policy
 from fppo_jax.sweep import expand_grid, sweep
 from fppo_jax.trainer import METRICS, Metrics, Trainer, TrainState, make_train

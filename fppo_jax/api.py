@@ -2,27 +2,23 @@
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import jax
 
 from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
+    VARIANT_SPECIFIC,
     check_seed,
-    describe,
-    environment_name,
-    resolve_config,
     resolve_hyperparameters,
 )
 from fppo_jax.distributed import is_main_process
 from fppo_jax.driver import Plan, drive
-from fppo_jax.envs import Environment, as_environment, choose_backend, describe_backend
+from fppo_jax.envs import Environment
 from fppo_jax.objectives import EPSILON
-from fppo_jax.options import Options
 from fppo_jax.policy import make_policy
+from fppo_jax.prepare import prepare
 from fppo_jax.results import TrainResult
-from fppo_jax.trainer import make_train
 
 
 def train(
@@ -59,25 +55,22 @@ def train(
     Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite (the last
     good checkpoint stays on disk).
     """
-    options, overrides = Options.split(settings)
-    optimisation = {
-        name: overrides.pop(name) for name in HYPERPARAMETER_DEFAULTS if name in overrides
-    }
-    valid = (*HYPERPARAMETER_DEFAULTS, *Options.names())
-    config = resolve_config(env, total_steps, overrides, also_valid=valid, preset=preset)
-    task = env if isinstance(env, str) else None
+    run = prepare(
+        env,
+        settings,
+        total_steps=total_steps,
+        preset=preset,
+        backend=backend,
+        hyperparameters=(*VARIANT_SPECIFIC, *HYPERPARAMETER_DEFAULTS),
+    )
     hp, setting = resolve_hyperparameters(
-        variant, task, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **optimisation
+        variant, run.task, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **run.hyperparameters
     )
     seed = check_seed(seed)
-    chosen, why = choose_backend(env, backend)
-    environment = as_environment(env, backend)
-    name = environment_name(env, environment)
-    record = {**setting, "env": name, "backend": chosen, "seed": seed, "preset": preset}
-    record.update(dataclasses.asdict(config))
-    trainer = make_train(config, environment)
-    description = f"{variant} on {name}"
-    header = f"{description}{describe_backend(chosen, why)}: {describe(config, preset)}"
+    trainer, options = run.trainer, run.options
+    record = {**setting, **run.record(seed=seed)}
+    description = f"{variant} on {run.name}"
+    header = run.header(description)
     plan = Plan("train", trainer, jax.random.key(seed), hp, record, description, header)
     outcome = drive(plan, options)
     result = TrainResult(
@@ -88,7 +81,7 @@ def train(
         policy=make_policy(trainer, outcome.state),
         compile_seconds=outcome.compile_seconds,
         train_seconds=outcome.train_seconds,
-        env=environment,
+        env=run.environment,
         resumed_from=outcome.resumed_from,
         stopped_at=outcome.stopped_at,
     )

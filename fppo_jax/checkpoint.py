@@ -4,9 +4,11 @@ orbax atomically and in the background, and verified when read back.
 ``<directory>/<step>/`` holds four items: ``state`` (every array of the training state, PRNG
 keys as their raw data), ``curves`` (the metrics of every update so far), ``policy`` (what
 :func:`~fppo_jax.saved_policy.load_policy` needs) and ``record`` (JSON: the run's configuration,
-the policy's description and a SHA-256 digest of each array item). Orbax writes a step into a
-temporary directory and renames it once complete, so a killed process leaves whole checkpoints
-only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
+the policy's description and a SHA-256 digest of each array item). A run's step counts its
+updates; a sweep's, group × updates per run + update, and its record and ``curves`` also say
+where it is (:class:`ResumePoint`: the group, the update, the finished groups). Orbax writes a
+step into a temporary directory and renames it once complete, so a killed process leaves whole
+checkpoints only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
 checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old
 checkpoints are deleted only after a newer one is complete.
 
@@ -23,7 +25,7 @@ import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import numpy as np
@@ -58,6 +60,31 @@ class Restored:
     state: Any
     curves: dict[str, Any]
     record: dict[str, Any]
+
+    def point(self) -> ResumePoint:
+        """Where the checkpoint says training stopped (a run's checkpoint of the first format
+        holds its metrics alone, and no group)."""
+        current = self.curves.get("current", self.curves)
+        return ResumePoint(
+            group=self.record.get("group", 0),
+            update=self.record["update"],
+            current={name: np.asarray(values) for name, values in current.items()},
+            finished={k: np.asarray(v) for k, v in self.curves.get("finished", {}).items()},
+            finished_diverged=np.asarray(self.curves.get("finished_diverged", []), np.int32),
+        )
+
+
+class ResumePoint(NamedTuple):
+    """Where training is when it is checkpointed, and where a resumed run goes on: update
+    `update` of group `group` (a sweep's runs train in groups; a single run is group 0), the
+    group's metrics so far, and the finished groups' metrics and first diverged updates (empty
+    when none is finished)."""
+
+    group: int
+    update: int
+    current: dict[str, np.ndarray]
+    finished: dict[str, np.ndarray]
+    finished_diverged: np.ndarray
 
 
 def open_checkpoints(
@@ -210,6 +237,28 @@ class Checkpoints:
             state = [_from_storable(items.state[_name(i)], leaf) for i, leaf in enumerate(leaves)]
             return Restored(step, jax.tree.unflatten(treedef, state), items.curves, record)
         return None
+
+    def save_point(
+        self,
+        point: ResumePoint,
+        state: Any,
+        *,
+        kind: str,
+        config: dict[str, Any],
+        runs_per_call: int,
+        num_updates: int,
+        policy: Policy | None = None,
+    ) -> None:
+        """Checkpoint a `kind` of run ("train" or "sweep") configured as `config` at `point`,
+        with its `state` (and, for one run, its `policy`, which ``load_policy`` reads); the
+        record names the point, which :meth:`Restored.point` reads back."""
+        record = {"kind": kind, "config": config, "group": point.group, "update": point.update}
+        record["runs_per_call"] = runs_per_call
+        curves: dict[str, Any] = {"current": point.current}
+        if point.finished:
+            curves["finished"] = point.finished
+            curves["finished_diverged"] = point.finished_diverged
+        self.save(point.group * num_updates + point.update, state, curves, record, policy)
 
     def save(
         self,

@@ -34,7 +34,10 @@ TABLE2: dict[str, dict[str, float]] = {
 }
 _TABLE2_VARIANTS = {"fppo-lp": "alpha", "fppo-qp": "k"}
 
-VARIANT_SPECIFIC: tuple[str, ...] = ("alpha", "k", "delta")
+# The hyperparameters some variants take and others do not (α, k, δ).
+VARIANT_SPECIFIC: tuple[str, ...] = tuple(
+    dict.fromkeys(name for taken in VARIANT_DEFAULTS.values() for name in taken)
+)
 # The most env steps a run may take: the compiled program counts them in int32.
 MAX_STEPS = 2**31 - 1
 SYMBOLS = {"alpha": "α", "k": "k", "delta": "δ", "epsilon": "ε"}

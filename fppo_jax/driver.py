@@ -12,10 +12,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
 import numpy as np
@@ -26,6 +25,7 @@ from fppo_jax.checkpoint import (
     CheckpointsUnavailable,
     ConfigMismatch,
     Restored,
+    ResumePoint,
     check_same_run,
     open_checkpoints,
 )
@@ -43,11 +43,25 @@ from fppo_jax.execution import Program, compile_program, concatenate, run_chunks
 from fppo_jax.files import DirectoryLock
 from fppo_jax.memory import runs_per_call
 from fppo_jax.metric_log import Block, open_logs, prepare_log_dir
-from fppo_jax.options import Options, Snapshot
+from fppo_jax.options import Options, Snapshot, stops
 from fppo_jax.policy import Policy, make_policy
-from fppo_jax.progress import PROGRESS_LINES, Progress, reporter
-from fppo_jax.results import TrainingDiverged
+from fppo_jax.progress import PROGRESS_LINES, Counter, Progress, reporter
 from fppo_jax.trainer import Trainer, TrainState
+
+
+class TrainingDiverged(FloatingPointError):
+    """The loss or the parameters became NaN or infinite."""
+
+    def __init__(self, update: int, env_steps: int, checkpoint: str | None = None):
+        """`update` counts from 1, as the progress lines do; `checkpoint` says where the last
+        good checkpoint is, if any."""
+        self.update, self.env_steps = update, env_steps
+        kept = f" {checkpoint}." if checkpoint else ""
+        super().__init__(
+            f"training diverged at update {update} (after {env_steps:,} env steps): the loss or "
+            f"the parameters became NaN or infinite.{kept} Lower the learning rate, or check the "
+            "environment's observations and rewards."
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -285,7 +299,7 @@ class _Chunks:
         """The runs and metrics a resumed run starts from, for the logs to rewrite."""
         if self.restored is None:
             return []
-        point = _resume_point(self.restored)
+        point = self.restored.point()
         if not self.plan.batched:
             return [(range(1), point.current)]
         blocks = []
@@ -298,15 +312,23 @@ class _Chunks:
     def train(self) -> Outcome:
         first_group, start, resumed_from = 0, None, 0
         if self.restored is not None:
-            point = _resume_point(self.restored)
+            point = self.restored.point()
             if point.finished:
                 self.finished.append(point.finished)
                 self.diverged = point.finished_diverged
             first_group, resumed_from = point.group, point.update
             start = (self._restart_envs(self.restored.state, resumed_from), point.current)
             self.saved.append(resumed_from)
-        self.began = time.perf_counter()
-        self.steps_before = self._steps(first_group, resumed_from)
+        config = self.plan.trainer.config
+        self.counter = Counter(
+            self.plan.num_runs,
+            self.size,
+            self.num_updates,
+            config.samples_per_update,
+            self.program.compile_seconds,
+            first_group,
+            resumed_from,
+        )
         self._report(first_group, resumed_from, None)
         state, stopped_at = None, None
         for group in range(first_group, -(-self.plan.num_runs // self.size)):
@@ -366,10 +388,10 @@ class _Chunks:
         """The runs finished so far, ending with the group whose final state is `state`."""
         return Outcome(
             state=state,
-            metrics=_join(self.finished) if self.plan.batched else self.finished[-1],
+            metrics=concatenate(self.finished, axis=0) if self.plan.batched else self.finished[-1],
             diverged=self.diverged if self.plan.batched else self.diverged[0],
             compile_seconds=self.program.compile_seconds,
-            train_seconds=time.perf_counter() - self.began,
+            train_seconds=self.counter.elapsed(),
             resumed_from=resumed_from,
             runs_per_call=self.size,
             stopped_at=stopped_at,
@@ -387,16 +409,17 @@ class _Chunks:
         if self.options.checkpoint_dir is not None:
             host = fetch_tree(state)  # every process takes part; process 0 writes
             if self.checkpoints:
-                record = {"kind": self.plan.kind, "config": self.plan.record, "group": group}
-                record.update(update=update, runs_per_call=self.size)
-                curves: dict[str, Any] = {"current": metrics}
-                if self.finished:
-                    curves["finished"] = _join(self.finished)
-                    curves["finished_diverged"] = self.diverged
-                step = group * self.num_updates + update
-                # load_policy reads one run's
-                kept = None if self.plan.batched else make_policy(self.plan.trainer, host)
-                self.checkpoints.save(step, host, curves, record, kept)
+                finished = concatenate(self.finished, axis=0) if self.finished else {}
+                point = ResumePoint(group, update, metrics, finished, self.diverged)
+                self.checkpoints.save_point(
+                    point,
+                    host,
+                    kind=self.plan.kind,
+                    config=self.plan.record,
+                    runs_per_call=self.size,
+                    num_updates=self.num_updates,
+                    policy=None if self.plan.batched else make_policy(self.plan.trainer, host),
+                )
             self.saved.append(update)
         runs = range(group * self.size, min((group + 1) * self.size, self.plan.num_runs))
         if self.outputs:
@@ -406,7 +429,7 @@ class _Chunks:
         callback = self.options.callback
         if callback is None:
             return False
-        return _stops(callback(Snapshot(update, metrics, state, policy, runs)))
+        return stops(callback(Snapshot(update, metrics, state, policy, runs)))
 
     def _check_finite(self, nonfinite: int) -> None:
         """A single run stops at its first non-finite update (a sweep's runs go on)."""
@@ -432,88 +455,10 @@ class _Chunks:
             column[..., -1] = np.asarray(self.evaluate(policy)).mean(axis=-1)
         chunk["eval_return"] = column
 
-    def _steps(self, group: int, update: int) -> int:
-        """Env steps of every run, with groups before `group` done and `update` of this one."""
-        runs_done = min(group * self.size, self.plan.num_runs)
-        in_group = min(self.size, self.plan.num_runs - runs_done)
-        return (runs_done * self.num_updates + in_group * update) * self.samples
-
     def _report(self, group: int, update: int, metrics: dict[str, np.ndarray] | None) -> None:
-        if not self.report:
-            return
-        total = self.plan.num_runs * self.num_updates * self.samples
-        steps = self._steps(group, update)
-        elapsed = time.perf_counter() - self.began if metrics is not None else 0.0
-        rate = (steps - self.steps_before) / elapsed if elapsed > 0 else 0.0
-        latest = math.nan
-        if metrics is not None:
-            returns = metrics["average_return"][..., -1]
-            if np.isfinite(returns).any():
-                latest = float(np.nanmean(returns))
-        eta = (total - steps) / rate if rate > 0 else math.nan
-        self.report(
-            Progress(
-                update,
-                self.num_updates,
-                steps,
-                total,
-                latest,
-                rate,
-                elapsed,
-                self.program.compile_seconds,
-                eta,
-            )
-        )
-
-
-class _ResumePoint(NamedTuple):
-    group: int
-    update: int
-    current: dict[str, np.ndarray]  # the group's metrics so far
-    finished: dict[str, np.ndarray]  # the finished groups' ({} if none)
-    finished_diverged: np.ndarray
-
-
-def _resume_point(restored: Restored) -> _ResumePoint:
-    """Where a checkpoint's record and curves say training stopped (a run's checkpoint of the
-    first format holds its metrics alone, and no group)."""
-    curves, record = restored.curves, restored.record
-    current = curves.get("current", curves)
-    return _ResumePoint(
-        group=record.get("group", 0),
-        update=record["update"],
-        current={name: np.asarray(values) for name, values in current.items()},
-        finished={name: np.asarray(v) for name, v in curves.get("finished", {}).items()},
-        finished_diverged=np.asarray(curves.get("finished_diverged", []), np.int32),
-    )
-
-
-def _stops(answer: object) -> bool:
-    """Whether a callback's answer stops training: ``False`` (Python's or numpy's) stops, ``True``
-    and ``None`` go on, anything else is a mistake named at its first return."""
-    if answer is None:
-        return False
-    if isinstance(answer, bool | np.bool_):
-        return not answer
-    raise TypeError(
-        f"the callback returned {answer!r} ({type(answer).__name__}); it must return True or "
-        "False (a Python or numpy boolean; False stops training), or None to go on"
-    )
-
-
-def _join(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    """Groups' metrics stacked along runs; a group stopped early is padded with NaN (and
-    env steps −1) to the others' length."""
-    names = dict.fromkeys(name for p in parts for name in p)
-    length = max(p["env_steps"].shape[-1] for p in parts)
-
-    def padded(p: dict[str, np.ndarray], name: str) -> np.ndarray:
-        values = np.asarray(p[name]) if name in p else np.full(p["env_steps"].shape, np.nan)
-        fill = -1 if name == "env_steps" else np.nan
-        width = [(0, 0)] * (values.ndim - 1) + [(0, length - values.shape[-1])]
-        return np.pad(values, width, constant_values=fill)
-
-    return {name: np.concatenate([padded(p, name) for p in parts]) for name in names}
+        if self.report:
+            returns = None if metrics is None else metrics["average_return"][..., -1]
+            self.report(self.counter.progress(group, update, returns))
 
 
 def _multiple(size: int, of: int) -> int:

@@ -169,12 +169,22 @@ def _ran(metrics: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {name: values[..., ran] for name, values in metrics.items()}
 
 
-def concatenate(rows: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    """Metrics of consecutive chunks joined along the update axis; NaN where a chunk lacks
-    one (an evaluation column that a resumed run added)."""
-    names = dict.fromkeys(name for r in rows for name in r)
+def concatenate(parts: list[dict[str, np.ndarray]], axis: int = -1) -> dict[str, np.ndarray]:
+    """Metrics joined along updates (``axis=-1``: consecutive chunks of the same runs) or along
+    runs (``axis=0``: groups of runs, [run, update]; a group stopped early is padded to the
+    others' length with NaN, and env steps −1). A column a part lacks (an evaluation column
+    that a resumed run added) is NaN there."""
+    names = dict.fromkeys(name for p in parts for name in p)
+    length = max(p["env_steps"].shape[-1] for p in parts)
 
-    def column(r: dict[str, np.ndarray], name: str) -> np.ndarray:
-        return r[name] if name in r else np.full(r["env_steps"].shape, np.nan, np.float32)
+    def column(p: dict[str, np.ndarray], name: str) -> np.ndarray:
+        values = (
+            np.asarray(p[name]) if name in p else np.full(p["env_steps"].shape, np.nan, np.float32)
+        )
+        if axis == -1:
+            return values
+        fill = -1 if name == "env_steps" else np.nan
+        width = [(0, 0)] * (values.ndim - 1) + [(0, length - values.shape[-1])]
+        return np.pad(values, width, constant_values=fill)
 
-    return {name: np.concatenate([column(r, name) for r in rows], axis=-1) for name in names}
+    return {name: np.concatenate([column(p, name) for p in parts], axis=axis) for name in names}

@@ -1,6 +1,7 @@
 """How runs are driven, apart from what they train: the host-side options that ``train`` and
-``sweep`` share (:class:`Options`, each field with its default and its check), and what a
-callback sees between compiled chunks (:class:`Snapshot`)."""
+``sweep`` share (:class:`Options`, each field declared once with its default, its check and
+its command-line help, from which ``fppo-jax`` makes its flags), and what a callback sees
+between compiled chunks (:class:`Snapshot`)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from fppo_jax.config import positive_int
+from fppo_jax.extras import install_hint
 from fppo_jax.metric_log import require_wandb
 from fppo_jax.policy import Policy
 from fppo_jax.progress import Progress
@@ -35,6 +37,25 @@ class Snapshot(NamedTuple):
 
 
 Callback = Callable[[Snapshot], bool | None]
+
+
+def _flag(help: str, metavar: str | None = None, flag: str | None = None) -> dict[str, Any]:
+    """An :class:`Options` field's command-line flag: its help, its metavar, and its name if it
+    is not the field's (``log_dir``'s is ``--output``)."""
+    return {"help": help, "metavar": metavar, "flag": flag}
+
+
+def stops(answer: object) -> bool:
+    """Whether a callback's answer stops training: ``False`` (Python's or numpy's) stops, ``True``
+    and ``None`` go on, anything else is a mistake named at its first return."""
+    if answer is None:
+        return False
+    if isinstance(answer, bool | np.bool_):
+        return not answer
+    raise TypeError(
+        f"the callback returned {answer!r} ({type(answer).__name__}); it must return True or "
+        "False (a Python or numpy boolean; False stops training), or None to go on"
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,16 +104,58 @@ class Options:
     """
 
     progress: bool | Callable[[Progress], None] = False
-    checkpoint_dir: str | Path | None = None
-    resume: bool = False
-    checkpoint_every: int | None = None
-    keep: int = 3
-    log_dir: str | Path | None = None
-    devices: int | None = None
+    log_dir: str | Path | None = dataclasses.field(
+        default=None,
+        metadata=_flag(
+            "directory for config.json (at once), metrics.csv and TensorBoard files (as "
+            "training goes) and the results",
+            flag="--output",
+        ),
+    )
+    checkpoint_dir: str | Path | None = dataclasses.field(
+        default=None,
+        metadata=_flag(
+            "save the full training state in DIR every --checkpoint-every updates", "DIR"
+        ),
+    )
+    resume: bool = dataclasses.field(
+        default=False,
+        metadata=_flag(
+            "continue from the newest intact checkpoint in --checkpoint-dir (if there is one); "
+            "with a larger --steps, a finished run goes on"
+        ),
+    )
+    checkpoint_every: int | None = dataclasses.field(
+        default=None,
+        metadata=_flag("updates between checkpoints (default: a twentieth of the run)", "N"),
+    )
+    keep: int = dataclasses.field(default=3, metadata=_flag("checkpoints kept (the newest)"))
+    eval_every: int | None = dataclasses.field(
+        default=None,
+        metadata=_flag(
+            "every N updates and at the end, record eval_return: the deterministic policy's "
+            "mean return over --eval-episodes episodes",
+            "N",
+        ),
+    )
+    eval_episodes: int = dataclasses.field(default=10, metadata=_flag("episodes per evaluation"))
+    wandb_project: str | None = dataclasses.field(
+        default=None,
+        metadata=_flag(
+            f"also log to this Weights & Biases project ({install_hint('wandb')}; "
+            "WANDB_MODE=offline works without an account)",
+            "NAME",
+        ),
+    )
+    devices: int | None = dataclasses.field(
+        default=None,
+        metadata=_flag(
+            "devices to train on (default: all that JAX sees, every process's in a "
+            "multi-process run)",
+            "N",
+        ),
+    )
     callback: Callback | None = None
-    eval_every: int | None = None
-    eval_episodes: int = 10
-    wandb_project: str | None = None
 
     def __post_init__(self) -> None:
         for name in ("resume",):
@@ -120,6 +183,11 @@ class Options:
             if not isinstance(self.wandb_project, str):
                 raise ValueError(f"wandb_project must be a name, got {self.wandb_project!r}")
             require_wandb()
+
+    @classmethod
+    def flagged(cls) -> tuple[dataclasses.Field, ...]:
+        """The fields the command line sets with a flag of their own."""
+        return tuple(f for f in dataclasses.fields(cls) if "help" in f.metadata)
 
     @classmethod
     def names(cls) -> tuple[str, ...]:

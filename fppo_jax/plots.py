@@ -22,10 +22,12 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import PercentFormatter
 
 from fppo_jax import statistics
+from fppo_jax.config import VARIANT_SPECIFIC
 from fppo_jax.objectives import EPSILON, VARIANTS, objective
 from fppo_jax.results import SweepResult, labels, max_average_return, nanmean
 
-SWEPT = ("alpha", "k", "delta", "epsilon", "learning_rate")
+# The settings a sweep's charts are drawn against, where they vary, in this order.
+SWEPT = (*VARIANT_SPECIFIC, "epsilon", "learning_rate")
 IN_NEGATIVE_REGIONS = "share of the batch in R+ ∪ R-"
 YLABELS = {
     "average_return": "average return (last 100 episodes)",

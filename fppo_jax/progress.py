@@ -1,12 +1,16 @@
-"""Progress of a training program: what a report holds, a bar on a terminal, lines otherwise."""
+"""Progress of a training program: what a report holds and how it is counted, a bar on a
+terminal, lines otherwise."""
 
 from __future__ import annotations
 
 import contextlib
 import math
 import sys
+import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
+
+import numpy as np
 
 PROGRESS_LINES = 20  # chunks of updates a run is split into when progress is reported
 
@@ -29,6 +33,62 @@ class Progress(NamedTuple):
     elapsed: float
     compile_seconds: float
     eta: float = math.nan
+
+
+class Counter:
+    """Counts the progress of `num_runs` runs of `num_updates` updates of `samples` env steps
+    each, trained in groups of `group_size` runs one after another, from update `update` of
+    group `group` (where a resumed run starts); its clock starts when it is made."""
+
+    def __init__(
+        self,
+        num_runs: int,
+        group_size: int,
+        num_updates: int,
+        samples: int,
+        compile_seconds: float,
+        group: int = 0,
+        update: int = 0,
+    ):
+        self.num_runs, self.group_size = num_runs, group_size
+        self.num_updates, self.samples = num_updates, samples
+        self.compile_seconds = compile_seconds
+        self.began = time.perf_counter()
+        self.steps_before = self.steps(group, update)
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.began
+
+    def steps(self, group: int, update: int) -> int:
+        """Env steps of every run, with groups before `group` done and `update` of this one."""
+        runs_done = min(group * self.group_size, self.num_runs)
+        in_group = min(self.group_size, self.num_runs - runs_done)
+        return (runs_done * self.num_updates + in_group * update) * self.samples
+
+    def progress(
+        self, group: int, update: int, average_return: np.ndarray | None = None
+    ) -> Progress:
+        """The report at `update` of group `group`, given the group's latest average returns
+        (None before training, when the clock has not run)."""
+        total = self.num_runs * self.num_updates * self.samples
+        steps = self.steps(group, update)
+        elapsed = self.elapsed() if average_return is not None else 0.0
+        rate = (steps - self.steps_before) / elapsed if elapsed > 0 else 0.0
+        latest = math.nan
+        if average_return is not None and np.isfinite(average_return).any():
+            latest = float(np.nanmean(average_return))
+        eta = (total - steps) / rate if rate > 0 else math.nan
+        return Progress(
+            update,
+            self.num_updates,
+            steps,
+            total,
+            latest,
+            rate,
+            elapsed,
+            self.compile_seconds,
+            eta,
+        )
 
 
 def print_progress(p: Progress) -> None:

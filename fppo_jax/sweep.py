@@ -7,7 +7,6 @@ called on more runs. Runs are split into equal groups only when they do not fit 
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import sys
 from collections.abc import Iterable, Mapping, Sequence
@@ -22,20 +21,16 @@ from fppo_jax.config import (
     VARIANT_SPECIFIC,
     check_seed,
     check_variant,
-    describe,
-    environment_name,
     positive_int,
-    resolve_config,
     resolve_hyperparameters,
     table2,
 )
 from fppo_jax.driver import Outcome, Plan, drive
-from fppo_jax.envs import Environment, as_environment, choose_backend, describe_backend
+from fppo_jax.envs import Environment
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
 from fppo_jax.objectives import VARIANTS, real
-from fppo_jax.options import Options
+from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, labels
-from fppo_jax.trainer import make_train
 
 
 def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[str, Any]]:
@@ -119,16 +114,21 @@ def sweep(
     cluster's nodes. Its result and ``sweep.json`` name the part, and :func:`~fppo_jax.merge`
     joins the N parts into the whole sweep, naming any run still missing.
     """
-    options, overrides = Options.split(settings)
-    fixed = {name: overrides.pop(name) for name in list(overrides) if name in SWEEPABLE}
+    run = prepare(
+        env,
+        settings,
+        total_steps=total_steps,
+        preset=preset,
+        backend=backend,
+        hyperparameters=SWEEPABLE,
+    )
+    fixed, options = run.hyperparameters, run.options
     clash = sorted(set(fixed) & set(grid))
     if clash:
         raise ValueError(f"{', '.join(clash)} given both in the grid and as a fixed value")
-    valid = (*SWEEPABLE, *Options.names())
-    config = resolve_config(env, total_steps, overrides, also_valid=valid, preset=preset)
-    task = env if isinstance(env, str) else None
-    settings = expand_grid({**grid, **fixed}, task)
-    hps = [resolve_hyperparameters(task=task, **setting)[0] for setting in settings]
+    settings = expand_grid({**grid, **fixed}, run.task)
+    # expand_grid applied Table 2 to each setting: resolved as given, not again per task.
+    hps = [resolve_hyperparameters(task=None, **setting)[0] for setting in settings]
     seeds = _seeds(seeds)
     runs = [{"setting": i, "seed": seed} for i in range(len(settings)) for seed in seeds]
     if part is not None:
@@ -138,14 +138,10 @@ def sweep(
     if data_parallel is not None:
         positive_int("data_parallel", data_parallel)
 
-    chosen, why = choose_backend(env, backend)
-    environment = as_environment(env, backend)
-    name = environment_name(env, environment)
     grid_values = {key: _as_list(key, v) for key, v in {**grid, **fixed}.items()}
-    record = {"env": name, "backend": chosen, "grid": grid_values, "seeds": seeds, "preset": preset}
-    if part is not None:
-        record["part"] = list(part)
-    record.update(dataclasses.asdict(config))
+    shares = {} if part is None else {"part": list(part)}
+    record = run.record(grid=grid_values, seeds=seeds, **shares)
+    name = run.name
 
     def result_of(outcome: Outcome) -> SweepResult:
         return SweepResult(
@@ -167,16 +163,17 @@ def sweep(
     stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *[hps[run["setting"]] for run in runs])
     plan = Plan(
         "sweep",
-        make_train(config, environment),
+        run.trainer,
         keys,
         stacked,
         record,
         f"sweep on {name}",
-        f"sweep on {name}{describe_backend(chosen, why)}: {len(settings)} settings × "
-        f"{len(seeds)} seeds = {len(settings) * len(seeds)} runs"
-        + ("" if part is None else f", part {part[0]} of {part[1]}: {len(runs)} of them")
-        + "; "
-        f"each {describe(config, preset)}",
+        run.header(
+            f"sweep on {name}",
+            f"{len(settings)} settings × {len(seeds)} seeds = {len(settings) * len(seeds)} runs"
+            + ("" if part is None else f", part {part[0]} of {part[1]}: {len(runs)} of them")
+            + "; each ",
+        ),
         runs=tuple({**settings[run["setting"]], "seed": run["seed"]} for run in runs),
         runs_per_call=chunk,
         data_parallel=1 if data_parallel is None else data_parallel,

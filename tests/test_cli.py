@@ -136,30 +136,30 @@ def test_every_config_field_has_a_flag_named_after_it():
     import dataclasses
 
     from fppo_jax import TrainConfig
-    from fppo_jax.cli import _config_overrides
+    from fppo_jax.cli.flags import config_overrides
 
     parser = build_parser()
     for command in ("train", "sweep"):
         fields = {f.name for f in dataclasses.fields(TrainConfig)}
         args = parser.parse_args([command])
         assert fields <= set(vars(args))  # one destination per field, None unless given
-        assert _config_overrides(args) == {"preset": "paper"}
+        assert config_overrides(args) == {"preset": "paper"}
     named = parser.parse_args(
         ["train", "--num-minibatches", "8", "--hidden-sizes", "32,16", "--no-normalize-rewards"]
     )
     aliased = parser.parse_args(["train", "--minibatches", "8", "--hidden", "32,16"])
-    assert _config_overrides(named) == {
+    assert config_overrides(named) == {
         "preset": "paper",
         "num_minibatches": 8,
         "hidden_sizes": (32, 16),
         "normalize_rewards": False,
     }
-    assert _config_overrides(aliased) == {
+    assert config_overrides(aliased) == {
         "preset": "paper",
         "num_minibatches": 8,
         "hidden_sizes": (32, 16),
     }
-    assert _config_overrides(parser.parse_args(["train", "--no-obs-norm", "--anneal-lr"])) == {
+    assert config_overrides(parser.parse_args(["train", "--no-obs-norm", "--anneal-lr"])) == {
         "preset": "paper",
         "normalize_observations": False,
         "anneal_learning_rate": True,
@@ -238,10 +238,10 @@ def test_sweep_then_table_then_plot(tmp_path, capsys):
 
 
 def test_sweep_value_ranges_and_errors(tmp_path, capsys):
-    from fppo_jax.cli import _values
+    from fppo_jax.cli.flags import values as parse_values
 
-    assert _values("1.1:1.5:0.1") == [1.1, 1.2, 1.3, 1.4, 1.5]
-    assert _values("0.1,0.4") == [0.1, 0.4]
+    assert parse_values("1.1:1.5:0.1") == [1.1, 1.2, 1.3, 1.4, 1.5]
+    assert parse_values("0.1,0.4") == [0.1, 0.4]
     with pytest.raises(SystemExit):
         main(["sweep", "--alpha", "1.5:1.1:0.1"])
     assert "expected start:stop:step" in capsys.readouterr().err
@@ -261,9 +261,9 @@ def test_sweep_value_ranges_and_errors(tmp_path, capsys):
     ],
 )
 def test_value_ranges_end_on_or_before_their_stop_without_float_error(text, values):
-    from fppo_jax.cli import _values
+    from fppo_jax.cli.flags import values as parse_values
 
-    assert _values(text) == values
+    assert parse_values(text) == values
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,70 @@
+"""The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``eval`` (and render)
+or ``export`` a trained policy, ``table``, ``compare``, ``merge`` and ``plot`` sweeps' results,
+``list`` the tasks and variants.
+
+:mod:`.flags` turns text into checked values and makes the flags of the fields that declare
+them; :mod:`.parser` assembles the commands; :mod:`.settings` reads ``--config FILE``;
+:mod:`.commands` does what each command does. ``main`` reports every expected error in one line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import warnings
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+from fppo_jax.checkpoint import CheckpointsUnavailable, DamagedCheckpoint
+from fppo_jax.cli.commands import COMMANDS
+from fppo_jax.cli.parser import build_parser
+from fppo_jax.cli.settings import settings_file
+from fppo_jax.distributed import initialize
+from fppo_jax.driver import TrainingDiverged
+
+__all__ = ["build_parser", "main"]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "config", None) is not None:
+        command = args.commands[args.command]
+        try:
+            command.set_defaults(**settings_file(args.config, command))
+        except (ValueError, FileNotFoundError) as error:
+            print(f"fppo-jax: error: {error}", file=sys.stderr)
+            return 2
+        args = parser.parse_args(argv)
+    if getattr(args, "distributed", False):
+        initialize()
+    with _warnings_as_lines():
+        try:
+            return COMMANDS[args.command](args)
+        except (
+            ValueError,
+            FileNotFoundError,
+            ImportError,
+            MemoryError,
+            TrainingDiverged,
+            CheckpointsUnavailable,
+        ) as error:
+            print(f"fppo-jax: error: {error}", file=sys.stderr)
+            return 2
+
+
+@contextlib.contextmanager
+def _warnings_as_lines() -> Iterator[None]:
+    """A damaged checkpoint reported in a line of the command's own, as its errors are; any
+    other warning as before."""
+    with warnings.catch_warnings():
+        show = warnings.showwarning
+
+        def shown(message: Warning | str, category: type[Warning], *rest: Any) -> None:
+            if issubclass(category, DamagedCheckpoint):
+                print(f"fppo-jax: warning: {message}", file=sys.stderr)
+            else:
+                show(message, category, *rest)
+
+        warnings.showwarning = shown
+        yield

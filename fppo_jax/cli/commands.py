@@ -1,0 +1,225 @@
+"""What each ``fppo-jax`` command does with its parsed flags: ``train`` one policy, ``sweep``
+a grid, ``eval`` (and render) or ``export`` a trained policy, ``table``, ``compare``, ``merge``
+and ``plot`` sweeps' results, ``list`` the tasks and variants."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from fppo_jax.api import train
+from fppo_jax.cli.flags import HYPERPARAMETER_HELP, config_overrides, options, slurm_part
+from fppo_jax.config import (
+    PRESETS,
+    TABLE2,
+    describe_update,
+    preset_config,
+)
+from fppo_jax.distributed import is_main_process
+from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
+from fppo_jax.files import writable_directory
+from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
+from fppo_jax.results import SweepResult, merge
+from fppo_jax.saved_policy import (
+    ARRAYS_FILE,
+    POLICY_FILE,
+    check_no_saved_policy,
+    load_policy,
+)
+from fppo_jax.sweep import sweep
+
+
+def _train(args: argparse.Namespace) -> int:
+    if args.render:  # refused now rather than after training
+        from fppo_jax.render import check_render_path, check_renderable
+
+        check_render_path(args.render)
+        check_renderable(args.env)
+    if args.save_policy:  # refused now rather than after training
+        check_no_saved_policy(
+            args.save_policy, replace=f"remove its {POLICY_FILE} and {ARRAYS_FILE}"
+        )
+        writable_directory(args.save_policy)
+    given = {name: getattr(args, name) for name in HYPERPARAMETER_HELP}
+    result = train(
+        args.env,
+        args.variant,
+        seed=args.seed,
+        backend=args.backend,
+        **{name: value for name, value in given.items() if value is not None},
+        **options(args),
+        **config_overrides(args),
+    )
+    if not is_main_process():
+        return 0
+    print(result.summary())
+    if args.output:  # written by train
+        print(f"wrote {args.output}/config.json, metrics.csv, tensorboard/, summary.txt")
+    if args.save_policy:
+        print(f"wrote {result.save(args.save_policy)}/policy.json, policy.npz")
+    if args.render:
+        from fppo_jax.render import RenderingUnavailable
+
+        try:
+            print(f"wrote {result.render(args.render)}")
+        except (RenderingUnavailable, TypeError) as error:
+            print(f"fppo-jax: not rendered: {error}", file=sys.stderr)
+            return 2
+    return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    grid = {"variant": args.variant}
+    grid.update({name: getattr(args, name) for name in HYPERPARAMETER_HELP if getattr(args, name)})
+    part = args.part or slurm_part()
+    result = sweep(
+        args.env,
+        grid,
+        seeds=args.seeds,
+        part=part,
+        chunk=args.chunk,
+        data_parallel=args.data_parallel,
+        backend=args.backend,
+        **options(args),
+        **config_overrides(args),
+    )
+    if not is_main_process():
+        return 0
+    runs = len(result.runs)
+    share = "" if part is None else f" (part {part[0]} of {part[1]})"
+    print(
+        f"{runs} runs{share} on {result.config['env']} in {result.train_seconds:.1f} s "
+        f"(+{result.compile_seconds:.1f} s compiling), {result.config['runs_per_call']} per call"
+    )
+    print(result.table())
+    if args.output:  # written by the sweep as each group of runs finished
+        print(f"wrote {args.output}/curves.csv, sweep.json")
+    return 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from fppo_jax.evaluation import evaluate
+    from fppo_jax.saved_policy import read_policy
+
+    if args.render:
+        from fppo_jax.render import check_render_path
+
+        check_render_path(args.render)
+    policy, record = read_policy(args.checkpoint)
+    config = record["config"]
+    if config["env"] not in TASKS:
+        raise ValueError(
+            f"the policy's environment {config['env']!r} is not a registered task; load the "
+            "policy with fppo_jax.load_policy and evaluate it on your environment"
+        )
+    if args.render:
+        from fppo_jax.render import check_renderable
+
+        check_renderable(config["env"])
+    env = make_env(config["env"], args.backend or config.get("backend", "auto"))
+    steps = record["update"] * config["num_envs"] * config["num_steps"]
+    source = "saved policy" if record["kind"] == "policy" else "checkpoint"
+    print(
+        f"{config['variant']} on {config['env']}, seed {config['seed']}: {source} at update "
+        f"{record['update']} ({steps:,} env steps); {args.episodes} episodes each"
+    )
+    for name, deterministic in (("deterministic", True), ("stochastic", False)):
+        returns = evaluate(env, policy, args.episodes, seed=args.seed, deterministic=deterministic)
+        print(
+            f"  {name:<13} return {returns.mean():.1f} ± {returns.std():.1f} "
+            f"(min {returns.min():.1f}, max {returns.max():.1f})"
+        )
+    if args.render:
+        from fppo_jax.render import RenderingUnavailable, drawable, render_policy
+
+        try:
+            path = render_policy(drawable(env, config["env"]), policy, args.render, seed=args.seed)
+            print(f"wrote {path}")
+        except RenderingUnavailable as error:
+            print(f"fppo-jax: not rendered: {error}", file=sys.stderr)
+            return 2
+    return 0
+
+
+def _table(args: argparse.Namespace) -> int:
+    result = SweepResult.read(args.directory)
+    print(result.table(args.stat, args.endpoint, args.ci))
+    return 0
+
+
+def _compare(args: argparse.Namespace) -> int:
+    result = SweepResult.read(args.directory)
+    print(result.compare(args.baseline, args.endpoint, args.ci))
+    return 0
+
+
+def _merge(args: argparse.Namespace) -> int:
+    if (args.output / "sweep.json").exists():
+        raise ValueError(f"{args.output} already holds a sweep; merge into a new directory")
+    result = merge([SweepResult.read(directory) for directory in args.directories])
+    result.write(args.output, metrics=list(result.metrics))
+    settings, seeds = len(result.settings), len(result.seeds)
+    print(
+        f"merged {len(args.directories)} sweeps: {len(result.runs)} runs ({settings} settings, "
+        f"{seeds} seeds) in {args.output}/curves.csv, sweep.json"
+    )
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from fppo_jax.plots import plot_sweep
+
+    for path in plot_sweep(SweepResult.read(args.directory), args.directory):
+        print(f"wrote {path}")
+    return 0
+
+
+def _list() -> int:
+    print("tasks:")
+    for task in TASKS.values():
+        print(
+            f"  {task.name:<12} {task.description}; {task.total_steps:,} steps, "
+            f"fppo-lp alpha {TABLE2[task.name]['alpha']}, fppo-qp k {TABLE2[task.name]['k']}; "
+            f"backends: {', '.join(task.backends)}" + (f" ({task.native})" if task.native else "")
+        )
+    print("namespaces (any id the library has, e.g. --env gymnax/Pendulum-v1):")
+    for name, text in NAMESPACES.items():
+        print(f"  {name + '/':<12} {text}")
+    print("backends (--backend):")
+    for name, text in BACKENDS.items():
+        print(f"  {name:<10} {text}")
+    print("presets:")
+    for name in PRESETS:
+        config = preset_config(name, total_steps=10**9)
+        print(f"  {name:<10} {describe_update(config)} per update")
+    print("variants:")
+    for name in VARIANTS:
+        params = ", ".join(f"{k} {v}" for k, v in DEFAULTS[name].items()) or "-"
+        print(f"  {name:<10} defaults: epsilon {EPSILON}; {params}")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from fppo_jax.onnx_export import export_onnx
+
+    if os.path.lexists(args.onnx):
+        raise ValueError(f"{args.onnx} already exists; remove it or choose another path")
+    writable_directory(Path(args.onnx).parent)
+    print(f"wrote {export_onnx(load_policy(args.checkpoint), args.onnx)}")
+    return 0
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "train": _train,
+    "sweep": _sweep,
+    "table": _table,
+    "compare": _compare,
+    "merge": _merge,
+    "plot": _plot,
+    "eval": _eval,
+    "export": _export,
+    "list": lambda args: _list(),
+}

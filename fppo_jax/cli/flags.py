@@ -1,0 +1,346 @@
+"""The command line's flags: argument types that turn text into checked values, and the flags
+generated from the fields that declare them once (:class:`~fppo_jax.config.TrainConfig`'s run
+shape, :class:`~fppo_jax.options.Options`' way of driving a run), read back as keyword
+arguments of ``train`` and ``sweep``."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import os
+from collections.abc import Callable, Mapping
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+from typing import Any, NoReturn
+
+from fppo_jax.config import (
+    HYPERPARAMETER_DEFAULTS,
+    PRESETS,
+    TrainConfig,
+    check_variant,
+    parse_seeds,
+    positive_int,
+)
+from fppo_jax.envs import BACKENDS
+from fppo_jax.objectives import EPSILON
+from fppo_jax.options import Options
+from fppo_jax.statistics import CONFIDENCE, ENDPOINTS
+
+
+def _argument(parse: Callable[[str], Any]) -> Callable[[str], Any]:
+    """`parse` as an argparse type: its ValueError becomes the flag's one-line error."""
+
+    def parsed(text: str) -> Any:
+        try:
+            return parse(text)
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error)) from None
+
+    parsed.__name__ = parse.__name__
+    return parsed
+
+
+@_argument
+def count(text: str) -> int:
+    """A positive integer (a count of updates, episodes, devices …)."""
+    try:
+        number = int(text)
+    except ValueError:
+        raise ValueError(f"expected a positive integer, got {text!r}") from None
+    return positive_int("the value", number)
+
+
+seeds = _argument(parse_seeds)
+
+
+@_argument
+def part(text: str) -> tuple[int, int]:
+    """``K/N``: the K-th of N shares of a sweep."""
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise ValueError(f"expected K/N such as 2/8, got {text!r}") from None
+    if not 1 <= k <= n:
+        raise ValueError(f"expected K/N with 1 <= K <= N, got {text!r}")
+    return k, n
+
+
+def slurm_part(environ: Mapping[str, str] = os.environ) -> tuple[int, int] | None:
+    """The part of a SLURM job array's task: (its index from 1, the array's task count)."""
+    if "SLURM_ARRAY_TASK_ID" not in environ or "SLURM_ARRAY_TASK_COUNT" not in environ:
+        return None
+    task, first = int(environ["SLURM_ARRAY_TASK_ID"]), int(environ.get("SLURM_ARRAY_TASK_MIN", 0))
+    return task - first + 1, int(environ["SLURM_ARRAY_TASK_COUNT"])
+
+
+@_argument
+def path(text: str) -> Path:
+    if not text:
+        raise ValueError("an empty path: name one ('.' for this directory)")
+    return Path(text)
+
+
+@_argument
+def confidence(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value < 1:
+        raise ValueError(f"a confidence level in (0, 1) such as 0.95, got {text}")
+    return value
+
+
+@_argument
+def sizes(text: str) -> tuple[int, ...]:
+    """Hidden layers' widths: ``64,64``."""
+    try:
+        return tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise ValueError(f"expected comma-separated widths such as 64,64, got {text!r}") from None
+
+
+# The most values one start:stop:step may give: far more than a sweep trains, so more is a
+# mistyped step.
+MAX_RANGE = 1000
+
+
+@_argument
+def values(text: str) -> list[float]:
+    """``1.1:1.5:0.1`` (inclusive, never past its stop) or ``0.1,0.2,0.4``; finite numbers."""
+    # Decimal, so that 1.1:1.5:0.1 steps by exactly 0.1 and ends on 1.5, neither short nor past.
+    try:
+        parts = [Decimal(part) for part in text.split(":" if ":" in text else ",")]
+    except InvalidOperation:
+        raise ValueError(
+            f"expected start:stop:step or a comma list of numbers, got {text!r}"
+        ) from None
+    if not all(part.is_finite() and math.isfinite(part) for part in parts):
+        raise ValueError(f"values must be finite numbers, got {text!r}")
+    if ":" not in text:
+        return [float(part) for part in parts]
+    if len(parts) != 3 or parts[2] <= 0 or parts[1] < parts[0]:
+        raise ValueError(f"expected start:stop:step with stop >= start and step > 0, got {text!r}")
+    start, stop, step = parts
+    if (stop - start) / step >= MAX_RANGE:
+        raise ValueError(f"{text} gives more than {MAX_RANGE} values")
+    return [float(start + i * step) for i in range(int((stop - start) // step) + 1)]
+
+
+@_argument
+def variants(text: str) -> list[str]:
+    """A comma list of variants: ``ppo,fppo-lp``."""
+    return [check_variant(name.strip()) for name in text.split(",")]
+
+
+# A field's type, as its dataclass declares it, and the argparse type of its flag.
+_TYPES: dict[str, Callable[[str], Any]] = {
+    "int": count,
+    "int | None": count,
+    "float": _argument(float),
+    "float | None": _argument(float),
+    "str | None": str,
+    "str | Path | None": path,
+    "tuple[int, ...]": sizes,
+}
+
+
+def _type_of(owner: type, field: dataclasses.Field) -> Callable[[str], Any]:
+    if field.type not in _TYPES:
+        raise TypeError(
+            f"{owner.__name__}.{field.name} is a {field.type}, which has no command-line flag "
+            "type: add one to fppo_jax.cli.flags._TYPES"
+        )
+    return _TYPES[field.type]
+
+
+# Short flags, kept as aliases of the flags named after TrainConfig's fields.
+ALIASES = {
+    "total_steps": "--steps",
+    "num_minibatches": "--minibatches",
+    "num_epochs": "--epochs",
+    "hidden_sizes": "--hidden",
+    "normalize_observations": "--no-obs-norm",
+    "normalize_rewards": "--no-reward-norm",
+    "clip_value_loss": "--no-value-clip",
+    "anneal_learning_rate": "--anneal-lr",
+}
+
+
+def add_config_flags(command: argparse.ArgumentParser) -> None:
+    """A flag per :class:`TrainConfig` field, named after it, over the preset's value."""
+    group = command.add_argument_group(
+        "run shape", "TrainConfig's fields; each defaults to the preset's value, shown per preset"
+    )
+    for field in dataclasses.fields(TrainConfig):
+        flag, alias = "--" + field.name.replace("_", "-"), ALIASES.get(field.name)
+        text = field.metadata["help"] + _preset_values(field.name, field.default)
+        if field.type == "bool":
+            group.add_argument(
+                flag, dest=field.name, action=argparse.BooleanOptionalAction, help=text
+            )
+            if alias:  # --no-obs-norm turns a default-on field off; --anneal-lr one on
+                on = alias.startswith("--no-")
+                same = ("--no-" + flag[2:]) if on else flag
+                group.add_argument(
+                    alias,
+                    dest=field.name,
+                    action="store_false" if on else "store_true",
+                    default=None,
+                    help=f"same as {same}",
+                )
+            continue
+        flags = [flag, alias] if alias else [flag]
+        group.add_argument(*flags, dest=field.name, type=_type_of(TrainConfig, field), help=text)
+
+
+def config_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The preset and the run-shape flags given, as :class:`TrainConfig` fields."""
+    given = {field.name: getattr(args, field.name) for field in dataclasses.fields(TrainConfig)}
+    return {"preset": args.preset, **{k: v for k, v in given.items() if v is not None}}
+
+
+def _preset_values(name: str, default: Any) -> str:
+    """What a field is unless given, for its help: per preset where a preset sets it
+    (" (paper: 8; massive: 2048)"), else its default, where it is worth reading."""
+    if name == "total_steps":
+        return ""  # its help names its default: the task's budget
+    if name == "anneal_learning_rate":
+        return " (default: on for the MuJoCo tasks under the paper preset, else off)"
+    set_by = {preset: shape[name] for preset, shape in PRESETS.items() if name in shape}
+    if set_by:
+        return " (" + "; ".join(f"{preset}: {_shown(v)}" for preset, v in set_by.items()) + ")"
+    if isinstance(default, bool):
+        return f" (default: {'on' if default else 'off'})"
+    return "" if default is None else f" (default: {_shown(default)})"
+
+
+def _shown(value: Any) -> str:
+    return ",".join(map(str, value)) if isinstance(value, tuple | list) else str(value)
+
+
+def _option_flag(field: dataclasses.Field) -> str:
+    return field.metadata["flag"] or "--" + field.name.replace("_", "-")
+
+
+def _option_dest(field: dataclasses.Field) -> str:
+    return _option_flag(field)[2:].replace("-", "_")
+
+
+def add_option_flags(command: argparse.ArgumentParser) -> None:
+    """A flag per :class:`Options` field that has one, and ``--quiet`` (the command line
+    shows progress unless told not to)."""
+    command.add_argument("--quiet", action="store_true", help="no progress bar or lines")
+    for field in Options.flagged():
+        flag, text = _option_flag(field), field.metadata["help"]
+        if field.type == "bool":
+            command.add_argument(flag, dest=_option_dest(field), action="store_true", help=text)
+            continue
+        command.add_argument(
+            flag,
+            dest=_option_dest(field),
+            type=_type_of(Options, field),
+            default=field.default,
+            metavar=field.metadata["metavar"],
+            help=text,
+        )
+
+
+def options(args: argparse.Namespace) -> dict[str, Any]:
+    """The flags of :func:`add_option_flags`, as ``train``'s and ``sweep``'s arguments."""
+    given = {field.name: getattr(args, _option_dest(field)) for field in Options.flagged()}
+    return {"progress": not args.quiet, **given}
+
+
+def add_backend_flag(command: argparse.ArgumentParser, default: str | None) -> None:
+    command.add_argument(
+        "--backend",
+        default=default,
+        choices=list(BACKENDS),
+        help="what runs a MuJoCo task: "
+        + "; ".join(f"{name}: {text}" for name, text in BACKENDS.items())
+        + ("" if default else " (default: the run's own)"),
+    )
+
+
+def add_render_flag(command: argparse.ArgumentParser, which: str) -> None:
+    command.add_argument(
+        "--render",
+        type=path,
+        metavar="PATH",
+        help=f"MuJoCo tasks: save an episode of {which} as an .mp4, a .gif or a .png strip",
+    )
+
+
+def add_score_flags(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--endpoint",
+        default="final",
+        choices=list(ENDPOINTS),
+        help="each run's score: " + "; ".join(f"{k}: {v}" for k, v in ENDPOINTS.items()),
+    )
+    command.add_argument(
+        "--ci", type=confidence, default=CONFIDENCE, help="the confidence intervals' level"
+    )
+
+
+HYPERPARAMETER_HELP = {
+    "alpha": "FPPO-LP pulling factor (>= 1), or the RB variants' rollback coefficient (>= 0)",
+    "k": "FPPO-QP quadratic coefficient (>= 0)",
+    "delta": "TR variants' KL bound (> 0)",
+    "epsilon": f"clip range, 0 < epsilon < 1 (default {EPSILON:g})",
+    **{
+        name: name.replace("_", " ") + f" (default {v:g})"
+        for name, v in HYPERPARAMETER_DEFAULTS.items()
+    },
+}
+
+
+def add_run_flags(command: argparse.ArgumentParser) -> None:
+    """The task, the preset, the run's shape and how it is driven, shared by train and sweep."""
+    command.add_argument(
+        "--env",
+        default="cartpole",
+        help="a registered task (fppo-jax list) or a namespaced id such as gymnax/Pendulum-v1",
+    )
+    add_backend_flag(command, "auto")
+    command.add_argument(
+        "--preset",
+        default="paper",
+        choices=list(PRESETS),
+        help="run shape: paper (8 envs × 256 steps, 32 minibatches × 10 epochs) or massive "
+        "(2048 envs × 16 steps, 16 minibatches × 4 epochs, for a GPU); the run-shape flags "
+        "override it",
+    )
+    add_config_flags(command)
+    command.add_argument(
+        "--config",
+        type=path,
+        metavar="FILE",
+        help="settings from FILE (JSON, or YAML: .yaml/.yml), a run's own config.json for one: "
+        "its run again; flags given beside it override it, and an unknown key is refused",
+    )
+    add_option_flags(command)
+    command.add_argument(
+        "--distributed",
+        action="store_true",
+        help="join a multi-process run (jax.distributed): JAX_COORDINATOR_ADDRESS, "
+        "JAX_NUM_PROCESSES and JAX_PROCESS_ID, or detected from SLURM / Open MPI",
+    )
+
+
+class Parser(argparse.ArgumentParser):
+    """A command's parser whose errors are one line, pointing at --help, not the usage."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class Defaults(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows a flag's default where it has one worth reading (not None, not off)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        if action.default in (None, False):
+            return action.help or ""
+        return super()._get_help_string(action)

@@ -1,0 +1,201 @@
+"""The ``fppo-jax`` command line's parser: its commands and their flags."""
+
+from __future__ import annotations
+
+import argparse
+
+from fppo_jax import __version__
+from fppo_jax.cli.flags import (
+    HYPERPARAMETER_HELP,
+    Defaults,
+    Parser,
+    add_backend_flag,
+    add_render_flag,
+    add_run_flags,
+    add_score_flags,
+    count,
+    part,
+    path,
+    seeds,
+    values,
+    variants,
+)
+from fppo_jax.extras import install_hint
+from fppo_jax.objectives import VARIANTS
+from fppo_jax.options import Options
+from fppo_jax.statistics import STATISTICS
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fppo-jax",
+        description="Train PPO and its fast variants (FPPO-LP, FPPO-QP, TR-PPO, PPO-RB, TR-PPO-RB) "
+        "with a fully jitted JAX trainer.",
+    )
+    parser.add_argument("--version", action="version", version=f"fppo-jax {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    parser.set_defaults(commands=commands.choices)
+    formatter = Defaults
+
+    run = commands.add_parser(
+        "train",
+        help="train one policy",
+        description="Train one policy and print progress and a summary. FPPO-LP's alpha and "
+        "FPPO-QP's k default to the paper's Table 2 for the task; other variants' "
+        "hyperparameters to the paper's values. --output DIR gets config.json at once, "
+        "metrics.csv and TensorBoard event files (tensorboard/) as training goes, then "
+        "summary.txt. "
+        "--checkpoint-dir DIR saves the full state as it goes; run the same command with "
+        "--resume to continue a stopped run exactly where its last checkpoint left it.",
+        formatter_class=formatter,
+    )
+    run.add_argument("--variant", default="fppo-lp", choices=list(VARIANTS), help="surrogate")
+    for name, text in HYPERPARAMETER_HELP.items():
+        run.add_argument(f"--{name.replace('_', '-')}", type=float, help=text)
+    run.add_argument("--seed", type=int, default=0, help="random seed")
+    add_render_flag(run, "the trained policy")
+    run.add_argument(
+        "--save-policy",
+        type=path,
+        metavar="DIR",
+        help="save the trained policy and the run's configuration in DIR, for fppo-jax eval "
+        "and fppo_jax.load_policy",
+    )
+    add_run_flags(run)
+
+    grid = commands.add_parser(
+        "sweep",
+        help="train a grid of settings × seeds as one compiled program",
+        description="Train every combination of the given values, times the seeds, as one "
+        "vmapped program. Values are start:stop:step (inclusive) or comma lists; alpha, k and "
+        "delta apply to the variants that take them. --output DIR writes curves.csv and "
+        "sweep.json, which `fppo-jax table` and `fppo-jax plot` read.",
+        formatter_class=formatter,
+    )
+    grid.add_argument(
+        "--variant", type=variants, default="fppo-lp", help="variants, e.g. ppo,fppo-lp,fppo-qp"
+    )
+    for name, text in HYPERPARAMETER_HELP.items():
+        grid.add_argument(f"--{name.replace('_', '-')}", type=values, help=text)
+    grid.add_argument(
+        "--seeds",
+        type=seeds,
+        default="5",  # parsed by the seeds type, shown as typed
+        help="per setting: N (seeds 0 … N−1), a range 10:20 (seeds 10 … 19) or a list 0,3,7",
+    )
+    grid.add_argument(
+        "--chunk", type=count, help="runs per compiled call (default: what fits in memory)"
+    )
+    grid.add_argument(
+        "--part",
+        type=part,
+        metavar="K/N",
+        help="train only the K-th of N equal shares of the sweep's runs (its run order), e.g. "
+        "one node's share; fppo-jax merge joins the parts. Under a SLURM job array, without "
+        "--part: the array task's share (SLURM_ARRAY_TASK_ID of SLURM_ARRAY_TASK_COUNT)",
+    )
+    grid.add_argument(
+        "--data-parallel",
+        type=count,
+        metavar="N",
+        help="devices each run's environments are split over (default 1: the devices share "
+        "the runs)",
+    )
+    add_run_flags(grid)
+
+    table = commands.add_parser(
+        "table",
+        help="print a sweep's summary per setting (Markdown)",
+        description="One row per setting. --stat paper (the default) is Table 1's: the max "
+        "average return (the maximum over updates of the seed-mean curve, ± the sample std "
+        "there), which is biased upward; iqm, mean or median give that statistic of each run's "
+        "--endpoint score with a percentile bootstrap confidence interval, and the sample std.",
+        formatter_class=formatter,
+    )
+    table.add_argument("directory", type=path, help="a sweep's --output directory")
+    table.add_argument(
+        "--stat",
+        default="paper",
+        choices=["paper", *STATISTICS],
+        help="paper: Table 1's max average return; or that statistic of each run's score, "
+        "with its bootstrap CI",
+    )
+    add_score_flags(table)
+    compare = commands.add_parser(
+        "compare",
+        help="each setting of a sweep against a baseline: probability of improvement, with CIs",
+        description="For every setting but the baseline: the probability that one of its runs "
+        "scores above one of the baseline's (P(X > Y) + ½ P(X = Y)) and the difference in IQM, "
+        "each with a percentile bootstrap confidence interval over both settings' runs.",
+        formatter_class=formatter,
+    )
+    compare.add_argument("directory", type=path, help="a sweep's --output directory")
+    compare.add_argument("--baseline", default="ppo", help="a setting's label or a variant")
+    add_score_flags(compare)
+    merged = commands.add_parser(
+        "merge",
+        help="join sweeps of other seeds (parts of one sweep) into one sweep's output",
+        description="Join the runs of sweeps that differ only in their seeds (or settings of the "
+        "same grid) into one curves.csv and sweep.json, which table, compare and plot read. "
+        "Parts of different tasks or protocols, and a run two parts both hold, are refused.",
+        formatter_class=formatter,
+    )
+    merged.add_argument("directories", type=path, nargs="+", help="sweeps' --output directories")
+    merged.add_argument("--output", type=path, required=True, help="where the merged sweep goes")
+    plot = commands.add_parser(
+        "plot", help="write a sweep's learning curves (and α/k chart) as PNG"
+    )
+    plot.add_argument("directory", type=path, help="a sweep's --output directory")
+
+    evaluation = commands.add_parser(
+        "eval",
+        help="report a trained policy's return, or render it",
+        description="Run the policy saved in DIR (of `fppo-jax train --save-policy DIR`), or "
+        "that of the newest checkpoint in DIR (of `--checkpoint-dir DIR`), for whole episodes "
+        "on its task, with its most likely actions (deterministic) and with sampled ones "
+        "(stochastic), and report the returns. --render PATH also saves an episode of the "
+        "deterministic policy on a MuJoCo task (.mp4, .gif or .png strip).",
+        formatter_class=formatter,
+    )
+    evaluation.add_argument(
+        "--checkpoint",
+        "--policy",
+        dest="checkpoint",
+        type=path,
+        required=True,
+        metavar="DIR",
+        help="a checkpoint directory or a saved policy",
+    )
+    evaluation.add_argument(
+        "--episodes",
+        type=count,
+        default=Options.eval_episodes,
+        help="episodes each",
+    )
+    add_backend_flag(evaluation, None)
+    evaluation.add_argument("--seed", type=int, default=0, help="random seed of the episodes")
+    add_render_flag(evaluation, "the deterministic policy")
+
+    export = commands.add_parser(
+        "export",
+        help="write a trained policy as an ONNX model",
+        description="Write the deterministic policy saved in DIR (or that of the newest "
+        "checkpoint in DIR) as an ONNX model: input `observation` [batch, size] float32, output "
+        f"`action` (see fppo_jax.onnx_export). Needs the onnx extra: {install_hint('onnx')}.",
+        formatter_class=formatter,
+    )
+    export.add_argument(
+        "--policy",
+        "--checkpoint",
+        dest="checkpoint",
+        type=path,
+        required=True,
+        metavar="DIR",
+        help="a saved policy or a checkpoint directory",
+    )
+    export.add_argument(
+        "--onnx", type=path, required=True, metavar="FILE", help="the model file to write"
+    )
+
+    commands.add_parser("list", help="list the tasks and the variants")
+    return parser

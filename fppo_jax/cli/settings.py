@@ -1,0 +1,48 @@
+"""Settings from a file (``--config FILE``): a run's own ``config.json``, or JSON or YAML
+written by hand, as defaults of a command's flags."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+# What a run's config.json records beside its settings (metric_log.environment_record).
+RECORD_ONLY = ("versions", "platform")
+
+
+def settings_file(path: Path, command: argparse.ArgumentParser) -> dict[str, Any]:
+    """The settings in `path` (JSON or YAML) as defaults of `command`'s flags: a run's own
+    ``config.json`` (train) or a sweep's (sweep, its grid as the grid's flags), or a file of
+    flag names written by hand. Raises ValueError naming any key that is not a setting."""
+    text = Path(path).read_text()
+    try:
+        if Path(path).suffix in (".yaml", ".yml"):
+            import yaml
+
+            settings = yaml.safe_load(text)
+        else:
+            settings = json.loads(text)
+    except ImportError:
+        raise ValueError(f"{path}: reading YAML needs PyYAML (pip install pyyaml)") from None
+    except Exception as error:
+        raise ValueError(f"{path} cannot be read as settings: {error}") from None
+    if not isinstance(settings, dict):
+        raise ValueError(f"{path} must hold a mapping of settings, got {type(settings).__name__}")
+    settings = {k: v for k, v in settings.items() if k not in RECORD_ONLY}
+    if isinstance(settings.get("devices"), list):  # the record's device kinds, not a count
+        del settings["devices"]
+    settings.update(settings.pop("grid", None) or {})
+    if "runs_per_call" in settings:
+        settings["chunk"] = settings.pop("runs_per_call")
+    if isinstance(settings.get("part"), list):
+        settings["part"] = tuple(settings["part"])
+    valid = set(vars(command.parse_args([]))) - {"commands", "command", "config"}
+    unknown = sorted(set(settings) - valid)
+    if unknown:
+        raise ValueError(
+            f"{path}: unknown setting{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
+            f"valid: {', '.join(sorted(valid))}"
+        )
+    return settings

@@ -4,8 +4,9 @@
 :class:`Hyperparameters` is a pytree of arrays passed into the compiled program, so seeds and
 hyperparameters (variants included) can be vmapped without recompiling.
 Defaults follow the paper's protocol (OpenAI baselines' ppo2 settings) and the paper's Table 2
-(:data:`TABLE2`). Every default and every check of a run's settings lives here, so that
-``train``, ``sweep`` and the command line resolve them alike.
+(:data:`TABLE2`). Every default and every check of what a run trains (its shape and its
+hyperparameters) lives here, so that ``train``, ``sweep`` and the command line resolve them
+alike; how a run is driven has its defaults and checks in :mod:`fppo_jax.options`.
 """
 
 from __future__ import annotations
@@ -246,33 +247,29 @@ _RANGES: dict[str, tuple[str, object]] = {
 
 
 def hyperparameters(
-    variant: str = "ppo",
-    *,
-    epsilon: float = EPSILON,
-    alpha: float | None = None,
-    k: float | None = None,
-    delta: float | None = None,
-    **values: float,
+    variant: str = "ppo", *, epsilon: float = EPSILON, **values: float | None
 ) -> Hyperparameters:
-    """Checked hyperparameters: the objective of `variant` and the optimisation settings.
+    """Checked hyperparameters: the objective of `variant` (ε and its own α, k or δ, see
+    :func:`~fppo_jax.objectives.objective`) and the optimisation settings.
 
     Unset settings take :data:`HYPERPARAMETER_DEFAULTS`; unknown names and out-of-range values
     raise ``ValueError`` naming the parameter.
     """
+    own = {name: values.pop(name) for name in VARIANT_SPECIFIC if name in values}
     unknown = sorted(set(values) - set(HYPERPARAMETER_DEFAULTS))
     if unknown:
         raise ValueError(
-            f"unknown hyperparameter {', '.join(unknown)}; valid: epsilon, alpha, k, delta, "
-            + ", ".join(HYPERPARAMETER_DEFAULTS)
+            f"unknown hyperparameter {', '.join(unknown)}; valid: "
+            + ", ".join(["epsilon", *VARIANT_SPECIFIC, *HYPERPARAMETER_DEFAULTS])
         )
-    settings = {**HYPERPARAMETER_DEFAULTS, **{k_: v for k_, v in values.items() if v is not None}}
+    settings = {**HYPERPARAMETER_DEFAULTS, **{k: v for k, v in values.items() if v is not None}}
     for name, value in settings.items():
         bound, ok = _RANGES[name]
         value = real(name, value)
         if not (math.isfinite(value) and ok(value)):
             raise ValueError(f"{name} must be {bound}, got {value}")
     return Hyperparameters(
-        objective=objective(variant, epsilon=epsilon, alpha=alpha, k=k, delta=delta),
+        objective=objective(variant, epsilon=epsilon, **own),
         **{name: jnp.asarray(value, jnp.float32) for name, value in settings.items()},
     )
 

@@ -34,19 +34,15 @@ def make_mesh(devices: int | None, num_envs: int, data_parallel: int | None = No
     compiled, for a count that JAX does not have or that does not divide the environments.
     """
     available = jax.devices()
-    count = len(available) if devices is None else devices
-    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
-        raise ValueError(f"devices must be a positive integer, got {devices!r}")
+    count = len(available) if devices is None else devices  # a positive count (Options)
     if count > len(available):
         raise ValueError(
             f"devices={count}, but JAX sees {len(available)} {available[0].platform} "
             f"device{'s' if len(available) > 1 else ''}"
         )
-    data = count if data_parallel is None else data_parallel
-    if isinstance(data, bool) or not isinstance(data, int) or data < 1 or count % data:
-        raise ValueError(
-            f"data_parallel must be a positive divisor of the devices ({count}), got {data!r}"
-        )
+    data = count if data_parallel is None else data_parallel  # a positive count (sweep)
+    if count % data:
+        raise ValueError(f"data_parallel must divide the devices ({count}), got {data}")
     if num_envs % data:
         raise ValueError(
             f"num_envs ({num_envs}) must be divisible by the devices each run is split over "

@@ -132,30 +132,31 @@ def drive(plan: Plan, options: Options) -> Outcome:
 
     def open_on_main() -> dict[str, Any] | None:
         nonlocal checkpoints
-        checkpoints, record = open_checkpoints(
+        checkpoints, newest = open_checkpoints(
             options.checkpoint_dir, options.resume, options.keep, plan.kind, plan.record
         )
-        return record
+        return newest
 
-    # Process 0 alone holds the checkpoints; the others learn their record, or the error met.
-    record = on_main_process(open_on_main)
+    # Process 0 alone holds the checkpoints; the others learn the newest one's record (None if
+    # there is none), or the error met.
+    checkpointed = on_main_process(open_on_main)
     outputs, failed = None, True
     try:
         if options.log_dir is not None and main:
             resumed = None
             if options.resume:  # the run checkpointed, or this one if nothing was yet
-                resumed = plan.record if record is None else record["config"]
+                resumed = plan.record if checkpointed is None else checkpointed["config"]
             outputs = prepare_log_dir(options.log_dir, resumed)
-        size = _group_size(plan, mesh, record, options.checkpoint_dir)
+        size = _group_size(plan, mesh, checkpointed, options.checkpoint_dir)
         per_call = _updates_per_call(options, config.num_updates)
         restored = None
-        if record is not None:
+        if checkpointed is not None:
             like = jax.eval_shape(_init(plan), *_group(plan, 0, size))
             restored = on_main_process(lambda: _restore(checkpoints, like, plan))
         if options.progress is True and main:
             where = f" on {mesh.size} devices" if mesh else ""
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
-        if plan.runs_per_call is None and record is None:
+        if plan.runs_per_call is None and checkpointed is None:
             runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
             size = runs_per_call(trainer, *_first_run(plan), size, runs, data)
         program = compile_program(trainer, *_group(plan, 0, size), per_call, mesh)
@@ -194,7 +195,7 @@ def _init(plan: Plan) -> Callable:
 
 
 def _group_size(
-    plan: Plan, mesh: Mesh | None, record: dict | None, checkpoint_dir: str | Path | None
+    plan: Plan, mesh: Mesh | None, checkpointed: dict | None, checkpoint_dir: str | Path | None
 ) -> int:
     """Runs per compiled call: the sweep's chunk, or its recorded one when resuming, rounded
     up to split evenly over the devices that share the runs."""
@@ -202,18 +203,18 @@ def _group_size(
         return 1
     chunk = plan.runs_per_call
     directory = None if checkpoint_dir is None else Path(checkpoint_dir).absolute()
-    if record is not None:
-        if chunk is not None and chunk != record["runs_per_call"]:
+    if checkpointed is not None:
+        if chunk is not None and chunk != checkpointed["runs_per_call"]:
             raise ConfigMismatch(
-                f"{directory} holds a sweep of {record['runs_per_call']} runs "
+                f"{directory} holds a sweep of {checkpointed['runs_per_call']} runs "
                 f"per compiled call, not {chunk}; resume without chunk, or with that"
             )
-        chunk = record["runs_per_call"]
+        chunk = checkpointed["runs_per_call"]
     across = mesh.shape["runs"] if mesh else 1
     size = _multiple(min(chunk or plan.num_runs, plan.num_runs), across)
-    if record is not None and size != record["runs_per_call"]:
+    if checkpointed is not None and size != checkpointed["runs_per_call"]:
         raise ConfigMismatch(
-            f"{directory} holds a sweep of {record['runs_per_call']} runs per "
+            f"{directory} holds a sweep of {checkpointed['runs_per_call']} runs per "
             f"call, which does not split evenly over {across} devices; resume with devices "
             "that divide it"
         )

@@ -67,7 +67,7 @@ def test_bad_device_counts_are_refused_with_the_reason(four_devices):
     errors = [str(e) for e in four_devices["errors"]]
     assert errors[0] == "devices=5, but JAX sees 4 cpu devices"
     assert errors[1] == "num_envs (8) must be divisible by the devices each run is split over (3)"
-    assert errors[2] == "data_parallel must be a positive divisor of the devices (4), got 3"
+    assert errors[2] == "data_parallel must divide the devices (4), got 3"
 
 
 def test_more_devices_than_there_are_is_an_error_here_too(capsys):

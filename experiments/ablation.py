@@ -17,49 +17,33 @@ saying which are still to run: a long ablation can go part by part, across sitti
 from __future__ import annotations
 
 import argparse
-import json
-from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
-from common import add_record_flags, refuse_to_replace
-from matplotlib.axes import Axes
-from table1_mujoco import record_sweep
+from common import (
+    ABLATION_PARTS,
+    ablation_parts,
+    add_record_flags,
+    add_sweep_flags,
+    argument_parser,
+    draw_ablation,
+    read_run_record,
+    record_sweep,
+    sweep_directory,
+    write_result,
+)
 
 from fppo_jax.config import table2
-from fppo_jax.envs import BACKENDS, TASKS, choose_backend
+from fppo_jax.envs import TASKS
 from fppo_jax.results import SweepResult
 
-PARTS = {  # part: the variant and the values of its own hyperparameter (the paper's Fig. 6)
-    "alpha": ("fppo-lp", "alpha", [1.1, 1.2, 1.3, 1.4, 1.5]),
-    "k": ("fppo-qp", "k", [0.1, 0.2, 0.3, 0.4, 0.5]),
-}
 TASKS_IN_PAPER = ("walker2d", "ant")
 
 
 def run_part(task: str, part: str, args: argparse.Namespace, directory: Path) -> None:
     """One part's sweep, written with its run record to `directory`/<task>/<part>/."""
-    variant, name, values = PARTS[part]
+    variant, name, values = ABLATION_PARTS[part]
     record_sweep(task, {"variant": variant, name: values}, args, directory / task / part)
-
-
-def recorded(directory: Path, task: str) -> list[str]:
-    """The parts of `task` recorded under `directory`."""
-    return [part for part in PARTS if (directory / task / part / "run.json").exists()]
-
-
-def draw(directory: Path, task: str, axes: Sequence[Axes]) -> None:
-    """Each recorded part of `task` on its own Axes: max average return against its
-    hyperparameter, with Table 2's choice marked."""
-    from fppo_jax.plots import plot_ablation
-
-    for ax, part in zip(axes, recorded(directory, task), strict=False):
-        plot_ablation(SweepResult.read(directory / task / part), axes=[ax])
-        variant, name, _ = PARTS[part]
-        chosen = table2(task, variant).get(name)
-        if chosen is not None:
-            ax.axvline(chosen, color="grey", linestyle=":", label=f"Table 2: {name} = {chosen}")
-            ax.legend(fontsize="small")
 
 
 def figure(directory: Path, task: str) -> Path:
@@ -67,9 +51,9 @@ def figure(directory: Path, task: str) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    width = len(recorded(directory, task))
+    width = len(ablation_parts(directory, task))
     fig, axes = plt.subplots(1, width, figsize=(5 * width, 4), squeeze=False, layout="constrained")
-    draw(directory, task, axes[0])
+    draw_ablation(directory, task, axes[0])
     path = directory / f"{task}.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -80,14 +64,14 @@ def report(directory: Path, backend: str) -> Path:
     """ablation.md: every part recorded under `directory`, and those still to run."""
     others = sorted(p.name for p in directory.iterdir() if p.is_dir())
     shown = [*TASKS_IN_PAPER, *(t for t in others if t not in TASKS_IN_PAPER)]
-    done = [f"{t} {p}" for t in shown for p in recorded(directory, t)]
-    pending = [f"{t} {p}" for t in TASKS_IN_PAPER for p in PARTS if f"{t} {p}" not in done]
+    done = [f"{t} {p}" for t in shown for p in ablation_parts(directory, t)]
+    pending = [f"{t} {p}" for t in TASKS_IN_PAPER for p in ABLATION_PARTS if f"{t} {p}" not in done]
     lines = [
         f"# Fig. 6 ablation on {backend}: FPPO-LP's α and FPPO-QP's k",
         "",
         "- Each part is one sweep (one compiled program) of the `paper` preset (learning rate "
         "annealed linearly to 0, as baselines' ppo2 MuJoCo defaults): `alpha`, FPPO-LP with "
-        f"α ∈ {PARTS['alpha'][2]}; `k`, FPPO-QP with k ∈ {PARTS['k'][2]}.",
+        f"α ∈ {ABLATION_PARTS['alpha'][2]}; `k`, FPPO-QP with k ∈ {ABLATION_PARTS['k'][2]}.",
         "- Max average return: the maximum over updates of the seed-mean of the "
         "last-100-episode average return, ± the sample std across seeds there, over the seeds that "
         "did not diverge. The paper's Fig. 6 gives these as a chart only; its Table 2 picks "
@@ -96,7 +80,7 @@ def report(directory: Path, backend: str) -> Path:
         "",
     ]
     for task in shown:
-        parts = recorded(directory, task)
+        parts = ablation_parts(directory, task)
         if not parts:
             continue
         chosen = {**table2(task, "fppo-lp"), **table2(task, "fppo-qp")}
@@ -106,7 +90,7 @@ def report(directory: Path, backend: str) -> Path:
             lines += [""]
         for part in parts:
             result = SweepResult.read(directory / task / part)
-            record = json.loads((directory / task / part / "run.json").read_text())
+            record = read_run_record(directory / task / part)
             lines += [
                 f"### {part}",
                 "",
@@ -119,25 +103,22 @@ def report(directory: Path, backend: str) -> Path:
             ]
         lines += [f"![{task}: Fig. 6]({task}.png)", ""]
     path = directory / "ablation.md"
-    path.write_text("\n".join(lines))
+    write_result(path, lines)
     return path
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--tasks", nargs="+", default=list(TASKS_IN_PAPER), choices=list(TASKS))
-    parser.add_argument("--parts", nargs="+", default=list(PARTS), choices=list(PARTS))
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--steps", type=int, default=1_000_000)
-    parser.add_argument("--chunk", type=int, help="runs per compiled call (default: automatic)")
-    parser.add_argument("--backend", default="auto", choices=list(BACKENDS))
+    parser.add_argument(
+        "--parts", nargs="+", default=list(ABLATION_PARTS), choices=list(ABLATION_PARTS)
+    )
+    add_sweep_flags(parser)
     add_record_flags(parser)
     args = parser.parse_args()
 
-    backend, why = choose_backend(args.tasks[0], args.backend)
-    directory = args.results / f"ablation_{backend}"
-    refuse_to_replace([directory / t / p for t in args.tasks for p in args.parts], args.force)
-    print(f"backend {backend}{' (' + why + ')' if why else ''}; results in {directory}")
+    parts = [Path(task, part) for task in args.tasks for part in args.parts]
+    backend, directory = sweep_directory(args, "ablation", parts)
     for task in args.tasks:
         for part in args.parts:
             run_part(task, part, args, directory)

@@ -18,10 +18,6 @@ Writes experiments/results/bench_cartpole.md.
 
 from __future__ import annotations
 
-import argparse
-import datetime
-import os
-import platform
 import sys
 import time
 from collections.abc import Callable
@@ -30,13 +26,20 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import purejaxrl_settings as pjr
-from common import refuse_to_replace
+from common import (
+    RESULTS,
+    add_output_flags,
+    argument_parser,
+    header,
+    refuse_to_replace,
+    seconds,
+    write_result,
+)
 
 from fppo_jax import make_train
 
 REPO = Path(__file__).resolve().parent.parent
 PUREJAXRL = REPO.parent / "shared" / "anchors" / "purejaxrl"
-RESULTS = Path(__file__).resolve().parent / "results"
 
 # (workload, vmapped seeds, steps per seed, goal: fppo-jax / PureJaxRL)
 ARMS = (
@@ -46,20 +49,6 @@ ARMS = (
     ("paper", 1, 200_000, 1.3),
     ("paper", 8, 200_000, 1.2),
 )
-
-
-def cpu_model() -> str:
-    with open("/proc/cpuinfo") as f:
-        names = [line.split(":", 1)[1].strip() for line in f if line.startswith("model name")]
-    return names[0] if names else platform.processor()
-
-
-def quiet_cpu() -> str:
-    """The machine a CPU benchmark ran on, today, as its results file states it."""
-    return (
-        f"{cpu_model()}, {os.cpu_count()} cores, no GPU; jax {jax.__version__}; "
-        f"{datetime.date.today()}; nothing else running"
-    )
 
 
 def purejaxrl_program(module, workload: str, seeds: int, steps: int) -> Callable[[], object]:
@@ -86,19 +75,12 @@ def compiled_in(make: Callable[[], Callable[[], object]]) -> tuple[Callable[[], 
     return program, time.perf_counter() - start
 
 
-def seconds(program: Callable[[], object]) -> float:
-    start = time.perf_counter()
-    jax.block_until_ready(program())
-    return time.perf_counter() - start
-
-
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--purejaxrl", type=Path, default=PUREJAXRL, help="its ppo.py's folder")
     parser.add_argument("--quick", action="store_true", help="a tenth of the steps, 1 repeat")
-    parser.add_argument("--output", type=Path, default=RESULTS / "bench_cartpole.md")
-    parser.add_argument("--force", action="store_true", help="replace results already recorded")
+    add_output_flags(parser, RESULTS / "bench_cartpole.md")
     args = parser.parse_args()
     refuse_to_replace([args.output], args.force)
     if not (args.purejaxrl / "ppo.py").exists():
@@ -127,12 +109,8 @@ def main() -> None:
             best[i][1] = min(best[i][1], seconds(ours))
             print(f"repeat {repeat + 1}: {workload}, {seeds} seeds: {best[i]}", flush=True)
 
-    command = " ".join(["python experiments/bench_cartpole.py", *sys.argv[1:]])
     lines = [
-        "# CartPole training throughput against PureJaxRL, in the same process",
-        "",
-        f"- Machine: {quiet_cpu()}.",
-        f"- Command: `{command}`",
+        *header("CartPole training throughput against PureJaxRL, in the same process"),
         "- PureJaxRL's `ppo.py` (patched only for gymnax 1.0) and `fppo_jax.make_train` with the "
         "same settings on gymnax CartPole-v1, no observation or reward normalisation in either; "
         "each whole run one compiled call (vmapped over the seeds), compilation apart; arms "
@@ -154,8 +132,7 @@ def main() -> None:
             f"{rate_ours:,.0f} | **{ratio:.2f}×** | {goal}× ({verdict}) | "
             f"{c_theirs:.1f} / {c_ours:.1f} |"
         )
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text("\n".join(lines) + "\n")
+    write_result(args.output, lines)
     print(f"wrote {args.output}")
 
 

@@ -13,11 +13,10 @@ experiments/results/bench_gymnasium_<task>.md.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
-from common import add_record_flags, command, machine, refuse_to_replace
+from common import add_record_flags, argument_parser, header, refuse_to_replace, write_result
 
 import fppo_jax
 from fppo_jax.envs.native import import_envpool
@@ -64,7 +63,7 @@ def trained(name: str, steps: int) -> tuple[float, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--task", default="Hopper-v4", help="an id both Gymnasium and envpool have")
     parser.add_argument("--steps", type=int, default=40_960)
     parser.add_argument("--repeats", type=int, default=2)
@@ -89,9 +88,7 @@ def main() -> None:
         for kind, arms in (("alone", alone), ("trained", training))
     }
     lines = [
-        f"# {args.task}: Gymnasium's environments against envpool's (native)",
-        "",
-        f"Machine: {machine()}. Command: `{command()}`.",
+        *header(f"{args.task}: Gymnasium's environments against envpool's (native)"),
         "",
         f"{NUM_ENVS} environments, {args.steps:,} env steps an arm, best of {args.repeats} "
         "(arms alternating). (a): the environments alone on the host, random actions, no JAX "
@@ -110,8 +107,7 @@ def main() -> None:
         f"Compiling (first run of each): Gymnasium {compiling['gymnasium']:.1f} s, native "
         f"{compiling['native']:.1f} s.",
     ]
-    output.parent.mkdir(parents=True, exist_ok=True)
-    output.write_text("\n".join(lines) + "\n")
+    write_result(output, lines)
     print(f"wrote {output}")
 
 

@@ -13,20 +13,16 @@ Writes experiments/results/bench_logging.md.
 
 from __future__ import annotations
 
-import argparse
-import datetime
 import sys
 import tempfile
 from pathlib import Path
 
 import jax
 import numpy as np
-from common import add_record_flags, machine, refuse_to_replace
+from common import add_record_flags, argument_parser, header, refuse_to_replace, write_result
 
 import fppo_jax
 from fppo_jax.progress import print_progress
-
-RESULTS = Path(__file__).parent / "results"
 
 
 def arms(chunks: int, per_call: int, scratch: Path) -> dict[str, dict]:
@@ -51,7 +47,7 @@ def arms(chunks: int, per_call: int, scratch: Path) -> dict[str, dict]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--steps", type=int, default=500_000)
     parser.add_argument("--chunks", type=int, default=20)
     parser.add_argument("--repeats", type=int, default=3)
@@ -83,15 +79,7 @@ def main() -> None:
     checkpoints = -(-num_updates // per_call)
     per_checkpoint = (args.steps / with_checkpoints - args.steps / with_log) / checkpoints
     lines = [
-        "# What feedback costs: progress, logging and checkpoints",
-        "",
-        f"Machine: {machine()}; {datetime.date.today()}.",
-        "",
-        "Command: `python experiments/bench_logging.py"
-        + (f" --steps {args.steps}" if args.steps != 500_000 else "")
-        + (f" --chunks {args.chunks}" if args.chunks != 20 else "")
-        + (f" --repeats {args.repeats}" if args.repeats != 3 else "")
-        + "`",
+        *header("What feedback costs: progress, logging and checkpoints"),
         "",
         f"Run: `fppo_jax.train('cartpole', 'fppo-lp', total_steps={args.steps})`, the paper "
         f"preset (8 envs × 256 steps, 32 minibatches × 10 epochs), {num_updates} updates; "
@@ -112,8 +100,7 @@ def main() -> None:
         "an asynchronous orbax save; the next call is dispatched before that work starts, so "
         "the two overlap.",
     ]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
+    write_result(path, lines)
     print("\n".join(lines))
 
 

@@ -29,61 +29,24 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime
 import functools
-import sys
 import time
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
-from common import add_record_flags, machine, refuse_to_replace
+from common import (
+    add_record_flags,
+    argument_parser,
+    env_alone,
+    header,
+    machine,
+    refuse_to_replace,
+    write_result,
+)
 
 import fppo_jax
 from fppo_jax.config import describe_update, preset_config
-from fppo_jax.envs import Discrete, draw_resets, make_env, resets_itself, where_done
-
-RESULTS = Path(__file__).resolve().parent / "results"
-
-
-def env_alone(env, num_envs: int, num_steps: int, num_rollouts: int):
-    """(a): random actions for num_rollouts × num_steps steps of num_envs environments,
-    restarting ended episodes from one reset state per environment per rollout (native
-    environments restart themselves)."""
-    space = env.action_space
-
-    def random_actions(key: jax.Array, shape: tuple[int, ...]) -> jax.Array:
-        if isinstance(space, Discrete):
-            return jax.random.randint(key, shape, 0, space.n)
-        low, high = jnp.asarray(space.low), jnp.asarray(space.high)
-        return jax.random.uniform(key, (*shape, space.size), minval=low, maxval=high)
-
-    own_resets = resets_itself(env)
-
-    def run(key: jax.Array) -> jax.Array:
-        init_key, key = jax.random.split(key)
-        state, _ = draw_resets(env, init_key, (num_envs,))
-
-        def rollout(state, key):
-            action_key, step_key, reset_key = jax.random.split(key, 3)
-            shape = (num_steps, num_envs)
-            actions = random_actions(action_key, shape)
-            resets = None if own_resets else draw_resets(env, reset_key, (num_envs,))[0]
-
-            def step(state, inputs):
-                keys, action = inputs
-                state, out = jax.vmap(env.step)(keys, state, action)
-                if own_resets:
-                    return state, out.reward
-                return where_done(out.terminated | out.truncated, resets, state), out.reward
-
-            keys = jax.random.split(step_key, shape)
-            state, rewards = jax.lax.scan(step, state, (keys, actions))
-            return state, rewards.sum()
-
-        return jax.lax.scan(rollout, state, jax.random.split(key, num_rollouts))[1].sum()
-
-    return run
+from fppo_jax.envs import make_env
 
 
 def timed(fn, *args) -> tuple[float, float]:
@@ -198,7 +161,7 @@ def measure(args: argparse.Namespace, backend: str, config, updates: int) -> lis
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--env", default="hopper")
     parser.add_argument("--preset", default="paper", choices=["paper", "massive"])
     parser.add_argument(
@@ -243,24 +206,17 @@ def main() -> None:
         ratio = rates["native"] / rates["MJX"]
         rows.append(("native (b) / MJX (b)", None, None, f"{ratio:.1f}×"))
 
-    command = " ".join(["python experiments/bench_mujoco.py", *sys.argv[1:]])
-    path.parent.mkdir(parents=True, exist_ok=True)
     steps = ", ".join(
         f"{updates * config.samples_per_update:,} env steps on {backend}"
         for backend, updates in timed_updates.items()
     )
-    sweep_shape = ""
+    sweep_shape, runs_of = "", ""
     if args.runs > 1:
         sweep_shape = f" per run, {args.runs} runs as one sweep (env steps/s count them all)"
+        runs_of = f"{args.runs} runs × "
+    title = f"Training throughput on {args.env}, {runs_of}{config.num_envs} environments: "
     lines = [
-        f"# Training throughput on {args.env}, "
-        + (f"{args.runs} runs × " if args.runs > 1 else "")
-        + f"{config.num_envs} environments: "
-        + " and ".join(args.backends),
-        "",
-        f"- Machine: {machine()}; nothing else running",
-        f"- Command: `{command}`",
-        f"- Date: {datetime.date.today()}",
+        *header(title + " and ".join(args.backends)),
         f"- Shape: preset {args.preset}, {describe_update(config)}{sweep_shape}; {steps}; "
         "on MJX one reset "
         "state per environment per rollout in (a) and (b), Brax's auto-reset in (c); native "
@@ -273,7 +229,7 @@ def main() -> None:
         shown_rate = "" if rate is None else f"{rate:,.0f}"
         shown = "in epochs 1–2" if compile_seconds is None else f"{compile_seconds:.1f}"
         lines.append(f"| {name} | {shown_rate} | {'' if rate is None else shown} | {ratio} |")
-    path.write_text("\n".join(lines) + "\n")
+    write_result(path, lines)
     print(f"wrote {path}")
 
 

@@ -14,8 +14,6 @@ T(N) = overhead + training / N. Writes experiments/results/bench_parts.md.
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import subprocess
 import sys
@@ -23,7 +21,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from common import RESULTS, add_record_flags, command, machine, refuse_to_replace
+from common import (
+    RESULTS,
+    RUN_RECORD,
+    add_record_flags,
+    argument_parser,
+    header,
+    read_run_record,
+    refuse_to_replace,
+    write_result,
+)
 
 from fppo_jax import SweepResult, merge
 
@@ -61,7 +68,7 @@ def finish(process: subprocess.Popen) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--task", default="hopper")
     parser.add_argument("--seeds", type=int, default=2)
     parser.add_argument("--steps", type=int, default=100_000)
@@ -92,9 +99,7 @@ def main() -> None:
     overhead = (a - training) / PARTS  # start-up and compilation, per part
     steps = sum(int(p.metrics["env_steps"][:, -1].sum()) for p in parts["a"])
     lines = [
-        "# A sweep's two parts: one after another, or at once on a core each",
-        "",
-        f"Machine: {machine()}. Command: `{command()}`.",
+        *header("A sweep's two parts: one after another, or at once on a core each"),
         "",
         f"The sweep: PPO and FPPO-LP × {args.seeds} seeds on {args.task} (native MuJoCo), "
         f"{args.steps:,} env steps a run, {steps:,} in all, split with `--part K/2`. Wall time "
@@ -123,16 +128,15 @@ def main() -> None:
     for n in (1, 2, 4, 8, 16):
         t = overhead + training / n
         lines.append(f"| {n} | {t:.1f} | {(overhead + training) / t:.2f}× |")
-    study = RESULTS / "study" / "hopper" / "paper" / "seeds-0-4_ppo+fppo-lp+fppo-qp" / "run.json"
-    if study.exists():
-        part = json.loads(study.read_text())["wall_seconds"]
+    study = RESULTS / "study" / "hopper" / "paper" / "seeds-0-4_ppo+fppo-lp+fppo-qp"
+    if (study / RUN_RECORD).exists():
+        part = read_run_record(study)["wall_seconds"]
         lines += [
             "",
             f"A part of the seed study trains far longer (Hopper, 15 runs × 1M steps: {part:,.0f} "
             f"s), against which this overhead is {overhead / part:.1%}.",
         ]
-    output.parent.mkdir(parents=True, exist_ok=True)
-    output.write_text("\n".join(lines) + "\n")
+    write_result(output, lines)
     print(f"wrote {output}")
 
 

@@ -13,40 +13,40 @@ Writes experiments/results/bench_sweep.md.
 
 from __future__ import annotations
 
-import argparse
 import time
-from pathlib import Path
 
-from bench_cartpole import quiet_cpu
-from common import refuse_to_replace
+from common import (
+    PAPER_VARIANTS,
+    RESULTS,
+    add_output_flags,
+    argument_parser,
+    header,
+    refuse_to_replace,
+    write_result,
+)
 
 from fppo_jax import sweep, train
 
-VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
-
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=100_000)
-    parser.add_argument(
-        "--output", type=Path, default=Path(__file__).parent / "results" / "bench_sweep.md"
-    )
-    parser.add_argument("--force", action="store_true", help="replace results already recorded")
+    add_output_flags(parser, RESULTS / "bench_sweep.md")
     args = parser.parse_args()
     refuse_to_replace([args.output], args.force)
-    runs = len(VARIANTS) * args.seeds
+    runs = len(PAPER_VARIANTS) * args.seeds
 
     start = time.perf_counter()
     result = sweep(
-        "cartpole", {"variant": list(VARIANTS)}, seeds=args.seeds, total_steps=args.steps
+        "cartpole", {"variant": list(PAPER_VARIANTS)}, seeds=args.seeds, total_steps=args.steps
     )
     sweep_wall = time.perf_counter() - start
     sweep_train = result.train_seconds
     print(f"sweep: {sweep_train:.1f} s training, {result.compile_seconds:.1f} s compiling")
 
     start, compile_seconds, train_seconds = time.perf_counter(), 0.0, 0.0
-    for variant in VARIANTS:
+    for variant in PAPER_VARIANTS:
         for seed in range(args.seeds):
             run = train("cartpole", variant, seed=seed, total_steps=args.steps)
             compile_seconds += run.compile_seconds
@@ -57,13 +57,9 @@ def main() -> None:
     steps = runs * int(result.metrics["env_steps"][0, -1])
     training_ratio = train_seconds / sweep_train
     lines = [
-        "# A sweep vs the same runs one after another",
+        *header("A sweep vs the same runs one after another"),
         "",
-        f"Machine: {quiet_cpu()}.",
-        "",
-        f"Command: `python experiments/bench_sweep.py --seeds {args.seeds} --steps {args.steps}`",
-        "",
-        f"{runs} runs: {', '.join(VARIANTS)} × {args.seeds} seeds on CartPole, the paper's "
+        f"{runs} runs: {', '.join(PAPER_VARIANTS)} × {args.seeds} seeds on CartPole, the paper's "
         f"protocol, {args.steps:,} steps each. Training is the compiled calls and the host's "
         "work between them; the sequential calls compile once and reuse the program.",
         "",
@@ -78,7 +74,7 @@ def main() -> None:
         f"{'met' if training_ratio >= 2 else 'missed'}); wall time "
         f"{sequence_wall / sweep_wall:.2f}×.",
     ]
-    args.output.write_text("\n".join(lines) + "\n")
+    write_result(args.output, lines)
     print(f"wrote {args.output}")
 
 

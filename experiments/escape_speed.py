@@ -16,14 +16,9 @@ update, variant and epoch), which `figures.py` draws.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import dataclasses
-import datetime
 import functools
-import os
-import platform
-import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -31,15 +26,19 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
-from common import add_record_flags, refuse_to_replace
+from common import (
+    ESCAPE_FRACTIONS,
+    ESCAPE_VARIANTS,
+    add_record_flags,
+    argument_parser,
+    header,
+    refuse_to_replace,
+    write_result,
+)
 
 from fppo_jax import make_env, make_train
 from fppo_jax.config import describe, resolve_config, resolve_hyperparameters
 from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, choose_backend
-
-VARIANTS = ("ppo", "fppo-lp", "fppo-qp")
-RESULTS = Path(__file__).resolve().parent / "results"
-CSV_NAME = Path("escape_speed") / "fractions.csv"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,7 +64,7 @@ def measure(task: str, seeds: int, points: Sequence[int], backend: str) -> Measu
     if max(points) >= config.num_updates:
         raise ValueError(f"{task}: update points must be below its {config.num_updates} updates")
     trainer = make_train(config, env)
-    resolved = [resolve_hyperparameters(variant, task) for variant in VARIANTS]
+    resolved = [resolve_hyperparameters(variant, task) for variant in ESCAPE_VARIANTS]
     ppo = resolved[0][0]
     variants = jax.tree.map(lambda *x: jnp.stack(x), *[hp for hp, _ in resolved])
 
@@ -96,35 +95,24 @@ def measure(task: str, seeds: int, points: Sequence[int], backend: str) -> Measu
         chosen,
         tuple(points),
         np.stack(fractions, axis=1),
-        {variant: settings for variant, (_, settings) in zip(VARIANTS, resolved, strict=True)},
+        {v: settings for v, (_, settings) in zip(ESCAPE_VARIANTS, resolved, strict=True)},
         describe(config, "paper"),
         time.perf_counter() - start,
     )
 
 
 def write_fractions(measured: Sequence[Measured], path: Path) -> None:
+    """One row per task, seed, update point, variant and epoch, as `common.read_fractions`
+    reads them."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["task", "seed", "update", "variant", "epoch", "fraction"])
         for m in measured:
             for (seed, p, v, epoch), fraction in np.ndenumerate(m.fractions):
-                row = [m.task, seed, m.points[p], VARIANTS[v], epoch + 1, f"{fraction:.6f}"]
+                variant = ESCAPE_VARIANTS[v]
+                row = [m.task, seed, m.points[p], variant, epoch + 1, f"{fraction:.6f}"]
                 writer.writerow(row)
-
-
-def read_fractions(path: Path) -> dict[str, np.ndarray]:
-    """What :func:`write_fractions` wrote: each task's [seed, point, variant, epoch]."""
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    by_task: dict[str, np.ndarray] = {}
-    for task in dict.fromkeys(r["task"] for r in rows):
-        mine = [r for r in rows if r["task"] == task]
-        seeds = len({r["seed"] for r in mine})
-        points = len({r["update"] for r in mine})
-        values = np.array([float(r["fraction"]) for r in mine])
-        by_task[task] = values.reshape(seeds, points, len(VARIANTS), -1)
-    return by_task
 
 
 def below_ppo(fractions: np.ndarray) -> list[float]:
@@ -133,15 +121,9 @@ def below_ppo(fractions: np.ndarray) -> list[float]:
     return [float(np.mean(fractions[:, :, v] < fractions[:, :, 0])) for v in (1, 2)]
 
 
-def report(measured: Sequence[Measured], command: str) -> str:
-    device = jax.devices()[0]
+def report(measured: Sequence[Measured]) -> list[str]:
     lines = [
-        "# Escape speed on the same data",
-        "",
-        f"- Machine: {device.platform.upper()}, {os.cpu_count()} CPU cores "
-        f"({platform.processor() or platform.machine()}), jax {jax.__version__}; "
-        f"{datetime.date.today()}",
-        f"- Command: `{command}`",
+        *header("Escape speed on the same data"),
         "- How: for each task and seed, PPO trains from scratch; at each update point the next "
         "rollout is collected once, and PPO, FPPO-LP and FPPO-QP (Table 2's α and k) each run "
         "that update's epochs on its batch from the same parameters, in the same minibatch "
@@ -181,18 +163,18 @@ def report(measured: Sequence[Measured], command: str) -> str:
             "|---|---|" + "---|" * len(shown),
         ]
         for p, point in enumerate(m.points):
-            for v, variant in enumerate(VARIANTS):
+            for v, variant in enumerate(ESCAPE_VARIANTS):
                 cells = [
                     f"{m.fractions[:, p, v, e - 1].mean():.2%} ± "
                     f"{m.fractions[:, p, v, e - 1].std():.2%}"
                     for e in shown
                 ]
                 lines.append(f"| {point} | {variant} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--tasks", nargs="+", default=["cartpole", "acrobot", "hopper", "walker2d"])
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument(
@@ -201,17 +183,16 @@ def main() -> None:
     parser.add_argument("--backend", default="auto", choices=list(BACKENDS))
     add_record_flags(parser)
     args = parser.parse_args()
-    refuse_to_replace([args.results / CSV_NAME, args.results / "escape_speed.md"], args.force)
+    fractions, path = args.results / ESCAPE_FRACTIONS, args.results / "escape_speed.md"
+    refuse_to_replace([fractions, path], args.force)
     points = sorted(set(args.points))
     measured = [
         measure(task, args.seeds, points, args.backend if task in MUJOCO_TASKS else "auto")
         for task in args.tasks
     ]
-    write_fractions(measured, args.results / CSV_NAME)
-    command = " ".join(["python experiments/escape_speed.py", *sys.argv[1:]])
-    path = args.results / "escape_speed.md"
-    path.write_text(report(measured, command))
-    print(f"wrote {path} and {args.results / CSV_NAME}")
+    write_fractions(measured, fractions)
+    write_result(path, report(measured))
+    print(f"wrote {path} and {fractions}")
 
 
 if __name__ == "__main__":

@@ -19,36 +19,44 @@ Nothing is trained.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
-import ablation
 import matplotlib.pyplot as plt
 import numpy as np
-from escape_speed import CSV_NAME, VARIANTS, read_fractions
+from common import (
+    CLASSIC_TASKS,
+    ESCAPE_FRACTIONS,
+    ESCAPE_VARIANTS,
+    RESULTS,
+    RUN_RECORD,
+    ablation_parts,
+    argument_parser,
+    draw_ablation,
+    read_fractions,
+)
 from matplotlib.figure import Figure
 
 from fppo_jax.plots import plot_curves, plot_escape_speed, plot_objectives
 from fppo_jax.results import SweepResult
 
-RESULTS = Path(__file__).resolve().parent / "results"
-CLASSIC_TASKS = ("cartpole", "acrobot", "mountaincar")
 DPI = 90
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--out", type=Path, default=RESULTS / "figures")
     args = parser.parse_args()
     figures = {
         "objectives.png": plot_objectives(),
         "table1_classic.png": plot_sweeps([RESULTS / "table1_classic" / t for t in CLASSIC_TASKS]),
-        "escape_speed.png": plot_escape_speed_by_task(read_fractions(RESULTS / CSV_NAME)),
+        "escape_speed.png": plot_escape_speed_by_task(read_fractions(RESULTS / ESCAPE_FRACTIONS)),
     }
     mujoco = sorted(path.parent for path in RESULTS.glob("table1_mujoco*/*/curves.csv"))
     if mujoco:
         figures["table1_mujoco.png"] = plot_sweeps(mujoco)
-    ablations = sorted({path.parent.parent for path in RESULTS.glob("ablation_*/*/*/run.json")})
+    ablations = sorted(
+        {path.parent.parent for path in RESULTS.glob(f"ablation_*/*/*/{RUN_RECORD}")}
+    )
     if ablations:
         figures["ablation.png"] = plot_ablations(ablations)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -76,25 +84,25 @@ def plot_sweeps(directories: list[Path], columns: int = 3) -> Figure:
 
 def plot_ablations(tasks: list[Path]) -> Figure:
     """Each task's recorded ablation parts (`ablation.py`'s <task>/<part>/), one row per task."""
-    width = max(len(ablation.recorded(task.parent, task.name)) for task in tasks)
+    width = max(len(ablation_parts(task.parent, task.name)) for task in tasks)
     fig, axes = plt.subplots(
         len(tasks), width, figsize=(4 * width, 3 * len(tasks)), layout="constrained", squeeze=False
     )
     for row, task in zip(axes, tasks, strict=True):
-        ablation.draw(task.parent, task.name, row)
-        for ax in row[len(ablation.recorded(task.parent, task.name)) :]:
+        draw_ablation(task.parent, task.name, row)
+        for ax in row[len(ablation_parts(task.parent, task.name)) :]:
             ax.set_visible(False)
     return fig
 
 
 def plot_escape_speed_by_task(fractions: dict[str, np.ndarray]) -> Figure:
-    """One panel per task of :func:`escape_speed.read_fractions`' [seed, point, variant,
-    epoch], each over its seeds and update points."""
+    """One panel per task of :func:`common.read_fractions`' [seed, point, variant, epoch],
+    each over its seeds and update points."""
     fig, axes = plt.subplots(
         1, len(fractions), figsize=(4 * len(fractions), 3.2), layout="constrained", sharey=True
     )
     for ax, (task, values) in zip(np.atleast_1d(axes), fractions.items(), strict=True):
-        plot_escape_speed(values.reshape(-1, *values.shape[2:]), VARIANTS, ax=ax)
+        plot_escape_speed(values.reshape(-1, *values.shape[2:]), ESCAPE_VARIANTS, ax=ax)
         seeds, points = values.shape[:2]
         ax.set_title(f"{task}: {seeds} seeds × {points} updates", fontsize="medium")
     return fig

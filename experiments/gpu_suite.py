@@ -25,8 +25,6 @@ another, and never into experiments/results. A result already recorded is refuse
 
 from __future__ import annotations
 
-import argparse
-import datetime
 import json
 import subprocess
 import sys
@@ -34,7 +32,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from common import RESULTS, inside_results, machine, refuse_to_replace
+from common import (
+    RESULTS,
+    add_force_flag,
+    argument_parser,
+    header,
+    inside_results,
+    refuse_to_replace,
+    write_result,
+)
 
 HERE = Path(__file__).resolve().parent
 MUJOCO = ("hopper", "walker2d", "halfcheetah", "ant", "reacher", "swimmer")
@@ -102,12 +108,9 @@ def run_part(commands: list[list[str]], results: Path, seconds: float, force: bo
     return {"status": status, "seconds": round(time.perf_counter() - start, 1), "tail": lines}
 
 
-def report(done: dict[str, dict], path: Path, command: str) -> None:
+def report(done: dict[str, dict], path: Path) -> None:
     lines = [
-        "# GPU suite",
-        "",
-        f"- Command: `{command}`; {datetime.datetime.now():%Y-%m-%d %H:%M}",
-        f"- Machine: {machine()}",
+        *header("GPU suite"),
         "",
         "| part | status | seconds |",
         "|---|---|---|",
@@ -116,12 +119,12 @@ def report(done: dict[str, dict], path: Path, command: str) -> None:
     ]
     for name, part in done.items():
         lines += [f"## {name}", "", "```", *part["tail"], "```", ""]
-    path.write_text("\n".join(lines))
+    write_result(path, lines)
     (path.with_suffix(".json")).write_text(json.dumps(done, indent=1) + "\n")
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--parts", nargs="+", help="default: every part (see --list)")
     parser.add_argument("--list", action="store_true", help="print the parts and exit")
     parser.add_argument("--smoke", action="store_true", help="tiny parts, for a CPU")
@@ -131,9 +134,7 @@ def main() -> None:
         help="where results go (default: experiments/results, or a new temporary directory "
         "with --smoke)",
     )
-    parser.add_argument(
-        "--force", action="store_true", help="replace results already recorded there"
-    )
+    add_force_flag(parser)
     parser.add_argument("--part-seconds", type=float, default=540, help="each part's time limit")
     args = parser.parse_args()
     planned = parts(args.smoke)
@@ -159,13 +160,12 @@ def main() -> None:
     results.mkdir(parents=True, exist_ok=True)
     path = results / f"gpu_suite_{platform}.md"
     refuse_to_replace([path], args.force)
-    command = " ".join(["python experiments/gpu_suite.py", *sys.argv[1:]])
     done: dict[str, dict] = {}
     for name in chosen:
         print(f"{name}…", flush=True)
         done[name] = run_part(planned[name], results, args.part_seconds, args.force)
         print(f"{name}: {done[name]['status']} in {done[name]['seconds']:.0f} s", flush=True)
-        report(done, path, command)
+        report(done, path)
     print(f"wrote {path}")
     if any(part["status"] != "done" for part in done.values()):
         sys.exit(1)

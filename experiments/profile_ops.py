@@ -15,26 +15,28 @@ Writes experiments/results/profile_ops_<workload>_<seeds>seeds.md.
 
 from __future__ import annotations
 
-import argparse
 import collections
 import math
 import re
-import sys
 import tempfile
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import purejaxrl_settings as pjr
-from bench_cartpole import quiet_cpu, seconds
-from common import add_record_flags, refuse_to_replace
+from common import (
+    add_record_flags,
+    argument_parser,
+    header,
+    refuse_to_replace,
+    seconds,
+    write_result,
+)
 
 from fppo_jax import make_train
 from fppo_jax.config import Hyperparameters
 from fppo_jax.losses import Batch
 from fppo_jax.trainer import Trainer, TrainState
-
-RESULTS = Path(__file__).resolve().parent / "results"
 
 # The trainer's named scopes: an operation belongs to the innermost of them on its name path.
 PARTS = (
@@ -177,7 +179,7 @@ def large_matmul_rate(size: int = 1024) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--workload", choices=sorted(pjr.WORKLOADS), default="purejaxrl")
     parser.add_argument("--seeds", type=int, default=8)
     parser.add_argument("--steps", type=int, default=100_000, help="env steps per seed")
@@ -217,13 +219,9 @@ def main() -> None:
         by_both[f"{part}: {kind}"] += ns
     whole = sum(own.values())
 
-    command = " ".join(["python experiments/profile_ops.py", *sys.argv[1:]])
     seeds_vmapped = "one seed" if args.seeds == 1 else f"the {args.seeds} seeds vmapped"
     lines = [
-        f"# Where a vmapped run's time goes: {pjr.WORKLOADS[args.workload]['title']}",
-        "",
-        f"- Machine: {quiet_cpu()}.",
-        f"- Command: `{command}`",
+        *header(f"Where a vmapped run's time goes: {pjr.WORKLOADS[args.workload]['title']}"),
         f"- {args.seeds} vmapped seed{'s' if args.seeds > 1 else ''} × {args.steps:,} env steps, "
         "one compiled call: "
         f"{untraced:.2f} s untraced (best of 3, {args.seeds * args.steps / untraced:,.0f} env "
@@ -245,8 +243,7 @@ def main() -> None:
         "",
         *table("part: kind", collections.Counter(dict(by_both.most_common(10))), whole),
     ]
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("\n".join(lines) + "\n")
+    write_result(out, lines)
     print("\n".join(lines))
     print(f"wrote {out}")
 

@@ -5,19 +5,23 @@
 Parts: the environment alone (random actions, the same number of steps as a rollout, one reset
 state per environment), the rollout (policy + environment), the epochs of minibatch updates,
 and the whole update.
-Settings: PureJaxRL's CartPole (see purejaxrl_settings.py).
+Settings: PureJaxRL's CartPole (see purejaxrl_settings.py). Prints its table and writes it to
+experiments/results/profile_update.md.
 """
 
-import argparse
-import os
 import time
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import purejaxrl_settings as pjr
-from bench_cartpole import cpu_model
-from bench_mujoco import env_alone
+from common import (
+    add_record_flags,
+    argument_parser,
+    env_alone,
+    header,
+    refuse_to_replace,
+    write_result,
+)
 
 from fppo_jax import make_train
 
@@ -36,9 +40,12 @@ def seconds_per_call(fn, *args, repeats, blocks=7):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--repeats", type=int, default=200)
+    add_record_flags(parser)
     args = parser.parse_args()
+    output = args.results / "profile_update.md"
+    refuse_to_replace([output], args.force)
 
     env, config, hp = pjr.fppo("purejaxrl")
     trainer = make_train(config, env)
@@ -83,10 +90,7 @@ def main() -> None:
     }
     whole = parts["whole update"]
     lines = [
-        "# Where one update's time goes (CartPole, PureJaxRL's settings)",
-        "",
-        f"Command: `python experiments/profile_update.py --repeats {args.repeats}`; "
-        f"{cpu_model()}, {os.cpu_count()} cores; jax {jax.__version__}.",
+        *header("Where one update's time goes (CartPole, PureJaxRL's settings)"),
         "",
         f"Each part compiled and timed alone (best of 7 blocks of {args.repeats} calls); one "
         f"update is {config.samples_per_update} env steps. Parts timed alone include a call's "
@@ -100,8 +104,7 @@ def main() -> None:
         "env steps/s (a whole run in one compiled call is faster: see bench_cartpole.md).",
     ]
     print("\n".join(lines))
-    output = Path(__file__).parent / "results" / "profile_update.md"
-    output.write_text("\n".join(lines) + "\n")
+    write_result(output, lines)
     print(f"wrote {output}")
 
 

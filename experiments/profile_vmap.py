@@ -21,25 +21,26 @@ Writes experiments/results/profile_vmap_<workload>_<seeds>seeds.md.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import functools
-import sys
-from pathlib import Path
 from unittest import mock
 
 import jax
 import jax.numpy as jnp
 import purejaxrl_settings as pjr
-from bench_cartpole import quiet_cpu, seconds
-from common import add_record_flags, refuse_to_replace
+from common import (
+    add_record_flags,
+    argument_parser,
+    header,
+    refuse_to_replace,
+    seconds,
+    write_result,
+)
 
 import fppo_jax.objectives as objectives
 import fppo_jax.trainer as trainer_module
 from fppo_jax import make_train
 from fppo_jax.trainer import Trainer
-
-RESULTS = Path(__file__).resolve().parent / "results"
 
 
 class WithoutEscape(Trainer):
@@ -82,7 +83,7 @@ def compiled(kind: type[Trainer], *patches, workload: str, seeds: int, steps: in
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--workload", choices=sorted(pjr.WORKLOADS), default="purejaxrl")
     parser.add_argument("--seeds", type=int, default=8)
     parser.add_argument("--steps", type=int, default=500_000)
@@ -107,24 +108,19 @@ def main() -> None:
             best[name] = min(best[name], seconds(program))
         print(f"repeat {repeat + 1}: " + ", ".join(f"{k} {v:.2f} s" for k, v in best.items()))
     base, n, steps = best["as is"], args.seeds, args.steps
-    command = " ".join(["python experiments/profile_vmap.py", *sys.argv[1:]])
     lines = [
-        "# What each extra costs under vmap",
-        "",
-        f"- Machine: {quiet_cpu()}.",
-        f"- Command: `{command}`",
+        *header("What each extra costs under vmap"),
         f"- {pjr.WORKLOADS[args.workload]['title']}: {n} vmapped seeds × {steps:,} steps, one "
         f"compiled call per arm, interleaved, best of {args.repeats}.",
         "",
         "| arm | run (s) | env steps/s | time against as is |",
         "|---|---|---|---|",
         *[
-            f"| {name} | {seconds:.2f} | {n * steps / seconds:,.0f} | {seconds / base:.3f} |"
-            for name, seconds in best.items()
+            f"| {name} | {wall:.2f} | {n * steps / wall:,.0f} | {wall / base:.3f} |"
+            for name, wall in best.items()
         ],
     ]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
+    write_result(path, lines)
     print(f"wrote {path}")
 
 

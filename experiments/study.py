@@ -20,27 +20,28 @@ fresh directory and renamed into place whole. A part already recorded is refused
 
 from __future__ import annotations
 
-import argparse
-import datetime
-import json
 import shutil
 import subprocess
 import tempfile
 import time
 from pathlib import Path
 
-from common import add_record_flags, command, machine, refuse_to_replace
+from common import (
+    CLASSIC_TASKS,
+    PAPER_VARIANTS,
+    RECORDED_METRICS,
+    add_record_flags,
+    argument_parser,
+    refuse_to_replace,
+    write_run_record,
+)
 
 from fppo_jax import sweep
 from fppo_jax.config import parse_seeds
 from fppo_jax.envs import MUJOCO_TASKS
 from fppo_jax.objectives import VARIANTS
 
-CLASSIC_TASKS = ("cartpole", "acrobot", "mountaincar")
 STUDIED = ("ppo", "fppo-lp", "fppo-qp")
-PAPER_VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
-# What the verdict reads: the curves stay small enough to keep in the repository.
-RECORDED = ("env_steps", "average_return", "negative_fraction_before", "negative_fraction_after")
 PROTOCOLS = {
     "paper": {},
     "unnormalised": {"normalize_observations": False, "normalize_rewards": False},
@@ -73,7 +74,7 @@ def part_name(variants: list[str], seeds: list[int]) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--task", required=True, choices=[*CLASSIC_TASKS, *MUJOCO_TASKS])
     parser.add_argument("--seeds", type=parse_seeds, required=True, help="20, 10:20 or 0,3,7")
     parser.add_argument(
@@ -112,16 +113,8 @@ def main() -> None:
     wall = time.perf_counter() - start
     directory.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=".part-", dir=directory.parent))
-    result.write(staging, metrics=RECORDED)
-    record = {
-        "machine": machine(),
-        "date": str(datetime.date.today()),
-        "wall_seconds": round(wall, 1),
-        "protocol": args.protocol,
-        "commit": code,
-        "command": command(),
-    }
-    (staging / "run.json").write_text(json.dumps(record, indent=1) + "\n")
+    result.write(staging, metrics=RECORDED_METRICS)
+    write_run_record(staging, wall, protocol=args.protocol, commit=code)
     if directory.exists():  # --force
         shutil.rmtree(directory)
     staging.rename(directory)

@@ -13,48 +13,41 @@ experiments/figures.py read."""
 
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
 import numpy as np
-from common import refuse_to_replace
+from common import (
+    CLASSIC_TASKS,
+    PAPER_VARIANTS,
+    RECORDED_METRICS,
+    RESULTS,
+    TABLE1,
+    add_output_flags,
+    argument_parser,
+    header,
+    refuse_to_replace,
+    write_result,
+)
 
 from fppo_jax import TrainConfig, sweep
 from fppo_jax.results import max_average_return
 
-# What the table and the figures read: the curves stay small enough to keep in the repository.
-RECORDED = ("env_steps", "average_return", "negative_fraction_before", "negative_fraction_after")
-VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
-PAPER = {  # the paper's Table 1
-    "cartpole": (200.0, 200.0, 200.0, 192.7, 200.0),
-    "acrobot": (-84.2, -82.0, -88.7, -86.8, -89.2),
-    "mountaincar": (-130.6, -131.0, -143.3, -140.2, -146.2),
-}
-
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tasks", nargs="+", default=list(PAPER), choices=list(PAPER))
+    parser = argument_parser(__doc__)
+    parser.add_argument("--tasks", nargs="+", default=list(CLASSIC_TASKS), choices=CLASSIC_TASKS)
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=100_000)
-    parser.add_argument(
-        "--output", type=Path, default=Path(__file__).parent / "results" / "table1_classic.md"
-    )
-    parser.add_argument(
-        "--curves", type=Path, default=Path(__file__).parent / "results" / "table1_classic"
-    )
-    parser.add_argument("--force", action="store_true", help="replace results already recorded")
+    parser.add_argument("--curves", type=Path, default=RESULTS / "table1_classic")
+    add_output_flags(parser, RESULTS / "table1_classic.md")
     args = parser.parse_args()
     refuse_to_replace([args.output, *(args.curves / task for task in args.tasks)], args.force)
 
     config = TrainConfig(total_steps=args.steps)
-    runs = len(VARIANTS) * args.seeds
+    runs = len(PAPER_VARIANTS) * args.seeds
     lines = [
-        "# Learning on the classic-control tasks",
-        "",
-        "Command: `python experiments/table1_classic.py "
-        f"--tasks {' '.join(args.tasks)} --seeds {args.seeds} --steps {args.steps}`",
+        *header("Learning on the classic-control tasks"),
         "",
         f"Protocol (the paper's): {config.num_updates} updates × "
         f"{config.samples_per_update} samples "
@@ -73,9 +66,10 @@ def main() -> None:
     ]
     for task in args.tasks:
         start = time.perf_counter()
-        result = sweep(task, {"variant": list(VARIANTS)}, seeds=args.seeds, total_steps=args.steps)
+        grid = {"variant": list(PAPER_VARIANTS)}
+        result = sweep(task, grid, seeds=args.seeds, total_steps=args.steps)
         seconds = time.perf_counter() - start
-        result.write(args.curves / task, metrics=RECORDED)
+        result.write(args.curves / task, metrics=RECORDED_METRICS)
         lines += [
             f"## {task}",
             "",
@@ -85,7 +79,7 @@ def main() -> None:
             "| escape: in R± after update |",
             "|---|---|---|---|---|",
         ]
-        for index, (variant, paper) in enumerate(zip(VARIANTS, PAPER[task], strict=True)):
+        for index, (variant, paper) in enumerate(zip(PAPER_VARIANTS, TABLE1[task], strict=True)):
             m = result.setting_metrics(index)  # its runs that did not diverge, as fppo-jax table
             name = variant
             if result.setting_runs(index)[1].size:
@@ -106,8 +100,7 @@ def main() -> None:
             )
             print(f"{task:<12} {variant:<8} max {best:8.1f} ± {std:5.1f}  final {final:8.1f}")
         lines.append("")
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text("\n".join(lines))
+    write_result(args.output, lines)
     print(f"wrote {args.output}")
 
 

@@ -19,62 +19,31 @@ so absolute returns differ; what should agree is how the variants compare.
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
-import time
 from pathlib import Path
 
 import matplotlib
-from common import add_record_flags, command, machine, refuse_to_replace
+from common import (
+    PAPER_VARIANTS,
+    RUN_RECORD,
+    TABLE1,
+    add_record_flags,
+    add_sweep_flags,
+    argument_parser,
+    read_run_record,
+    record_sweep,
+    sweep_directory,
+    write_result,
+)
 
-from fppo_jax import sweep
 from fppo_jax.config import describe, preset_config, task_preset
-from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, choose_backend
+from fppo_jax.envs import MUJOCO_TASKS
 from fppo_jax.results import SweepResult
-
-PAPER = {  # the paper's Table 1: FPPO-LP, FPPO-QP, PPO, TR-PPO, PPO-RB
-    "walker2d": (4030.4, 3893.4, 3368.5, 3279.8, 2858.4),
-    "ant": (2778.8, 3323.6, 2024.3, 2013.0, 2640.1),
-    "reacher": (-6.1, -6.5, -7.6, -6.0, -7.8),
-    "hopper": (2726.1, 2908.8, 2364.2, 2341.8, 1997.7),
-    "halfcheetah": (4107.0, 4478.3, 4141.7, 3455.8, 3420.1),
-    "swimmer": (113.6, 115.5, 100.2, 108.9, 99.8),
-}
-PAPER_VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
-# What the table and the figures read: the curves stay small enough to keep in the repository.
-RECORDED = ("env_steps", "average_return", "negative_fraction_before", "negative_fraction_after")
 
 
 def run_task(task: str, args: argparse.Namespace, directory: Path) -> None:
     """One task's sweep, its curves and record, and its figure."""
     result = record_sweep(task, {"variant": list(args.variants)}, args, directory / task)
     figure(result, directory / f"{task}.png")
-
-
-def record_sweep(task: str, grid: dict, args: argparse.Namespace, directory: Path) -> SweepResult:
-    """`task`'s sweep of `grid` with the command line's seeds, steps, chunk and backend; its
-    curves (the `RECORDED` metrics) and its run record (machine, date, wall time, command) go
-    to `directory`."""
-    start = time.perf_counter()
-    result = sweep(
-        task,
-        grid,
-        seeds=args.seeds,
-        total_steps=args.steps,
-        chunk=args.chunk,
-        backend=args.backend,
-        progress=True,
-    )
-    wall = time.perf_counter() - start
-    result.write(directory, metrics=RECORDED)
-    record = {
-        "machine": machine(),
-        "date": str(datetime.date.today()),
-        "wall_seconds": round(wall, 1),
-        "command": command(),
-    }
-    (directory / "run.json").write_text(json.dumps(record, indent=1) + "\n")
-    return result
 
 
 def figure(result: SweepResult, path: Path) -> None:
@@ -89,7 +58,7 @@ def figure(result: SweepResult, path: Path) -> None:
 def report(args: argparse.Namespace, directory: Path, backend: str) -> Path:
     """The Markdown table of every task recorded under `directory`, beside the paper's."""
     config = preset_config("paper", total_steps=args.steps, **task_preset("paper", MUJOCO_TASKS[0]))
-    done = [task for task in MUJOCO_TASKS if (directory / task / "run.json").exists()]
+    done = [task for task in MUJOCO_TASKS if (directory / task / RUN_RECORD).exists()]
     pending = [task for task in MUJOCO_TASKS if task not in done]
     lines = [
         f"# Table 1, MuJoCo rows, on {backend}",
@@ -106,10 +75,10 @@ def report(args: argparse.Namespace, directory: Path, backend: str) -> Path:
     ]
     for task in done:
         result = SweepResult.read(directory / task)
-        record = json.loads((directory / task / "run.json").read_text())
+        record = read_run_record(directory / task)
         hours = record["wall_seconds"] / 3600
         paper = ", ".join(
-            f"{s['variant']} {PAPER[task][PAPER_VARIANTS.index(s['variant'])]}"
+            f"{s['variant']} {TABLE1[task][PAPER_VARIANTS.index(s['variant'])]}"
             for s in result.settings
         )
         lines += [
@@ -127,25 +96,19 @@ def report(args: argparse.Namespace, directory: Path, backend: str) -> Path:
             "",
         ]
     path = directory.parent / f"{directory.name}.md"
-    path.write_text("\n".join(lines))
+    write_result(path, lines)
     return path
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--tasks", nargs="+", default=list(MUJOCO_TASKS), choices=MUJOCO_TASKS)
     parser.add_argument("--variants", nargs="+", default=PAPER_VARIANTS, choices=PAPER_VARIANTS)
-    parser.add_argument("--backend", default="auto", choices=list(BACKENDS))
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--steps", type=int, default=1_000_000)
-    parser.add_argument("--chunk", type=int, help="runs per compiled call (default: automatic)")
+    add_sweep_flags(parser)
     add_record_flags(parser)
     args = parser.parse_args()
 
-    backend, why = choose_backend(args.tasks[0], args.backend)
-    directory = args.results / f"table1_mujoco_{backend}"
-    refuse_to_replace([directory / task for task in args.tasks], args.force)
-    print(f"backend {backend}{' (' + why + ')' if why else ''}; results in {directory}")
+    backend, directory = sweep_directory(args, "table1_mujoco", args.tasks)
     for task in args.tasks:
         run_task(task, args, directory)
         print(f"wrote {report(args, directory, backend)}", flush=True)

@@ -15,8 +15,6 @@ different amount per variant.
 
 from __future__ import annotations
 
-import argparse
-import json
 from pathlib import Path
 
 import matplotlib
@@ -24,20 +22,25 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from escape_speed import VARIANTS as ESCAPE_VARIANTS
-from escape_speed import read_fractions
-from table1_classic import PAPER as PAPER_CLASSIC
-from table1_mujoco import PAPER as PAPER_MUJOCO
-from table1_mujoco import PAPER_VARIANTS
+from common import (
+    CLASSIC_TASKS,
+    ESCAPE_FRACTIONS,
+    ESCAPE_VARIANTS,
+    PAPER_VARIANTS,
+    RESULTS,
+    RUN_RECORD,
+    TABLE1,
+    argument_parser,
+    read_fractions,
+    read_run_record,
+    write_result,
+)
 
 from fppo_jax import SweepResult, merge, statistics
 from fppo_jax.envs import MUJOCO_TASKS
 from fppo_jax.plots import plot_curves, plot_improvement, plot_profiles
 from fppo_jax.results import labels, max_average_return
 
-RESULTS = Path(__file__).resolve().parent / "results"
-CLASSIC_TASKS = tuple(PAPER_CLASSIC)
-PAPER = {**PAPER_CLASSIC, **PAPER_MUJOCO}  # Table 1, in PAPER_VARIANTS' order
 BASELINE = "ppo"
 CHALLENGERS = ("fppo-lp", "fppo-qp")
 # What the study sets out to record: (variants, seeds per variant, protocols) per task.
@@ -54,10 +57,11 @@ DPI = 80
 
 def recorded(results: Path, task: str, protocol: str) -> tuple[SweepResult | None, list[dict]]:
     """The merged parts of `task` under `protocol`, and each part's run record."""
-    directories = sorted(p.parent for p in (results / "study" / task / protocol).glob("*/run.json"))
+    run_records = (results / "study" / task / protocol).glob(f"*/{RUN_RECORD}")
+    directories = sorted(p.parent for p in run_records)
     if not directories:
         return None, []
-    records = [json.loads((d / "run.json").read_text()) for d in directories]
+    records = [read_run_record(d) for d in directories]
     return merge([SweepResult.read(d) for d in directories]), records
 
 
@@ -102,7 +106,7 @@ def task_section(task: str, protocol: str, result: SweepResult, records: list[di
     ]
     for variant, i in index.items():
         best, std, _ = max_average_return(result.setting_metrics(i)["average_return"])
-        paper = PAPER[task][PAPER_VARIANTS.index(variant)]
+        paper = TABLE1[task][PAPER_VARIANTS.index(variant)]
         lines.append(
             f"| {names[i]} | {result.setting_seeds(i)} "
             f"| {interval_text(statistics.interval(final[i]))} "
@@ -122,7 +126,7 @@ def task_section(task: str, protocol: str, result: SweepResult, records: list[di
         "| Δ max average return | paper's Δ | paper's Δ in the CI |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    paper_base = PAPER[task][PAPER_VARIANTS.index(BASELINE)]
+    paper_base = TABLE1[task][PAPER_VARIANTS.index(BASELINE)]
     curves = {v: result.setting_metrics(i)["average_return"] for v, i in index.items()}
     for variant, i in index.items():
         if i == base:
@@ -130,7 +134,7 @@ def task_section(task: str, protocol: str, result: SweepResult, records: list[di
         on_final = statistics.compare(final[i], final[base])
         on_area = statistics.compare(area[i], area[base])
         gap = statistics.max_average_difference(curves[variant], curves[BASELINE])
-        paper_gap = PAPER[task][PAPER_VARIANTS.index(variant)] - paper_base
+        paper_gap = TABLE1[task][PAPER_VARIANTS.index(variant)] - paper_base
         inside = "yes" if gap[1] <= paper_gap <= gap[2] else "no"
         probability = on_final["probability_of_improvement"]
         lines.append(
@@ -247,7 +251,7 @@ def figures(results: dict[str, SweepResult], out: Path, protocol: str) -> Path:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--results", type=Path, default=RESULTS, help="where the parts are")
     args = parser.parse_args()
     out = args.results / "study"
@@ -313,7 +317,7 @@ def main() -> None:
     if aggregate:
         lines += ["## Aggregate", "", *aggregate]
     lines += escape_section(
-        args.results / "escape_speed" / "fractions.csv",
+        args.results / ESCAPE_FRACTIONS,
         "`results/escape_speed/`: 5 seeds, recorded before the minibatch-shuffle change",
     )
     out.mkdir(parents=True, exist_ok=True)
@@ -342,7 +346,7 @@ def main() -> None:
     lines += ["## Figures", ""]
     lines += [f"![{p.stem}](study/{p.name})" for p in pictures]
     path = args.results / "study.md"
-    path.write_text("\n".join(lines) + "\n")
+    write_result(path, lines)
     print(f"wrote {path}")
 
 

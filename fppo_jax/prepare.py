@@ -39,6 +39,11 @@ class Prepared:
 
     @functools.cached_property
     def trainer(self) -> Trainer:
+        check = getattr(self.environment, "check_batch", None)  # vector environments' sizes
+        if check is not None:
+            check(self.config.num_envs)
+            if self.options.eval_every is not None:
+                check(self.options.eval_episodes)
         return make_train(self.config, self.environment)
 
     @property

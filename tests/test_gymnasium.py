@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import TINY
 
+import fppo_jax.driver
 from fppo_jax import make_env, sweep, train
 from fppo_jax.envs import Discrete, Step, as_environment, draw_resets
 from fppo_jax.envs.gymnasium import gymnasium_environment
@@ -215,6 +216,17 @@ def test_a_run_takes_vector_environments_whole_and_an_instance_serves_one_batch_
     draw_resets(instance, jax.random.key(1), (2,))  # an evaluation's, say: it takes the instance
     with pytest.raises(Exception, match="reset since for another batch"):
         jax.vmap(instance.step)(jax.random.split(jax.random.key(2), 2), training, jnp.ones(2, int))
+
+
+def test_environments_a_vector_environment_cannot_serve_are_refused_before_compiling(
+    monkeypatch,
+):
+    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    pairs = gymnasium_environment(lambda: gymnasium.vector.SyncVectorEnv([Corridor, Corridor]))
+    with pytest.raises(ValueError, match="2 sub-environments, which cannot serve 3 "):
+        train(pairs, "ppo", total_steps=512, **{**TINY, "num_envs": 3})
+    with pytest.raises(ValueError, match="2 sub-environments, which cannot serve 5 "):
+        train(pairs, "ppo", total_steps=512, **TINY, eval_every=1, eval_episodes=5)
 
 
 @pytest.mark.slow

@@ -218,6 +218,18 @@ class GymnasiumEnvironment(OnHost):
                 'or AsyncVectorEnv: gymnasium.make_vec(..., vectorization_mode="sync"))'
             )
 
+    def check_batch(self, per_run: int) -> None:
+        """Refuse `per_run` environments per run (num_envs, or an evaluation's episodes) that
+        the vector environments' sub-environments cannot serve; checked before compiling."""
+        size = self.vector_size
+        if size and per_run % size:
+            raise ValueError(
+                f"{self.name}: its vector environment has {size} sub-environments, which cannot "
+                f"serve {per_run} environments per run (num_envs, or an evaluation's episodes): "
+                f"make them a multiple of {size} (num_envs={size}, say), or make the vector "
+                f"environment with {per_run}"
+            )
+
     def _host_reset(self, key_data: np.ndarray) -> tuple[HostState, np.ndarray]:
         key_data = np.asarray(key_data)
         batch = key_data.shape[:-1]
@@ -244,13 +256,7 @@ class GymnasiumEnvironment(OnHost):
         `batch`: a run's environments, or an evaluation's episodes), reset from their seeds."""
         size = self.vector_size
         per_run = batch[-1] if batch else 1
-        if per_run % size:
-            raise ValueError(
-                f"{self.name}: its vector environment has {size} sub-environments, which cannot "
-                f"serve {per_run} environments per run (num_envs, or an evaluation's episodes): "
-                f"make them a multiple of {size} (num_envs={size}, say), or make the vector "
-                f"environment with {per_run}"
-            )
+        self.check_batch(per_run)
         count = len(seeds) // size
         if self.instance and count > 1:
             raise ValueError(

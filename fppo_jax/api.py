@@ -37,20 +37,23 @@ def train(
 ) -> TrainResult:
     """Train one policy with `variant` on `env` and return its metrics, parameters and policy.
 
-    `env` is a registered name (:data:`fppo_jax.envs.TASKS`), a gymnax environment or an
-    :class:`~fppo_jax.envs.Environment`. For a registered task, FPPO-LP's α and FPPO-QP's k default
-    to the paper's Table 2 and `total_steps` to the paper's budget. `preset` names the run's shape
-    (:data:`fppo_jax.config.PRESETS`): ``"paper"`` (the paper's protocol: 8 environments × 256
-    steps) or ``"massive"`` (2048 environments × 16 steps, for a GPU). `backend` runs a MuJoCo task
-    on ``"mjx"`` or in ``"native"`` MuJoCo (envpool, gym's own version of the task), or ``"auto"``:
-    MJX with a GPU or TPU, native on a CPU (:data:`fppo_jax.envs.BACKENDS`). `settings` are
-    :class:`TrainConfig` fields (``num_envs``, ``num_steps``, ``num_minibatches``, …), optimisation
-    settings (``learning_rate``, ``gamma``, ``gae_lambda``, ``entropy_coef``, ``value_coef``,
-    ``max_grad_norm``) and how the run is driven (:class:`~fppo_jax.options.Options`: ``progress``,
-    ``checkpoint_dir``, ``resume``, ``checkpoint_every``, ``keep``, ``log_dir``, ``devices``,
-    ``callback``, ``eval_every``, ``eval_episodes``, ``wandb_project``). Everything is checked
-    before compiling. With ``log_dir``, the run's ``summary.txt`` is written there at the end,
-    beside the ``config.json``, ``metrics.csv`` and TensorBoard files written as it trains.
+    `env` is a registered or namespaced name (:data:`fppo_jax.envs.TASKS`, ``gymnax/…``,
+    ``gymnasium/…``), a gymnax or Brax environment, a ``gymnasium.Env`` or vector environment
+    subclass, a vector environment, or an :class:`~fppo_jax.envs.Environment` (see
+    :func:`~fppo_jax.envs.as_environment`). For a registered task, FPPO-LP's α and FPPO-QP's k
+    default to the paper's Table 2 and `total_steps` to the paper's budget. `preset` names the
+    run's shape (:data:`fppo_jax.config.PRESETS`): ``"paper"`` (the paper's protocol: 8
+    environments × 256 steps) or ``"massive"`` (2048 environments × 16 steps, for a GPU).
+    `backend` runs a MuJoCo task on ``"mjx"`` or in ``"native"`` MuJoCo (envpool, gym's own
+    version of the task), or ``"auto"``: MJX with a GPU or TPU, native on a CPU
+    (:data:`fppo_jax.envs.BACKENDS`). `settings` are :class:`TrainConfig` fields (``num_envs``,
+    ``num_steps``, ``num_minibatches``, …), optimisation settings (``learning_rate``, ``gamma``,
+    ``gae_lambda``, ``entropy_coef``, ``value_coef``, ``max_grad_norm``) and how the run is
+    driven (:class:`~fppo_jax.options.Options`: ``progress``, ``checkpoint_dir``, ``resume``,
+    ``checkpoint_every``, ``keep``, ``log_dir``, ``devices``, ``callback``, ``eval_every``,
+    ``eval_episodes``, ``wandb_project``). Everything is checked before compiling. With
+    ``log_dir``, the run's ``summary.txt`` is written there at the end, beside the
+    ``config.json``, ``metrics.csv`` and TensorBoard files written as it trains.
 
     Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite (the last
     good checkpoint stays on disk).

@@ -122,8 +122,8 @@ def drive(plan: Plan, options: Options) -> Outcome:
     if resets_itself(trainer.env):
         if devices not in (None, 1) or jax.process_count() > 1:
             raise ValueError(
-                "native MuJoCo steps its environments on this host, for one device: "
-                "devices must be 1, in a single process"
+                "native MuJoCo and Gymnasium step their environments on this host, for one "
+                "device: devices must be 1, in a single process"
             )
         devices = 1
     mesh = make_mesh(devices, config.num_envs, plan.data_parallel)

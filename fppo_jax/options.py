@@ -84,15 +84,16 @@ class Options:
     no checkpoint yet). `wandb_project` logs the same to Weights & Biases
     (the ``wandb`` extra).
 
-    Environments whose state lives outside JAX (native MuJoCo) cannot be checkpointed: a
-    resumed run goes on from the restored policy, optimiser and normalisers with every
-    environment starting a new episode, so it learns on but is not bitwise the run that never
-    stopped (it says so on resuming).
+    Environments whose state lives outside JAX (native MuJoCo, Gymnasium) cannot be
+    checkpointed: a resumed run goes on from the restored policy, optimiser and normalisers with
+    every environment starting a new episode, so it learns on but is not bitwise the run that
+    never stopped (it says so on resuming).
 
-    `devices`: how many of the devices JAX sees (default: all; one for native MuJoCo, which
-    steps on the host) share the runs (see :mod:`fppo_jax.distributed`). In a multi-process run
-    only process 0 reports and writes, checkpoints included: every process hands it its part
-    of the state to save, and it hands each its part back on resuming.
+    `devices`: how many of the devices JAX sees (default: all; one for the environments
+    stepped on the host: native MuJoCo, Gymnasium) share the runs (see
+    :mod:`fppo_jax.distributed`). In a multi-process run only process 0 reports and writes,
+    checkpoints included: every process hands it its part of the state to save, and it hands
+    each its part back on resuming.
 
     `callback(snapshot)` is called between compiled chunks with a :class:`Snapshot`; returning
     ``False`` (or a numpy ``False``, as a comparison of metrics gives) stops training there

@@ -41,6 +41,9 @@ VARIANT_SPECIFIC: tuple[str, ...] = tuple(
 )
 # The most env steps a run may take: the compiled program counts them in int32.
 MAX_STEPS = 2**31 - 1
+# The most seeds one setting may name on a command line: far more than a sweep trains, so more
+# is a mistyped range, refused before a list of them is built.
+MAX_SEEDS = 100_000
 SYMBOLS = {"alpha": "α", "k": "k", "delta": "δ", "epsilon": "ε"}
 
 
@@ -66,19 +69,22 @@ def parse_seeds(text: str) -> list[int]:
     try:
         if ":" in text:
             start, stop = (int(part) for part in text.split(":"))
-            seeds = list(range(start, stop))
+            seeds = range(start, stop)
         elif "," in text:
             seeds = [int(part) for part in text.split(",")]
         else:
-            seeds = list(range(positive_int("the number of seeds", int(text))))
+            seeds = range(positive_int("the number of seeds", int(text)))
     except ValueError as error:
         if "must be" in str(error):
             raise
         raise ValueError(
             f"seeds {text!r} are not a count (20), a range (10:20) or a list (0,3,7)"
         ) from None
-    if not seeds:
+    count = max(0, seeds.stop - seeds.start) if isinstance(seeds, range) else len(seeds)
+    if not count:
         raise ValueError(f"seeds {text!r} name no seed (a range start:stop needs start < stop)")
+    if count > MAX_SEEDS:
+        raise ValueError(f"seeds {text!r} name {count:,} seeds, more than {MAX_SEEDS:,}")
     if len(set(seeds)) < len(seeds):
         raise ValueError(f"seeds {text!r} repeat a seed")
     return [check_seed(seed) for seed in seeds]

@@ -28,6 +28,9 @@ LONGEST_FIRST = (
     "test_results.py",
     "test_study.py",
     "test_trainer.py",
+    "test_saved_policy.py",
+    "test_evaluation.py",
+    "test_gymnasium.py",
 )
 
 

@@ -1,10 +1,7 @@
 import csv
-import json
 import os
-import re
 import shutil
 import signal
-import struct
 import subprocess
 import sys
 import textwrap
@@ -16,16 +13,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from helpers import NaNRewardAfter, assert_bitwise_equal
-from tensorboardX.proto.event_pb2 import Event
 
 import fppo_jax
 from fppo_jax import ConfigMismatch, DamagedCheckpoint, TrainingDiverged, load_policy, train
 from fppo_jax.checkpoint import Checkpoints
 from fppo_jax.cli import main
-from fppo_jax.envs import Box
-from fppo_jax.normalization import RunningStats
-from fppo_jax.policy import Policy
-from fppo_jax.saved_policy import read_policy, save_policy
 from fppo_jax.trainer import METRICS
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
@@ -166,142 +158,6 @@ def test_load_policy_acts_as_the_trained_policy(tmp_path):
             policy(wrong)
 
 
-def test_a_continuous_policy_round_trips_through_its_description():
-    params = make_gaussian_params()
-    stats = RunningStats(jnp.full(3, 0.5), jnp.full(3, 4.0), jnp.asarray(10.0))
-    policy = Policy(params, stats, Box((-1.0, -2.0), (1.0, 2.0)), (8,))
-    again = Policy.from_parts(policy.describe(), jax.device_get(policy.arrays()))
-    obs = np.random.default_rng(0).normal(size=(16, 3)).astype(np.float32) * 5
-    np.testing.assert_array_equal(again(obs), policy(obs))
-    actions = np.asarray(again(obs, jax.random.key(0)))
-    assert (np.abs(actions) <= [1.0, 2.0]).all()  # clipped to the bounds
-
-
-def make_gaussian_params():
-    from fppo_jax.networks import make_networks
-
-    networks = make_networks(Box((-1.0, -2.0), (1.0, 2.0)), (8,))
-    params = networks.init(jax.random.key(0), 3)["policy"]
-    # A mean far outside the bounds, so that clipping matters.
-    return jax.tree.map(lambda x: x * 50, params)
-
-
-def test_a_saved_policy_acts_as_the_trained_policy_and_is_not_overwritten(tmp_path, capsys):
-    result = train(**RUN)
-    assert result.save(tmp_path / "policy") == tmp_path / "policy"
-    policy, record = read_policy(tmp_path / "policy")
-    assert_bitwise_equal(policy.arrays(), result.policy.arrays())
-    obs = np.random.default_rng(0).normal(size=(64, 4)).astype(np.float32)
-    np.testing.assert_array_equal(policy(obs), result.policy(obs))
-    key = jax.random.key(1)
-    np.testing.assert_array_equal(policy(obs, key), result.policy(obs, key))
-    assert record["config"] == json.loads(json.dumps(result.config))
-    assert (record["kind"], record["update"]) == ("policy", 20)
-
-    with pytest.raises(ValueError, match="already holds a saved policy; pass overwrite=True"):
-        result.save(tmp_path / "policy")
-    result.save(tmp_path / "policy", overwrite=True)
-    assert sorted(p.name for p in (tmp_path / "policy").iterdir()) == ["policy.json", "policy.npz"]
-
-    assert main(["eval", "--policy", str(tmp_path / "policy"), "--episodes", "2"]) == 0
-    assert "fppo-qp on cartpole, seed 3: saved policy at update 20" in capsys.readouterr().out
-    assert main(["eval", "--policy", str(tmp_path / "policy"), "--render", "a.mp4"]) == 2
-    assert (
-        "cartpole is a classic (gymnax) task, which MuJoCo cannot render" in capsys.readouterr().err
-    )
-    assert main(["eval", "--policy", str(tmp_path / "policy"), "--render", "a.avi"]) == 2
-    assert (
-        "render to a .png (image strip), a .gif (animation) or an .mp4" in capsys.readouterr().err
-    )
-
-
-def test_cli_saves_the_trained_policy_and_refuses_before_training_to_overwrite_it(tmp_path, capsys):
-    flags = ["train", "--steps", "256", "--save-policy", str(tmp_path), "--quiet"]
-    flags += ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
-    assert main(flags) == 0
-    assert f"wrote {tmp_path}/policy.json, policy.npz" in capsys.readouterr().out
-    assert load_policy(tmp_path).action_space.n == 2
-    saved = (tmp_path / "policy.json").read_bytes()
-    assert main(flags) == 2
-    out, err = capsys.readouterr()
-    assert "already holds a saved policy; remove its policy.json and policy.npz to" in err
-    assert "overwrite=True" not in err and "updates" not in out  # no such flag; nothing trained
-    with pytest.raises(FileNotFoundError, match=r"policy\.json is a file: name the directory"):
-        load_policy(tmp_path / "policy.json")
-    assert (tmp_path / "policy.json").read_bytes() == saved
-
-
-def save_gaussian_policy(directory: Path) -> Policy:
-    stats = RunningStats(jnp.full(3, 0.5), jnp.full(3, 4.0), jnp.asarray(10.0))
-    policy = Policy(make_gaussian_params(), stats, Box((-1.0, -2.0), (1.0, 2.0)), (8,))
-    save_policy(directory, policy, {"config": {"env": "mine"}, "update": 7})
-    return policy
-
-
-def test_a_saved_gaussian_policy_round_trips_bit_for_bit(tmp_path):
-    policy = save_gaussian_policy(tmp_path)
-    again = load_policy(tmp_path)
-    assert_bitwise_equal(again.arrays(), policy.arrays())
-    assert (again.action_space, again.hidden_sizes) == (policy.action_space, (8,))
-    obs = np.random.default_rng(0).normal(size=(16, 3)).astype(np.float32) * 5
-    np.testing.assert_array_equal(again(obs), policy(obs))
-    key = jax.random.key(2)
-    np.testing.assert_array_equal(again(obs, key), policy(obs, key))
-
-
-def test_a_policy_refuses_a_non_finite_observation_saying_where(tmp_path):
-    policy = save_gaussian_policy(tmp_path)
-    obs = np.zeros((4, 3), np.float32)
-    obs[2, 1] = np.nan
-    with pytest.raises(ValueError, match=r"holds nan at index \(2, 1\) \(1 non-finite"):
-        policy(obs)
-    assert policy(np.zeros(3)).shape == (2,)
-    assert jax.jit(lambda o: policy(o))(jnp.zeros(3)).shape == (2,)  # inside jit: no check
-
-
-@pytest.mark.parametrize(
-    "edit, found",
-    [
-        (lambda d: d["action_space"].update(low=[-1.0] * 3, high=[1.0] * 3), "network for its"),
-        (lambda d: d.update(hidden_sizes=[16]), "['Dense_0']['bias'] is (8,), expected (16,)"),
-    ],
-)
-def test_a_policy_json_edited_apart_from_its_arrays_is_refused_at_load(tmp_path, edit, found):
-    save_gaussian_policy(tmp_path)
-    path = tmp_path / "policy.json"
-    saved = json.loads(path.read_text())
-    edit(saved["policy"])
-    path.write_text(json.dumps(saved))
-    with pytest.raises(
-        ValueError, match=rf"saved policy in {tmp_path} is damaged .*{re.escape(found)}"
-    ):
-        load_policy(tmp_path)
-
-
-@pytest.mark.parametrize("how", ["truncated", "replaced"])
-def test_a_damaged_saved_policy_is_reported_naming_its_directory(tmp_path, how):
-    policy = save_gaussian_policy(tmp_path)
-    arrays = tmp_path / "policy.npz"
-    if how == "truncated":
-        arrays.write_bytes(arrays.read_bytes()[:-100])
-    else:  # a well-formed file with other values: only the digest tells
-        flat = dict(np.load(arrays))
-        flat["obs_stats/mean"] = np.asarray(policy.obs_stats.mean) + 1
-        with open(arrays, "wb") as f:
-            np.savez(f, **flat)
-    with pytest.raises(ValueError, match=f"saved policy in {tmp_path} is damaged"):
-        load_policy(tmp_path)
-
-
-def test_a_directory_with_neither_a_policy_nor_checkpoints_is_refused_by_name(tmp_path, capsys):
-    (tmp_path / "notes.txt").write_text("not a policy")
-    message = f"{tmp_path} holds neither a saved policy (policy.json and policy.npz) nor checkp"
-    with pytest.raises(FileNotFoundError, match=re.escape(message)):
-        load_policy(tmp_path)
-    assert main(["eval", "--checkpoint", str(tmp_path)]) == 2
-    assert message in capsys.readouterr().err
-
-
 def test_nan_guard_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
     run = {**TINY, "total_steps": 128 * 40}
     with pytest.raises(TrainingDiverged, match=r"update 3 .*checkpoint, at update 2, is in"):
@@ -336,99 +192,6 @@ def test_interrupted_sweep_resumes_at_its_group_and_update(tmp_path):
     assert resumed.config["runs_per_call"] == 3
     assert_bitwise_equal(resumed.metrics, whole.metrics)
     np.testing.assert_array_equal(resumed.diverged, whole.diverged)
-
-
-def read_events(directory: Path) -> list[Event]:
-    """Every event in the TFRecord files under `directory`."""
-    events = []
-    for path in sorted(directory.glob("events.out.tfevents.*")):
-        data = path.read_bytes()
-        while data:
-            (length,) = struct.unpack("<Q", data[:8])
-            events.append(Event.FromString(data[12 : 12 + length]))
-            data = data[12 + length + 4 :]
-    return events
-
-
-def test_metrics_are_logged_to_csv_and_tensorboard_as_training_goes(tmp_path):
-    seen = []
-
-    def progress(p):
-        seen.append((p.update, len(list(csv.reader(open(tmp_path / "metrics.csv"))))))
-
-    result = train(**RUN, log_dir=tmp_path, progress=progress)
-    # After each chunk the CSV already holds its rows (plus the header).
-    assert [(u, rows - 1) for u, rows in seen[1:]] == [(u, u) for u, _ in seen[1:]]
-    assert seen[-1][0] == 20
-    values, texts = {}, []
-    for event in read_events(tmp_path / "tensorboard"):
-        for value in event.summary.value:
-            if value.HasField("simple_value"):
-                values.setdefault(value.tag, {})[event.step] = value.simple_value
-            else:
-                texts.append(value.tag)
-    assert set(values) == set(METRICS) - {"env_steps"}
-    assert texts == ["config/text_summary"]  # every setting, as TensorBoard's text
-    loss = values["policy_loss"]
-    assert sorted(loss) == list(result.metrics["env_steps"])
-    np.testing.assert_array_equal([loss[s] for s in sorted(loss)], result.metrics["policy_loss"])
-
-
-def test_eval_reports_deterministic_and_stochastic_returns(tmp_path, capsys):
-    train(**RUN, checkpoint_dir=tmp_path)
-    assert main(["eval", "--checkpoint", str(tmp_path), "--episodes", "4"]) == 0
-    out = capsys.readouterr().out
-    assert "fppo-qp on cartpole, seed 3: checkpoint at update 20 (2,560 env steps)" in out
-    for line in ("deterministic return", "stochastic    return"):
-        text = next(x for x in out.splitlines() if line in x)
-        mean = float(text.split("return")[1].split("±")[0])
-        assert 1 <= mean <= 200  # CartPole-v0 episodes: 1 to 200 steps, reward 1 per step
-    assert main(["eval", "--checkpoint", str(tmp_path / "none")]) == 2
-    assert "not found" in capsys.readouterr().err
-
-
-def test_evaluate_counts_each_episode_until_it_ends():
-    env = fppo_jax.make_env("cartpole")
-    policy = Policy(make_cartpole_params(), None, env.action_space, (4,))
-    returns = fppo_jax.evaluate(env, policy, 5, seed=0)
-    # Always pushing one way ends an episode within a few dozen steps.
-    assert returns.shape == (5,) and (returns >= 5).all() and (returns < 60).all()
-    np.testing.assert_array_equal(returns, np.round(returns))
-
-
-def make_cartpole_params():
-    from fppo_jax.networks import make_networks
-
-    networks = make_networks(fppo_jax.make_env("cartpole").action_space, (4,))
-    params = networks.init(jax.random.key(0), 4)["policy"]
-    # A constant action: zero weights and a large bias on action 1.
-    params = jax.tree.map(jnp.zeros_like, params)
-    head = params["params"]["MLP_0"]["Dense_1"]
-    head["bias"] = jnp.asarray([0.0, 10.0])
-    return params
-
-
-def test_progress_reports_an_eta_and_a_bar_only_on_a_terminal(monkeypatch):
-    from fppo_jax.progress import ProgressBar, format_seconds, print_progress, reporter
-
-    assert [format_seconds(s) for s in (4.4, 185, 7620, float("nan"))] == [
-        "4 s",
-        "3 min 05 s",
-        "2 h 07 min",
-        "-",
-    ]
-    monkeypatch.setattr(sys.stderr, "isatty", lambda: False, raising=False)
-    with reporter(True, "run") as report:
-        assert report is print_progress
-    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
-    assert isinstance(reporter(True, "run"), ProgressBar)
-    with reporter(False, "run") as report:
-        assert report is None
-    seen = []
-    train(**RUN, progress=seen.append)
-    assert np.isnan(seen[0].eta)  # before any update has run
-    etas = np.array([p.eta for p in seen[1:]])
-    assert (etas[:-1] > 0).all() and np.isfinite(etas).all() and etas[-1] == 0
 
 
 @pytest.mark.parametrize(

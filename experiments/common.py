@@ -106,7 +106,8 @@ def inside_results(path: Path) -> bool:
 
 
 def machine() -> str:
-    """The processor, its cores, the accelerator JAX sees and the jax version."""
+    """The processor, its cores (and how many this process may use, if fewer), the accelerator
+    JAX sees and the jax version."""
     import jax
 
     try:
@@ -117,7 +118,11 @@ def machine() -> str:
     device = jax.devices()[0]
     accelerator = "no GPU" if device.platform == "cpu" else device.device_kind
     cpu = names[0] if names else platform.processor() or platform.machine()
-    return f"{cpu}, {os.cpu_count()} cores, {accelerator}; jax {jax.__version__}"
+    cores = f"{os.cpu_count()} cores"
+    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if usable != os.cpu_count():  # pinned to some of them (taskset, a SLURM job's share)
+        cores += f" ({usable} used)"
+    return f"{cpu}, {cores}, {accelerator}; jax {jax.__version__}"
 
 
 def command() -> str:

@@ -264,6 +264,20 @@ def add_backend_flag(command: argparse.ArgumentParser, default: str | None) -> N
     )
 
 
+def add_policy_flag(command: argparse.ArgumentParser, first: str) -> None:
+    """``--checkpoint`` and ``--policy``, one flag under two names (`first` shown first): a
+    saved policy's directory or a checkpoint directory."""
+    names = [first, *({"--checkpoint", "--policy"} - {first})]
+    command.add_argument(
+        *names,
+        dest="checkpoint",
+        type=path,
+        required=True,
+        metavar="DIR",
+        help="a saved policy or a checkpoint directory",
+    )
+
+
 def add_render_flag(command: argparse.ArgumentParser, which: str) -> None:
     command.add_argument(
         "--render",

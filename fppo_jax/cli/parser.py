@@ -10,6 +10,7 @@ from fppo_jax.cli.flags import (
     Defaults,
     Parser,
     add_backend_flag,
+    add_policy_flag,
     add_render_flag,
     add_run_flags,
     add_score_flags,
@@ -157,15 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
         "deterministic policy on a MuJoCo task (.mp4, .gif or .png strip).",
         formatter_class=formatter,
     )
-    evaluation.add_argument(
-        "--checkpoint",
-        "--policy",
-        dest="checkpoint",
-        type=path,
-        required=True,
-        metavar="DIR",
-        help="a checkpoint directory or a saved policy",
-    )
+    add_policy_flag(evaluation, "--checkpoint")
     evaluation.add_argument(
         "--episodes",
         type=count,
@@ -184,15 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
         f"`action` (see fppo_jax.onnx_export). Needs the onnx extra: {install_hint('onnx')}.",
         formatter_class=formatter,
     )
-    export.add_argument(
-        "--policy",
-        "--checkpoint",
-        dest="checkpoint",
-        type=path,
-        required=True,
-        metavar="DIR",
-        help="a saved policy or a checkpoint directory",
-    )
+    add_policy_flag(export, "--policy")
     export.add_argument(
         "--onnx", type=path, required=True, metavar="FILE", help="the model file to write"
     )

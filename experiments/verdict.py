@@ -84,7 +84,42 @@ def outcome(probability: tuple[float, float, float]) -> str:
     return "not resolved"
 
 
-def task_section(task: str, protocol: str, result: SweepResult, records: list[dict]) -> list[str]:
+def planned_comparisons(protocol: str) -> list[tuple[str, str]]:
+    """The family the study set out to test under `protocol`: each challenger against PPO on
+    each task's final returns."""
+    return [
+        (task, variant)
+        for task, (variants, _, protocols) in PLAN.items()
+        if protocol in protocols
+        for variant in CHALLENGERS
+        if variant in variants
+    ]
+
+
+def holm_adjusted(results: dict[str, SweepResult], protocol: str) -> dict[tuple[str, str], float]:
+    """Holm-adjusted p-values of Mann–Whitney's test of P(challenger > PPO) = ½ on final
+    returns, over the protocol's whole planned family; a comparison not recorded yet enters
+    as p = 1, so the adjustment can only fall as the study fills in."""
+    family = planned_comparisons(protocol)
+    p_values = []
+    for task, variant in family:
+        result = results.get(task)
+        index = by_variant(result) if result is not None else {}
+        p = float("nan")
+        if {variant, BASELINE} <= set(index):
+            final = result.scores("final")
+            p = statistics.improvement_test(final[index[variant]], final[index[BASELINE]])
+        p_values.append(1.0 if np.isnan(p) else p)
+    return dict(zip(family, statistics.holm(p_values), strict=True))
+
+
+def task_section(
+    task: str,
+    protocol: str,
+    result: SweepResult,
+    records: list[dict],
+    adjusted: dict[tuple[str, str], float],
+) -> list[str]:
     index = by_variant(result)
     names = labels(result.settings)
     final, area = result.scores("final"), result.scores("auc")
@@ -120,11 +155,12 @@ def task_section(task: str, protocol: str, result: SweepResult, records: list[di
         "",
         f"Against {BASELINE}: P(variant > {BASELINE}) on final returns and on AUC, the "
         "difference in IQM of final returns, and the difference in the paper's statistic "
-        "beside the paper's own gap (all 95% bootstrap CIs).",
+        "beside the paper's own gap (all 95% bootstrap CIs); for the planned comparisons, "
+        f"the Holm-adjusted p over the {len(adjusted)} of the {protocol} protocol.",
         "",
-        "| variant | P(> ppo), final | outcome | P(> ppo), AUC | Δ IQM final "
+        "| variant | P(> ppo), final | outcome | Holm p | P(> ppo), AUC | Δ IQM final "
         "| Δ max average return | paper's Δ | paper's Δ in the CI |",
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     paper_base = TABLE1[task][PAPER_VARIANTS.index(BASELINE)]
     curves = {v: result.setting_metrics(i)["average_return"] for v, i in index.items()}
@@ -137,8 +173,10 @@ def task_section(task: str, protocol: str, result: SweepResult, records: list[di
         paper_gap = TABLE1[task][PAPER_VARIANTS.index(variant)] - paper_base
         inside = "yes" if gap[1] <= paper_gap <= gap[2] else "no"
         probability = on_final["probability_of_improvement"]
+        holm = adjusted.get((task, variant))
         lines.append(
             f"| {names[i]} | {interval_text(probability, '.2f')} | {outcome(probability)} "
+            f"| {'–' if holm is None else f'{holm:.2f}'} "
             f"| {interval_text(on_area['probability_of_improvement'], '.2f')} "
             f"| {interval_text(on_final['iqm_difference'])} | {interval_text(gap)} "
             f"| {paper_gap:+.1f} | {inside} |"
@@ -270,15 +308,20 @@ def main() -> None:
         "percentile bootstrap CI (2,000 resamples, seeded); P(X > Y) + ½ P(X = Y) over all "
         "pairs of runs (probability of improvement) with a bootstrap CI that resamples both "
         "variants' runs; `outcome` is *better* or *worse* where that CI excludes 0.5, "
-        "*not resolved* otherwise. No correction for the number of comparisons is applied: "
-        "read a single *better* among many rows with that in mind.",
+        "*not resolved* otherwise, one comparison at a time.",
+        "- The planned comparisons, FPPO-LP and FPPO-QP against PPO on each task's final "
+        "returns, are also tested as a family: Mann–Whitney's U test of P = ½, each p-value "
+        "adjusted by Holm's step-down method over every planned comparison of its protocol "
+        "(one not recorded yet counts as p = 1). A *Holm p* below 0.05 is a difference that "
+        "survives the number of comparisons made; TR-PPO's and PPO-RB's rows are exploratory "
+        "and carry none.",
         "- Runs: seed s starts from `jax.random.key(s)`; Table 2's α and k; the `paper` preset "
         "(8 envs × 256 steps, 32 minibatches × 10 epochs, Adam 3e-4, annealed on MuJoCo); MuJoCo "
         "tasks on native MuJoCo (envpool, gym's v3 tasks; Reacher v2), so absolute returns are "
         "not the paper's (MuJoCo 1.5, gym v2).",
         "",
     ]
-    sections, done, missing = [], [], []
+    done, missing, parts = [], [], []
     merged: dict[str, dict[str, SweepResult]] = {p: {} for p in PROTOCOLS}
     for task, (variants, seeds, protocols) in PLAN.items():
         for protocol in protocols:
@@ -302,7 +345,15 @@ def main() -> None:
                 done.append(label)
             if result is not None:
                 merged[protocol][task] = result
-                sections += task_section(task, protocol, result, records)
+                parts.append((task, protocol, records))
+    adjusted = {p: holm_adjusted(results, p) for p, results in merged.items()}
+    sections = [
+        line
+        for task, protocol, records in parts
+        for line in task_section(
+            task, protocol, merged[protocol][task], records, adjusted[protocol]
+        )
+    ]
     head = [
         "## Where the study stands",
         "",

@@ -10,6 +10,8 @@ precipice* (NeurIPS), whose library, rliable, these reproduce on ``scipy.stats``
 - two settings are compared by the **probability of improvement** P(X > Y) + ½ P(X = Y), the
   Mann–Whitney U statistic over n·m, and by the difference of their IQMs, each with a bootstrap
   interval that resamples both settings' runs independently;
+- a family of comparisons is tested with the Mann–Whitney U test of each probability of
+  improvement against ½, its p-values adjusted by Holm's step-down method;
 - across tasks, scores are first normalised per task, and resampling is **stratified**: each
   task's runs are resampled among themselves (scipy's bootstrap of several independent samples).
 
@@ -195,6 +197,35 @@ def probability_of_improvement(x: np.ndarray, y: np.ndarray, axis: int = -1) -> 
     x, y = np.moveaxis(np.asarray(x, float), axis, -1), np.moveaxis(np.asarray(y, float), axis, -1)
     difference = x[..., :, None] - y[..., None, :]
     return np.mean((difference > 0) + 0.5 * (difference == 0), axis=(-2, -1))
+
+
+def improvement_test(x: np.ndarray, y: np.ndarray) -> float:
+    """The two-sided p-value of the Mann–Whitney U test that a score of `x`'s setting is as
+    likely to be above one of `y`'s as below it, P(X > Y) + ½ P(X = Y) = ½: the test that goes
+    with :func:`probability_of_improvement` (``scipy.stats.mannwhitneyu``: exact for small
+    samples without ties, the normal approximation with a tie correction otherwise).
+    Non-finite scores are left out; NaN if either setting has none."""
+    x, y = _finite(x), _finite(y)
+    if x.size == 0 or y.size == 0:
+        return float("nan")
+    if np.ptp(np.concatenate([x, y])) == 0:  # every score tied: no evidence either way
+        return 1.0
+    return float(stats.mannwhitneyu(x, y, alternative="two-sided").pvalue)
+
+
+def holm(p_values: Sequence[float]) -> np.ndarray:
+    """Holm's (1979) step-down adjustment of a family of m p-values: the i-th smallest becomes
+    max over j ≤ i of min(1, (m − j + 1)·p₍ⱼ₎). Rejecting every hypothesis whose adjusted p is
+    below α keeps the chance of any false rejection in the family at most α, whatever the
+    dependence between the tests. A comparison not yet made can be entered as 1."""
+    p = np.asarray(p_values, dtype=float)
+    if p.ndim != 1 or np.any(~np.isfinite(p)) or np.any((p < 0) | (p > 1)):
+        raise ValueError(f"Holm's adjustment needs finite p-values in [0, 1], got {p_values!r}")
+    order = np.argsort(p, kind="stable")
+    scaled = np.minimum(1.0, (len(p) - np.arange(len(p))) * p[order])
+    adjusted = np.empty_like(p)
+    adjusted[order] = np.maximum.accumulate(scaled)
+    return adjusted
 
 
 def compare(

@@ -47,6 +47,40 @@ def test_the_probability_of_improvement_counts_pairs_and_half_ties():
     assert statistics.probability_of_improvement(b, a) == pytest.approx(1 - u / (17 * 11))
 
 
+def test_the_improvement_test_is_the_mann_whitney_test_of_one_half():
+    # Five runs each, every x above every y: 2 of the C(10, 5) = 252 labellings are as extreme.
+    x, y = np.arange(5.0, 10.0), np.arange(5.0)
+    assert statistics.improvement_test(x, y) == pytest.approx(2 / 252)
+    assert statistics.improvement_test(y, x) == pytest.approx(2 / 252)
+    # Against a direct permutation test of |U - nm/2| on tied, overlapping scores.
+    rng = np.random.default_rng(4)
+    a, b = rng.integers(0, 9, 23).astype(float), rng.integers(2, 11, 19).astype(float)
+    pooled = np.concatenate([a, b])
+
+    def distance(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return np.abs(statistics.probability_of_improvement(x, y) - 0.5)
+
+    shuffled = np.array([rng.permutation(pooled) for _ in range(20_000)])
+    null = distance(shuffled[:, :23], shuffled[:, 23:])
+    direct = np.mean(null >= distance(a, b) - 1e-12)
+    assert statistics.improvement_test(a, b) == pytest.approx(direct, abs=0.01)
+    assert statistics.improvement_test(np.ones(4), np.ones(3)) == 1.0
+    assert np.isnan(statistics.improvement_test(np.array([np.nan]), y))
+
+
+def test_holm_adjusts_a_family_step_down():
+    adjusted = statistics.holm([0.01, 0.04, 0.03, 0.005])
+    # Sorted 0.005, 0.01, 0.03, 0.04 times 4, 3, 2, 1, then made non-decreasing.
+    np.testing.assert_allclose(adjusted, [0.03, 0.06, 0.06, 0.02])
+    np.testing.assert_allclose(statistics.holm([0.5, 0.9]), [1.0, 1.0])
+    np.testing.assert_allclose(statistics.holm([0.2]), [0.2])
+    # A comparison not made yet, entered as 1, can only raise the others' adjusted p.
+    assert statistics.holm([0.01, 0.02, 1.0])[0] == pytest.approx(0.03)
+    for bad in ([0.1, np.nan], [1.5], [[0.1]]):
+        with pytest.raises(ValueError, match="finite p-values in"):
+            statistics.holm(bad)
+
+
 def test_an_interval_matches_a_direct_percentile_bootstrap():
     x = np.random.default_rng(2).normal(10.0, 3.0, size=20)
     point, low, high = statistics.interval(x, "iqm", resamples=20_000)

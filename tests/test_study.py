@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from fppo_jax import SweepResult, merge, statistics
+
 EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
 
 
@@ -43,6 +45,13 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
     assert "### cartpole, paper protocol" in text
     assert "2 parts, 12 runs of 4,096 env steps" in text
     assert "| fppo-lp α=1.3 | 0." in text  # its probability of improvement over ppo
+    # One of the paper protocol's 18 planned comparisons recorded: Holm multiplies its p by 18.
+    merged = merge([SweepResult.read(d) for d in sorted(parts.iterdir())])
+    final = merged.scores("final")
+    p = statistics.improvement_test(final[1], final[0])
+    assert "the Holm-adjusted p over the 18 of the paper protocol" in text
+    row = next(line for line in text.splitlines() if line.startswith("| fppo-lp α=1.3 | 0."))
+    assert row.split(" | ")[3] == f"{min(1.0, 18 * p):.2f}"
     assert "cartpole (paper): fppo-lp 6 of 50 seeds" in text
     assert "hopper (paper): not started" in text
     assert (tmp_path / "study" / "curves_paper.png").stat().st_size > 0

@@ -39,6 +39,7 @@ from common import (
 from fppo_jax import make_env, make_train
 from fppo_jax.config import describe, resolve_config, resolve_hyperparameters
 from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, choose_backend
+from fppo_jax.statistics import sample_std
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,7 +129,7 @@ def report(measured: Sequence[Measured]) -> list[str]:
         "rollout is collected once, and PPO, FPPO-LP and FPPO-QP (Table 2's α and k) each run "
         "that update's epochs on its batch from the same parameters, in the same minibatch "
         "order. The figure is the fraction of the batch in R+ ∪ R- after each epoch, mean ± "
-        "std over seeds. The probed rollout is not trained on.",
+        "sample std over seeds. The probed rollout is not trained on.",
         "",
         "## Summary",
         "",
@@ -156,7 +157,7 @@ def report(measured: Sequence[Measured]) -> list[str]:
             "",
             f"## {m.task} ({m.backend}; FPPO-LP α = {alpha}, FPPO-QP k = {k})",
             "",
-            f"{m.description}; {m.seconds:.0f} s. After epoch e, mean ± std over "
+            f"{m.description}; {m.seconds:.0f} s. After epoch e, mean ± sample std over "
             f"{m.fractions.shape[0]} seeds:",
             "",
             "| update | variant | " + " | ".join(f"epoch {e}" for e in shown) + " |",
@@ -166,7 +167,7 @@ def report(measured: Sequence[Measured]) -> list[str]:
             for v, variant in enumerate(ESCAPE_VARIANTS):
                 cells = [
                     f"{m.fractions[:, p, v, e - 1].mean():.2%} ± "
-                    f"{m.fractions[:, p, v, e - 1].std():.2%}"
+                    f"{sample_std(m.fractions[:, p, v, e - 1]):.2%}"
                     for e in shown
                 ]
                 lines.append(f"| {point} | {variant} | " + " | ".join(cells) + " |")

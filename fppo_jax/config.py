@@ -21,7 +21,7 @@ import numpy as np
 
 from fppo_jax.envs import MUJOCO_TASKS, lookup
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
-from fppo_jax.objectives import EPSILON, VARIANTS, Objective, objective, real
+from fppo_jax.objectives import EPSILON, Objective, check_variant, objective, real
 
 # The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task.
 TABLE2: dict[str, dict[str, float]] = {
@@ -88,12 +88,6 @@ def parse_seeds(text: str) -> list[int]:
     if len(set(seeds)) < len(seeds):
         raise ValueError(f"seeds {text!r} repeat a seed")
     return [check_seed(seed) for seed in seeds]
-
-
-def check_variant(variant: object) -> str:
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown variant {variant!r}; valid variants: {', '.join(VARIANTS)}")
-    return str(variant)
 
 
 def table2(task: str | None, variant: str) -> dict[str, float]:

@@ -95,6 +95,13 @@ class Objective:
         return VARIANTS[int(self.variant)]
 
 
+def check_variant(variant: object) -> str:
+    """`variant` if it names one of :data:`VARIANTS`; else an error that lists them."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown variant {variant!r}; valid variants: {', '.join(VARIANTS)}")
+    return str(variant)
+
+
 def objective(name: str, *, epsilon: float = EPSILON, **hyperparameters: float) -> Objective:
     """The objective of variant `name`, with its hyperparameters checked against their ranges.
 
@@ -104,8 +111,7 @@ def objective(name: str, *, epsilon: float = EPSILON, **hyperparameters: float) 
     missing. ε only enters through the bounds ``1 ± ε`` (0 < ε < 1); tr-ppo uses it solely for
     the negative-region diagnostic and value clipping.
     """
-    if name not in VARIANTS:
-        raise ValueError(f"unknown variant {name!r}; valid variants: {', '.join(VARIANTS)}")
+    check_variant(name)
     given = {key: value for key, value in hyperparameters.items() if value is not None}
     allowed = DEFAULTS[name]
     extra = sorted(set(given) - set(allowed))

@@ -20,7 +20,6 @@ from fppo_jax.config import (
     SWEEPABLE,
     VARIANT_SPECIFIC,
     check_seed,
-    check_variant,
     positive_int,
     resolve_hyperparameters,
     table2,
@@ -28,7 +27,7 @@ from fppo_jax.config import (
 from fppo_jax.driver import Outcome, Plan, drive
 from fppo_jax.envs import Environment
 from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
-from fppo_jax.objectives import VARIANTS, real
+from fppo_jax.objectives import VARIANTS, check_variant, real
 from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, labels
 

@@ -16,7 +16,6 @@ from fppo_jax.config import (
     TrainConfig,
     as_float,
     check_seed,
-    check_variant,
     describe,
     describe_update,
     environment_name,
@@ -30,7 +29,6 @@ from fppo_jax.config import (
     task_preset,
 )
 from fppo_jax.envs import MUJOCO_TASKS, lookup
-from fppo_jax.objectives import VARIANTS
 
 SMALL = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 
@@ -110,16 +108,6 @@ def test_parse_seeds_reads_a_count_a_range_or_a_list(text, seeds):
 def test_parse_seeds_refuses_what_names_no_distinct_valid_seeds(text, message):
     with pytest.raises(ValueError, match=re.escape(message)):
         parse_seeds(text)
-
-
-def test_check_variant_takes_each_variant_and_lists_them_when_refusing():
-    assert [check_variant(v) for v in VARIANTS] == list(VARIANTS)
-    listed = "ppo, fppo-lp, fppo-qp, tr-ppo, ppo-rb, tr-ppo-rb"
-    for wrong in ("PPO", "fppo", None):
-        with pytest.raises(
-            ValueError, match=re.escape(f"unknown variant {wrong!r}; valid variants: {listed}")
-        ):
-            check_variant(wrong)
 
 
 def test_table2_gives_the_papers_alpha_or_k_of_the_variants_that_take_them():

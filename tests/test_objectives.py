@@ -1,12 +1,15 @@
 """Every variant's value and slope against the paper's definitions (Eq. 22 with its sign
 corrected), region by region."""
 
+import re
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from fppo_jax import VARIANTS, negative_regions, objective
+from fppo_jax.objectives import check_variant
 
 EPS = 0.2
 LO, HI = 1 - EPS, 1 + EPS
@@ -245,3 +248,15 @@ def test_an_optimisation_setting_that_is_not_a_number_is_refused():
         hyperparameters("ppo", learning_rate="0.001")
     with pytest.raises(ValueError, match=r"k must be a number, got '0\.4'"):
         sweep("cartpole", {"variant": "fppo-qp", "k": ["0.4"]}, seeds=1)
+
+
+def test_check_variant_takes_each_variant_and_lists_them_when_refusing():
+    assert [check_variant(v) for v in VARIANTS] == list(VARIANTS)
+    listed = "ppo, fppo-lp, fppo-qp, tr-ppo, ppo-rb, tr-ppo-rb"
+    for wrong in ("PPO", "fppo", None):
+        with pytest.raises(
+            ValueError, match=re.escape(f"unknown variant {wrong!r}; valid variants: {listed}")
+        ):
+            check_variant(wrong)
+    with pytest.raises(ValueError, match="unknown variant 'fppo'"):
+        objective("fppo")

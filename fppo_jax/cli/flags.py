@@ -18,12 +18,11 @@ from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
     PRESETS,
     TrainConfig,
-    check_variant,
     parse_seeds,
     positive_int,
 )
 from fppo_jax.envs import BACKENDS
-from fppo_jax.objectives import EPSILON
+from fppo_jax.objectives import EPSILON, check_variant
 from fppo_jax.options import Options
 from fppo_jax.statistics import CONFIDENCE, ENDPOINTS
 

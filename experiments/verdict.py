@@ -369,7 +369,7 @@ def main() -> None:
         lines += ["## Aggregate", "", *aggregate]
     lines += escape_section(
         args.results / ESCAPE_FRACTIONS,
-        "`results/escape_speed/`: 5 seeds, recorded before the minibatch-shuffle change",
+        "`results/escape_speed/`, as `results/escape_speed.md` records it",
     )
     out.mkdir(parents=True, exist_ok=True)
     pictures = [figures(results, out, p) for p, results in merged.items() if results]

@@ -7,8 +7,8 @@
 A part is one sweep (one compiled program) of `--variants` × `--seeds` on `--task`, with the
 `paper` preset, Table 2's α and k and the paper's budget (100k steps on the classic tasks, 1M on
 MuJoCo). Run seed s starts from ``jax.random.key(s)`` whatever else the part holds, so parts
-with disjoint seeds are samples of one study and are merged by what reads them
-(``experiments/verdict.py``). Protocols: ``paper`` is the project's default (observation and
+with disjoint seeds or other variants are samples of one study and are merged by what reads
+them (``experiments/verdict.py``). Protocols: ``paper`` is the project's default (observation and
 reward normalisation everywhere); ``unnormalised`` is baselines' classic-control protocol
 (no VecNormalize: baselines wraps only its MuJoCo runs).
 

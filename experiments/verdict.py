@@ -48,6 +48,8 @@ PLAN = {
     **{task: (PAPER_VARIANTS, 50, ("paper", "unnormalised")) for task in CLASSIC_TASKS},
     **{task: (("ppo", "fppo-lp", "fppo-qp"), 20, ("paper",)) for task in MUJOCO_TASKS},
 }
+# Run on the MuJoCo tasks where time allows, and reported as exploratory: no planned comparison.
+EXPLORATORY, EXPLORATORY_SEEDS = ("tr-ppo", "ppo-rb"), 10
 PROTOCOLS = {
     "paper": "the project's protocol: observation and reward normalisation",
     "unnormalised": "baselines' classic-control protocol: no normalisation",
@@ -67,6 +69,12 @@ def recorded(results: Path, task: str, protocol: str) -> tuple[SweepResult | Non
 
 def by_variant(result: SweepResult) -> dict[str, int]:
     return {setting["variant"]: index for index, setting in enumerate(result.settings)}
+
+
+def run_counts(result: SweepResult | None, variants: tuple[str, ...]) -> dict[str, int]:
+    """How many runs of each of `variants` the merged parts hold, diverged ones included."""
+    index = {} if result is None else by_variant(result)
+    return {v: sum(map(len, result.setting_runs(index[v]))) if v in index else 0 for v in variants}
 
 
 def interval_text(values: tuple[float, float, float], form: str = ".1f") -> str:
@@ -121,6 +129,7 @@ def task_section(
     adjusted: dict[tuple[str, str], float],
 ) -> list[str]:
     index = by_variant(result)
+    index = {v: index[v] for v in sorted(index, key=lambda v: v in EXPLORATORY)}  # them last
     names = labels(result.settings)
     final, area = result.scores("final"), result.scores("auc")
     wall = sum(r["wall_seconds"] for r in records)
@@ -277,7 +286,9 @@ def figures(results: dict[str, SweepResult], out: Path, protocol: str) -> Path:
     )
     for ax, task in zip(axes.flat, tasks, strict=False):
         plot_curves(results[task], band="iqm", ax=ax)
-        seeds = len(results[task].seeds)
+        counts = run_counts(results[task], tuple(by_variant(results[task]))).values()
+        low, high = min(counts), max(counts)
+        seeds = f"{low}" if low == high else f"{low}–{high}"
         ax.set_title(f"{task} ({seeds} seeds; IQM, 95% CI)", fontsize="medium")
         ax.legend(fontsize="x-small")
     for ax in axes.flat[len(tasks) :]:
@@ -326,13 +337,7 @@ def main() -> None:
     for task, (variants, seeds, protocols) in PLAN.items():
         for protocol in protocols:
             result, records = recorded(args.results, task, protocol)
-            have = {} if result is None else by_variant(result)
-            counts = {
-                v: len(result.setting_runs(have[v])[0]) + len(result.setting_runs(have[v])[1])
-                if v in have
-                else 0
-                for v in variants
-            }
+            counts = run_counts(result, variants)
             short = {v: n for v, n in counts.items() if n < seeds}
             label = f"{task} ({protocol})"
             if result is None:
@@ -346,6 +351,11 @@ def main() -> None:
             if result is not None:
                 merged[protocol][task] = result
                 parts.append((task, protocol, records))
+    explored = []
+    for task in MUJOCO_TASKS:
+        counts = run_counts(merged["paper"].get(task), EXPLORATORY)
+        if any(counts.values()):
+            explored.append(f"{task} ({', '.join(f'{v} {n}' for v, n in counts.items())})")
     adjusted = {p: holm_adjusted(results, p) for p, results in merged.items()}
     sections = [
         line
@@ -359,6 +369,8 @@ def main() -> None:
         "",
         f"- Complete: {', '.join(done) or 'nothing yet'}.",
         f"- Still to run: {'; '.join(missing) or 'nothing'}.",
+        f"- Exploratory, where time allowed ({' and '.join(EXPLORATORY)} at "
+        f"{EXPLORATORY_SEEDS} seeds on the MuJoCo tasks): {'; '.join(explored) or 'none yet'}.",
         "",
         "## Per task",
         "",

@@ -113,12 +113,13 @@ def plot_curves(
     that statistic over seeds with its percentile bootstrap band at level `confidence`
     (:func:`fppo_jax.statistics.curve_interval`). Runs that diverged are left out, as the table
     leaves them out, and the legend says how many seeds a setting's line is over when some
-    did."""
+    did or when settings ran different numbers of seeds."""
     if band != "std":
         statistics.estimator(band)
     ax = _axes(ax, (7, 4.5))
+    run_counts = {sum(map(len, result.setting_runs(i))) for i in range(len(result.settings))}
     for index, name in enumerate(labels(result.settings)):
-        if result.setting_runs(index)[1].size:
+        if len(run_counts) > 1 or result.setting_runs(index)[1].size:
             name += f", seeds {result.setting_seeds(index)}"
         m = result.setting_metrics(index)
         if not len(m[metric]):  # every run diverged: in the legend, with no line
@@ -140,7 +141,8 @@ def plot_curves(
         if band == "std"
         else f"{statistics.STATISTICS[band]}, {confidence:.0%} bootstrap CI"
     )
-    ax.set_title(f"{result.config['env']}: {shown} over {len(result.seeds)} seeds")
+    over = f"{len(result.seeds)} seeds" if len(run_counts) == 1 else "each setting's seeds"
+    ax.set_title(f"{result.config['env']}: {shown} over {over}")
     if metric in FRACTIONS:
         ax.yaxis.set_major_formatter(PercentFormatter(1.0))
     ax.legend(fontsize="small")

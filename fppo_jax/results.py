@@ -313,18 +313,19 @@ class SweepResult:
         )
 
 
-# What may differ between parts of one sweep: which seeds and share of its runs each ran, and
-# how many runs per call.
-PART_FIELDS = ("seeds", "runs_per_call", "part")
+# What may differ between parts of one study: which settings, seeds and share of its runs each
+# ran, and how many runs per call.
+PART_FIELDS = ("grid", "seeds", "runs_per_call", "part")
 
 
 def merge(parts: Sequence[SweepResult]) -> SweepResult:
     """One sweep of the runs of `parts`, sweeps of the same task and protocol that ran other
-    seeds (or other settings of the same grid): what ``table``, ``compare`` and ``plot`` read as
-    if one process had run them all. A ``ValueError`` names the configuration field on which two
-    parts differ and a (setting, seed) run that two parts both hold; for the shares of one sweep
-    (``sweep(..., part=(K, N))``) it also names the runs, and the parts, still missing. Metrics
-    not in every part are left out."""
+    seeds or other settings: what ``table``, ``compare`` and ``plot`` read as if one process had
+    run them all. The merged grid holds each axis's values from every part. A ``ValueError``
+    names the configuration field on which two parts differ and a (setting, seed) run that two
+    parts both hold; for the shares of one sweep (``sweep(..., part=(K, N))``), which share one
+    grid, it also names the runs, and the parts, still missing. Metrics not in every part are
+    left out."""
     if not parts:
         raise ValueError("merge needs at least one sweep")
     first = parts[0]
@@ -358,13 +359,22 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
     _check_shares(parts, settings, runs)
     metrics = [name for name in first.metrics if all(name in p.metrics for p in parts)]
     seeds = list(dict.fromkeys(seed for part in parts for seed in part.seeds))
+    grid: dict[str, list[Any]] = {}
+    for part in parts:
+        for axis, values in (part.config.get("grid") or {}).items():
+            known = grid.setdefault(axis, [])
+            known += [v for v in values if v not in known]
     return SweepResult(
         settings=settings,
         seeds=seeds,
         runs=runs,
         metrics={name: np.concatenate([p.metrics[name] for p in parts]) for name in metrics},
         diverged=np.concatenate([np.asarray(p.diverged, np.int64) for p in parts]),
-        config={**{k: v for k, v in first.config.items() if k != "part"}, "seeds": seeds},
+        config={
+            **{k: v for k, v in first.config.items() if k != "part"},
+            **({"grid": grid} if "grid" in first.config else {}),
+            "seeds": seeds,
+        },
         compile_seconds=sum(p.compile_seconds for p in parts),
         train_seconds=sum(p.train_seconds for p in parts),
     )
@@ -383,6 +393,8 @@ def _check_shares(
             "the sweeps are not shares of one split: their parts are "
             + ", ".join("whole" if s is None else f"{s[0]} of {s[1]}" for s in shares)
         )
+    if any(p.config.get("grid") != parts[0].config.get("grid") for p in parts):
+        raise ValueError("the sweeps are not shares of one split: their grids differ")
     count = shares[0][1]
     missing_parts = sorted(set(range(1, count + 1)) - {share[0] for share in shares})
     found = {(run["setting"], run["seed"]) for run in runs}

@@ -1,3 +1,4 @@
+import dataclasses
 import importlib.util
 import os
 import subprocess
@@ -107,6 +108,21 @@ def test_runs_that_diverged_are_left_out_of_the_curves_and_counted_as_the_table_
     for index in range(3):
         row = result.table().splitlines()[2 + index]
         assert row.split(" | ")[1] == result.setting_seeds(index)
+
+
+def test_settings_with_fewer_seeds_say_how_many_in_the_legend_and_the_title():
+    whole = sweep_by_hand()
+    kept = list(range(8))  # tr-ppo's last seed not run
+    result = dataclasses.replace(
+        whole,
+        runs=whole.runs[:8],
+        metrics={k: v[kept] for k, v in whole.metrics.items()},
+        diverged=whole.diverged[kept],
+    )
+    ax = plot_curves(result).axes[0]
+    assert [line.get_label() for line in ax.lines][-1] == "tr-ppo δ=0.02, seeds 2"
+    assert ax.get_title().endswith("over each setting's seeds")
+    assert plot_curves(whole).axes[0].get_title().endswith("over 3 seeds")
 
 
 def test_curve_bands_are_the_sample_std_or_a_bootstrap_interval():

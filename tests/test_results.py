@@ -107,6 +107,37 @@ def test_merge_refuses_other_protocols_and_repeated_runs():
         merge([])
 
 
+def one_variant(result: SweepResult, variant: str, grid: dict) -> SweepResult:
+    """`result`'s runs of `variant` alone, as a sweep of `grid` would have recorded them."""
+    index = [s["variant"] for s in result.settings].index(variant)
+    kept = [i for i, run in enumerate(result.runs) if run["setting"] == index]
+    return dataclasses.replace(
+        result,
+        settings=[result.settings[index]],
+        runs=[{**result.runs[i], "setting": 0} for i in kept],
+        metrics={k: v[kept] for k, v in result.metrics.items()},
+        diverged=np.asarray(result.diverged)[kept],
+        config={**result.config, "grid": grid},
+    )
+
+
+def test_parts_that_ran_other_settings_merge_and_their_grids_join():
+    both = two_settings()
+    ppo = one_variant(both, "ppo", {"variant": ["ppo"]})
+    lp = one_variant(both, "fppo-lp", {"variant": ["fppo-lp"], "alpha": [1.3]})
+    merged = merge([ppo, lp])
+    assert merged.settings == both.settings
+    assert merged.config["grid"] == {"variant": ["ppo", "fppo-lp"], "alpha": [1.3]}
+    assert merged.table("iqm") == both.table("iqm")
+    assert merged.compare("ppo") == both.compare("ppo")
+    shares = [
+        dataclasses.replace(p, config={**p.config, "part": [k, 2]})
+        for k, p in enumerate([ppo, lp], start=1)
+    ]
+    with pytest.raises(ValueError, match="not shares of one split: their grids differ"):
+        merge(shares)
+
+
 def test_merge_joins_settings_and_seeds_from_the_command_line(tmp_path, capsys):
     first = two_settings()
     second = dataclasses.replace(

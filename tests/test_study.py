@@ -39,16 +39,22 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
     assert again.returncode != 0 and "is already recorded" in again.stderr
     assert (parts / "seeds-0-2_ppo+fppo-lp" / "curves.csv").read_bytes() == curves
 
+    other = _run("study.py", *tiny, "--seeds", "0:2", "--variants", "tr-ppo")  # another grid
+    assert other.returncode == 0, other.stdout + other.stderr
+
     verdict = _run("verdict.py", "--results", str(tmp_path))
     assert verdict.returncode == 0, verdict.stdout + verdict.stderr
     text = (tmp_path / "study.md").read_text()
     assert "### cartpole, paper protocol" in text
-    assert "2 parts, 12 runs of 4,096 env steps" in text
+    assert "3 parts, 14 runs of 4,096 env steps" in text
     assert "| fppo-lp α=1.3 | 0." in text  # its probability of improvement over ppo
+    tr_ppo = [line.split(" | ") for line in text.splitlines() if line.startswith("| tr-ppo")]
+    assert tr_ppo[0][1] == "2" and tr_ppo[1][3] == "–"  # 2 runs; exploratory, no Holm p
+    assert "Exploratory, where time allowed (tr-ppo and ppo-rb at 10 seeds" in text
     # One of the paper protocol's 18 planned comparisons recorded: Holm multiplies its p by 18.
     merged = merge([SweepResult.read(d) for d in sorted(parts.iterdir())])
-    final = merged.scores("final")
-    p = statistics.improvement_test(final[1], final[0])
+    final, variants = merged.scores("final"), [s["variant"] for s in merged.settings]
+    p = statistics.improvement_test(final[variants.index("fppo-lp")], final[variants.index("ppo")])
     assert "the Holm-adjusted p over the 18 of the paper protocol" in text
     row = next(line for line in text.splitlines() if line.startswith("| fppo-lp α=1.3 | 0."))
     assert row.split(" | ")[3] == f"{min(1.0, 18 * p):.2f}"

@@ -135,9 +135,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_score_flags(compare)
     merged = commands.add_parser(
         "merge",
-        help="join sweeps of other seeds (parts of one sweep) into one sweep's output",
-        description="Join the runs of sweeps that differ only in their seeds (or settings of the "
-        "same grid) into one curves.csv and sweep.json, which table, compare and plot read. "
+        help="join sweeps of other seeds or settings (parts of one study) into one output",
+        description="Join the runs of sweeps that differ only in their seeds or settings into "
+        "one curves.csv and sweep.json, which table, compare and plot read. "
         "Parts of different tasks or protocols, and a run two parts both hold, are refused.",
         formatter_class=formatter,
     )

@@ -74,7 +74,7 @@ def by_variant(result: SweepResult) -> dict[str, int]:
 def run_counts(result: SweepResult | None, variants: tuple[str, ...]) -> dict[str, int]:
     """How many runs of each of `variants` the merged parts hold, diverged ones included."""
     index = {} if result is None else by_variant(result)
-    return {v: sum(map(len, result.setting_runs(index[v]))) if v in index else 0 for v in variants}
+    return {v: result.setting_run_count(index[v]) if v in index else 0 for v in variants}
 
 
 def interval_text(values: tuple[float, float, float], form: str = ".1f") -> str:
@@ -128,8 +128,8 @@ def task_section(
     records: list[dict],
     adjusted: dict[tuple[str, str], float],
 ) -> list[str]:
-    index = by_variant(result)
-    index = {v: index[v] for v in sorted(index, key=lambda v: v in EXPLORATORY)}  # them last
+    # The exploratory variants' rows last.
+    index = dict(sorted(by_variant(result).items(), key=lambda item: item[0] in EXPLORATORY))
     names = labels(result.settings)
     final, area = result.scores("final"), result.scores("auc")
     wall = sum(r["wall_seconds"] for r in records)

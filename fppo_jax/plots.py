@@ -117,7 +117,7 @@ def plot_curves(
     if band != "std":
         statistics.estimator(band)
     ax = _axes(ax, (7, 4.5))
-    run_counts = {sum(map(len, result.setting_runs(i))) for i in range(len(result.settings))}
+    run_counts = {result.setting_run_count(i) for i in range(len(result.settings))}
     for index, name in enumerate(labels(result.settings)):
         if len(run_counts) > 1 or result.setting_runs(index)[1].size:
             name += f", seeds {result.setting_seeds(index)}"

@@ -146,6 +146,10 @@ class SweepResult:
         kept, _ = self.setting_runs(index)
         return {name: values[kept] for name, values in self.metrics.items()}
 
+    def setting_run_count(self, index: int) -> int:
+        """How many runs setting `index` has, diverged ones included."""
+        return sum(run["setting"] == index for run in self.runs)
+
     def setting_seeds(self, index: int) -> str:
         """How many seeds setting `index`'s figures are over, as the table's ``seeds`` column
         says it: ``5``, or ``3 of 5 (2 diverged)``."""
@@ -372,7 +376,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         diverged=np.concatenate([np.asarray(p.diverged, np.int64) for p in parts]),
         config={
             **{k: v for k, v in first.config.items() if k != "part"},
-            **({"grid": grid} if "grid" in first.config else {}),
+            **({"grid": grid} if grid else {}),
             "seeds": seeds,
         },
         compile_seconds=sum(p.compile_seconds for p in parts),

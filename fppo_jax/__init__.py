@@ -1,4 +1,5 @@
-"""fppo-jax: PPO and its fast variants (FPPO-LP, FPPO-QP, TR-PPO, PPO-RB, TR-PPO-RB) in JAX.
+"""fppo-jax: PPO and its fast variants (FPPO-LP, FPPO-QP, TR-PPO, PPO-RB, TR-PPO-RB, SPO,
+clip-higher, DPO) in JAX, and surrogates of one's own (:func:`surrogate`).
 
 The surrogate objective is a pure function of traced data (:func:`objective`), and the whole
 training run is one compiled function of its key and hyperparameters (:func:`make_train`), so
@@ -25,16 +26,17 @@ from fppo_jax.checkpoint import (
     ConfigMismatch,
     DamagedCheckpoint,
 )
-from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters
+from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters, stack_hyperparameters
 from fppo_jax.driver import TrainingDiverged
 from fppo_jax.envs import TASKS, Environment, make_env
 from fppo_jax.evaluation import evaluate
-from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective
+from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective, stack
 from fppo_jax.options import Snapshot
 from fppo_jax.policy import Policy
 from fppo_jax.progress import Progress
 from fppo_jax.results import SweepResult, TrainResult, merge
 from fppo_jax.saved_policy import load_policy
+from fppo_jax.surrogates import Surrogate, surrogate
 from fppo_jax.sweep import expand_grid, sweep
 from fppo_jax.trainer import METRICS, Metrics, Trainer, TrainState, make_train
 
@@ -52,6 +54,7 @@ __all__ = [
     "Policy",
     "Progress",
     "Snapshot",
+    "Surrogate",
     "SweepResult",
     "TrainConfig",
     "TrainResult",
@@ -67,6 +70,9 @@ __all__ = [
     "merge",
     "negative_regions",
     "objective",
+    "stack",
+    "stack_hyperparameters",
+    "surrogate",
     "sweep",
     "train",
 ]

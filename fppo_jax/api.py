@@ -8,22 +8,22 @@ import jax
 
 from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
-    VARIANT_SPECIFIC,
     check_seed,
     resolve_hyperparameters,
 )
 from fppo_jax.distributed import is_main_process
 from fppo_jax.driver import Plan, drive
 from fppo_jax.envs import Environment
-from fppo_jax.objectives import EPSILON
+from fppo_jax.objectives import BUILTINS, EPSILON, hyperparameter_names, identities, resolve
 from fppo_jax.policy import make_policy
 from fppo_jax.prepare import prepare
 from fppo_jax.results import TrainResult
+from fppo_jax.surrogates import Surrogate
 
 
 def train(
     env: str | Environment | Any = "cartpole",
-    variant: str = "fppo-lp",
+    variant: str | Surrogate = "fppo-lp",
     alpha: float | None = None,
     *,
     k: float | None = None,
@@ -58,21 +58,25 @@ def train(
     Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite (the last
     good checkpoint stays on disk).
     """
+    surrogate = resolve(variant)
     run = prepare(
         env,
         settings,
         total_steps=total_steps,
         preset=preset,
         backend=backend,
-        hyperparameters=(*VARIANT_SPECIFIC, *HYPERPARAMETER_DEFAULTS),
+        hyperparameters=(
+            *hyperparameter_names([*BUILTINS.values(), surrogate]),
+            *HYPERPARAMETER_DEFAULTS,
+        ),
     )
     hp, setting = resolve_hyperparameters(
-        variant, run.task, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **run.hyperparameters
+        surrogate, run.task, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **run.hyperparameters
     )
     seed = check_seed(seed)
     trainer, options = run.trainer, run.options
-    record = {**setting, **run.record(seed=seed)}
-    description = f"{variant} on {run.name}"
+    record = {**setting, **run.record(seed=seed, **identities([surrogate]))}
+    description = f"{surrogate.name} on {run.name}"
     header = run.header(description)
     plan = Plan("train", trainer, jax.random.key(seed), hp, record, description, header)
     outcome = drive(plan, options)

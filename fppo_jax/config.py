@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import jax
@@ -20,8 +21,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.envs import MUJOCO_TASKS, lookup
-from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
-from fppo_jax.objectives import EPSILON, Objective, check_variant, objective, real
+from fppo_jax.objectives import (
+    BUILTINS,
+    EPSILON,
+    Objective,
+    hyperparameter_names,
+    objective,
+    resolve,
+    union,
+)
+from fppo_jax.surrogates import Surrogate, real
 
 # The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task.
 TABLE2: dict[str, dict[str, float]] = {
@@ -35,16 +44,22 @@ TABLE2: dict[str, dict[str, float]] = {
 }
 _TABLE2_VARIANTS = {"fppo-lp": "alpha", "fppo-qp": "k"}
 
-# The hyperparameters some variants take and others do not (α, k, δ).
-VARIANT_SPECIFIC: tuple[str, ...] = tuple(
-    dict.fromkeys(name for taken in VARIANT_DEFAULTS.values() for name in taken)
-)
+# The hyperparameters some built-in variants take and others do not (α, k, δ, …).
+VARIANT_SPECIFIC: tuple[str, ...] = hyperparameter_names(list(BUILTINS.values()))
 # The most env steps a run may take: the compiled program counts them in int32.
 MAX_STEPS = 2**31 - 1
 # The most seeds one setting may name on a command line: far more than a sweep trains, so more
 # is a mistyped range, refused before a list of them is built.
 MAX_SEEDS = 100_000
-SYMBOLS = {"alpha": "α", "k": "k", "delta": "δ", "epsilon": "ε"}
+SYMBOLS = {
+    "alpha": "α",
+    "k": "k",
+    "delta": "δ",
+    "epsilon": "ε",
+    "beta": "β",
+    "eps_low": "ε_low",
+    "eps_high": "ε_high",
+}
 
 
 def positive_int(name: str, value: object) -> int:
@@ -247,20 +262,23 @@ _RANGES: dict[str, tuple[str, object]] = {
 
 
 def hyperparameters(
-    variant: str = "ppo", *, epsilon: float = EPSILON, **values: float | None
+    variant: str | Surrogate = "ppo", *, epsilon: float = EPSILON, **values: float | None
 ) -> Hyperparameters:
-    """Checked hyperparameters: the objective of `variant` (ε and its own α, k or δ, see
-    :func:`~fppo_jax.objectives.objective`) and the optimisation settings.
+    """Checked hyperparameters: the objective of `variant` (a built-in's name or a surrogate of
+    one's own; ε and its own hyperparameters, see :func:`~fppo_jax.objectives.objective`) and
+    the optimisation settings.
 
     Unset settings take :data:`HYPERPARAMETER_DEFAULTS`; unknown names and out-of-range values
     raise ``ValueError`` naming the parameter.
     """
-    own = {name: values.pop(name) for name in VARIANT_SPECIFIC if name in values}
+    surrogate = resolve(variant)
+    taken_by_some = hyperparameter_names([*BUILTINS.values(), surrogate])
+    own = {name: values.pop(name) for name in taken_by_some if name in values}
     unknown = sorted(set(values) - set(HYPERPARAMETER_DEFAULTS))
     if unknown:
         raise ValueError(
             f"unknown hyperparameter {', '.join(unknown)}; valid: "
-            + ", ".join(["epsilon", *VARIANT_SPECIFIC, *HYPERPARAMETER_DEFAULTS])
+            + ", ".join(["epsilon", *taken_by_some, *HYPERPARAMETER_DEFAULTS])
         )
     settings = {**HYPERPARAMETER_DEFAULTS, **{k: v for k, v in values.items() if v is not None}}
     for name, value in settings.items():
@@ -269,13 +287,29 @@ def hyperparameters(
         if not (math.isfinite(value) and ok(value)):
             raise ValueError(f"{name} must be {bound}, got {value}")
     return Hyperparameters(
-        objective=objective(variant, epsilon=epsilon, **own),
+        objective=objective(surrogate, epsilon=epsilon, **own),
         **{name: jnp.asarray(value, jnp.float32) for name, value in settings.items()},
     )
 
 
 CONFIG_FIELDS: tuple[str, ...] = tuple(field.name for field in dataclasses.fields(TrainConfig))
-SWEEPABLE: tuple[str, ...] = ("variant", "epsilon", *VARIANT_SPECIFIC, *HYPERPARAMETER_DEFAULTS)
+
+
+def sweepable(surrogates: Iterable[Surrogate] = ()) -> tuple[str, ...]:
+    """What a sweep's grid may vary: the variant, ε, the hyperparameters of the built-ins and of
+    `surrogates`, and the optimisation settings."""
+    own = hyperparameter_names([*BUILTINS.values(), *surrogates])
+    return ("variant", "epsilon", *own, *HYPERPARAMETER_DEFAULTS)
+
+
+SWEEPABLE: tuple[str, ...] = sweepable()
+
+
+def stack_hyperparameters(hps: Sequence[Hyperparameters]) -> Hyperparameters:
+    """`hps` as one batch (a leading run axis) over all of their surrogates, for ``vmap``."""
+    menu = union([s for hp in hps for s in hp.objective.surrogates])
+    among = [dataclasses.replace(hp, objective=hp.objective.among(menu)) for hp in hps]
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *among)
 
 
 def resolve_config(
@@ -303,17 +337,17 @@ def resolve_config(
 
 
 def resolve_hyperparameters(
-    variant: str, task: str | None, **values: Any
+    variant: str | Surrogate, task: str | None = None, **values: Any
 ) -> tuple[Hyperparameters, dict[str, Any]]:
     """Checked hyperparameters of one setting, with Table 2's α or k for a registered `task`,
-    and the setting as plain values (the variant, ε, its own α, k, δ, the optimisation
-    settings), as records and tables show it."""
-    check_variant(variant)
+    and the setting as plain values (the variant's name, ε, its own hyperparameters, the
+    optimisation settings), as records and tables show it."""
+    surrogate = resolve(variant)
     given = {name: value for name, value in values.items() if value is not None}
-    hp = hyperparameters(variant, **{**table2(task, variant), **given})
+    hp = hyperparameters(surrogate, **{**table2(task, surrogate.name), **given})
     o = hp.objective
-    settings: dict[str, Any] = {"variant": variant, "epsilon": as_float(o.epsilon)}
-    settings.update({name: as_float(getattr(o, name)) for name in VARIANT_DEFAULTS[variant]})
+    settings: dict[str, Any] = {"variant": surrogate.name, "epsilon": as_float(o.epsilon)}
+    settings.update({name: as_float(value) for name, value in o.values.items()})
     settings.update({name: as_float(getattr(hp, name)) for name in HYPERPARAMETER_DEFAULTS})
     return hp, settings
 

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 from fppo_jax.config import Hyperparameters
 from fppo_jax.distributions import Distribution
 from fppo_jax.networks import Networks
-from fppo_jax.objectives import negative_regions
+from fppo_jax.objectives import negative_regions, outside_clip_range
 
 
 class Batch(NamedTuple):
@@ -64,11 +64,18 @@ def ppo_loss(
     entropy = jnp.mean(dist.entropy())
     loss = policy_loss + hp.value_coef * value_loss - hp.entropy_coef * entropy
 
-    r_plus, r_minus = negative_regions(ratio, batch.advantage, o.epsilon)
+    below, above = o.clip_range()
+    r_plus, r_minus = negative_regions(ratio, batch.advantage, below, above)
     # One stacked reduction instead of one per diagnostic: fewer kernels per minibatch step.
     diagnostics = jnp.mean(
         jax.lax.stop_gradient(
-            jnp.stack([(ratio - 1) - log_ratio, jnp.abs(ratio - 1) > o.epsilon, r_plus | r_minus])
+            jnp.stack(
+                [
+                    (ratio - 1) - log_ratio,
+                    outside_clip_range(ratio, below, above),
+                    r_plus | r_minus,
+                ]
+            )
         ),
         axis=1,
     )

@@ -1,245 +1,470 @@
-"""Per-sample surrogate objectives of PPO and its variants, as one pure function.
+"""The built-in surrogates, each one declaration, and the objective: which surrogate a run
+maximises and its hyperparameters, as one pytree of traced arrays.
 
-Every variant maximises a per-sample objective ``L(r, A)`` of the likelihood ratio
-``r = π_θ(a|s) / π_old(a|s)`` and the advantage ``A``. With ``lo = 1 - ε`` and ``hi = 1 + ε``
-the two *negatively optimised* regions of the paper (Sect. 4.1) are
+With ``lo = 1 - ε`` and ``hi = 1 + ε`` the two *negatively optimised* regions of the paper
+(Sect. 4.1) are
 
     R+ : A > 0 and r < lo      (a good action whose probability fell out of range)
     R- : A < 0 and r > hi      (a bad action whose probability rose out of range)
 
-and the variants are (slope = ∂L/∂r)::
+and the built-in surrogates are (slope = ∂L/∂r)::
 
-    ppo        min(rA, clip(r, lo, hi) A)
-    fppo-lp    min(rA, F A),  F = α r + (1 - α) lo  in R+,  α r + (1 - α) hi  in R-,
-               clip(r) elsewhere                                slope α A in R±
-    fppo-qp    min(rA, F A),  F = r - k (lo - r)²  in R+,  r + k (r - hi)²  in R-,
-               clip(r) elsewhere                                slope (1 + 2 k d) A in R±
-    ppo-rb     min(rA, F A),  F = -α r + (1 + α) lo  for r ≤ lo,  -α r + (1 + α) hi  for r ≥ hi,
-               r inside                                         slope -α A where PPO clips
-    tr-ppo     A (no gradient) if KL ≥ δ and rA ≥ A, else rA
-    tr-ppo-rb  value rA and slope -α A if KL ≥ δ and rA > A, else rA
+    ppo          min(rA, clip(r, lo, hi) A)
+    fppo-lp      min(rA, F A),  F = α r + (1 - α) lo  in R+,  α r + (1 - α) hi  in R-,
+                 clip(r) elsewhere                                slope α A in R±
+    fppo-qp      min(rA, F A),  F = r - k (lo - r)²  in R+,  r + k (r - hi)²  in R-,
+                 clip(r) elsewhere                                slope (1 + 2 k d) A in R±
+    ppo-rb       min(rA, F A),  F = -α r + (1 + α) lo  for r ≤ lo,  -α r + (1 + α) hi  for r ≥ hi,
+                 r inside                                         slope -α A where PPO clips
+    tr-ppo       A (no gradient) if KL ≥ δ and rA ≥ A, else rA
+    tr-ppo-rb    value rA and slope -α A if KL ≥ δ and rA > A, else rA
+    spo          rA - |A| (r - 1)² / (2ε)                         slope A - |A| (r - 1) / ε
+    clip-higher  min(rA, clip(r, 1 - ε_low, 1 + ε_high) A)
+    dpo          rA - drift,  drift = relu(x - α tanh(x / α)),  x = (r - 1) A  for A ≥ 0,
+                              drift = relu(x - β tanh(x / β)),  x = log(r) A  for A < 0
 
 where ``d`` is the distance past the bound and ``KL = KL(π_old(·|s) ‖ π_θ(·|s))`` per sample.
+Sources: PPO (Schulman et al. 2017); FPPO-LP and FPPO-QP (the paper, Eqs. 20–22, Eq. 22's
+sign corrected); PPO-RB, TR-PPO and TR-PPO-RB (Wang et al. 2019, "Truly Proximal Policy
+Optimization"); SPO (Xie et al. 2024, "Simple Policy Optimization", its ε = 0.2); clip-higher
+(Yu et al. 2025, "DAPO", ε_low = 0.2, ε_high = 0.28); DPO (Lu et al. 2022, "Discovered Policy
+Optimisation", α = 2, β = 0.6).
 
-The variant and its hyperparameters are the leaves of an :class:`Objective` pytree, so a
-``jax.vmap`` over a stacked batch of objectives (mixed variants included) compiles once.
+An :class:`Objective` holds the surrogates of one compiled program (static) and, as arrays,
+which of them it is and every one's hyperparameters, so a ``jax.vmap`` over a stack of
+objectives (mixed surrogates, one's own included) compiles once.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import numbers
-from collections.abc import Callable
+import importlib
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-VARIANTS: tuple[str, ...] = ("ppo", "fppo-lp", "fppo-qp", "tr-ppo", "ppo-rb", "tr-ppo-rb")
-
-# The hyperparameters each variant takes, with the paper's values as defaults (Sect. 5;
-# TR-PPO-RB's from the Truly PPO paper). `alpha` is the pulling factor of FPPO-LP and the
-# rollback coefficient of the RB variants, as in the papers.
-DEFAULTS: dict[str, dict[str, float]] = {
-    "ppo": {},
-    "fppo-lp": {"alpha": 1.3},
-    "fppo-qp": {"k": 0.4},
-    "tr-ppo": {"delta": 0.035},
-    "ppo-rb": {"alpha": 0.3},
-    "tr-ppo-rb": {"alpha": 0.05, "delta": 0.03},
-}
+from fppo_jax.surrogates import Range, Surrogate, declare, probe, real
 
 EPSILON = 0.2  # the clip range every variant takes, as the paper and baselines use it
-
-_TRUST_REGION = ("tr-ppo", "tr-ppo-rb")
-
-
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Objective:
-    """A surrogate objective: the variant (an index into :data:`VARIANTS`) and its hyperparameters.
-
-    All fields are arrays, so objectives stack, vmap and trace like any pytree. A field the
-    variant does not use holds 0 and has no effect. Build one with :func:`objective`.
-    """
-
-    variant: jax.Array
-    epsilon: jax.Array
-    alpha: jax.Array
-    k: jax.Array
-    delta: jax.Array
-
-    def __call__(
-        self, ratio: jax.Array, advantage: jax.Array, kl: jax.Array | None = None
-    ) -> jax.Array:
-        """Per-sample objective values (to maximise). `kl` is required by tr-ppo and tr-ppo-rb."""
-        if kl is None:
-            if isinstance(self.variant, jax.core.Tracer):
-                # Which variant runs is known only when it runs: a trust-region one would go
-                # ungated.
-                raise ValueError(
-                    "the variant is traced (under jit or vmap), so it may gate on the KL "
-                    "divergence: pass kl= (per-sample KL(π_old ‖ π_θ))"
-                )
-            if _needs_kl(self.variant):
-                raise ValueError(
-                    f"{self.name} gates on the KL divergence: pass kl= (per-sample KL(π_old ‖ π_θ))"
-                )
-            kl = jnp.zeros_like(ratio)
-        return surrogate(self, ratio, advantage, kl)
-
-    @property
-    def name(self) -> str:
-        """The variant's name (only for a concrete, unbatched objective)."""
-        return VARIANTS[int(self.variant)]
-
-
-def check_variant(variant: object) -> str:
-    """`variant` if it names one of :data:`VARIANTS`; else an error that lists them."""
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown variant {variant!r}; valid variants: {', '.join(VARIANTS)}")
-    return str(variant)
-
-
-def objective(name: str, *, epsilon: float = EPSILON, **hyperparameters: float) -> Objective:
-    """The objective of variant `name`, with its hyperparameters checked against their ranges.
-
-    Variants and their hyperparameters: ``ppo`` (ε), ``fppo-lp`` (ε, α ≥ 1), ``fppo-qp``
-    (ε, k ≥ 0), ``tr-ppo`` (ε, δ > 0), ``ppo-rb`` (ε, rollback α ≥ 0), ``tr-ppo-rb`` (ε, α ≥ 0,
-    δ > 0). Missing hyperparameters take the paper's values (:data:`DEFAULTS`); ``None`` counts as
-    missing. ε only enters through the bounds ``1 ± ε`` (0 < ε < 1); tr-ppo uses it solely for
-    the negative-region diagnostic and value clipping.
-    """
-    check_variant(name)
-    given = {key: value for key, value in hyperparameters.items() if value is not None}
-    allowed = DEFAULTS[name]
-    extra = sorted(set(given) - set(allowed))
-    if extra:
-        takes = ", ".join(["epsilon", *allowed])
-        raise ValueError(f"{name} has no hyperparameter {', '.join(extra)} (it takes: {takes})")
-    values = {"epsilon": epsilon, **allowed, **given}
-    for key, value in values.items():
-        _check_range(name, key, real(key, value))
-    return Objective(
-        variant=jnp.asarray(VARIANTS.index(name), jnp.int32),
-        epsilon=jnp.asarray(values["epsilon"], jnp.float32),
-        alpha=jnp.asarray(values.get("alpha", 0.0), jnp.float32),
-        k=jnp.asarray(values.get("k", 0.0), jnp.float32),
-        delta=jnp.asarray(values.get("delta", 0.0), jnp.float32),
-    )
-
-
-def real(name: str, value: object) -> float:
-    """`value` as a float if it is a real number (numpy's included); strings and booleans,
-    which ``float`` would take, are refused."""
-    if isinstance(value, str | bool | np.bool_) or not isinstance(
-        value, numbers.Real | np.ndarray | jax.Array
-    ):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    if np.ndim(value) != 0:
-        raise ValueError(f"{name} must be a single number, got an array of shape {np.shape(value)}")
-    return float(value)
-
-
-def _check_range(variant: str, key: str, value: float) -> None:
-    # Written as `not (in range)` so that NaN is out of every range.
-    if key == "epsilon" and not 0.0 < value < 1.0:
-        raise ValueError(f"epsilon must be in (0, 1), got {value}")
-    if key == "alpha" and variant == "fppo-lp" and not value >= 1.0:
-        raise ValueError(
-            f"alpha must be >= 1 for fppo-lp, got {value} (below 1 the min falls back to "
-            "PPO's clipped objective, so it would silently train PPO)"
-        )
-    if key == "alpha" and variant != "fppo-lp" and not value >= 0.0:
-        raise ValueError(
-            f"alpha (the rollback coefficient) must be >= 0 for {variant}, got {value}"
-        )
-    if key == "k" and not value >= 0.0:
-        raise ValueError(f"k must be >= 0 for fppo-qp, got {value}")
-    if key == "delta" and not (value > 0.0 and math.isfinite(value)):
-        raise ValueError(f"delta must be > 0 for {variant}, got {value}")
-    if not math.isfinite(value):
-        raise ValueError(f"{key} must be finite, got {value}")
-
-
-def _needs_kl(variant: jax.Array) -> bool:
-    return bool(np.isin(np.asarray(variant), [VARIANTS.index(v) for v in _TRUST_REGION]).any())
+EPSILON_RANGE = Range("(0, 1)")
 
 
 def negative_regions(
-    ratio: jax.Array, advantage: jax.Array, epsilon: jax.Array
+    ratio: jax.Array, advantage: jax.Array, below: jax.Array, above: jax.Array | None = None
 ) -> tuple[jax.Array, jax.Array]:
-    """Masks of R+ (A > 0, r < 1 - ε) and R- (A < 0, r > 1 + ε), the negatively optimised."""
-    return (advantage > 0) & (ratio < 1 - epsilon), (advantage < 0) & (ratio > 1 + epsilon)
+    """Masks of R+ (A > 0, r < 1 - below) and R- (A < 0, r > 1 + above), the negatively
+    optimised; `above` is `below` (ε) unless given."""
+    above = below if above is None else above
+    return (advantage > 0) & (ratio < 1 - below), (advantage < 0) & (ratio > 1 + above)
 
 
-def distance_past_bound(ratio: jax.Array, epsilon: jax.Array) -> jax.Array:
-    """How far `ratio` lies outside [1 - ε, 1 + ε] (0 inside)."""
-    return jnp.maximum(1 - epsilon - ratio, 0.0) + jnp.maximum(ratio - 1 - epsilon, 0.0)
+def outside_clip_range(
+    ratio: jax.Array, below: jax.Array, above: jax.Array | None = None
+) -> jax.Array:
+    """Where `ratio` lies outside [1 - below, 1 + above]; `above` is `below` unless given."""
+    if above is None:
+        return jnp.abs(ratio - 1) > below
+    return (1 - ratio > below) | (ratio - 1 > above)
 
 
-Surrogate = Callable[[Objective, jax.Array, jax.Array, jax.Array], jax.Array]
+def distance_past_bound(
+    ratio: jax.Array, below: jax.Array, above: jax.Array | None = None
+) -> jax.Array:
+    """How far `ratio` lies outside [1 - below, 1 + above] (0 inside); `above` is `below`
+    unless given."""
+    above = below if above is None else above
+    return jnp.maximum(1 - below - ratio, 0.0) + jnp.maximum(ratio - 1 - above, 0.0)
 
 
-def _ppo(o: Objective, r: jax.Array, a: jax.Array, kl: jax.Array) -> jax.Array:
-    return jnp.minimum(r * a, jnp.clip(r, 1 - o.epsilon, 1 + o.epsilon) * a)
+def ppo(ratio: jax.Array, advantage: jax.Array, epsilon: jax.Array) -> jax.Array:
+    return jnp.minimum(ratio * advantage, jnp.clip(ratio, 1 - epsilon, 1 + epsilon) * advantage)
 
 
-def _fppo_lp(o: Objective, r: jax.Array, a: jax.Array, kl: jax.Array) -> jax.Array:
-    lo, hi = 1 - o.epsilon, 1 + o.epsilon
-    r_plus, r_minus = negative_regions(r, a, o.epsilon)
-    pulled = jnp.where(r_plus, o.alpha * r + (1 - o.alpha) * lo, o.alpha * r + (1 - o.alpha) * hi)
+def fppo_lp(
+    ratio: jax.Array, advantage: jax.Array, epsilon: jax.Array, alpha: jax.Array
+) -> jax.Array:
+    r, a = ratio, advantage
+    lo, hi = 1 - epsilon, 1 + epsilon
+    r_plus, r_minus = negative_regions(r, a, epsilon)
+    pulled = jnp.where(r_plus, alpha * r + (1 - alpha) * lo, alpha * r + (1 - alpha) * hi)
     f = jnp.where(r_plus | r_minus, pulled, jnp.clip(r, lo, hi))
     return jnp.minimum(r * a, f * a)
 
 
-def _fppo_qp(o: Objective, r: jax.Array, a: jax.Array, kl: jax.Array) -> jax.Array:
-    lo, hi = 1 - o.epsilon, 1 + o.epsilon
-    r_plus, r_minus = negative_regions(r, a, o.epsilon)
+def fppo_qp(ratio: jax.Array, advantage: jax.Array, epsilon: jax.Array, k: jax.Array) -> jax.Array:
+    r, a = ratio, advantage
+    lo, hi = 1 - epsilon, 1 + epsilon
+    r_plus, r_minus = negative_regions(r, a, epsilon)
     # The paper's Eq. 22 prints `+ k(lo - r)²` for R+, which makes F ≥ r so that the
     # min keeps rA and nothing is pulled. Its Eq. 21 and proof (Eq. 23) give `r - k(lo - r)²`.
     # The distance is masked before it is squared: an unselected branch's infinite square
     # would turn the select's zero gradient into NaN.
     below = jnp.where(r_plus, lo - r, 0.0)
     above = jnp.where(r_minus, r - hi, 0.0)
-    pulled = jnp.where(r_plus, r - o.k * below**2, r + o.k * above**2)
+    pulled = jnp.where(r_plus, r - k * below**2, r + k * above**2)
     f = jnp.where(r_plus | r_minus, pulled, jnp.clip(r, lo, hi))
     return jnp.minimum(r * a, f * a)
 
 
-def _tr_ppo(o: Objective, r: jax.Array, a: jax.Array, kl: jax.Array) -> jax.Array:
-    gate = (jax.lax.stop_gradient(kl) >= o.delta) & (r * a >= a)
+def tr_ppo(ratio: jax.Array, advantage: jax.Array, kl: jax.Array, delta: jax.Array) -> jax.Array:
+    r, a = ratio, advantage
+    gate = (jax.lax.stop_gradient(kl) >= delta) & (r * a >= a)
     return jnp.where(gate, a, r * a)
 
 
-def _ppo_rb(o: Objective, r: jax.Array, a: jax.Array, kl: jax.Array) -> jax.Array:
-    lo, hi = 1 - o.epsilon, 1 + o.epsilon
-    rollback_lo = -o.alpha * r + (1 + o.alpha) * lo
-    rollback_hi = -o.alpha * r + (1 + o.alpha) * hi
+def ppo_rb(
+    ratio: jax.Array, advantage: jax.Array, epsilon: jax.Array, alpha: jax.Array
+) -> jax.Array:
+    r, a = ratio, advantage
+    lo, hi = 1 - epsilon, 1 + epsilon
+    rollback_lo = -alpha * r + (1 + alpha) * lo
+    rollback_hi = -alpha * r + (1 + alpha) * hi
     f = jnp.where(r <= lo, rollback_lo, jnp.where(r >= hi, rollback_hi, r))
     return jnp.minimum(r * a, f * a)
 
 
-def _tr_ppo_rb(o: Objective, r: jax.Array, a: jax.Array, kl: jax.Array) -> jax.Array:
-    gate = (jax.lax.stop_gradient(kl) >= o.delta) & (r * a > a)
+def tr_ppo_rb(
+    ratio: jax.Array, advantage: jax.Array, kl: jax.Array, alpha: jax.Array, delta: jax.Array
+) -> jax.Array:
+    r, a = ratio, advantage
+    gate = (jax.lax.stop_gradient(kl) >= delta) & (r * a > a)
     # Value rA, slope -αA: the stop-gradient term restores the value without adding slope.
-    rolled_back = (-o.alpha * r + jax.lax.stop_gradient((1 + o.alpha) * r)) * a
+    rolled_back = (-alpha * r + jax.lax.stop_gradient((1 + alpha) * r)) * a
     return jnp.where(gate, rolled_back, r * a)
 
 
-_SURROGATES: tuple[Surrogate, ...] = (_ppo, _fppo_lp, _fppo_qp, _tr_ppo, _ppo_rb, _tr_ppo_rb)
+def spo(ratio: jax.Array, advantage: jax.Array, epsilon: jax.Array) -> jax.Array:
+    # Its optimum in r is 1 + ε sign(A): the penalty keeps the ratio at PPO's bound without
+    # flattening the slope beyond it.
+    return ratio * advantage - jnp.abs(advantage) / (2 * epsilon) * (ratio - 1) ** 2
 
 
-def surrogate(o: Objective, ratio: jax.Array, advantage: jax.Array, kl: jax.Array) -> jax.Array:
-    """Per-sample objective of `o` (to maximise); `kl` only gates and carries no gradient.
+def clip_higher(
+    ratio: jax.Array, advantage: jax.Array, eps_low: jax.Array, eps_high: jax.Array
+) -> jax.Array:
+    clipped = jnp.clip(ratio, 1 - eps_low, 1 + eps_high)
+    return jnp.minimum(ratio * advantage, clipped * advantage)
 
-    Every variant's surrogate is computed and the one of `o.variant` selected, element-wise:
-    the same program for any variant, and under ``vmap`` over objectives each gets its own.
+
+def dpo(ratio: jax.Array, advantage: jax.Array, alpha: jax.Array, beta: jax.Array) -> jax.Array:
+    # As DPO's own code writes its discovered drift: each branch is relu(x - c tanh(x / c)),
+    # zero with zero slope at x = 0, growing like x beyond c.
+    def drift(x: jax.Array, c: jax.Array) -> jax.Array:
+        return jax.nn.relu(x - c * jnp.tanh(x / c))
+
+    positive = drift((ratio - 1) * advantage, alpha)
+    negative = drift(jnp.log(ratio) * advantage, beta)
+    return ratio * advantage - jnp.where(advantage >= 0, positive, negative)
+
+
+_ROLLBACK = Range(">= 0", "the rollback coefficient")
+_KL_BOUND = Range("> 0")
+# Each built-in once: its function, its hyperparameters' defaults (the paper's values, Sect. 5;
+# TR-PPO-RB's from the Truly PPO paper; SPO's, DAPO's and DPO's from theirs) and ranges.
+# `alpha` is FPPO-LP's pulling factor, the RB variants' rollback coefficient and DPO's drift
+# scale for A ≥ 0, as their papers name them.
+BUILTINS: dict[str, Surrogate] = {
+    s.name: s
+    for s in (
+        declare("ppo", ppo, None, False, None, {}, builtin=True),
+        declare(
+            "fppo-lp",
+            fppo_lp,
+            {
+                "alpha": Range(
+                    ">= 1",
+                    "below 1 the min falls back to PPO's clipped objective, so it would "
+                    "silently train PPO",
+                )
+            },
+            False,
+            None,
+            {"alpha": 1.3},
+            builtin=True,
+        ),
+        declare("fppo-qp", fppo_qp, {"k": Range(">= 0")}, False, None, {"k": 0.4}, builtin=True),
+        declare("tr-ppo", tr_ppo, {"delta": _KL_BOUND}, True, None, {"delta": 0.035}, builtin=True),
+        declare("ppo-rb", ppo_rb, {"alpha": _ROLLBACK}, False, None, {"alpha": 0.3}, builtin=True),
+        declare(
+            "tr-ppo-rb",
+            tr_ppo_rb,
+            {"alpha": _ROLLBACK, "delta": _KL_BOUND},
+            True,
+            None,
+            {"alpha": 0.05, "delta": 0.03},
+            builtin=True,
+        ),
+        declare("spo", spo, None, False, None, {}, builtin=True),
+        declare(
+            "clip-higher",
+            clip_higher,
+            {"eps_low": Range("(0, 1)"), "eps_high": Range("> 0")},
+            False,
+            ("eps_low", "eps_high"),
+            {"eps_low": 0.2, "eps_high": 0.28},
+            builtin=True,
+        ),
+        declare(
+            "dpo",
+            dpo,
+            {"alpha": Range("> 0"), "beta": Range("> 0")},
+            False,
+            None,
+            {"alpha": 2.0, "beta": 0.6},
+            builtin=True,
+        ),
+    )
+}
+VARIANTS: tuple[str, ...] = tuple(BUILTINS)
+# The paper's six, computed in every program: the loss's kernel is then the very one every
+# recorded run was trained with (XLA's rounding of the loss follows the kernel's whole body),
+# and computing the six costs one fused element-wise kernel.
+PAPERS: tuple[str, ...] = VARIANTS[:6]
+
+
+def resolve(variant: object) -> Surrogate:
+    """The surrogate `variant` names: a built-in's name, a :class:`Surrogate`, or
+    ``"module:attribute"`` (a surrogate of one's own, imported); else an error listing them."""
+    if isinstance(variant, Surrogate):
+        return variant
+    if isinstance(variant, str) and variant in BUILTINS:
+        return BUILTINS[variant]
+    if isinstance(variant, str) and ":" in variant:
+        return _imported(variant)
+    raise ValueError(
+        f"unknown variant {variant!r}; valid variants: {', '.join(VARIANTS)}, or a surrogate of "
+        "one's own (fppo_jax.surrogate, or module:attribute on the command line)"
+    )
+
+
+def check_variant(variant: object) -> str:
+    """The name of the surrogate `variant` names (see :func:`resolve`)."""
+    return resolve(variant).name
+
+
+def _imported(path: str) -> Surrogate:
+    module_name, _, attribute = path.partition(":")
+    try:
+        found: Any = importlib.import_module(module_name)
+    except ImportError as error:
+        raise ValueError(f"variant {path!r}: cannot import {module_name!r} ({error})") from None
+    for name in attribute.split("."):
+        if not hasattr(found, name):
+            raise ValueError(f"variant {path!r}: {module_name} has no {attribute!r}")
+        found = getattr(found, name)
+    if not isinstance(found, Surrogate):
+        raise ValueError(
+            f"variant {path!r} is a {type(found).__name__}, not a surrogate: declare it with "
+            "fppo_jax.surrogate(name, function, **defaults)"
+        )
+    return found
+
+
+def union(surrogates: Sequence[Surrogate]) -> tuple[Surrogate, ...]:
+    """The surrogates of a program that runs `surrogates`: the paper's six (:data:`PAPERS`),
+    then the others of `surrogates`, built-ins in their order before one's own as given. Two
+    different surrogates under one name are refused."""
+    distinct = list(dict.fromkeys([*(BUILTINS[name] for name in PAPERS), *surrogates]))
+    names: dict[str, Surrogate] = {}
+    for s in distinct:
+        if names.setdefault(s.name, s) is not s:
+            raise ValueError(
+                f"two different surrogates are named {s.name!r}: give each of them its own name"
+            )
+    order = {name: i for i, name in enumerate(VARIANTS)}
+    return tuple(sorted(distinct, key=lambda s: order.get(s.name, len(order))))
+
+
+@dataclasses.dataclass(frozen=True)
+class Objective:
+    """A surrogate objective: which of `surrogates` it is (`variant`, an index), the clip
+    range ε and the hyperparameters, by name, that any of them takes.
+
+    `surrogates` is static (the program's functions); the rest are arrays, so objectives over
+    the same surrogates stack, vmap and trace like any pytree. A hyperparameter is shared by
+    the surrogates that take a name (``alpha``: FPPO-LP's, the RB variants', DPO's), as a grid
+    axis is; one the chosen surrogate does not take holds 0 and has no effect. Build one with
+    :func:`objective`, and :func:`stack` a mixed batch.
     """
-    # A select rather than lax.switch: the surrogates are a few element-wise operations that
-    # XLA fuses into one kernel, while a conditional (in the loss and again in its gradient)
-    # costs more than all of them at minibatch sizes. Only the selected branch gets gradient,
-    # and every branch is finite, so the others contribute exact zeros.
-    candidates = [f(o, ratio, advantage, kl) for f in _SURROGATES]
-    return jnp.choose(o.variant, candidates, mode="clip")
+
+    variant: jax.Array
+    epsilon: jax.Array
+    hyperparameters: dict[str, jax.Array]
+    surrogates: tuple[Surrogate, ...]
+
+    def __call__(
+        self, ratio: jax.Array, advantage: jax.Array, kl: jax.Array | None = None
+    ) -> jax.Array:
+        """Per-sample objective values (to maximise); `kl` (no gradient) is required by the
+        surrogates that gate on it (tr-ppo, tr-ppo-rb).
+
+        Every surrogate of the program is computed and the chosen one selected, element-wise:
+        the same program for any of them, and under ``vmap`` over objectives each gets its own.
+        """
+        if kl is None:
+            self._check_kl_not_needed()
+            kl = jnp.zeros_like(ratio)
+        # A select rather than lax.switch: the surrogates are a few element-wise operations that
+        # XLA fuses into one kernel, while a conditional (in the loss and again in its gradient)
+        # costs more than all of them at minibatch sizes. Only the chosen one gets gradient: the
+        # others contribute exact zeros as long as they are finite, which the paper's six are
+        # for any ratio and any valid hyperparameter of a name they share.
+        candidates = [
+            s(self._ratio(i, s, ratio), advantage, kl, self.epsilon, self._own(i, s))
+            for i, s in enumerate(self.surrogates)
+        ]
+        return jnp.choose(self.variant, candidates, mode="clip")
+
+    def _guarded(self, s: Surrogate) -> bool:
+        # The others see, when not chosen, a ratio of 1 and their own defaults, where they are
+        # finite with a finite slope (as their declaration's trial showed), whatever the chosen
+        # one's ratio and a shared name's value.
+        return s.name not in PAPERS
+
+    def _ratio(self, i: int, s: Surrogate, ratio: jax.Array) -> jax.Array:
+        return jnp.where(self.variant == i, ratio, 1.0) if self._guarded(s) else ratio
+
+    def _own(self, i: int, s: Surrogate) -> dict[str, jax.Array]:
+        values = {key: self.hyperparameters[key] for key in s.defaults}
+        if not self._guarded(s):
+            return values
+        chosen = self.variant == i
+        return {key: jnp.where(chosen, v, s.defaults[key]) for key, v in values.items()}
+
+    def _check_kl_not_needed(self) -> None:
+        if not any(s.needs_kl for s in self.surrogates):
+            return
+        if isinstance(self.variant, jax.core.Tracer):
+            # Which surrogate runs is known only when it runs: a KL-gated one would go ungated.
+            raise ValueError(
+                "the variant is traced (under jit or vmap), so it may gate on the KL "
+                "divergence: pass kl= (per-sample KL(π_old ‖ π_θ))"
+            )
+        chosen = dict.fromkeys(self.surrogates[int(v)] for v in np.ravel(self.variant))
+        gated = [s.name for s in chosen if s.needs_kl]
+        if gated:
+            raise ValueError(
+                f"{', '.join(gated)} gates on the KL divergence: pass kl= (per-sample "
+                "KL(π_old ‖ π_θ))"
+            )
+
+    def clip_range(self) -> tuple[jax.Array, jax.Array | None]:
+        """The chosen surrogate's distances below and above 1 where it stops following r (the
+        R± diagnostics' bounds): ε, and None for "the same", unless a surrogate of the program
+        declares its own."""
+        if all(s.clip_range is None for s in self.surrogates):
+            return self.epsilon, None
+        bounds = [
+            (self.epsilon, self.epsilon)
+            if s.clip_range is None
+            else (self.hyperparameters[s.clip_range[0]], self.hyperparameters[s.clip_range[1]])
+            for s in self.surrogates
+        ]
+        below, above = zip(*bounds, strict=True)
+        return (
+            jnp.choose(self.variant, below, mode="clip"),
+            jnp.choose(self.variant, above, mode="clip"),
+        )
+
+    @property
+    def surrogate(self) -> Surrogate:
+        """The chosen surrogate (only for a concrete, unbatched objective)."""
+        return self.surrogates[int(self.variant)]
+
+    @property
+    def name(self) -> str:
+        """The chosen surrogate's name (only for a concrete, unbatched objective)."""
+        return self.surrogate.name
+
+    @property
+    def values(self) -> dict[str, jax.Array]:
+        """The chosen surrogate's hyperparameters (only for a concrete, unbatched objective)."""
+        return {key: self.hyperparameters[key] for key in self.surrogate.defaults}
+
+    def among(self, surrogates: Sequence[Surrogate]) -> Objective:
+        """The same objective in the program of `surrogates` and its own (:func:`union`): the
+        form in which it stacks with the objectives of any of them."""
+        menu = union([*surrogates, *self.surrogates])
+        index = jnp.asarray([menu.index(s) for s in self.surrogates], jnp.int32)[self.variant]
+        unused = jnp.zeros_like(self.epsilon)
+        return Objective(
+            variant=index,
+            epsilon=self.epsilon,
+            hyperparameters={
+                key: self.hyperparameters.get(key, unused) for key in hyperparameter_names(menu)
+            },
+            surrogates=menu,
+        )
+
+
+jax.tree_util.register_dataclass(
+    Objective,
+    data_fields=["variant", "epsilon", "hyperparameters"],
+    meta_fields=["surrogates"],
+)
+
+
+def objective(
+    variant: str | Surrogate, *, epsilon: float = EPSILON, **hyperparameters: float | None
+) -> Objective:
+    """The objective of `variant` (a built-in's name, or a surrogate of one's own), with its
+    hyperparameters checked against their ranges before anything compiles.
+
+    Built-ins and their hyperparameters: ``ppo``, ``spo`` (ε only), ``fppo-lp`` (α ≥ 1),
+    ``fppo-qp`` (k ≥ 0), ``tr-ppo`` (δ > 0), ``ppo-rb`` (rollback α ≥ 0), ``tr-ppo-rb`` (α ≥ 0,
+    δ > 0), ``clip-higher`` (0 < ε_low < 1, ε_high > 0), ``dpo`` (α > 0, β > 0); every one also
+    takes ε (0 < ε < 1). Missing hyperparameters take their defaults (:data:`BUILTINS`); ``None``
+    counts as missing. ε enters the built-ins through the bounds ``1 ± ε`` (SPO through its
+    penalty's scale; tr-ppo, clip-higher and dpo use it only for value clipping and the R±
+    diagnostics).
+    """
+    s = resolve(variant)
+    given = {key: value for key, value in hyperparameters.items() if value is not None}
+    extra = sorted(set(given) - set(s.defaults))
+    if extra:
+        takes = ", ".join(["epsilon", *s.defaults])
+        raise ValueError(f"{s.name} has no hyperparameter {', '.join(extra)} (it takes: {takes})")
+    eps = real("epsilon", epsilon)
+    if eps not in EPSILON_RANGE:
+        raise ValueError(f"epsilon must be {EPSILON_RANGE}, got {eps}")
+    values = {key: s.check(key, value) for key, value in {**s.defaults, **given}.items()}
+    if not s.builtin:
+        probe(s, values, eps)
+    menu = union([s])
+    return Objective(
+        variant=jnp.asarray(menu.index(s), jnp.int32),
+        epsilon=jnp.asarray(eps, jnp.float32),
+        hyperparameters={
+            key: jnp.asarray(values.get(key, 0.0), jnp.float32)
+            for key in hyperparameter_names(menu)
+        },
+        surrogates=menu,
+    )
+
+
+def stack(objectives: Sequence[Objective]) -> Objective:
+    """`objectives` as one batch (a leading axis), over all of their surrogates: what
+    ``jax.vmap`` maps over to train or evaluate them side by side in one program."""
+    menu = union([s for o in objectives for s in o.surrogates])
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *[o.among(menu) for o in objectives])
+
+
+def hyperparameter_names(surrogates: Sequence[Surrogate]) -> tuple[str, ...]:
+    """The hyperparameters any of `surrogates` takes, each once, in order."""
+    return tuple(dict.fromkeys(key for s in surrogates for key in s.defaults))
+
+
+def takers(name: str, surrogates: Mapping[str, Surrogate] = BUILTINS) -> list[str]:
+    """The surrogates (by name) that take hyperparameter `name`."""
+    return [key for key, s in surrogates.items() if name in s.defaults]
+
+
+def identities(surrogates: Iterable[Surrogate]) -> dict[str, dict[str, dict[str, Any]]]:
+    """What a record keeps of `surrogates` beyond their names: ``{"surrogates": {name:
+    identity}}`` for those of one's own (:meth:`Surrogate.identity`), nothing for built-ins
+    (their names pin them), so records of built-ins alone are as before."""
+    own = {s.name: s.identity() for s in surrogates if not s.builtin}
+    return {"surrogates": own} if own else {}

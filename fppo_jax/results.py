@@ -318,8 +318,8 @@ class SweepResult:
 
 
 # What may differ between parts of one study: which settings, seeds and share of its runs each
-# ran, and how many runs per call.
-PART_FIELDS = ("grid", "seeds", "runs_per_call", "part")
+# ran, how many runs per call, and which surrogates of one's own (one function per name).
+PART_FIELDS = ("grid", "seeds", "runs_per_call", "part", "surrogates")
 
 
 def merge(parts: Sequence[SweepResult]) -> SweepResult:
@@ -343,6 +343,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
                 f"sweep {number} is not a part of the same sweep as sweep 1: its {field} is "
                 f"{other.get(field)!r}, sweep 1's {common.get(field)!r}"
             )
+    own = _own_surrogates(parts)
     settings: list[dict[str, Any]] = []
     runs: list[dict[str, Any]] = []
     for part in parts:
@@ -375,13 +376,30 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         metrics={name: np.concatenate([p.metrics[name] for p in parts]) for name in metrics},
         diverged=np.concatenate([np.asarray(p.diverged, np.int64) for p in parts]),
         config={
-            **{k: v for k, v in first.config.items() if k != "part"},
+            **{k: v for k, v in first.config.items() if k not in ("part", "surrogates")},
             **({"grid": grid} if grid else {}),
             "seeds": seeds,
+            **({"surrogates": own} if own else {}),
         },
         compile_seconds=sum(p.compile_seconds for p in parts),
         train_seconds=sum(p.train_seconds for p in parts),
     )
+
+
+def _own_surrogates(parts: Sequence[SweepResult]) -> dict[str, Any]:
+    """The surrogates of one's own that `parts` ran, by name; two functions under one name
+    (their records' digests differ) are refused."""
+    own: dict[str, Any] = {}
+    for number, part in enumerate(parts, start=1):
+        for name, identity in (part.config.get("surrogates") or {}).items():
+            first = own.setdefault(name, identity)
+            if first != identity:
+                raise ValueError(
+                    f"sweep {number} ran another surrogate named {name!r} than an earlier sweep "
+                    f"(digest {identity.get('digest')} against {first.get('digest')}): give "
+                    "each its own name"
+                )
+    return own
 
 
 def _check_shares(

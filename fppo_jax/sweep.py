@@ -17,51 +17,69 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.config import (
-    SWEEPABLE,
-    VARIANT_SPECIFIC,
     check_seed,
     positive_int,
     resolve_hyperparameters,
+    stack_hyperparameters,
+    sweepable,
     table2,
 )
 from fppo_jax.driver import Outcome, Plan, drive
 from fppo_jax.envs import Environment
-from fppo_jax.objectives import DEFAULTS as VARIANT_DEFAULTS
-from fppo_jax.objectives import VARIANTS, check_variant, real
+from fppo_jax.objectives import (
+    BUILTINS,
+    hyperparameter_names,
+    identities,
+    resolve,
+    takers,
+    union,
+)
 from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, labels
+from fppo_jax.surrogates import Surrogate, real
 
 
 def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[str, Any]]:
     """The distinct settings of a grid, in order: every combination of its values.
 
-    A variant-specific value (α, k, δ) applies to the variants that take it and is dropped for
-    the others, so ``{"variant": ["ppo", "fppo-lp"], "alpha": [1.1, 1.3]}`` is three settings.
-    For a registered `task`, FPPO-LP's α and FPPO-QP's k default to the paper's Table 2.
+    Its variants are built-ins' names or surrogates of one's own; a setting names its variant.
+    A variant-specific value (α, k, δ, a surrogate's own) applies to the variants that take it
+    and is dropped for the others, so ``{"variant": ["ppo", "fppo-lp"], "alpha": [1.1, 1.3]}``
+    is three settings. For a registered `task`, FPPO-LP's α and FPPO-QP's k default to the
+    paper's Table 2.
     """
-    unknown = sorted(set(grid) - set(SWEEPABLE))
+    surrogates = grid_surrogates(grid)
+    specific = hyperparameter_names([*BUILTINS.values(), *surrogates.values()])
+    valid = sweepable(surrogates.values())
+    unknown = sorted(set(grid) - set(valid))
     if unknown:
-        raise ValueError(f"cannot sweep {', '.join(unknown)}; sweepable: {', '.join(SWEEPABLE)}")
-    values = {name: _as_list(name, v) for name, v in grid.items()}
-    variants = [check_variant(v) for v in values.pop("variant", ["fppo-lp"])]
-    for name in set(values) & set(VARIANT_SPECIFIC):
-        if not any(name in VARIANT_DEFAULTS[v] for v in variants):
-            takers = [v for v in VARIANTS if name in VARIANT_DEFAULTS[v]]
+        raise ValueError(f"cannot sweep {', '.join(unknown)}; sweepable: {', '.join(valid)}")
+    values = {name: _as_list(name, v) for name, v in grid.items() if name != "variant"}
+    for name in set(values) & set(specific):
+        if not takers(name, surrogates):
+            everyone = {**BUILTINS, **surrogates}
             raise ValueError(
-                f"no variant of the grid ({', '.join(variants)}) takes {name}; "
-                f"it is taken by {', '.join(takers)}"
+                f"no variant of the grid ({', '.join(surrogates)}) takes {name}; "
+                f"it is taken by {', '.join(takers(name, everyone))}"
             )
     settings: list[dict[str, Any]] = []
-    for variant, *combo in itertools.product(variants, *values.values()):
+    for (variant, surrogate), *combo in itertools.product(surrogates.items(), *values.values()):
         setting: dict[str, Any] = {"variant": variant}
         for name, value in zip(values, combo, strict=True):
-            if name not in VARIANT_SPECIFIC or name in VARIANT_DEFAULTS[variant]:
+            if name not in specific or name in surrogate.defaults:
                 setting[name] = real(name, value)
         for name, value in table2(task, variant).items():
             setting.setdefault(name, value)
         if setting not in settings:
             settings.append(setting)
     return settings
+
+
+def grid_surrogates(grid: Mapping[str, Any]) -> dict[str, Surrogate]:
+    """The surrogates a grid's variants name, by name, in the grid's order (default: FPPO-LP)."""
+    given = [resolve(v) for v in _as_list("variant", grid.get("variant", ["fppo-lp"]))]
+    union(given)  # two different surrogates under one name are refused
+    return {s.name: s for s in given}
 
 
 def _as_list(name: str, values: Any) -> list:
@@ -113,13 +131,14 @@ def sweep(
     cluster's nodes. Its result and ``sweep.json`` name the part, and :func:`~fppo_jax.merge`
     joins the N parts into the whole sweep, naming any run still missing.
     """
+    surrogates = grid_surrogates(grid)
     run = prepare(
         env,
         settings,
         total_steps=total_steps,
         preset=preset,
         backend=backend,
-        hyperparameters=SWEEPABLE,
+        hyperparameters=sweepable(surrogates.values()),
     )
     fixed, options = run.hyperparameters, run.options
     clash = sorted(set(fixed) & set(grid))
@@ -127,7 +146,13 @@ def sweep(
         raise ValueError(f"{', '.join(clash)} given both in the grid and as a fixed value")
     settings = expand_grid({**grid, **fixed}, run.task)
     # expand_grid applied Table 2 to each setting: resolved as given, not again per task.
-    hps = [resolve_hyperparameters(task=None, **setting)[0] for setting in settings]
+    hps = stack_hyperparameters(
+        [
+            resolve_hyperparameters(surrogates[setting["variant"]], None, **values)[0]
+            for setting in settings
+            for values in [{k: v for k, v in setting.items() if k != "variant"}]
+        ]
+    )
     seeds = _seeds(seeds)
     runs = [{"setting": i, "seed": seed} for i in range(len(settings)) for seed in seeds]
     if part is not None:
@@ -138,8 +163,10 @@ def sweep(
         positive_int("data_parallel", data_parallel)
 
     grid_values = {key: _as_list(key, v) for key, v in {**grid, **fixed}.items()}
+    if "variant" in grid_values:
+        grid_values["variant"] = list(surrogates)
     shares = {} if part is None else {"part": list(part)}
-    record = run.record(grid=grid_values, seeds=seeds, **shares)
+    record = run.record(grid=grid_values, seeds=seeds, **shares, **identities(surrogates.values()))
     name = run.name
 
     def result_of(outcome: Outcome) -> SweepResult:
@@ -159,7 +186,10 @@ def sweep(
         result_of(outcome).write(options.log_dir)
 
     keys = jnp.stack([jax.random.key(run["seed"]) for run in runs])
-    stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *[hps[run["setting"]] for run in runs])
+    # Every run in the program of all the sweep's surrogates, so that a part is the whole
+    # sweep's program on fewer runs.
+    setting_of_run = jnp.asarray([run["setting"] for run in runs])
+    stacked = jax.tree.map(lambda x: x[setting_of_run], hps)
     plan = Plan(
         "sweep",
         run.trainer,

@@ -35,7 +35,7 @@ from fppo_jax.gae import gae
 from fppo_jax.losses import Batch, LossInfo, ppo_loss
 from fppo_jax.networks import Networks, make_networks
 from fppo_jax.normalization import RunningStats
-from fppo_jax.objectives import distance_past_bound, negative_regions
+from fppo_jax.objectives import Objective, distance_past_bound, negative_regions
 from fppo_jax.permutation import permutation
 
 RETURN_WINDOW = 100  # episodes in `average_return` (the paper's average return)
@@ -253,7 +253,7 @@ class Trainer:
         with jax.named_scope("epochs"):
             params, opt_state, losses, infos, _ = self._epochs(state, hp, batch, epochs_key)
         with jax.named_scope("escape"):
-            negative_fraction, negative_distance = self._escape(params, batch, hp.objective.epsilon)
+            negative_fraction, negative_distance = self._escape(params, batch, hp.objective)
 
         done = traj.terminated | traj.truncated
         recent_returns, num_episodes = _push_returns(
@@ -343,15 +343,16 @@ class Trainer:
         return stats.normalize(obs) if self.config.normalize_observations else obs
 
     def _escape(
-        self, params: dict, batch: Batch, epsilon: jax.Array
+        self, params: dict, batch: Batch, objective: Objective
     ) -> tuple[jax.Array, jax.Array]:
         """The fraction of the batch in R+ ∪ R- under `params`, and how far past the bound those
-        samples sit on average (the escape speed's measures)."""
+        samples sit on average (the escape speed's measures), by the surrogate's clip range."""
         dist = self.networks.distribution(params, batch.obs)
         ratio = jnp.exp(dist.log_prob(batch.action) - batch.log_prob)
-        r_plus, r_minus = negative_regions(ratio, batch.advantage, epsilon)
+        below, above = objective.clip_range()
+        r_plus, r_minus = negative_regions(ratio, batch.advantage, below, above)
         negative = r_plus | r_minus
-        distance = jnp.sum(jnp.where(negative, distance_past_bound(ratio, epsilon), 0.0))
+        distance = jnp.sum(jnp.where(negative, distance_past_bound(ratio, below, above), 0.0))
         return jnp.mean(negative), distance / jnp.maximum(jnp.sum(negative), 1)
 
     def _rollout(
@@ -460,7 +461,7 @@ class Trainer:
                 minibatches = jax.tree.map(lambda x: x[order].reshape(shape + x.shape[1:]), batch)
             carry, out = jax.lax.scan(minibatch_step, carry, minibatches)
             if track_escape:
-                out = (*out, self._escape(carry[0], batch, hp.objective.epsilon)[0])
+                out = (*out, self._escape(carry[0], batch, hp.objective)[0])
             return carry, out
 
         # Every epoch's shuffle in one batched draw, outside the loop.

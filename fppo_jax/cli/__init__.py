@@ -17,8 +17,9 @@ from typing import Any
 
 from fppo_jax.checkpoint import CheckpointsUnavailable, DamagedCheckpoint
 from fppo_jax.cli.commands import COMMANDS
+from fppo_jax.cli.flags import own_surrogates, surrogates_named
 from fppo_jax.cli.parser import build_parser
-from fppo_jax.cli.settings import settings_file
+from fppo_jax.cli.settings import check_settings, settings_file
 from fppo_jax.distributed import initialize
 from fppo_jax.driver import TrainingDiverged
 
@@ -26,12 +27,23 @@ __all__ = ["build_parser", "main"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        surrogates = surrogates_named(argv)  # their hyperparameters become flags
+    except ValueError as error:
+        print(f"fppo-jax: error: {error}", file=sys.stderr)
+        return 2
+    parser = build_parser(surrogates)
     args = parser.parse_args(argv)
     if getattr(args, "config", None) is not None:
-        command = args.commands[args.command]
         try:
-            command.set_defaults(**settings_file(args.config, command))
+            settings = settings_file(args.config)
+            named = own_surrogates(_variants(settings.get("variant")))
+            if named:
+                parser = build_parser([*surrogates, *named])
+            command = parser.parse_args(argv).commands[args.command]
+            check_settings(args.config, settings, command)
+            command.set_defaults(**settings)
         except (ValueError, FileNotFoundError) as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
@@ -51,6 +63,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         ) as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
+
+
+def _variants(variant: object) -> list[object]:
+    """A settings file's variant (a name, a comma list, a list, or none) as a list."""
+    if isinstance(variant, str):
+        return variant.split(",")
+    return list(variant) if isinstance(variant, list) else []
 
 
 @contextlib.contextmanager

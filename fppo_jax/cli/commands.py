@@ -11,7 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from fppo_jax.api import train
-from fppo_jax.cli.flags import HYPERPARAMETER_HELP, config_overrides, options, slurm_part
+from fppo_jax.cli.flags import config_overrides, hyperparameters_given, options, slurm_part
 from fppo_jax.config import (
     PRESETS,
     TABLE2,
@@ -21,7 +21,7 @@ from fppo_jax.config import (
 from fppo_jax.distributed import is_main_process
 from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
 from fppo_jax.files import writable_directory
-from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
+from fppo_jax.objectives import BUILTINS, EPSILON
 from fppo_jax.results import SweepResult, merge
 from fppo_jax.saved_policy import (
     ARRAYS_FILE,
@@ -43,13 +43,12 @@ def _train(args: argparse.Namespace) -> int:
             args.save_policy, replace=f"remove its {POLICY_FILE} and {ARRAYS_FILE}"
         )
         writable_directory(args.save_policy)
-    given = {name: getattr(args, name) for name in HYPERPARAMETER_HELP}
     result = train(
         args.env,
         args.variant,
         seed=args.seed,
         backend=args.backend,
-        **{name: value for name, value in given.items() if value is not None},
+        **hyperparameters_given(args),
         **options(args),
         **config_overrides(args),
     )
@@ -72,8 +71,7 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    grid = {"variant": args.variant}
-    grid.update({name: getattr(args, name) for name in HYPERPARAMETER_HELP if getattr(args, name)})
+    grid = {"variant": args.variant, **hyperparameters_given(args)}
     part = args.part or slurm_part()
     result = sweep(
         args.env,
@@ -195,10 +193,10 @@ def _list() -> int:
     for name in PRESETS:
         config = preset_config(name, total_steps=10**9)
         print(f"  {name:<10} {describe_update(config)} per update")
-    print("variants:")
-    for name in VARIANTS:
-        params = ", ".join(f"{k} {v}" for k, v in DEFAULTS[name].items()) or "-"
-        print(f"  {name:<10} defaults: epsilon {EPSILON}; {params}")
+    print("variants (or module:attribute, a surrogate of one's own):")
+    for name, s in BUILTINS.items():
+        params = ", ".join(f"{k} {v}" for k, v in s.defaults.items()) or "-"
+        print(f"  {name:<11} defaults: epsilon {EPSILON}; {params}")
     return 0
 
 

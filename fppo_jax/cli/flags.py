@@ -9,7 +9,7 @@ import argparse
 import dataclasses
 import math
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any, NoReturn
@@ -22,9 +22,10 @@ from fppo_jax.config import (
     positive_int,
 )
 from fppo_jax.envs import BACKENDS
-from fppo_jax.objectives import EPSILON, check_variant
+from fppo_jax.objectives import BUILTINS, EPSILON, hyperparameter_names, resolve
 from fppo_jax.options import Options
 from fppo_jax.statistics import CONFIDENCE, ENDPOINTS
+from fppo_jax.surrogates import Surrogate
 
 
 def _argument(parse: Callable[[str], Any]) -> Callable[[str], Any]:
@@ -128,17 +129,46 @@ def values(text: str) -> list[float]:
 
 
 @_argument
-def variants(text: str) -> list[str]:
-    """A comma list of variants: ``ppo,fppo-lp``."""
-    return [check_variant(name.strip()) for name in text.split(",")]
+def variant(text: str) -> Surrogate:
+    """A built-in variant's name, or ``module:attribute`` naming a surrogate of one's own."""
+    return resolve(text.strip())
 
+
+@_argument
+def variants(text: str) -> list[Surrogate]:
+    """A comma list of variants: ``ppo,fppo-lp,mypackage.mymodule:mine``."""
+    return [resolve(name.strip()) for name in text.split(",")]
+
+
+def surrogates_named(argv: Sequence[str]) -> list[Surrogate]:
+    """The surrogates of one's own that `argv`'s ``--variant`` names (``module:attribute``),
+    imported, so that their hyperparameters get flags before the command line is parsed."""
+    named = []
+    for i, token in enumerate(argv):
+        if token == "--variant" and i + 1 < len(argv):
+            named += argv[i + 1].split(",")
+        elif token.startswith("--variant="):
+            named += token.partition("=")[2].split(",")
+    return own_surrogates(named)
+
+
+def own_surrogates(variants: Sequence[object]) -> list[Surrogate]:
+    """The surrogates of one's own among `variants` (built-ins' names are skipped)."""
+    return [
+        s
+        for s in (resolve(v.strip() if isinstance(v, str) else v) for v in variants)
+        if not s.builtin
+    ]
+
+
+float_value = _argument(float)
 
 # A field's type, as its dataclass declares it, and the argparse type of its flag.
 _TYPES: dict[str, Callable[[str], Any]] = {
     "int": count,
     "int | None": count,
-    "float": _argument(float),
-    "float | None": _argument(float),
+    "float": float_value,
+    "float | None": float_value,
     "str | None": str,
     "str | Path | None": path,
     "tuple[int, ...]": sizes,
@@ -298,16 +328,42 @@ def add_score_flags(command: argparse.ArgumentParser) -> None:
     )
 
 
-HYPERPARAMETER_HELP = {
-    "alpha": "FPPO-LP pulling factor (>= 1), or the RB variants' rollback coefficient (>= 0)",
-    "k": "FPPO-QP quadratic coefficient (>= 0)",
-    "delta": "TR variants' KL bound (> 0)",
-    "epsilon": f"clip range, 0 < epsilon < 1 (default {EPSILON:g})",
-    **{
-        name: name.replace("_", " ") + f" (default {v:g})"
-        for name, v in HYPERPARAMETER_DEFAULTS.items()
-    },
-}
+def hyperparameter_help(surrogates: Sequence[Surrogate] = ()) -> dict[str, str]:
+    """A flag's help per hyperparameter of the built-ins and of `surrogates`, from their
+    declarations (which variants take it, its range and default), then ε and the
+    optimisation settings."""
+    everyone = [*BUILTINS.values(), *surrogates]
+    helps = {
+        name: "; ".join(
+            f"{s.name}: {s.ranges.get(name, 'any')}, default {s.defaults[name]:g}"
+            for s in everyone
+            if name in s.defaults
+        )
+        for name in hyperparameter_names(everyone)
+    }
+    helps["epsilon"] = f"clip range, 0 < epsilon < 1 (default {EPSILON:g})"
+    for name, v in HYPERPARAMETER_DEFAULTS.items():
+        helps[name] = name.replace("_", " ") + f" (default {v:g})"
+    return helps
+
+
+def add_hyperparameter_flags(
+    command: argparse.ArgumentParser,
+    surrogates: Sequence[Surrogate],
+    parse: Callable[[str], Any],
+) -> None:
+    """A flag per hyperparameter (:func:`hyperparameter_help`), each value read by `parse`;
+    the names are kept as the command's ``hyperparameter_flags``."""
+    helps = hyperparameter_help(surrogates)
+    for name, text in helps.items():
+        command.add_argument(f"--{name.replace('_', '-')}", dest=name, type=parse, help=text)
+    command.set_defaults(hyperparameter_flags=tuple(helps))
+
+
+def hyperparameters_given(args: argparse.Namespace) -> dict[str, Any]:
+    """The hyperparameter flags given (see :func:`add_hyperparameter_flags`)."""
+    given = {name: getattr(args, name) for name in args.hyperparameter_flags}
+    return {name: value for name, value in given.items() if value is not None}
 
 
 def add_run_flags(command: argparse.ArgumentParser) -> None:

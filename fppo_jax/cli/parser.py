@@ -3,31 +3,37 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 
 from fppo_jax import __version__
 from fppo_jax.cli.flags import (
-    HYPERPARAMETER_HELP,
     Defaults,
     Parser,
     add_backend_flag,
+    add_hyperparameter_flags,
     add_policy_flag,
     add_render_flag,
     add_run_flags,
     add_score_flags,
     count,
+    float_value,
     part,
     path,
     seeds,
     values,
+    variant,
     variants,
 )
 from fppo_jax.extras import install_hint
 from fppo_jax.objectives import VARIANTS
 from fppo_jax.options import Options
 from fppo_jax.statistics import STATISTICS
+from fppo_jax.surrogates import Surrogate
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParser:
+    """The command line, with flags for the hyperparameters of the built-ins and of
+    `surrogates` (one's own, named by ``--variant module:attribute``)."""
     parser = argparse.ArgumentParser(
         prog="fppo-jax",
         description="Train PPO and its fast variants (FPPO-LP, FPPO-QP, TR-PPO, PPO-RB, TR-PPO-RB) "
@@ -50,9 +56,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--resume to continue a stopped run exactly where its last checkpoint left it.",
         formatter_class=formatter,
     )
-    run.add_argument("--variant", default="fppo-lp", choices=list(VARIANTS), help="surrogate")
-    for name, text in HYPERPARAMETER_HELP.items():
-        run.add_argument(f"--{name.replace('_', '-')}", type=float, help=text)
+    run.add_argument(
+        "--variant",
+        type=variant,
+        default="fppo-lp",
+        help=f"the surrogate: {', '.join(VARIANTS)}, or module:attribute for one's own "
+        "(fppo_jax.surrogate)",
+    )
+    add_hyperparameter_flags(run, surrogates, float_value)
     run.add_argument("--seed", type=int, default=0, help="random seed")
     add_render_flag(run, "the trained policy")
     run.add_argument(
@@ -74,10 +85,12 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=formatter,
     )
     grid.add_argument(
-        "--variant", type=variants, default="fppo-lp", help="variants, e.g. ppo,fppo-lp,fppo-qp"
+        "--variant",
+        type=variants,
+        default="fppo-lp",
+        help="variants, e.g. ppo,fppo-lp,fppo-qp, or module:attribute for a surrogate of one's own",
     )
-    for name, text in HYPERPARAMETER_HELP.items():
-        grid.add_argument(f"--{name.replace('_', '-')}", type=values, help=text)
+    add_hyperparameter_flags(grid, surrogates, values)
     grid.add_argument(
         "--seeds",
         type=seeds,

@@ -12,10 +12,12 @@ from typing import Any
 RECORD_ONLY = ("versions", "platform")
 
 
-def settings_file(path: Path, command: argparse.ArgumentParser) -> dict[str, Any]:
-    """The settings in `path` (JSON or YAML) as defaults of `command`'s flags: a run's own
+def settings_file(path: Path) -> dict[str, Any]:
+    """The settings in `path` (JSON or YAML) as defaults of a command's flags: a run's own
     ``config.json`` (train) or a sweep's (sweep, its grid as the grid's flags), or a file of
-    flag names written by hand. Raises ValueError naming any key that is not a setting."""
+    flag names written by hand. A surrogate of one's own that the record names is given by
+    where an import finds it (``module:attribute``); one made in a script or a notebook cannot
+    be found, and is refused with what to pass instead."""
     text = Path(path).read_text()
     try:
         if Path(path).suffix in (".yaml", ".yml"):
@@ -38,11 +40,40 @@ def settings_file(path: Path, command: argparse.ArgumentParser) -> dict[str, Any
         settings["chunk"] = settings.pop("runs_per_call")
     if isinstance(settings.get("part"), list):
         settings["part"] = tuple(settings["part"])
-    valid = set(vars(command.parse_args([]))) - {"commands", "command", "config"}
+    own = settings.pop("surrogates", None) or {}
+    if own and "variant" in settings:
+        settings["variant"] = _importable(path, settings["variant"], own)
+    return settings
+
+
+def _importable(path: Path, variant: Any, own: dict[str, Any]) -> Any:
+    """`variant` (a name or a list of them) with each surrogate of one's own replaced by
+    where its record says an import finds it."""
+    if isinstance(variant, list):
+        return ",".join(_importable(path, v, own) for v in variant)
+    if variant not in own:
+        return variant
+    found = own[variant].get("import")
+    if not found:
+        raise ValueError(
+            f"{path}: the surrogate {variant!r} was made in a script or a notebook, where no "
+            "import finds it; put it in a module and pass --variant module:attribute"
+        )
+    return found
+
+
+def check_settings(path: Path, settings: dict[str, Any], command: argparse.ArgumentParser) -> None:
+    """Raise ValueError naming any key of `settings` (from `path`) that `command` has no flag
+    for."""
+    valid = set(vars(command.parse_args([]))) - {
+        "commands",
+        "command",
+        "config",
+        "hyperparameter_flags",
+    }
     unknown = sorted(set(settings) - valid)
     if unknown:
         raise ValueError(
             f"{path}: unknown setting{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
             f"valid: {', '.join(sorted(valid))}"
         )
-    return settings

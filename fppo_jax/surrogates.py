@@ -1,0 +1,357 @@
+"""A surrogate objective, declared once: its name, its per-sample function and its own
+hyperparameters with their defaults and valid ranges.
+
+A surrogate maximises a per-sample objective ``L(r, A)`` of the likelihood ratio
+``r = π_θ(a|s) / π_old(a|s)`` and the advantage ``A``. Its function takes, by name, any of
+
+    ratio, advantage     the per-sample r and A (arrays of one shape)
+    kl                   the per-sample KL(π_old(·|s) ‖ π_θ(·|s)), without gradient
+    epsilon              the run's clip range ε (which also clips the value loss)
+
+and each of its own hyperparameters (float32 scalars, traced: they vmap like any pytree leaf),
+and returns L, an array of the ratio's shape and float dtype::
+
+    def clip_higher(ratio, advantage, eps_low, eps_high):
+        clipped = jnp.clip(ratio, 1 - eps_low, 1 + eps_high)
+        return jnp.minimum(ratio * advantage, clipped * advantage)
+
+    mine = surrogate("my-clip-higher", clip_higher, eps_low=0.2, eps_high=0.28,
+                     ranges={"eps_low": "(0, 1)", "eps_high": "> 0"},
+                     clip_range=("eps_low", "eps_high"))
+
+``clip_range`` names the hyperparameters giving the distances below and above 1 where the
+surrogate stops following ``r``; the diagnostics of the negatively optimised regions R± use
+them (``1 - ε`` and ``1 + ε`` when it names none).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import inspect
+import math
+import numbers
+import re
+import sys
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+# The arguments every surrogate function may take by name, besides its own hyperparameters.
+INPUTS = ("ratio", "advantage", "kl", "epsilon")
+_NAME = re.compile(r"[a-z0-9][a-z0-9_.-]*\Z")
+_BOUND = re.compile(r"\s*(>=|<=|>|<)\s*(\S+)\s*\Z")
+_INTERVAL = re.compile(r"\s*([\[(])\s*([^,\s]+)\s*,\s*([^,\s]+)\s*([\])])\s*\Z")
+
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """Where a hyperparameter is valid, written as its error message shows it: ``"> 0"``,
+    ``">= 1"``, ``"< 1"``, ``"(0, 1)"``, ``"[0, 1)"`` …; `why` says what lies outside."""
+
+    text: str
+    why: str = ""
+
+    def __post_init__(self) -> None:
+        self.bounds()  # a range that cannot be read is refused when declared
+
+    def bounds(self) -> tuple[float, float, bool, bool]:
+        """(low, high, low included, high included)."""
+        try:
+            if match := _BOUND.match(self.text):
+                op, value = match.group(1), float(match.group(2))
+                if op.startswith(">"):
+                    return value, math.inf, op == ">=", False
+                return -math.inf, value, False, op == "<="
+            if match := _INTERVAL.match(self.text):
+                low, high = float(match.group(2)), float(match.group(3))
+                if low <= high:
+                    return low, high, match.group(1) == "[", match.group(4) == "]"
+        except ValueError:
+            pass
+        raise ValueError(
+            f"a range must read like '> 0', '>= 1', '< 1' or '(0, 1]', got {self.text!r}"
+        )
+
+    def __contains__(self, value: float) -> bool:
+        # Written as comparisons that NaN fails: NaN lies outside every range.
+        low, high, with_low, with_high = self.bounds()
+        above = value >= low if with_low else value > low
+        below = value <= high if with_high else value < high
+        return bool(above and below)
+
+    def __str__(self) -> str:
+        low, high, _, _ = self.bounds()
+        interval = not (math.isinf(low) or math.isinf(high))
+        return f"in {self.text.strip()}" if interval else self.text.strip()
+
+
+def real(name: str, value: object) -> float:
+    """`value` as a float if it is a real number (numpy's included); strings and booleans,
+    which ``float`` would take, are refused."""
+    if isinstance(value, str | bool | np.bool_) or not isinstance(
+        value, numbers.Real | np.ndarray | jax.Array
+    ):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    if np.ndim(value) != 0:
+        raise ValueError(f"{name} must be a single number, got an array of shape {np.shape(value)}")
+    return float(value)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Surrogate:
+    """A declared surrogate (see the module's docstring); build one with :func:`surrogate`.
+
+    Equal only to itself, so that a compiled program's surrogates are those very functions.
+    """
+
+    name: str
+    function: Callable[..., jax.Array]
+    defaults: Mapping[str, float]
+    ranges: Mapping[str, Range]
+    needs_kl: bool = False
+    clip_range: tuple[str, str] | None = None
+    builtin: bool = False
+
+    @property
+    def hyperparameters(self) -> tuple[str, ...]:
+        """Its own hyperparameters' names (ε, which every surrogate has, is not one)."""
+        return tuple(self.defaults)
+
+    def __call__(
+        self,
+        ratio: jax.Array,
+        advantage: jax.Array,
+        kl: jax.Array,
+        epsilon: jax.Array,
+        values: Mapping[str, jax.Array],
+    ) -> jax.Array:
+        """L(r, A) at its hyperparameters' `values`; the function gets the inputs it takes."""
+        given = {"ratio": ratio, "advantage": advantage, "kl": kl, "epsilon": epsilon, **values}
+        return self.function(**{name: given[name] for name in _parameters(self.function)})
+
+    def check(self, name: str, value: object) -> float:
+        """`value` of hyperparameter `name` as a float, if it is a finite number in its range."""
+        value = real(name, value)
+        if math.isinf(value):
+            raise ValueError(f"{name} must be finite for {self.name}, got {value}")
+        valid = self.ranges.get(name)
+        # NaN lies outside every range, and is finite nowhere.
+        if valid is not None and value not in valid:
+            why = f" ({valid.why})" if valid.why else ""
+            raise ValueError(f"{name} must be {valid} for {self.name}, got {value}{why}")
+        if math.isnan(value):
+            raise ValueError(f"{name} must be a number for {self.name}, got {value}")
+        return value
+
+    def identity(self) -> dict[str, Any]:
+        """What records keep of a surrogate of one's own, so that two functions under one name
+        are told apart: its name, its defaults and a digest of its function's source."""
+        return {
+            "name": self.name,
+            "hyperparameters": dict(self.defaults),
+            "digest": source_digest(self.function),
+            "import": self.location(),
+        }
+
+    def location(self) -> str | None:
+        """Where an import finds this surrogate (``"module:attribute"``, as the command line's
+        ``--variant`` takes it): an attribute of its function's module that is this very
+        surrogate; None for one made in a script or a notebook (``__main__``)."""
+        module = sys.modules.get(getattr(self.function, "__module__", None) or "")
+        if module is None or module.__name__ == "__main__":
+            return None
+        found = [name for name, value in vars(module).items() if value is self]
+        return f"{module.__name__}:{found[0]}" if found else None
+
+    def __repr__(self) -> str:
+        values = ", ".join(f"{k}={v:g}" for k, v in self.defaults.items())
+        return f"surrogate({self.name!r}{', ' if values else ''}{values})"
+
+
+def surrogate(
+    name: str,
+    function: Callable[..., jax.Array],
+    /,
+    *,
+    ranges: Mapping[str, str | Range] | None = None,
+    needs_kl: bool = False,
+    clip_range: tuple[str, str] | None = None,
+    **defaults: float,
+) -> Surrogate:
+    """A surrogate of one's own, accepted wherever a variant's name is (``train``, ``sweep``
+    grids, :func:`~fppo_jax.objective`, :func:`~fppo_jax.hyperparameters`).
+
+    `function` takes ``ratio``, ``advantage`` and any of ``kl`` and ``epsilon`` by name, and
+    each hyperparameter named in `defaults` (their default values); `ranges` gives a
+    hyperparameter's valid range as text (``"> 0"``, ``"[0, 1)"``); `needs_kl` says the
+    surrogate gates on the KL divergence (so calling its objective without one is refused);
+    `clip_range` names the two hyperparameters that are its distances below and above 1 (for
+    the R± diagnostics; ε's otherwise). Everything is checked here, and the function is tried
+    on a grid of ratios and advantages: a value that is not finite, of the wrong shape or not
+    a float is refused, naming the surrogate.
+    """
+    from fppo_jax.objectives import BUILTINS  # the built-ins are declared with this function
+
+    if name in BUILTINS:
+        raise ValueError(
+            f"a surrogate cannot be named {name!r}: that is a built-in variant's name "
+            f"(built-ins: {', '.join(BUILTINS)})"
+        )
+    declared = declare(name, function, ranges, needs_kl, clip_range, defaults)
+    probe(declared, declared.defaults)
+    return declared
+
+
+def declare(
+    name: str,
+    function: Callable[..., jax.Array],
+    ranges: Mapping[str, str | Range] | None,
+    needs_kl: bool,
+    clip_range: tuple[str, str] | None,
+    defaults: Mapping[str, float],
+    builtin: bool = False,
+) -> Surrogate:
+    """A :class:`Surrogate`, its declaration checked (the built-ins are declared through here
+    too; :func:`surrogate` also refuses their names and tries the function)."""
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ValueError(
+            f"a surrogate's name must be lower-case letters, digits, '-', '_' or '.', got {name!r}"
+        )
+    if not callable(function):
+        raise ValueError(f"surrogate {name!r}: its function must be callable, got {function!r}")
+    clash = sorted(set(defaults) & set(INPUTS))
+    if clash:
+        raise ValueError(
+            f"surrogate {name!r}: {', '.join(clash)} is an input every surrogate gets, not a "
+            "hyperparameter of its own"
+        )
+    _check_signature(name, function, defaults)
+    checked_ranges = {
+        key: r if isinstance(r, Range) else Range(r) for key, r in (ranges or {}).items()
+    }
+    stray = sorted(set(checked_ranges) - set(defaults))
+    if clip_range is not None:
+        if not (isinstance(clip_range, tuple | list) and len(clip_range) == 2):
+            raise ValueError(
+                f"surrogate {name!r}: clip_range must name two hyperparameters, got {clip_range!r}"
+            )
+        stray += [key for key in clip_range if key not in defaults]
+    if stray:
+        raise ValueError(
+            f"surrogate {name!r} has no hyperparameter {', '.join(map(repr, stray))} "
+            f"(it takes: {', '.join(defaults) or 'none'})"
+        )
+    if not isinstance(needs_kl, bool):
+        raise ValueError(f"surrogate {name!r}: needs_kl must be True or False, got {needs_kl!r}")
+    declared = Surrogate(
+        name,
+        function,
+        MappingProxyType(dict(defaults)),
+        MappingProxyType(checked_ranges),
+        needs_kl,
+        None if clip_range is None else (clip_range[0], clip_range[1]),
+        builtin,
+    )
+    for key, value in defaults.items():
+        declared.check(key, value)
+    return declared
+
+
+def _parameters(function: Callable[..., Any]) -> tuple[str, ...]:
+    return tuple(inspect.signature(function).parameters)
+
+
+def _check_signature(
+    name: str, function: Callable[..., Any], defaults: Mapping[str, float]
+) -> None:
+    try:
+        parameters = inspect.signature(function).parameters
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"surrogate {name!r}: the signature of {function!r} cannot be read"
+        ) from None
+    takes = (*INPUTS, *defaults)
+    unknown = [
+        p
+        for p, spec in parameters.items()
+        if p not in takes
+        or spec.kind in (spec.VAR_POSITIONAL, spec.VAR_KEYWORD, spec.POSITIONAL_ONLY)
+    ]
+    if unknown:
+        raise ValueError(
+            f"surrogate {name!r}: its function takes {', '.join(unknown)}, which it would not "
+            f"be given; it may take {', '.join(INPUTS)} and its hyperparameters "
+            f"({', '.join(defaults) or 'none declared'}), each by name"
+        )
+    missing = [p for p in ("ratio", "advantage", *defaults) if p not in parameters]
+    if missing:
+        raise ValueError(
+            f"surrogate {name!r}: its function does not take {', '.join(missing)} (a surrogate "
+            "takes ratio and advantage, and each hyperparameter it declares, by name)"
+        )
+
+
+def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2) -> None:
+    """Try `declared` with `values` on ratios 0.25 … 4 and advantages of both signs (a KL of
+    0 and 0.1): its value must be a finite float array of the ratio's shape, and its slope in
+    the ratio finite."""
+    ratio, advantage = np.meshgrid(np.geomspace(0.25, 4.0, 17), [-2.0, -0.5, 0.0, 0.5, 2.0])
+    ratio, advantage = (
+        jnp.asarray(ratio.ravel(), jnp.float32),
+        jnp.asarray(advantage.ravel(), jnp.float32),
+    )
+    kl = jnp.tile(jnp.asarray([0.0, 0.1], jnp.float32), ratio.size // 2 + 1)[: ratio.size]
+    arrays = {key: jnp.asarray(value, jnp.float32) for key, value in values.items()}
+    eps = jnp.asarray(epsilon, jnp.float32)
+
+    def value(r: jax.Array) -> jax.Array:
+        return declared(r, advantage, kl, eps, arrays)
+
+    where = f"surrogate {declared.name!r}"
+    try:
+        out = value(ratio)
+    except Exception as error:
+        raise ValueError(f"{where} failed when tried: {type(error).__name__}: {error}") from None
+    if not isinstance(out, jax.Array | np.ndarray) or np.shape(out) != ratio.shape:
+        raise ValueError(
+            f"{where} must return one value per sample (an array of the ratio's shape "
+            f"{ratio.shape}), got {_described(out)}"
+        )
+    if not jnp.issubdtype(out.dtype, jnp.floating):
+        raise ValueError(f"{where} must return floats, got {out.dtype}")
+    # Per sample: the surrogate is element-wise, so the slope of the sum is each one's slope.
+    slope = jax.grad(lambda r: jnp.sum(value(r)))(ratio)
+    for what, array in (("value", out), ("slope in the ratio", slope)):
+        bad = ~np.isfinite(np.asarray(array))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(
+                f"{where} has a {what} that is not finite ({float(np.asarray(array)[i])}) at "
+                f"ratio {float(ratio[i]):.3g}, advantage {float(advantage[i]):g} with "
+                + ", ".join(f"{k} = {v:g}" for k, v in {"epsilon": epsilon, **values}.items())
+            )
+
+
+def _described(out: object) -> str:
+    shape = getattr(out, "shape", None)
+    return f"shape {shape}" if shape is not None else type(out).__name__
+
+
+def source_digest(function: Callable[..., Any]) -> str:
+    """A short digest of `function`'s source (of its compiled code where the source is not at
+    hand), so that a record tells two functions apart."""
+    try:
+        text = inspect.getsource(function).encode()
+    except (OSError, TypeError):
+        code = getattr(function, "__code__", None)
+        text = (
+            repr(function).encode()
+            if code is None
+            else code.co_code + repr(code.co_consts).encode()
+        )
+    return hashlib.sha256(text).hexdigest()[:16]

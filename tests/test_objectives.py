@@ -1,6 +1,7 @@
 """Every variant's value and slope against the paper's definitions (Eq. 22 with its sign
 corrected), region by region."""
 
+import math
 import re
 
 import jax
@@ -8,8 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fppo_jax import VARIANTS, negative_regions, objective
-from fppo_jax.objectives import check_variant
+from fppo_jax import VARIANTS, negative_regions, objective, stack
+from fppo_jax.objectives import PAPERS, check_variant, resolve
 
 EPS = 0.2
 LO, HI = 1 - EPS, 1 + EPS
@@ -83,6 +84,50 @@ CASES = [
     ("tr-ppo-rb", {"alpha": 0.05, "delta": 0.03}, 0.5, -2.0, 0.1, -1.0, -0.05 * -2.0),
     ("tr-ppo-rb", {"alpha": 0.05, "delta": 0.03}, 1.5, 2.0, 0.01, 3.0, 2.0),
     ("tr-ppo-rb", {"alpha": 0.05, "delta": 0.03}, 0.5, 2.0, 0.1, 1.0, 2.0),
+    # SPO: rA - |A|(r - 1)²/(2ε), slope A - |A|(r - 1)/ε: zero at 1 + ε sign(A), never flat.
+    ("spo", {}, 1.1, 2.0, 0, 2.2 - 2.0 * 0.1**2 / (2 * EPS), 2.0 - 2.0 * 0.1 / EPS),
+    ("spo", {}, 1.5, 2.0, 0, 3.0 - 2.0 * 0.5**2 / (2 * EPS), 2.0 - 2.0 * 0.5 / EPS),
+    ("spo", {}, 0.5, -2.0, 0, -1.0 - 2.0 * 0.5**2 / (2 * EPS), -2.0 + 2.0 * 0.5 / EPS),
+    ("spo", {}, HI, 2.0, 0, HI * 2.0 - 2.0 * EPS / 2, 0.0),
+    ("spo", {}, LO, -2.0, 0, LO * -2.0 - 2.0 * EPS / 2, 0.0),
+    # Clip-higher (DAPO): PPO's min with the bounds 1 - ε_low and 1 + ε_high.
+    ("clip-higher", {}, 1.25, 2.0, 0, 2.5, 2.0),
+    ("clip-higher", {}, 1.5, 2.0, 0, 1.28 * 2.0, 0.0),
+    ("clip-higher", {"eps_high": 0.4}, 1.3, 2.0, 0, 2.6, 2.0),
+    ("clip-higher", {}, 0.5, -2.0, 0, LO * -2.0, 0.0),
+    ("clip-higher", {}, 0.5, 2.0, 0, 1.0, 2.0),
+    ("clip-higher", {}, 1.5, -2.0, 0, -3.0, -2.0),
+    # DPO (α = 2, β = 0.6): rA - relu(x - c tanh(x / c)); x = (r - 1)A, c = α for A ≥ 0 and
+    # x = log(r) A, c = β for A < 0; the drift is 0 where x ≤ 0.
+    (
+        "dpo",
+        {},
+        1.5,
+        2.0,
+        0,
+        3.0 - (1.0 - 2.0 * math.tanh(0.5)),
+        2.0 - 2.0 * math.tanh(0.5) ** 2,
+    ),
+    ("dpo", {}, 0.5, 2.0, 0, 1.0, 2.0),
+    ("dpo", {}, 1.5, -2.0, 0, -3.0, -2.0),
+    (
+        "dpo",
+        {},
+        0.5,
+        -2.0,
+        0,
+        -1.0 - (2.0 * math.log(2) - 0.6 * math.tanh(2.0 * math.log(2) / 0.6)),
+        -2.0 + (1 - 1 / math.cosh(2.0 * math.log(2) / 0.6) ** 2) * 2.0 / 0.5,
+    ),
+    (
+        "dpo",
+        {"alpha": 1.0, "beta": 1.0},
+        2.0,
+        1.0,
+        0,
+        2.0 - (1.0 - math.tanh(1.0)),
+        1.0 - math.tanh(1.0) ** 2,
+    ),
 ]
 
 
@@ -139,8 +184,11 @@ def test_vmap_over_mixed_variants_matches_each_variant():
         objective("ppo-rb", alpha=0.2),
         objective("tr-ppo-rb", alpha=0.1, delta=0.02),
         objective("fppo-lp", alpha=1.1, epsilon=0.1),
+        objective("spo"),
+        objective("clip-higher", eps_high=0.3),
+        objective("dpo", beta=0.5),
     ]
-    stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *objs)
+    stacked = stack(objs)
     key_r, key_a, key_kl = jax.random.split(jax.random.key(0), 3)
     r = jax.random.uniform(key_r, (200,), minval=0.4, maxval=1.6)
     a = jax.random.normal(key_a, (200,))
@@ -178,12 +226,15 @@ def test_negative_regions():
     "variant, params, match",
     [
         ("sppo", {}, "unknown variant 'sppo'; valid variants: ppo, fppo-lp"),
+        ("dpo", {"beta": 0.0}, "beta must be > 0 for dpo, got 0.0"),
+        ("clip-higher", {"eps_low": 1.0}, "eps_low must be in \\(0, 1\\) for clip-higher"),
+        ("clip-higher", {"eps_high": float("inf")}, "eps_high must be finite for clip-higher"),
         ("fppo-lp", {"alpha": 0.9}, "alpha must be >= 1 for fppo-lp"),
         ("fppo-lp", {"alpha": float("nan")}, "alpha must be >= 1"),
         ("fppo-qp", {"k": -0.1}, "k must be >= 0"),
         ("tr-ppo", {"delta": 0.0}, "delta must be > 0"),
         ("tr-ppo-rb", {"delta": -1.0}, "delta must be > 0"),
-        ("ppo-rb", {"alpha": -0.1}, "rollback coefficient\\) must be >= 0"),
+        ("ppo-rb", {"alpha": -0.1}, "alpha must be >= 0 for ppo-rb, got -0.1 \\(the rollback"),
         ("ppo", {"epsilon": 1.0}, "epsilon must be in \\(0, 1\\)"),
         ("ppo", {"epsilon": 0.0}, "epsilon must be in \\(0, 1\\)"),
         ("ppo", {"alpha": 1.3}, "ppo has no hyperparameter alpha"),
@@ -208,14 +259,28 @@ def test_objective_name():
     assert [objective(v).name for v in VARIANTS] == list(VARIANTS)
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
-def test_an_unselected_branch_cannot_make_the_gradient_nan(variant):
-    # A > 0 and an overflowed ratio: every variant's own branch is flat or linear there, but
-    # FPPO-QP's square of the distance past the bound is infinite; the select must not turn
-    # its zero weight into NaN.
-    obj = objective(variant)
+@pytest.mark.parametrize("variant", PAPERS)
+@pytest.mark.parametrize("among", [(), tuple(VARIANTS)])
+def test_an_unselected_branch_cannot_make_the_gradient_nan(variant, among):
+    # A > 0 and an overflowed ratio: each of the paper's variants is flat or linear there, but
+    # FPPO-QP's square of the distance past the bound is infinite, and SPO's and DPO's values
+    # are too; the select must not turn their zero weight into NaN.
+    obj = objective(variant).among([resolve(v) for v in among])
     grad = jax.grad(lambda r: obj(r, jnp.float32(1.0), jnp.float32(0.0)))(jnp.float32(jnp.inf))
     assert np.isfinite(grad)
+
+
+def test_a_variant_not_chosen_sees_its_own_defaults_not_a_shared_names_value():
+    # PPO-RB's rollback α may be 0, which DPO (dividing by its α) must never see.
+    stacked = stack([objective("ppo-rb", alpha=0.0), objective("dpo")])
+    r = jnp.linspace(0.5, 1.5, 11)
+    for i, single in enumerate([objective("ppo-rb", alpha=0.0), objective("dpo")]):
+        o = jax.tree.map(lambda x, i=i: x[i], stacked)
+        value, slope = jax.vmap(jax.value_and_grad(lambda r_, o=o: o(r_, jnp.float32(1.0))))(r)
+        expected = jax.vmap(jax.value_and_grad(lambda r_, s=single: s(r_, jnp.float32(1.0))))(r)
+        np.testing.assert_allclose(value, expected[0], rtol=1e-6)
+        np.testing.assert_allclose(slope, expected[1], rtol=1e-6)
+        assert np.isfinite(slope).all()
 
 
 def test_a_traced_objective_without_kl_is_refused():
@@ -224,7 +289,7 @@ def test_a_traced_objective_without_kl_is_refused():
         jax.jit(lambda o, r, a: o(r, a))(objective("tr-ppo"), jnp.ones(3), jnp.ones(3))
     with pytest.raises(ValueError, match="pass kl="):
         jax.vmap(lambda o, r, a: o(r, a))(
-            jax.tree.map(lambda *x: jnp.stack(x), objective("ppo"), objective("tr-ppo")),
+            stack([objective("ppo"), objective("tr-ppo")]),
             jnp.ones((2, 3)),
             jnp.ones((2, 3)),
         )
@@ -238,7 +303,7 @@ def test_a_traced_objective_without_kl_is_refused():
 def test_a_hyperparameter_that_is_not_a_number_is_refused(value):
     with pytest.raises(ValueError, match=r"alpha must be a (single )?number"):
         objective("fppo-lp", alpha=value)
-    assert objective("fppo-lp", alpha=np.float32(1.25)).alpha == np.float32(1.25)
+    assert objective("fppo-lp", alpha=np.float32(1.25)).values["alpha"] == np.float32(1.25)
 
 
 def test_an_optimisation_setting_that_is_not_a_number_is_refused():
@@ -252,7 +317,7 @@ def test_an_optimisation_setting_that_is_not_a_number_is_refused():
 
 def test_check_variant_takes_each_variant_and_lists_them_when_refusing():
     assert [check_variant(v) for v in VARIANTS] == list(VARIANTS)
-    listed = "ppo, fppo-lp, fppo-qp, tr-ppo, ppo-rb, tr-ppo-rb"
+    listed = "ppo, fppo-lp, fppo-qp, tr-ppo, ppo-rb, tr-ppo-rb, spo, clip-higher, dpo"
     for wrong in ("PPO", "fppo", None):
         with pytest.raises(
             ValueError, match=re.escape(f"unknown variant {wrong!r}; valid variants: {listed}")

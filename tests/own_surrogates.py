@@ -1,0 +1,27 @@
+"""Surrogates of one's own, importable by the tests as ``own_surrogates:NAME`` (the way the
+command line's ``--variant module:attribute`` finds a user's)."""
+
+import jax.numpy as jnp
+
+import fppo_jax
+
+
+def clipped(ratio, advantage, epsilon):
+    """PPO's clipped objective, written again."""
+    return jnp.minimum(ratio * advantage, jnp.clip(ratio, 1 - epsilon, 1 + epsilon) * advantage)
+
+
+def clip_higher(ratio, advantage, kl, eps_low, eps_high):
+    clipped_ratio = jnp.clip(ratio, 1 - eps_low, 1 + eps_high)
+    return jnp.minimum(ratio * advantage, clipped_ratio * advantage)
+
+
+my_ppo = fppo_jax.surrogate("my-ppo", clipped)
+my_clip_higher = fppo_jax.surrogate(
+    "my-clip-higher",
+    clip_higher,
+    eps_low=0.2,
+    eps_high=0.28,
+    ranges={"eps_low": "(0, 1)", "eps_high": "> 0"},
+    clip_range=("eps_low", "eps_high"),
+)

@@ -1,0 +1,176 @@
+"""Surrogates of one's own: declared once, checked before compiling, trained in the same
+compiled program as the built-ins, and recorded so that two functions under one name are told
+apart."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from own_surrogates import clipped, my_clip_higher, my_ppo
+
+import fppo_jax
+from fppo_jax import objective, surrogate, sweep, train
+from fppo_jax.cli import main
+from fppo_jax.surrogates import Range
+
+TINY_STEPS = 512
+
+
+def test_a_range_reads_as_its_message_shows_it():
+    assert 0.5 in Range("(0, 1)") and 1.0 not in Range("(0, 1)") and 1.0 in Range("(0, 1]")
+    assert 1.0 in Range(">= 1") and 0.99 not in Range(">= 1") and 0.0 not in Range("> 0")
+    assert float("nan") not in Range("> 0") and -5.0 in Range("< 1")
+    assert str(Range("(0, 1)")) == "in (0, 1)" and str(Range("> 0")) == "> 0"
+    with pytest.raises(ValueError, match="a range must read like"):
+        Range("positive")
+
+
+def test_a_surrogate_is_accepted_where_a_variants_name_is():
+    o = objective(my_clip_higher, eps_high=0.3)
+    assert o.name == "my-clip-higher" and float(o.values["eps_high"]) == pytest.approx(0.3)
+    hp = fppo_jax.hyperparameters(my_clip_higher, eps_low=0.1, learning_rate=1e-3)
+    assert float(hp.objective.values["eps_low"]) == pytest.approx(0.1)
+    # Its declared clip range bounds the R± diagnostics.
+    below, above = o.clip_range()
+    assert float(below) == pytest.approx(0.2) and float(above) == pytest.approx(0.3)
+    assert fppo_jax.objectives.resolve("own_surrogates:my_ppo") is my_ppo
+
+
+def test_a_user_surrogate_computes_what_its_function_does():
+    r = jnp.linspace(0.5, 1.5, 21)
+    a = jnp.where(jnp.arange(21) % 2 == 0, 1.5, -0.7)
+    ours = jax.vmap(jax.value_and_grad(lambda r_, a_: objective(my_ppo)(r_, a_)))(r, a)
+    builtin = jax.vmap(jax.value_and_grad(lambda r_, a_: objective("ppo")(r_, a_)))(r, a)
+    np.testing.assert_array_equal(ours[0], builtin[0])
+    np.testing.assert_array_equal(ours[1], builtin[1])
+
+
+def _returns_a_scalar(ratio, advantage):
+    return jnp.mean(ratio * advantage)
+
+
+def _returns_integers(ratio, advantage):
+    return (ratio * advantage).astype(jnp.int32)
+
+
+def _not_finite_below_one(ratio, advantage):
+    return jnp.log(ratio - 1.0) * advantage
+
+
+def _takes_an_unknown_input(ratio, advantage, beta_typo):
+    return ratio * advantage
+
+
+@pytest.mark.parametrize(
+    "args, kwargs, match",
+    [
+        (("mine", 3.0), {}, "its function must be callable"),
+        (("ppo", clipped), {}, "cannot be named 'ppo': that is a built-in"),
+        (("Mine!", clipped), {}, "a surrogate's name must be lower-case"),
+        (("mine", _takes_an_unknown_input), {}, "takes beta_typo, which it would not be given"),
+        (("mine", lambda advantage: advantage), {}, "does not take ratio"),
+        (("mine", clipped), {"beta": 1.0}, "does not take beta"),
+        (("mine", clipped), {"ratio": 1.0}, "ratio is an input every surrogate gets"),
+        (
+            ("mine", my_clip_higher.function),
+            {"eps_low": 0.2, "eps_high": -0.1, "ranges": {"eps_high": "> 0"}},
+            "eps_high must be > 0 for mine, got -0.1",
+        ),
+        (
+            ("mine", my_clip_higher.function),
+            {"eps_low": 0.2, "eps_high": 0.3, "ranges": {"eps_hihg": "> 0"}},
+            "surrogate 'mine' has no hyperparameter 'eps_hihg'",
+        ),
+        (
+            ("mine", my_clip_higher.function),
+            {"eps_low": 0.2, "eps_high": 0.3, "clip_range": ("eps_low", "high")},
+            "surrogate 'mine' has no hyperparameter 'high'",
+        ),
+        (("mine", _returns_a_scalar), {}, "must return one value per sample"),
+        (("mine", _returns_integers), {}, "must return floats, got int32"),
+        (("mine", _not_finite_below_one), {}, "has a value that is not finite"),
+    ],
+)
+def test_a_bad_surrogate_gets_one_clear_error(args, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        surrogate(*args, **kwargs)
+
+
+def test_a_user_surrogates_hyperparameters_are_checked_before_compiling():
+    with pytest.raises(ValueError, match=r"eps_high must be > 0 for my-clip-higher, got -1\.0"):
+        train("cartpole", my_clip_higher, eps_high=-1.0)
+    with pytest.raises(ValueError, match=r"my-ppo has no hyperparameter alpha"):
+        train("cartpole", my_ppo, alpha=1.3)
+    with pytest.raises(ValueError, match="two different surrogates are named 'my-ppo'"):
+        sweep("cartpole", {"variant": [my_ppo, surrogate("my-ppo", clipped)]})
+
+
+def test_a_user_ppo_trains_bit_for_bit_like_the_builtin(tiny):
+    builtin = train("cartpole", "ppo", seed=2, total_steps=TINY_STEPS, **tiny)
+    ours = train("cartpole", my_ppo, seed=2, total_steps=TINY_STEPS, **tiny)
+    for name, values in builtin.metrics.items():
+        np.testing.assert_array_equal(ours.metrics[name], values, err_msg=name)
+    assert ours.config["variant"] == "my-ppo"
+    assert ours.config["surrogates"]["my-ppo"]["import"] == "own_surrogates:my_ppo"
+
+
+def test_a_sweep_mixing_builtins_and_own_surrogates_is_one_program(tiny, monkeypatch):
+    compiled = []
+    jit = jax.jit
+    monkeypatch.setattr(
+        fppo_jax.execution.jax, "jit", lambda f, **k: compiled.append(f) or jit(f, **k)
+    )
+    grid = {"variant": ["ppo", my_ppo, "fppo-qp", my_clip_higher], "eps_high": [0.25, 0.4]}
+    # A learning rate high enough that ratios pass 1.25, so that the two ε_high differ.
+    result = sweep("cartpole", grid, seeds=[4], total_steps=TINY_STEPS, learning_rate=0.03, **tiny)
+    assert [s["variant"] for s in result.settings] == [
+        "ppo",
+        "my-ppo",
+        "fppo-qp",
+        "my-clip-higher",
+        "my-clip-higher",
+    ]
+    programs = [f for f in compiled if f.__qualname__ == "compile_program.<locals>.run"]
+    assert len(programs) == 1  # one program of updates for every run
+    assert result.config["runs_per_call"] == 5
+    # The user's PPO trains as the built-in beside it, to float rounding (one vmapped program).
+    for name, values in result.metrics.items():
+        np.testing.assert_allclose(values[1], values[0], rtol=1e-5, atol=1e-6, err_msg=name)
+    assert not np.array_equal(
+        result.metrics["clip_fraction"][3], result.metrics["clip_fraction"][4]
+    )
+    assert set(result.config["surrogates"]) == {"my-ppo", "my-clip-higher"}
+
+
+def test_the_command_line_takes_a_surrogate_by_module_and_its_flags(tiny, tmp_path, capsys):
+    shape = ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+    common = ["--steps", str(TINY_STEPS), "--seed", "2", "--quiet", *shape]
+    assert main(["train", "--variant", "ppo", "--output", str(tmp_path / "a"), *common]) == 0
+    mine = ["train", "--variant", "own_surrogates:my_ppo", "--output", str(tmp_path / "b")]
+    assert main([*mine, *common]) == 0
+    a, b = ((tmp_path / d / "metrics.csv").read_text().splitlines() for d in "ab")
+    assert a == b  # bit for bit, as printed
+    # A surrogate's own hyperparameters are flags, and a sweep's grid axes.
+    sweep_args = ["sweep", "--variant", "ppo,own_surrogates:my_clip_higher"]
+    out = tmp_path / "sweep"
+    grid = ["--eps-high", "0.25,0.3", "--seeds", "1", "--output", str(out)]
+    assert main([*sweep_args, *grid, "--steps", str(TINY_STEPS), "--quiet", *shape]) == 0
+    record = json.loads((out / "sweep.json").read_text())
+    assert [s.get("eps_high") for s in record["settings"]] == [None, 0.25, 0.3]
+    identity = record["config"]["surrogates"]["my-clip-higher"]
+    assert identity["import"] == "own_surrogates:my_clip_higher" and len(identity["digest"]) == 16
+    capsys.readouterr()
+    assert main(["train", "--variant", "own_surrogates:nothing", *common]) == 2
+    assert "own_surrogates has no 'nothing'" in capsys.readouterr().err
+
+
+def test_a_record_tells_two_functions_under_one_name_apart(tiny):
+    first = sweep("cartpole", {"variant": [my_ppo]}, seeds=[0], total_steps=TINY_STEPS, **tiny)
+    other = surrogate("my-ppo", lambda ratio, advantage: ratio * advantage)
+    second = sweep("cartpole", {"variant": [other]}, seeds=[1], total_steps=TINY_STEPS, **tiny)
+    with pytest.raises(ValueError, match="another surrogate named 'my-ppo'"):
+        fppo_jax.merge([first, second])
+    same = sweep("cartpole", {"variant": [my_ppo]}, seeds=[1], total_steps=TINY_STEPS, **tiny)
+    assert len(fppo_jax.merge([first, same]).runs) == 2

@@ -11,7 +11,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from fppo_jax.api import train
-from fppo_jax.cli.flags import HYPERPARAMETER_HELP, config_overrides, options, slurm_part
+from fppo_jax.cli.flags import HYPERPARAMETER_HELP, config_overrides, options
+from fppo_jax.cli.slurm import array_part
 from fppo_jax.config import (
     PRESETS,
     TABLE2,
@@ -74,7 +75,13 @@ def _train(args: argparse.Namespace) -> int:
 def _sweep(args: argparse.Namespace) -> int:
     grid = {"variant": args.variant}
     grid.update({name: getattr(args, name) for name in HYPERPARAMETER_HELP if getattr(args, name)})
-    part = args.part or slurm_part()
+    part = array_part() if args.part == "auto" else args.part
+    if part is None and "SLURM_ARRAY_TASK_ID" in os.environ and is_main_process():
+        print(
+            f"fppo-jax: note: SLURM array task {os.environ['SLURM_ARRAY_TASK_ID']} trains the "
+            "whole sweep; --part auto would train this task's share of it",
+            file=sys.stderr,
+        )
     result = sweep(
         args.env,
         grid,

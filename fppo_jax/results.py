@@ -343,6 +343,10 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
                 f"sweep {number} is not a part of the same sweep as sweep 1: its {field} is "
                 f"{other.get(field)!r}, sweep 1's {common.get(field)!r}"
             )
+    if all(part.config.get("part") for part in parts):
+        # The shares of one split in their sweep's run order, whatever order they were named in:
+        # a shell lists part-10 before part-2, and the order of the runs is the order of curves.csv.
+        parts = sorted(parts, key=lambda part: part.config["part"][0])
     settings: list[dict[str, Any]] = []
     runs: list[dict[str, Any]] = []
     for part in parts:
@@ -411,8 +415,10 @@ def _check_shares(
     ]
     if missing:
         more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
-        which = f"parts {', '.join(map(str, missing_parts))} of {count} are missing: " * bool(
-            missing_parts
+        spelled = ", ".join(f"--part {k}/{count}" for k in missing_parts)
+        which = (
+            f"parts {', '.join(map(str, missing_parts))} of {count} ({spelled}) are missing: "
+            * bool(missing_parts)
         )
         raise ValueError(f"{which}the sweep's runs {', '.join(missing[:5])}{more} are not there")
 

@@ -138,6 +138,44 @@ def test_parts_that_ran_other_settings_merge_and_their_grids_join():
         merge(shares)
 
 
+def shares(whole: SweepResult, count: int) -> list[SweepResult]:
+    """`whole`'s runs split as ``sweep(..., part=(K, count))`` splits them, K = 1 … count."""
+    from fppo_jax.sweep import part_bounds
+
+    made = []
+    for k in range(1, count + 1):
+        kept = list(range(*part_bounds((k, count), len(whole.runs))))
+        runs = [whole.runs[i] for i in kept]
+        made.append(
+            dataclasses.replace(
+                whole,
+                runs=runs,
+                metrics={name: values[kept] for name, values in whole.metrics.items()},
+                diverged=np.asarray(whole.diverged)[kept],
+                config={**whole.config, "part": [k, count]},
+            )
+        )
+    return made
+
+
+def test_merge_orders_the_parts_of_a_split_by_their_number(tmp_path, capsys):
+    whole = two_settings()
+    whole.write(tmp_path / "whole")
+    for k, part in enumerate(shares(whole, 11), start=1):
+        part.write(tmp_path / f"part-{k}")
+    named = sorted(str(path) for path in tmp_path.glob("part-*"))  # as a shell lists them
+    assert named[:3] == [str(tmp_path / f"part-{k}") for k in (1, 10, 11)]
+    assert main(["merge", *named, "--output", str(tmp_path / "merged")]) == 0
+    merged = (tmp_path / "merged" / "curves.csv").read_bytes()
+    assert merged == (tmp_path / "whole" / "curves.csv").read_bytes()
+    assert SweepResult.read(tmp_path / "merged").runs == whole.runs
+
+    capsys.readouterr()
+    assert main(["merge", *named[2:], "--output", str(tmp_path / "partial")]) == 2
+    error = capsys.readouterr().err
+    assert "parts 1, 10 of 11 (--part 1/11, --part 10/11) are missing" in error
+
+
 def test_merge_joins_settings_and_seeds_from_the_command_line(tmp_path, capsys):
     first = two_settings()
     second = dataclasses.replace(

@@ -26,7 +26,7 @@ from fppo_jax.checkpoint import (
     DamagedCheckpoint,
 )
 from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters
-from fppo_jax.driver import TrainingDiverged
+from fppo_jax.driver import StoppedBySignal, TrainingDiverged
 from fppo_jax.envs import TASKS, Environment, make_env
 from fppo_jax.evaluation import evaluate
 from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective
@@ -52,6 +52,7 @@ __all__ = [
     "Policy",
     "Progress",
     "Snapshot",
+    "StoppedBySignal",
     "SweepResult",
     "TrainConfig",
     "TrainResult",

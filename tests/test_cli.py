@@ -308,3 +308,21 @@ def test_namespaced_environments_train_and_sweep_from_the_command_line(tmp_path,
     assert "2 runs on gymnax/Pendulum-v1" in capsys.readouterr().out
     assert main(["train", "--env", "nope/CartPole-v1", "--quiet"]) == 2
     assert "unknown environment 'nope/CartPole-v1'" in capsys.readouterr().err
+
+
+def test_a_finished_run_resumed_keeps_its_saved_policy(tmp_path, capsys):
+    flags = ["train", "--env", "cartpole", "--variant", "ppo", "--steps", "256", *TINY_FLAGS]
+    flags += ["--checkpoint-dir", str(tmp_path / "ckpt"), "--save-policy", str(tmp_path / "p")]
+    assert main(flags) == 0
+    files = {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in (tmp_path / "p").iterdir()}
+    capsys.readouterr()
+    assert main([*flags, "--resume"]) == 0
+    assert "kept " in capsys.readouterr().out
+    assert {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in (tmp_path / "p").iterdir()} == (
+        files
+    )
+    # Another run's policy is refused before compiling, resumed or not.
+    other = [*flags, "--seed", "1", "--checkpoint-dir", str(tmp_path / "other"), "--resume"]
+    assert main(other) == 2
+    err = capsys.readouterr().err
+    assert "already holds a saved policy" in err and "compiling" not in err

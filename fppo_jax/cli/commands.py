@@ -11,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from fppo_jax.api import train
+from fppo_jax.checkpoint import Checkpoints
 from fppo_jax.cli.flags import HYPERPARAMETER_HELP, config_overrides, options
 from fppo_jax.cli.slurm import array_part
 from fppo_jax.config import (
@@ -29,6 +30,7 @@ from fppo_jax.saved_policy import (
     POLICY_FILE,
     check_no_saved_policy,
     load_policy,
+    read_policy,
 )
 from fppo_jax.sweep import sweep
 
@@ -39,7 +41,8 @@ def _train(args: argparse.Namespace) -> int:
 
         check_render_path(args.render)
         check_renderable(args.env)
-    if args.save_policy:  # refused now rather than after training
+    finished = args.save_policy is not None and _holds_final_policy(args)
+    if args.save_policy and not finished:  # refused now rather than after training
         check_no_saved_policy(
             args.save_policy, replace=f"remove its {POLICY_FILE} and {ARRAYS_FILE}"
         )
@@ -59,7 +62,9 @@ def _train(args: argparse.Namespace) -> int:
     print(result.summary())
     if args.output:  # written by train
         print(f"wrote {args.output}/config.json, metrics.csv, tensorboard/, summary.txt")
-    if args.save_policy:
+    if finished:
+        print(f"kept {args.save_policy}/policy.json, policy.npz: this run's final policy")
+    elif args.save_policy:
         print(f"wrote {result.save(args.save_policy)}/policy.json, policy.npz")
     if args.render:
         from fppo_jax.render import RenderingUnavailable
@@ -70,6 +75,28 @@ def _train(args: argparse.Namespace) -> int:
             print(f"fppo-jax: not rendered: {error}", file=sys.stderr)
             return 2
     return 0
+
+
+def _holds_final_policy(args: argparse.Namespace) -> bool:
+    """Whether a resumed run's --save-policy directory holds the policy it finished with: the
+    newest checkpoint's run, at that checkpoint's update, its last. Resuming a finished run
+    then changes nothing, where saving again would refuse the directory."""
+    checkpoint_dir, saved_policy = args.checkpoint_dir, Path(args.save_policy) / POLICY_FILE
+    if not (
+        args.resume and checkpoint_dir and Path(checkpoint_dir).is_dir() and saved_policy.exists()
+    ):
+        return False
+    saved = read_policy(args.save_policy)[1]  # checked whole: a damaged one is refused
+    checkpoints = Checkpoints(checkpoint_dir)
+    try:
+        newest = checkpoints.latest_record()
+    finally:
+        checkpoints.close()
+    if newest is None or newest["kind"] != "train":
+        return False
+    config = newest["config"]
+    last = config["total_steps"] // (config["num_envs"] * config["num_steps"])
+    return saved["config"] == config and saved["update"] == newest["update"] == last
 
 
 def _sweep(args: argparse.Namespace) -> int:
@@ -109,7 +136,6 @@ def _sweep(args: argparse.Namespace) -> int:
 
 def _eval(args: argparse.Namespace) -> int:
     from fppo_jax.evaluation import evaluate
-    from fppo_jax.saved_policy import read_policy
 
     if args.render:
         from fppo_jax.render import check_render_path

@@ -203,3 +203,19 @@ def test_merge_joins_settings_and_seeds_from_the_command_line(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["table", str(out), "--ci", "95"])
     assert "a confidence level in (0, 1)" in capsys.readouterr().err
+
+
+def test_a_merge_into_a_directory_another_merge_writes_is_refused(tmp_path, capsys):
+    from fppo_jax.files import DirectoryLock
+
+    two_settings().write(tmp_path / "a")
+    out = tmp_path / "merged"
+    out.mkdir()
+    merging = DirectoryLock(out, "a merged sweep")  # another merge, between its check and write
+    assert main(["merge", str(tmp_path / "a"), "--output", str(out)]) == 2
+    assert f"is writing a merged sweep in {out}" in capsys.readouterr().err
+    assert not (out / "sweep.json").exists()
+    merging.release()
+    assert main(["merge", str(tmp_path / "a"), "--output", str(out)]) == 0
+    assert main(["merge", str(tmp_path / "a"), "--output", str(out)]) == 2
+    assert "already holds a sweep" in capsys.readouterr().err

@@ -22,7 +22,7 @@ from fppo_jax.config import (
 )
 from fppo_jax.distributed import is_main_process
 from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
-from fppo_jax.files import writable_directory
+from fppo_jax.files import DirectoryLock, writable_directory
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
 from fppo_jax.results import SweepResult, merge
 from fppo_jax.saved_policy import (
@@ -190,10 +190,16 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _merge(args: argparse.Namespace) -> int:
-    if (args.output / "sweep.json").exists():
-        raise ValueError(f"{args.output} already holds a sweep; merge into a new directory")
     result = merge([SweepResult.read(directory) for directory in args.directories])
-    result.write(args.output, metrics=list(result.metrics))
+    # Held from the check to the write, as a sweep holds its output: of two merges into one
+    # directory, one writes and the other is refused.
+    lock = DirectoryLock(writable_directory(args.output), "a merged sweep")
+    try:
+        if (args.output / "sweep.json").exists():
+            raise ValueError(f"{args.output} already holds a sweep; merge into a new directory")
+        result.write(args.output, metrics=list(result.metrics))
+    finally:
+        lock.release()
     settings, seeds = len(result.settings), len(result.seeds)
     print(
         f"merged {len(args.directories)} sweeps: {len(result.runs)} runs ({settings} settings, "

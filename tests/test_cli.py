@@ -326,3 +326,25 @@ def test_a_finished_run_resumed_keeps_its_saved_policy(tmp_path, capsys):
     assert main(other) == 2
     err = capsys.readouterr().err
     assert "already holds a saved policy" in err and "compiling" not in err
+
+
+@pytest.mark.parametrize(
+    "name, text, problem",
+    [
+        ("a.json", '{"quiet": "no"}', "a.json: quiet must be true or false, got 'no'"),
+        (
+            "b.json",
+            '{"anneal_learning_rate": 0}',
+            "anneal_learning_rate must be true or false, got 0",
+        ),
+        ("c.json", '{"quiet": null}', "c.json: quiet must be true or false, got None"),
+        ("d.json", '{"seed": 1, "seed": 2}', "d.json cannot be read as settings: seed given "),
+        ("e.yaml", "seed: 1\nseed: 2\n", "e.yaml cannot be read as settings: seed given "),
+    ],
+)
+def test_a_settings_file_s_switches_and_keys_are_read_strictly(
+    tmp_path, capsys, name, text, problem
+):
+    (tmp_path / name).write_text(text)
+    assert main(["train", "--config", str(tmp_path / name)]) == 2
+    assert problem in capsys.readouterr().err

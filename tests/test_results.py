@@ -219,3 +219,17 @@ def test_a_merge_into_a_directory_another_merge_writes_is_refused(tmp_path, caps
     assert main(["merge", str(tmp_path / "a"), "--output", str(out)]) == 0
     assert main(["merge", str(tmp_path / "a"), "--output", str(out)]) == 2
     assert "already holds a sweep" in capsys.readouterr().err
+
+
+def test_table_and_compare_warn_of_an_interval_one_seed_cannot_give(tmp_path, capsys):
+    two_settings(seeds=1).write(tmp_path / "one")
+    two_settings(seeds=2).write(tmp_path / "two")
+    warning = "fppo-jax: warning: {} has 1 run with a final score: its confidence interval cannot"
+    for command in (["table", "--stat", "iqm"], ["compare", "--baseline", "ppo"]):
+        assert main([command[0], str(tmp_path / "one"), *command[1:]]) == 0
+        err = capsys.readouterr().err
+        assert warning.format("ppo") in err and warning.format("fppo-lp α=1.3") in err
+        assert main([command[0], str(tmp_path / "two"), *command[1:]]) == 0
+        assert capsys.readouterr().err == ""
+    assert main(["table", str(tmp_path / "one")]) == 0  # the paper's statistic: no interval
+    assert capsys.readouterr().err == ""

@@ -10,6 +10,8 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from fppo_jax.api import train
 from fppo_jax.checkpoint import Checkpoints
 from fppo_jax.cli.flags import HYPERPARAMETER_HELP, config_overrides, options
@@ -24,7 +26,7 @@ from fppo_jax.distributed import is_main_process
 from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
 from fppo_jax.files import DirectoryLock, writable_directory
 from fppo_jax.objectives import DEFAULTS, EPSILON, VARIANTS
-from fppo_jax.results import SweepResult, merge
+from fppo_jax.results import SweepResult, labels, merge
 from fppo_jax.saved_policy import (
     ARRAYS_FILE,
     POLICY_FILE,
@@ -180,13 +182,31 @@ def _eval(args: argparse.Namespace) -> int:
 def _table(args: argparse.Namespace) -> int:
     result = SweepResult.read(args.directory)
     print(result.table(args.stat, args.endpoint, args.ci))
+    if args.stat != "paper":  # the paper's statistic has no interval
+        _warn_of_missing_intervals(result, args.endpoint)
     return 0
 
 
 def _compare(args: argparse.Namespace) -> int:
     result = SweepResult.read(args.directory)
     print(result.compare(args.baseline, args.endpoint, args.ci))
+    _warn_of_missing_intervals(result, args.endpoint)
     return 0
+
+
+def _warn_of_missing_intervals(result: SweepResult, endpoint: str) -> None:
+    """A line per setting with fewer than two scored runs: a bootstrap resamples a setting's
+    runs, so with one its interval is the point itself (or, with none, empty), and says
+    nothing of how far another seed would land."""
+    for name, scores in zip(labels(result.settings), result.scores(endpoint), strict=True):
+        count = int(np.isfinite(scores).sum())
+        if count < 2:
+            runs = "no run" if count == 0 else "1 run"
+            print(
+                f"fppo-jax: warning: {name} has {runs} with a {endpoint} score: its confidence "
+                "interval cannot be computed (a bootstrap needs 2 runs or more)",
+                file=sys.stderr,
+            )
 
 
 def _merge(args: argparse.Namespace) -> int:

@@ -328,8 +328,8 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
     run them all. The merged grid holds each axis's values from every part. A ``ValueError``
     names the configuration field on which two parts differ and a (setting, seed) run that two
     parts both hold; for the shares of one sweep (``sweep(..., part=(K, N))``), which share one
-    grid, it also names the runs, and the parts, still missing. Metrics not in every part are
-    left out."""
+    grid, it also names the runs, and the parts, still missing, and joins them in the order of
+    their part numbers. Metrics not in every part are left out."""
     if not parts:
         raise ValueError("merge needs at least one sweep")
     first = parts[0]

@@ -55,7 +55,8 @@ def settings_file(path: Path, command: argparse.ArgumentParser) -> dict[str, Any
 
 def _without_repeated_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     """A JSON object, refused if it names a key twice (JSON keeps the last, silently)."""
-    repeated = sorted({key for key, _ in pairs if [k for k, _ in pairs].count(key) > 1})
+    keys = [key for key, _ in pairs]
+    repeated = sorted({str(key) for key in keys if keys.count(key) > 1})
     if repeated:
         raise ValueError(f"{', '.join(repeated)} given more than once")
     return dict(pairs)

@@ -27,7 +27,7 @@ from fppo_jax.checkpoint import (
     DamagedCheckpoint,
 )
 from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters, stack_hyperparameters
-from fppo_jax.driver import TrainingDiverged
+from fppo_jax.driver import StoppedBySignal, TrainingDiverged
 from fppo_jax.envs import TASKS, Environment, make_env
 from fppo_jax.evaluation import evaluate
 from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective, stack
@@ -54,6 +54,7 @@ __all__ = [
     "Policy",
     "Progress",
     "Snapshot",
+    "StoppedBySignal",
     "Surrogate",
     "SweepResult",
     "TrainConfig",

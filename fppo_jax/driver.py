@@ -9,10 +9,13 @@ A sweep's runs train in groups of one size, so every group reuses the one compil
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -61,6 +64,24 @@ class TrainingDiverged(FloatingPointError):
             f"training diverged at update {update} (after {env_steps:,} env steps): the loss or "
             f"the parameters became NaN or infinite.{kept} Lower the learning rate, or check the "
             "environment's observations and rewards."
+        )
+
+
+# What a cluster sends a job it is about to stop: SIGTERM on preemption, at its time limit and
+# on scancel; SIGUSR1 when asked for ahead of the time limit (sbatch --signal=USR1@SECONDS).
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
+
+
+class StoppedBySignal(Exception):
+    """A checkpointed run stopped on SIGTERM or SIGUSR1 at the end of a chunk of updates, its
+    checkpoint written: resuming goes on from there."""
+
+    def __init__(self, signal_number: int, update: int, checkpoint_dir: str | Path):
+        self.signal = signal.Signals(signal_number)
+        self.update = update
+        super().__init__(
+            f"stopped by {self.signal.name} after update {update}, checkpointed in "
+            f"{Path(checkpoint_dir).absolute()}; resume (--resume) to go on from there"
         )
 
 
@@ -311,6 +332,15 @@ class _Chunks:
         return [*blocks, (runs, {k: v[: len(runs)] for k, v in point.current.items()})]
 
     def train(self) -> Outcome:
+        # Without checkpoints a signal's default (the end of the process) loses nothing more
+        # than stopping would. Joined processes would each see a signal at another chunk, and
+        # JAX's preemption notifier holds SIGTERM there, set from C where Python cannot see it
+        # to put it back.
+        catch = self.options.checkpoint_dir is not None and not jax.distributed.is_initialized()
+        with _signals_caught(STOP_SIGNALS if catch else ()) as self.signalled:
+            return self._train_groups()
+
+    def _train_groups(self) -> Outcome:
         first_group, start, resumed_from = 0, None, 0
         if self.restored is not None:
             point = self.restored.point()
@@ -332,7 +362,8 @@ class _Chunks:
         )
         self._report(first_group, resumed_from, None)
         state, stopped_at = None, None
-        for group in range(first_group, -(-self.plan.num_runs // self.size)):
+        groups = -(-self.plan.num_runs // self.size)
+        for group in range(first_group, groups):
             keys, hps = _group(self.plan, group, self.size)
             if group == first_group and start is not None:
                 initial, rows = start[0], [start[1]]
@@ -353,6 +384,9 @@ class _Chunks:
                 if stop:
                     stopped_at = update
                     break
+                if self.signalled and (update < self.num_updates or group < groups - 1):
+                    self.checkpoints.wait()
+                    raise StoppedBySignal(self.signalled[0], update, self.options.checkpoint_dir)
             kept = slice(0, min(self.size, self.plan.num_runs - group * self.size))
             metrics = concatenate(rows)
             self.finished.append(
@@ -460,6 +494,25 @@ class _Chunks:
         if self.report:
             returns = None if metrics is None else metrics["average_return"][..., -1]
             self.report(self.counter.progress(group, update, returns))
+
+
+@contextlib.contextmanager
+def _signals_caught(numbers: tuple[int, ...]) -> Iterator[list[int]]:
+    """While the block runs, `numbers` are recorded in the list it is given instead of acting,
+    and their handlers are then restored. Python handles signals in the main thread alone; and
+    a signal whose handler was not installed from Python is left to it, as it could not be
+    restored."""
+    received: list[int] = []
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for number in numbers:
+            if signal.getsignal(number) is not None:
+                previous[number] = signal.signal(number, lambda n, _: received.append(n))
+    try:
+        yield received
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 def _multiple(size: int, of: int) -> int:

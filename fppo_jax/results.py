@@ -328,8 +328,8 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
     run them all. The merged grid holds each axis's values from every part. A ``ValueError``
     names the configuration field on which two parts differ and a (setting, seed) run that two
     parts both hold; for the shares of one sweep (``sweep(..., part=(K, N))``), which share one
-    grid, it also names the runs, and the parts, still missing. Metrics not in every part are
-    left out."""
+    grid, it also names the runs, and the parts, still missing, and joins them in the order of
+    their part numbers. Metrics not in every part are left out."""
     if not parts:
         raise ValueError("merge needs at least one sweep")
     first = parts[0]
@@ -344,6 +344,10 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
                 f"{other.get(field)!r}, sweep 1's {common.get(field)!r}"
             )
     own = _own_surrogates(parts)
+    if all(part.config.get("part") for part in parts):
+        # The shares of one split in their sweep's run order, whatever order they were named in:
+        # a shell lists part-10 before part-2, and the order of the runs is the order of curves.csv.
+        parts = sorted(parts, key=lambda part: part.config["part"][0])
     settings: list[dict[str, Any]] = []
     runs: list[dict[str, Any]] = []
     for part in parts:
@@ -429,8 +433,10 @@ def _check_shares(
     ]
     if missing:
         more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
-        which = f"parts {', '.join(map(str, missing_parts))} of {count} are missing: " * bool(
-            missing_parts
+        spelled = ", ".join(f"--part {k}/{count}" for k in missing_parts)
+        which = (
+            f"parts {', '.join(map(str, missing_parts))} of {count} ({spelled}) are missing: "
+            * bool(missing_parts)
         )
         raise ValueError(f"{which}the sweep's runs {', '.join(missing[:5])}{more} are not there")
 

@@ -308,3 +308,43 @@ def test_namespaced_environments_train_and_sweep_from_the_command_line(tmp_path,
     assert "2 runs on gymnax/Pendulum-v1" in capsys.readouterr().out
     assert main(["train", "--env", "nope/CartPole-v1", "--quiet"]) == 2
     assert "unknown environment 'nope/CartPole-v1'" in capsys.readouterr().err
+
+
+def test_a_finished_run_resumed_keeps_its_saved_policy(tmp_path, capsys):
+    flags = ["train", "--env", "cartpole", "--variant", "ppo", "--steps", "256", *TINY_FLAGS]
+    flags += ["--checkpoint-dir", str(tmp_path / "ckpt"), "--save-policy", str(tmp_path / "p")]
+    assert main(flags) == 0
+    files = {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in (tmp_path / "p").iterdir()}
+    capsys.readouterr()
+    assert main([*flags, "--resume"]) == 0
+    assert "kept " in capsys.readouterr().out
+    assert {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in (tmp_path / "p").iterdir()} == (
+        files
+    )
+    # Another run's policy is refused before compiling, resumed or not.
+    other = [*flags, "--seed", "1", "--checkpoint-dir", str(tmp_path / "other"), "--resume"]
+    assert main(other) == 2
+    err = capsys.readouterr().err
+    assert "already holds a saved policy" in err and "compiling" not in err
+
+
+@pytest.mark.parametrize(
+    "name, text, problem",
+    [
+        ("a.json", '{"quiet": "no"}', "a.json: quiet must be true or false, got 'no'"),
+        (
+            "b.json",
+            '{"anneal_learning_rate": 0}',
+            "anneal_learning_rate must be true or false, got 0",
+        ),
+        ("c.json", '{"quiet": null}', "c.json: quiet must be true or false, got None"),
+        ("d.json", '{"seed": 1, "seed": 2}', "d.json cannot be read as settings: seed given "),
+        ("e.yaml", "seed: 1\nseed: 2\n", "e.yaml cannot be read as settings: seed given "),
+    ],
+)
+def test_a_settings_file_s_switches_and_keys_are_read_strictly(
+    tmp_path, capsys, name, text, problem
+):
+    (tmp_path / name).write_text(text)
+    assert main(["train", "--config", str(tmp_path / name)]) == 2
+    assert problem in capsys.readouterr().err

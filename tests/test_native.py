@@ -247,3 +247,15 @@ def test_the_native_backend_leaves_the_process_environment_as_it_was():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize(
+    "given, cores", [(None, 64), ("2", 2), ("128", 64), ("0", 64), ("two", 64), ("", 64)]
+)
+def test_threads_follow_slurm_s_cpus_per_task_on_a_node_left_unbound(monkeypatch, given, cores):
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(64)), raising=False)
+    if given is None:
+        monkeypatch.delenv("SLURM_CPUS_PER_TASK", raising=False)
+    else:
+        monkeypatch.setenv("SLURM_CPUS_PER_TASK", given)
+    assert native.usable_cores() == cores

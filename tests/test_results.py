@@ -138,6 +138,44 @@ def test_parts_that_ran_other_settings_merge_and_their_grids_join():
         merge(shares)
 
 
+def shares(whole: SweepResult, count: int) -> list[SweepResult]:
+    """`whole`'s runs split as ``sweep(..., part=(K, count))`` splits them, K = 1 … count."""
+    from fppo_jax.sweep import part_bounds
+
+    made = []
+    for k in range(1, count + 1):
+        kept = list(range(*part_bounds((k, count), len(whole.runs))))
+        runs = [whole.runs[i] for i in kept]
+        made.append(
+            dataclasses.replace(
+                whole,
+                runs=runs,
+                metrics={name: values[kept] for name, values in whole.metrics.items()},
+                diverged=np.asarray(whole.diverged)[kept],
+                config={**whole.config, "part": [k, count]},
+            )
+        )
+    return made
+
+
+def test_merge_orders_the_parts_of_a_split_by_their_number(tmp_path, capsys):
+    whole = two_settings()
+    whole.write(tmp_path / "whole")
+    for k, part in enumerate(shares(whole, 11), start=1):
+        part.write(tmp_path / f"part-{k}")
+    named = sorted(str(path) for path in tmp_path.glob("part-*"))  # as a shell lists them
+    assert named[:3] == [str(tmp_path / f"part-{k}") for k in (1, 10, 11)]
+    assert main(["merge", *named, "--output", str(tmp_path / "merged")]) == 0
+    merged = (tmp_path / "merged" / "curves.csv").read_bytes()
+    assert merged == (tmp_path / "whole" / "curves.csv").read_bytes()
+    assert SweepResult.read(tmp_path / "merged").runs == whole.runs
+
+    capsys.readouterr()
+    assert main(["merge", *named[2:], "--output", str(tmp_path / "partial")]) == 2
+    error = capsys.readouterr().err
+    assert "parts 1, 10 of 11 (--part 1/11, --part 10/11) are missing" in error
+
+
 def test_merge_joins_settings_and_seeds_from_the_command_line(tmp_path, capsys):
     first = two_settings()
     second = dataclasses.replace(
@@ -165,3 +203,33 @@ def test_merge_joins_settings_and_seeds_from_the_command_line(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["table", str(out), "--ci", "95"])
     assert "a confidence level in (0, 1)" in capsys.readouterr().err
+
+
+def test_a_merge_into_a_directory_another_merge_writes_is_refused(tmp_path, capsys):
+    from fppo_jax.files import DirectoryLock
+
+    two_settings().write(tmp_path / "a")
+    out = tmp_path / "merged"
+    out.mkdir()
+    merging = DirectoryLock(out, "a merged sweep")  # another merge, between its check and write
+    assert main(["merge", str(tmp_path / "a"), "--output", str(out)]) == 2
+    assert f"is writing a merged sweep in {out}" in capsys.readouterr().err
+    assert not (out / "sweep.json").exists()
+    merging.release()
+    assert main(["merge", str(tmp_path / "a"), "--output", str(out)]) == 0
+    assert main(["merge", str(tmp_path / "a"), "--output", str(out)]) == 2
+    assert "already holds a sweep" in capsys.readouterr().err
+
+
+def test_table_and_compare_warn_of_an_interval_one_seed_cannot_give(tmp_path, capsys):
+    two_settings(seeds=1).write(tmp_path / "one")
+    two_settings(seeds=2).write(tmp_path / "two")
+    warning = "fppo-jax: warning: {} has 1 run with a final score: its confidence interval cannot"
+    for command in (["table", "--stat", "iqm"], ["compare", "--baseline", "ppo"]):
+        assert main([command[0], str(tmp_path / "one"), *command[1:]]) == 0
+        err = capsys.readouterr().err
+        assert warning.format("ppo") in err and warning.format("fppo-lp α=1.3") in err
+        assert main([command[0], str(tmp_path / "two"), *command[1:]]) == 0
+        assert capsys.readouterr().err == ""
+    assert main(["table", str(tmp_path / "one")]) == 0  # the paper's statistic: no interval
+    assert capsys.readouterr().err == ""

@@ -194,13 +194,78 @@ def test_parts_share_the_runs_in_run_order():
         part_bounds((1, 3), 2)
 
 
-def test_a_slurm_array_task_chooses_its_part():
-    from fppo_jax.cli.flags import slurm_part
+def slurm_array(task, first, last, step, count):
+    from fppo_jax.cli.slurm import ARRAY_VARIABLES
 
-    assert slurm_part({}) is None
-    env = {"SLURM_ARRAY_TASK_ID": "3", "SLURM_ARRAY_TASK_COUNT": "4", "SLURM_ARRAY_TASK_MIN": "0"}
-    assert slurm_part(env) == (4, 4)
-    assert slurm_part({**env, "SLURM_ARRAY_TASK_MIN": "1"}) == (3, 4)
+    values = (task, first, last, step, count)
+    return {name: str(value) for name, value in zip(ARRAY_VARIABLES, values, strict=True)}
+
+
+def test_a_slurm_array_task_takes_its_index_among_the_array_s_tasks():
+    from fppo_jax.cli.slurm import array_part
+
+    stepped = [array_part(slurm_array(task, 0, 6, 2, 4)) for task in (0, 2, 4, 6)]
+    assert stepped == [(1, 4), (2, 4), (3, 4), (4, 4)]  # --array=0-6:2
+    assert [array_part(slurm_array(task, 1, 8, 1, 8)) for task in (1, 8)] == [(1, 8), (8, 8)]
+    assert array_part(slurm_array(3, 0, 7, 1, 8)) == (4, 8)
+
+
+@pytest.mark.parametrize(
+    "changed, problem",
+    [
+        ({}, "not a SLURM job array task"),
+        ({"SLURM_ARRAY_TASK_ID": "abc"}, "SLURM_ARRAY_TASK_ID is not a whole number"),
+        ({"SLURM_ARRAY_TASK_ID": ""}, "SLURM_ARRAY_TASK_ID is not a whole number"),
+        ({"SLURM_ARRAY_TASK_MIN": "-1"}, "SLURM_ARRAY_TASK_MIN is not a whole number"),
+        ({"SLURM_ARRAY_TASK_COUNT": "0"}, "must be at least 1"),
+        ({"SLURM_ARRAY_TASK_STEP": None}, "set SLURM_ARRAY_TASK_ID but not SLURM_ARRAY_TASK_STEP"),
+        ({"SLURM_ARRAY_TASK_COUNT": "5"}, "not one evenly stepped range"),
+        ({"SLURM_ARRAY_TASK_ID": "3"}, "SLURM_ARRAY_TASK_ID is not one of the array's indices"),
+        ({"SLURM_ARRAY_TASK_ID": "8"}, "SLURM_ARRAY_TASK_ID is not one of the array's indices"),
+    ],
+)
+def test_slurm_variables_that_name_no_part_are_refused_naming_them(changed, problem):
+    from fppo_jax.cli.slurm import array_part
+
+    environ = {} if not changed else {**slurm_array(2, 0, 6, 2, 4), **changed}
+    environ = {name: text for name, text in environ.items() if text is not None}
+    with pytest.raises(ValueError, match=problem) as refused:
+        array_part(environ)
+    message = str(refused.value)
+    assert message.startswith("--part auto cannot take this task's part from SLURM's job array")
+    assert message.endswith("pass --part K/N instead (the K-th of N parts)")
+    assert all(f"{name}={text!r}" in message for name, text in environ.items())
+
+
+def test_a_resubmitted_array_task_is_refused_rather_than_training_another_part():
+    from fppo_jax.cli.slurm import array_part
+
+    with pytest.raises(ValueError, match=r"an array of one task.*SLURM_ARRAY_TASK_ID='2'"):
+        array_part(slurm_array(2, 2, 2, 1, 1))  # sbatch --array=2
+    with pytest.raises(ValueError, match="the array starts at 3, not 0 or 1"):
+        array_part(slurm_array(5, 3, 5, 2, 2))  # sbatch --array=3,5
+
+
+def test_a_sweep_is_split_over_a_slurm_array_only_when_asked(monkeypatch, capsys):
+    import fppo_jax.cli.commands as commands
+
+    asked = []
+
+    def sweep_of(*args, part, **kwargs):
+        asked.append(part)
+        raise ValueError("stopped before training")
+
+    monkeypatch.setattr(commands, "sweep", sweep_of)
+    for name, text in slurm_array(4, 0, 6, 2, 4).items():
+        monkeypatch.setenv(name, text)
+    flags = ["sweep", "--env", "cartpole", "--seeds", "2"]
+    assert main(flags) == 2
+    assert "SLURM array task 4 trains the whole sweep; --part auto" in capsys.readouterr().err
+    assert main([*flags, "--part", "auto"]) == 2 and main([*flags, "--part", "2/3"]) == 2
+    assert asked == [None, (3, 4), (2, 3)]
+    monkeypatch.setenv("SLURM_ARRAY_TASK_COUNT", "1")
+    assert main([*flags, "--part", "auto"]) == 2
+    assert "SLURM_ARRAY_TASK_COUNT='1'" in capsys.readouterr().err and len(asked) == 3
 
 
 def test_two_parts_in_two_processes_merge_into_the_one_process_sweep(tmp_path, capsys):
@@ -224,7 +289,8 @@ def test_two_parts_in_two_processes_merge_into_the_one_process_sweep(tmp_path, c
     assert part2.config["part"] == [2, 2] and part2.seeds == [0, 1, 2]
     assert [(r["setting"], r["seed"]) for r in part2.runs] == [(1, 0), (1, 1), (1, 2)]
 
-    with pytest.raises(ValueError, match=r"parts 2 of 2 are missing: the sweep's runs fppo-lp"):
+    missing = r"parts 2 of 2 \(--part 2/2\) are missing: the sweep's runs fppo-lp"
+    with pytest.raises(ValueError, match=missing):
         merge([SweepResult.read(tmp_path / "part1")])
     parts = [str(tmp_path / "part1"), str(tmp_path / "part2")]
     assert main(["merge", *parts, "--output", str(tmp_path / "whole")]) == 0

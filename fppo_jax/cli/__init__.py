@@ -21,7 +21,7 @@ from fppo_jax.cli.flags import own_surrogates, surrogates_named
 from fppo_jax.cli.parser import build_parser
 from fppo_jax.cli.settings import check_settings, settings_file
 from fppo_jax.distributed import initialize
-from fppo_jax.driver import TrainingDiverged
+from fppo_jax.driver import StoppedBySignal, TrainingDiverged
 
 __all__ = ["build_parser", "main"]
 
@@ -63,6 +63,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         ) as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
+        except StoppedBySignal as stopped:
+            print(f"fppo-jax: {stopped}", file=sys.stderr)
+            # What a shell reports for a program the signal ended: a job script tells a time
+            # limit's warning (SIGUSR1, 138) from a preemption or scancel (SIGTERM, 143).
+            return 128 + stopped.signal
 
 
 def _variants(variant: object) -> list[object]:

@@ -10,8 +10,12 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from fppo_jax.api import train
-from fppo_jax.cli.flags import config_overrides, hyperparameters_given, options, slurm_part
+from fppo_jax.checkpoint import Checkpoints
+from fppo_jax.cli.flags import config_overrides, hyperparameters_given, options
+from fppo_jax.cli.slurm import array_part
 from fppo_jax.config import (
     PRESETS,
     TABLE2,
@@ -20,14 +24,15 @@ from fppo_jax.config import (
 )
 from fppo_jax.distributed import is_main_process
 from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
-from fppo_jax.files import writable_directory
+from fppo_jax.files import DirectoryLock, writable_directory
 from fppo_jax.objectives import BUILTINS, EPSILON
-from fppo_jax.results import SweepResult, merge
+from fppo_jax.results import SweepResult, labels, merge
 from fppo_jax.saved_policy import (
     ARRAYS_FILE,
     POLICY_FILE,
     check_no_saved_policy,
     load_policy,
+    read_policy,
 )
 from fppo_jax.sweep import sweep
 
@@ -38,7 +43,8 @@ def _train(args: argparse.Namespace) -> int:
 
         check_render_path(args.render)
         check_renderable(args.env)
-    if args.save_policy:  # refused now rather than after training
+    finished = args.save_policy is not None and _holds_final_policy(args)
+    if args.save_policy and not finished:  # refused now rather than after training
         check_no_saved_policy(
             args.save_policy, replace=f"remove its {POLICY_FILE} and {ARRAYS_FILE}"
         )
@@ -57,7 +63,9 @@ def _train(args: argparse.Namespace) -> int:
     print(result.summary())
     if args.output:  # written by train
         print(f"wrote {args.output}/config.json, metrics.csv, tensorboard/, summary.txt")
-    if args.save_policy:
+    if finished:
+        print(f"kept {args.save_policy}/policy.json, policy.npz: this run's final policy")
+    elif args.save_policy:
         print(f"wrote {result.save(args.save_policy)}/policy.json, policy.npz")
     if args.render:
         from fppo_jax.render import RenderingUnavailable
@@ -70,9 +78,37 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _holds_final_policy(args: argparse.Namespace) -> bool:
+    """Whether a resumed run's --save-policy directory holds the policy it finished with: the
+    newest checkpoint's run, at that checkpoint's update, its last. Resuming a finished run
+    then changes nothing, where saving again would refuse the directory."""
+    checkpoint_dir, saved_policy = args.checkpoint_dir, Path(args.save_policy) / POLICY_FILE
+    if not (
+        args.resume and checkpoint_dir and Path(checkpoint_dir).is_dir() and saved_policy.exists()
+    ):
+        return False
+    saved = read_policy(args.save_policy)[1]  # checked whole: a damaged one is refused
+    checkpoints = Checkpoints(checkpoint_dir)
+    try:
+        newest = checkpoints.latest_record()
+    finally:
+        checkpoints.close()
+    if newest is None or newest["kind"] != "train":
+        return False
+    config = newest["config"]
+    last = config["total_steps"] // (config["num_envs"] * config["num_steps"])
+    return saved["config"] == config and saved["update"] == newest["update"] == last
+
+
 def _sweep(args: argparse.Namespace) -> int:
     grid = {"variant": args.variant, **hyperparameters_given(args)}
-    part = args.part or slurm_part()
+    part = array_part() if args.part == "auto" else args.part
+    if part is None and "SLURM_ARRAY_TASK_ID" in os.environ and is_main_process():
+        print(
+            f"fppo-jax: note: SLURM array task {os.environ['SLURM_ARRAY_TASK_ID']} trains the "
+            "whole sweep; --part auto would train this task's share of it",
+            file=sys.stderr,
+        )
     result = sweep(
         args.env,
         grid,
@@ -100,7 +136,6 @@ def _sweep(args: argparse.Namespace) -> int:
 
 def _eval(args: argparse.Namespace) -> int:
     from fppo_jax.evaluation import evaluate
-    from fppo_jax.saved_policy import read_policy
 
     if args.render:
         from fppo_jax.render import check_render_path
@@ -145,20 +180,44 @@ def _eval(args: argparse.Namespace) -> int:
 def _table(args: argparse.Namespace) -> int:
     result = SweepResult.read(args.directory)
     print(result.table(args.stat, args.endpoint, args.ci))
+    if args.stat != "paper":  # the paper's statistic has no interval
+        _warn_of_missing_intervals(result, args.endpoint)
     return 0
 
 
 def _compare(args: argparse.Namespace) -> int:
     result = SweepResult.read(args.directory)
     print(result.compare(args.baseline, args.endpoint, args.ci))
+    _warn_of_missing_intervals(result, args.endpoint)
     return 0
 
 
+def _warn_of_missing_intervals(result: SweepResult, endpoint: str) -> None:
+    """A line per setting with fewer than two scored runs: a bootstrap resamples a setting's
+    runs, so with one its interval is the point itself (or, with none, empty), and says
+    nothing of how far another seed would land."""
+    for name, scores in zip(labels(result.settings), result.scores(endpoint), strict=True):
+        count = int(np.isfinite(scores).sum())
+        if count < 2:
+            runs = "no run" if count == 0 else "1 run"
+            print(
+                f"fppo-jax: warning: {name} has {runs} with a {endpoint} score: its confidence "
+                "interval cannot be computed (a bootstrap needs 2 runs or more)",
+                file=sys.stderr,
+            )
+
+
 def _merge(args: argparse.Namespace) -> int:
-    if (args.output / "sweep.json").exists():
-        raise ValueError(f"{args.output} already holds a sweep; merge into a new directory")
     result = merge([SweepResult.read(directory) for directory in args.directories])
-    result.write(args.output, metrics=list(result.metrics))
+    # Held from the check to the write, as a sweep holds its output: of two merges into one
+    # directory, one writes and the other is refused.
+    lock = DirectoryLock(writable_directory(args.output), "a merged sweep")
+    try:
+        if (args.output / "sweep.json").exists():
+            raise ValueError(f"{args.output} already holds a sweep; merge into a new directory")
+        result.write(args.output, metrics=list(result.metrics))
+    finally:
+        lock.release()
     settings, seeds = len(result.settings), len(result.seeds)
     print(
         f"merged {len(args.directories)} sweeps: {len(result.runs)} runs ({settings} settings, "

@@ -8,8 +8,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any, NoReturn
@@ -55,23 +54,18 @@ seeds = _argument(parse_seeds)
 
 
 @_argument
-def part(text: str) -> tuple[int, int]:
-    """``K/N``: the K-th of N shares of a sweep."""
+def part(text: str) -> tuple[int, int] | str:
+    """``K/N``: the K-th of N shares of a sweep; or ``auto``: a SLURM job array task's share,
+    read from SLURM's variables when the sweep starts (``cli.slurm.array_part``)."""
+    if text == "auto":
+        return text
     try:
         k, n = (int(x) for x in text.split("/"))
     except ValueError:
-        raise ValueError(f"expected K/N such as 2/8, got {text!r}") from None
+        raise ValueError(f"expected K/N such as 2/8, or auto, got {text!r}") from None
     if not 1 <= k <= n:
         raise ValueError(f"expected K/N with 1 <= K <= N, got {text!r}")
     return k, n
-
-
-def slurm_part(environ: Mapping[str, str] = os.environ) -> tuple[int, int] | None:
-    """The part of a SLURM job array's task: (its index from 1, the array's task count)."""
-    if "SLURM_ARRAY_TASK_ID" not in environ or "SLURM_ARRAY_TASK_COUNT" not in environ:
-        return None
-    task, first = int(environ["SLURM_ARRAY_TASK_ID"]), int(environ.get("SLURM_ARRAY_TASK_MIN", 0))
-    return task - first + 1, int(environ["SLURM_ARRAY_TASK_COUNT"])
 
 
 @_argument

@@ -105,8 +105,9 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
         type=part,
         metavar="K/N",
         help="train only the K-th of N equal shares of the sweep's runs (its run order), e.g. "
-        "one node's share; fppo-jax merge joins the parts. Under a SLURM job array, without "
-        "--part: the array task's share (SLURM_ARRAY_TASK_ID of SLURM_ARRAY_TASK_COUNT)",
+        "one node's share; fppo-jax merge joins the parts. auto: a SLURM job array task's "
+        "share, the array being the split (K = (SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN) / "
+        "SLURM_ARRAY_TASK_STEP + 1, N = SLURM_ARRAY_TASK_COUNT); without --part, no split",
     )
     grid.add_argument(
         "--data-parallel",

@@ -21,11 +21,9 @@ def settings_file(path: Path) -> dict[str, Any]:
     text = Path(path).read_text()
     try:
         if Path(path).suffix in (".yaml", ".yml"):
-            import yaml
-
-            settings = yaml.safe_load(text)
+            settings = _yaml_without_repeated_keys(text)
         else:
-            settings = json.loads(text)
+            settings = json.loads(text, object_pairs_hook=_without_repeated_keys)
     except ImportError:
         raise ValueError(f"{path}: reading YAML needs PyYAML (pip install pyyaml)") from None
     except Exception as error:
@@ -77,3 +75,32 @@ def check_settings(path: Path, settings: dict[str, Any], command: argparse.Argum
             f"{path}: unknown setting{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
             f"valid: {', '.join(sorted(valid))}"
         )
+    # A flag's default is not parsed as the flag is unless it is text, so a switch given "no"
+    # would be on: a switch's setting must be a boolean (or the flag's own null default).
+    for action in command._actions:
+        if action.nargs == 0 and action.dest in settings:
+            value = settings[action.dest]
+            if not isinstance(value, bool) and (value is not None or action.default is not None):
+                raise ValueError(f"{path}: {action.dest} must be true or false, got {value!r}")
+
+
+def _without_repeated_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object, refused if it names a key twice (JSON keeps the last, silently)."""
+    keys = [key for key, _ in pairs]
+    repeated = sorted({str(key) for key in keys if keys.count(key) > 1})
+    if repeated:
+        raise ValueError(f"{', '.join(repeated)} given more than once")
+    return dict(pairs)
+
+
+def _yaml_without_repeated_keys(text: str) -> Any:
+    """YAML's settings, refused if a mapping names a key twice (PyYAML keeps the last)."""
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        def construct_mapping(self, node: Any, deep: bool = False) -> dict[Any, Any]:
+            keys = [self.construct_object(key, deep=deep) for key, _ in node.value]
+            _without_repeated_keys([(key, None) for key in keys])
+            return super().construct_mapping(node, deep=deep)
+
+    return yaml.load(text, Loader=Loader)

@@ -166,12 +166,18 @@ class NativeEnvironment(OnHost):
 
 
 def usable_cores() -> int:
-    """The cores this process may run on: a cluster job's share (its CPU affinity), not the
-    whole node's count."""
+    """The cores this process may run on: a cluster job's share (its CPU affinity, and at most
+    SLURM's ``SLURM_CPUS_PER_TASK``), not the whole node's count."""
     try:
-        return len(os.sched_getaffinity(0))
+        cores = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
+        cores = os.cpu_count() or 1
+    # A cluster that binds no task to its cores (SLURM's task/none plugin) leaves the whole
+    # node in the affinity; the task's share is then SLURM's count alone.
+    given = os.environ.get("SLURM_CPUS_PER_TASK", "")
+    if given.isascii() and given.isdigit() and int(given) > 0:
+        return min(cores, int(given))
+    return cores
 
 
 def _step_pool(

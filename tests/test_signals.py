@@ -1,0 +1,87 @@
+"""A cluster's stop signals: a checkpointed run stops at the end of its chunk of updates,
+checkpointed, and leaves the process's signal handlers as it found them."""
+
+import os
+import signal
+
+import pytest
+
+import fppo_jax
+import fppo_jax.driver as driver
+from fppo_jax import train
+from fppo_jax.cli import main
+from fppo_jax.saved_policy import read_policy
+
+FLAGS = ["train", "--env", "cartpole", "--variant", "ppo", "--steps", "512", "--num-envs", "4"]
+FLAGS += ["--num-steps", "32", "--minibatches", "4", "--epochs", "2", "--checkpoint-every", "1"]
+
+
+def signal_after_first_chunk(monkeypatch, number):
+    """The process sends itself `number` while the first chunk of updates is being handled."""
+    run_chunks = driver.run_chunks
+
+    def chunks_then_signal(*args):
+        for index, chunk in enumerate(run_chunks(*args)):
+            if index == 0:
+                os.kill(os.getpid(), number)
+            yield chunk
+
+    monkeypatch.setattr(driver, "run_chunks", chunks_then_signal)
+
+
+@pytest.mark.parametrize("number, status", [(signal.SIGTERM, 143), (signal.SIGUSR1, 138)])
+def test_a_stop_signal_checkpoints_the_chunk_and_exits_for_a_requeue(
+    tmp_path, monkeypatch, capsys, number, status
+):
+    before = {n: signal.getsignal(n) for n in driver.STOP_SIGNALS}
+    signal_after_first_chunk(monkeypatch, number)
+    flags = [*FLAGS, "--checkpoint-dir", str(tmp_path)]
+    assert main(flags) == status
+    assert {n: signal.getsignal(n) for n in driver.STOP_SIGNALS} == before
+    error = capsys.readouterr().err
+    assert f"stopped by {signal.Signals(number).name} after update 1, checkpointed in" in error
+    assert read_policy(tmp_path)[1]["update"] == 1
+
+    monkeypatch.undo()
+    assert main([*flags, "--resume"]) == 0
+    assert "updates   4 × 128 samples" in capsys.readouterr().out
+
+
+def test_signals_are_caught_only_while_a_checkpointed_run_trains(tmp_path, tiny):
+    seen = []
+
+    def handlers(snapshot):
+        seen.append(signal.getsignal(signal.SIGTERM))
+
+    before = signal.getsignal(signal.SIGTERM)
+    train("cartpole", "ppo", total_steps=256, callback=handlers, **tiny)
+    assert seen[-1] is before  # nothing to save: the signal's own action is kept
+    train("cartpole", "ppo", total_steps=256, callback=handlers, checkpoint_dir=tmp_path, **tiny)
+    assert seen[-1] is not before and signal.getsignal(signal.SIGTERM) is before
+
+
+def test_a_signal_in_the_last_chunk_lets_the_run_finish(tmp_path, tiny):
+    def signal_at_the_end(snapshot):
+        if snapshot.update == 2:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    result = train(
+        "cartpole",
+        "ppo",
+        total_steps=256,
+        checkpoint_dir=tmp_path,
+        callback=signal_at_the_end,
+        checkpoint_every=1,
+        **tiny,
+    )
+    assert result.metrics["env_steps"].shape == (2,)
+    with pytest.raises(fppo_jax.StoppedBySignal, match="after update 1"):
+        train(
+            "cartpole",
+            "ppo",
+            total_steps=256,
+            checkpoint_dir=tmp_path / "b",
+            checkpoint_every=1,
+            callback=lambda s: os.kill(os.getpid(), signal.SIGTERM),
+            **tiny,
+        )

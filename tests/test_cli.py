@@ -82,7 +82,7 @@ def test_unknown_variant_is_rejected_by_the_parser(capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["train", "--variant", "sppo"])
     assert exit_info.value.code == 2
-    assert "invalid choice: 'sppo'" in capsys.readouterr().err
+    assert "unknown variant 'sppo'; valid variants: ppo," in capsys.readouterr().err
 
 
 def test_version_is_the_installed_package_s(capsys):

@@ -143,7 +143,7 @@ def surrogates_named(argv: Sequence[str]) -> list[Surrogate]:
             named += argv[i + 1].split(",")
         elif token.startswith("--variant="):
             named += token.partition("=")[2].split(",")
-    return own_surrogates(named)
+    return own_surrogates([name for name in named if ":" in name])  # the rest: the parser's
 
 
 def own_surrogates(variants: Sequence[object]) -> list[Surrogate]:

@@ -15,12 +15,8 @@ import warnings
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from fppo_jax.checkpoint import CheckpointsUnavailable, DamagedCheckpoint
-from fppo_jax.cli.commands import COMMANDS
 from fppo_jax.cli.parser import build_parser
 from fppo_jax.cli.settings import settings_file
-from fppo_jax.distributed import initialize
-from fppo_jax.driver import TrainingDiverged
 
 __all__ = ["build_parser", "main"]
 
@@ -36,6 +32,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
         args = parser.parse_args(argv)
+    # What the commands need (the trainer, checkpoints, JAX's devices) only now: --help and a
+    # mistyped flag answer without waiting for it.
+    from fppo_jax.checkpoint import CheckpointsUnavailable
+    from fppo_jax.cli.commands import COMMANDS
+    from fppo_jax.distributed import initialize
+    from fppo_jax.driver import TrainingDiverged
+
     if getattr(args, "distributed", False):
         initialize()
     with _warnings_as_lines():
@@ -57,6 +60,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _warnings_as_lines() -> Iterator[None]:
     """A damaged checkpoint reported in a line of the command's own, as its errors are; any
     other warning as before."""
+    from fppo_jax.checkpoint import DamagedCheckpoint
+
     with warnings.catch_warnings():
         show = warnings.showwarning
 

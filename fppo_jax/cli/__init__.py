@@ -34,6 +34,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     # What the commands need (the trainer, checkpoints, JAX's devices) only now: --help and a
     # mistyped flag answer without waiting for it.
+    from fppo_jax import compile_cache
     from fppo_jax.checkpoint import CheckpointsUnavailable
     from fppo_jax.cli.commands import COMMANDS
     from fppo_jax.distributed import initialize
@@ -41,6 +42,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if getattr(args, "distributed", False):
         initialize()
+    compile_cache.enable()
     with _warnings_as_lines():
         try:
             return COMMANDS[args.command](args)

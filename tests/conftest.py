@@ -31,8 +31,10 @@ LONGEST_FIRST = (
     "test_study.py",
     "test_trainer.py",
     "test_saved_policy.py",
+    "test_compile_cache.py",
     "test_evaluation.py",
     "test_gymnasium.py",
+    "test_bench_startup.py",
 )
 
 

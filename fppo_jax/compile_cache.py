@@ -31,10 +31,11 @@ from jax.experimental.compilation_cache import compilation_cache
 ENVIRONMENT_VARIABLE = "FPPO_JAX_CACHE_DIR"
 OFF = ("", "off")
 # Bounded, so that JAX locks each entry it reads or writes (see above) and old versions'
-# entries do not pile up: enough for many programs (the README's first run takes about 1 MB).
+# entries do not pile up: room for thousands of programs (the README's first run keeps two,
+# half a megabyte).
 MAX_SIZE = 2 * 1024**3
-# JAX's default skips programs compiled in under a second; starting again pays for each of
-# them, and a short run compiles a few (evaluation, the policy, the first reset).
+# JAX's default keeps only programs compiled in a second or more: a run's initialisation takes
+# about that on a fast CPU, and the small runs of tests and notebooks less.
 MIN_COMPILE_SECONDS = 0.1
 
 _ours: str | None = None  # the directory this module gave JAX, if any

@@ -14,6 +14,7 @@ import jaxlib
 from conftest import TINY
 
 from fppo_jax import compile_cache
+from fppo_jax.cli import build_parser
 
 ROOT = Path(__file__).resolve().parents[1]
 VERSIONS = f"jax-{jax.__version__}-jaxlib-{jaxlib.__version__}"
@@ -91,6 +92,10 @@ def test_the_command_line_turns_it_on(tmp_path):
     assert (where / VERSIONS).is_dir()
 
 
+def test_the_command_lines_help_names_the_switch():
+    assert "FPPO_JAX_CACHE_DIR=off" in " ".join(build_parser().format_help().split())
+
+
 def test_a_cache_directory_given_to_jax_is_kept(tmp_path):
     theirs, ours = tmp_path / "theirs", tmp_path / "ours"
     check = TRAIN + textwrap.dedent("""
@@ -107,6 +112,7 @@ def test_a_change_of_the_variable_moves_or_turns_off_only_the_cache_it_set(tmp_p
     code = textwrap.dedent(f"""
         import json, os, jax
         from fppo_jax import compile_cache
+from fppo_jax.cli import build_parser
         def enabled(value):
             os.environ["FPPO_JAX_CACHE_DIR"] = value
             compile_cache.enable()

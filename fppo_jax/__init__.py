@@ -8,10 +8,17 @@ policy, checkpointed and resumable; :func:`sweep` runs a grid of settings × see
 program; :func:`load_policy` reads a trained policy back, saved or from its checkpoints;
 :func:`merge` joins sweeps of other seeds into one, and :mod:`fppo_jax.statistics` compares
 settings with interval estimates.
+
+Each public name is imported from its module on first use (PEP 562), so that importing the
+package, or a light part of it such as :mod:`fppo_jax.numpy_policy` or the command line's
+``--help``, does not wait for JAX, Flax, orbax and SciPy.
 """
 
+import importlib
 import os
 import sys
+import types
+from typing import Any
 
 __version__ = "0.1.0"
 
@@ -20,25 +27,30 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
     # off-screen one (EGL) can render. A backend the user chose is kept.
     os.environ.setdefault("MUJOCO_GL", "egl")
 
-from fppo_jax.api import train
-from fppo_jax.checkpoint import (
-    CheckpointsUnavailable,
-    ConfigMismatch,
-    DamagedCheckpoint,
-)
-from fppo_jax.config import Hyperparameters, TrainConfig, hyperparameters, stack_hyperparameters
-from fppo_jax.driver import StoppedBySignal, TrainingDiverged
-from fppo_jax.envs import TASKS, Environment, make_env
-from fppo_jax.evaluation import evaluate
-from fppo_jax.objectives import VARIANTS, Objective, negative_regions, objective, stack
-from fppo_jax.options import Snapshot
-from fppo_jax.policy import Policy
-from fppo_jax.progress import Progress
-from fppo_jax.results import SweepResult, TrainResult, merge
-from fppo_jax.saved_policy import load_policy
-from fppo_jax.surrogates import Surrogate, surrogate
-from fppo_jax.sweep import expand_grid, sweep
-from fppo_jax.trainer import METRICS, Metrics, Trainer, TrainState, make_train
+# Where each public name is defined.
+_MODULES = {
+    "fppo_jax.api": ("train",),
+    "fppo_jax.checkpoint": ("CheckpointsUnavailable", "ConfigMismatch", "DamagedCheckpoint"),
+    "fppo_jax.config": (
+        "Hyperparameters",
+        "TrainConfig",
+        "hyperparameters",
+        "stack_hyperparameters",
+    ),
+    "fppo_jax.driver": ("StoppedBySignal", "TrainingDiverged"),
+    "fppo_jax.envs": ("TASKS", "Environment", "make_env"),
+    "fppo_jax.evaluation": ("evaluate",),
+    "fppo_jax.objectives": ("VARIANTS", "Objective", "negative_regions", "objective", "stack"),
+    "fppo_jax.options": ("Snapshot",),
+    "fppo_jax.policy": ("Policy",),
+    "fppo_jax.progress": ("Progress",),
+    "fppo_jax.results": ("SweepResult", "TrainResult", "merge"),
+    "fppo_jax.saved_policy": ("load_policy",),
+    "fppo_jax.surrogates": ("Surrogate", "surrogate"),
+    "fppo_jax.sweep": ("expand_grid", "sweep"),
+    "fppo_jax.trainer": ("METRICS", "Metrics", "Trainer", "TrainState", "make_train"),
+}
+_MODULE_OF = {name: module for module, names in _MODULES.items() for name in names}
 
 __all__ = [
     "METRICS",
@@ -77,3 +89,34 @@ __all__ = [
     "sweep",
     "train",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _MODULE_OF:
+        value = getattr(importlib.import_module(_MODULE_OF[name]), name)
+    else:
+        # A submodule as an attribute (fppo_jax.statistics), as when the package imported it.
+        try:
+            value = importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as error:
+            if error.name != f"{__name__}.{name}":
+                raise
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    globals()[name] = value  # looked up once
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
+
+
+class _Package(types.ModuleType):
+    def __setattr__(self, name: str, value: Any) -> None:
+        # Importing the submodule fppo_jax.sweep binds it here, under the name that is the
+        # function's: the name stays the function's, as when the package imported it itself.
+        if name in _MODULE_OF and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

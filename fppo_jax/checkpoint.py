@@ -25,14 +25,16 @@ import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import jax
 import numpy as np
-import orbax.checkpoint as ocp
 
 from fppo_jax.files import DirectoryBusy, DirectoryLock, first_line, json_value, tree_digest
 from fppo_jax.policy import Policy
+
+if TYPE_CHECKING:
+    import orbax.checkpoint as ocp
 
 # Orbax reports every save and restore through absl logging at INFO and WARNING.
 logging.getLogger("absl").setLevel(logging.ERROR)
@@ -171,6 +173,9 @@ class Checkpoints:
     """The checkpoints of one run (or one sweep) in `directory`, keeping the newest `keep`."""
 
     def __init__(self, directory: str | Path, keep: int = 3):
+        # Orbax on first use, here and below: a run without checkpoints never waits for it.
+        import orbax.checkpoint as ocp
+
         if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
             raise ValueError(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
@@ -204,6 +209,8 @@ class Checkpoints:
     def latest_record(self) -> dict[str, Any] | None:
         """The record of the newest checkpoint whose record can be read (no arrays are read:
         for checks before compiling); None if there is none."""
+        import orbax.checkpoint as ocp
+
         for step in reversed(self.steps()):
             try:
                 return self._read(step, record=ocp.args.JsonRestore()).record
@@ -218,6 +225,8 @@ class Checkpoints:
         ``jax.ShapeDtypeStruct``\\ s); damaged ones are reported and set aside. `check` sees
         the record of the one chosen, fallbacks included, and may raise. None if no
         checkpoint is intact."""
+        import orbax.checkpoint as ocp
+
         leaves, treedef = jax.tree.flatten(like)
         abstract = {_name(i): _storable_shape(leaf) for i, leaf in enumerate(leaves)}
         for step in reversed(self.steps()):
@@ -271,6 +280,8 @@ class Checkpoints:
         """Start writing checkpoint `step`; it completes in the background, and then the
         checkpoints beyond the newest `keep` are deleted. A checkpoint directory that vanished
         or was replaced since the run began is :class:`~fppo_jax.files.DirectoryLost`, at once."""
+        import orbax.checkpoint as ocp
+
         if self._lock is not None:
             self._lock.check()
         host = jax.device_get(
@@ -294,6 +305,8 @@ class Checkpoints:
 
     def policy(self) -> tuple[Policy, dict[str, Any]]:
         """The policy of the newest readable checkpoint, and its record."""
+        import orbax.checkpoint as ocp
+
         for step in reversed(self.steps()):
             try:
                 record = self._read(step, record=ocp.args.JsonRestore()).record
@@ -410,6 +423,8 @@ class _ReadsLeftBehind:
 
 
 def _args(**items: Any) -> ocp.args.Composite:
+    import orbax.checkpoint as ocp
+
     return ocp.args.Composite(**items)
 
 

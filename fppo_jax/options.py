@@ -9,16 +9,17 @@ import dataclasses
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from fppo_jax.config import positive_int
 from fppo_jax.extras import install_hint
-from fppo_jax.metric_log import require_wandb
-from fppo_jax.policy import Policy
-from fppo_jax.progress import Progress
-from fppo_jax.trainer import TrainState
+
+if TYPE_CHECKING:  # the trainer, not needed to declare or check options (the command's flags)
+    from fppo_jax.policy import Policy
+    from fppo_jax.progress import Progress
+    from fppo_jax.trainer import TrainState
 
 
 class Snapshot(NamedTuple):
@@ -183,6 +184,8 @@ class Options:
         if self.wandb_project is not None:
             if not isinstance(self.wandb_project, str):
                 raise ValueError(f"wandb_project must be a name, got {self.wandb_project!r}")
+            from fppo_jax.metric_log import require_wandb
+
             require_wandb()
 
     @classmethod

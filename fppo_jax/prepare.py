@@ -1,7 +1,8 @@
 """What ``train`` and ``sweep`` both do before driving: split their keyword settings into the
 run's shape (:class:`~fppo_jax.config.TrainConfig`), its hyperparameters and the host
 :class:`~fppo_jax.options.Options`; resolve the task and its backend once; check all of it
-before an environment is built or anything compiles."""
+before an environment is built or anything compiles; turn the compilation cache on
+(:mod:`fppo_jax.compile_cache`)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import dataclasses
 import functools
 from typing import Any
 
+from fppo_jax import compile_cache
 from fppo_jax.config import TrainConfig, describe, environment_name, resolve_config
 from fppo_jax.envs import Environment, as_environment, choose_backend, describe_backend, make_env
 from fppo_jax.options import Options
@@ -83,4 +85,5 @@ def prepare(
     config = resolve_config(env, total_steps, overrides, also_valid=valid, preset=preset)
     chosen, why = choose_backend(env, backend)
     task = env if isinstance(env, str) else None
+    compile_cache.enable()
     return Prepared(env, task, chosen, why, preset, config, options, given)

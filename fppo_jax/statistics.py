@@ -24,7 +24,6 @@ import warnings
 from collections.abc import Callable, Sequence
 
 import numpy as np
-from scipy import stats
 
 CONFIDENCE = 0.95
 RESAMPLES = 2000
@@ -139,6 +138,8 @@ def bootstrap(
     point = float(statistic(*samples, axis=-1))
     if all(np.ptp(s) == 0 for s in samples):  # nothing to resample: the interval is the point
         return point, point, point
+    from scipy import stats  # on first use: a second's import that training never needs
+
     result = stats.bootstrap(
         samples,
         statistic,
@@ -210,6 +211,8 @@ def improvement_test(x: np.ndarray, y: np.ndarray) -> float:
         return float("nan")
     if np.ptp(np.concatenate([x, y])) == 0:  # every score tied: no evidence either way
         return 1.0
+    from scipy import stats
+
     return float(stats.mannwhitneyu(x, y, alternative="two-sided").pvalue)
 
 

@@ -1,4 +1,6 @@
 import os
+import shutil
+import tempfile
 
 import pytest
 
@@ -29,9 +31,38 @@ LONGEST_FIRST = (
     "test_study.py",
     "test_trainer.py",
     "test_saved_policy.py",
+    "test_compile_cache.py",
     "test_evaluation.py",
     "test_gymnasium.py",
+    "test_bench_startup.py",
 )
+
+
+CACHE = pytest.StashKey[str]()
+
+
+def pytest_configure(config) -> None:
+    """One compilation cache for the session, fresh and never the user's: many tests train the
+    same small programs (each ``train`` call builds its own), so all but the first load them.
+    The process that starts the session makes it; the test processes it starts (pytest-xdist's
+    workers, and the command-line and worker subprocesses of tests) inherit it."""
+    if not hasattr(config, "workerinput"):
+        config.stash[CACHE] = tempfile.mkdtemp(prefix="fppo-jax-test-cache-")
+        os.environ["FPPO_JAX_CACHE_DIR"] = config.stash[CACHE]
+
+
+def pytest_unconfigure(config) -> None:
+    if CACHE in config.stash:
+        shutil.rmtree(config.stash[CACHE], ignore_errors=True)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def session_compile_cache() -> None:
+    """The session's cache also for the programs tests compile without ``train`` (``train``
+    and ``sweep`` turn it on themselves)."""
+    from fppo_jax import compile_cache
+
+    compile_cache.enable()
 
 
 def pytest_collection_modifyitems(items: list) -> None:

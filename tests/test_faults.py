@@ -138,6 +138,8 @@ def child(kind, directory, log, cache, *, resume, parked=None, writing=None):
     if cache is not None:
         env["JAX_COMPILATION_CACHE_DIR"] = str(cache)
         env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+    else:  # nor the session's, where another test may have put the same program
+        env["FPPO_JAX_CACHE_DIR"] = "off"
     with open(log, "w") as stream:
         process = subprocess.Popen(
             [sys.executable, "-c", CHILD, json.dumps(spec)],

@@ -15,13 +15,9 @@ import warnings
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from fppo_jax.checkpoint import CheckpointsUnavailable, DamagedCheckpoint
-from fppo_jax.cli.commands import COMMANDS
 from fppo_jax.cli.flags import own_surrogates, surrogates_named
 from fppo_jax.cli.parser import build_parser
 from fppo_jax.cli.settings import check_settings, settings_file
-from fppo_jax.distributed import initialize
-from fppo_jax.driver import StoppedBySignal, TrainingDiverged
 
 __all__ = ["build_parser", "main"]
 
@@ -48,8 +44,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
         args = parser.parse_args(argv)
+    # What the commands need (the trainer, checkpoints, JAX's devices) only now: --help and a
+    # mistyped flag answer without waiting for it.
+    from fppo_jax import compile_cache
+    from fppo_jax.checkpoint import CheckpointsUnavailable
+    from fppo_jax.cli.commands import COMMANDS
+    from fppo_jax.distributed import initialize
+    from fppo_jax.driver import StoppedBySignal, TrainingDiverged
+
     if getattr(args, "distributed", False):
         initialize()
+    compile_cache.enable()
     with _warnings_as_lines():
         try:
             return COMMANDS[args.command](args)
@@ -81,6 +86,8 @@ def _variants(variant: object) -> list[object]:
 def _warnings_as_lines() -> Iterator[None]:
     """A damaged checkpoint reported in a line of the command's own, as its errors are; any
     other warning as before."""
+    from fppo_jax.checkpoint import DamagedCheckpoint
+
     with warnings.catch_warnings():
         show = warnings.showwarning
 

@@ -38,6 +38,8 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
         prog="fppo-jax",
         description="Train PPO and its fast variants (FPPO-LP, FPPO-QP, TR-PPO, PPO-RB, TR-PPO-RB) "
         "with a fully jitted JAX trainer.",
+        epilog="Compiled programs are cached in ~/.cache/fppo-jax (under $XDG_CACHE_HOME if "
+        "set): FPPO_JAX_CACHE_DIR=DIR moves the cache, FPPO_JAX_CACHE_DIR=off turns it off.",
     )
     parser.add_argument("--version", action="version", version=f"fppo-jax {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=Parser)

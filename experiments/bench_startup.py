@@ -1,0 +1,147 @@
+"""What users wait for before anything trains: importing the package, and the README's first
+command with an empty compilation cache (cold) and with the cache that run filled (warm).
+
+    python experiments/bench_startup.py [--repeats 5]
+    python experiments/bench_startup.py --smoke    # tiny, into a new temporary directory
+
+Each measurement is the wall time of a fresh process of this checkout, from its start to its
+exit; the arms are interleaved and each one's best of `--repeats` is kept. Imports: ``import
+jax``, ``import fppo_jax``, ``from fppo_jax import train`` and ``fppo-jax --help``. The README's
+first command (``fppo-jax train --env cartpole --variant fppo-lp --steps 50000``): cold, in a
+new empty cache directory (``FPPO_JAX_CACHE_DIR``); warm, the same command again in that
+directory; and with the cache off, for what writing the cache costs. Writes
+experiments/results/bench_startup.md; `--smoke` trains a few tiny updates instead and writes
+into a new temporary directory unless `--results` names another (never the recorded results).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from common import (
+    RESULTS,
+    add_force_flag,
+    argument_parser,
+    header,
+    inside_results,
+    refuse_to_replace,
+    write_result,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+FIRST_COMMAND = ["train", "--env", "cartpole", "--variant", "fppo-lp", "--steps", "50000"]
+SMOKE_COMMAND = [*FIRST_COMMAND[:-1], "512", "--num-envs", "4", "--num-steps", "32"]
+SMOKE_COMMAND += ["--minibatches", "4", "--epochs", "2"]
+IMPORTS = {
+    "import jax": ["-c", "import jax"],
+    "import fppo_jax": ["-c", "import fppo_jax"],
+    "from fppo_jax import train": ["-c", "from fppo_jax import train"],
+    "fppo-jax --help": ["-m", "fppo_jax", "--help"],
+}
+
+
+def timed(arguments: list[str], cache: str) -> tuple[float, str]:
+    """Wall seconds of ``python <arguments>`` in a fresh process of this checkout, with
+    FPPO_JAX_CACHE_DIR set to `cache` (and no cache directory of JAX's own), and its output."""
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+    env |= {"PYTHONPATH": str(ROOT), "FPPO_JAX_CACHE_DIR": cache}
+    start = time.perf_counter()
+    done = subprocess.run(
+        [sys.executable, *arguments],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return time.perf_counter() - start, done.stdout + done.stderr
+
+
+def compile_seconds(output: str) -> float:
+    """The compile time the run's summary reports."""
+    return float(re.search(r"compile ([\d.]+) s", output).group(1))
+
+
+def main() -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--smoke", action="store_true", help="a few tiny updates, once")
+    parser.add_argument(
+        "--results",
+        type=Path,
+        help="where results go (default: experiments/results, or a new temporary directory "
+        "with --smoke)",
+    )
+    add_force_flag(parser)
+    args = parser.parse_args()
+    if args.smoke and args.results is None:
+        args.results = Path(tempfile.mkdtemp(prefix="fppo-bench-startup-smoke-"))
+    elif args.smoke and inside_results(args.results):
+        sys.exit(f"--smoke never writes into the recorded results ({RESULTS}); pass another")
+    path = (args.results or RESULTS) / "bench_startup.md"
+    refuse_to_replace([path], args.force)
+    command = SMOKE_COMMAND if args.smoke else FIRST_COMMAND
+    repeats = 1 if args.smoke else args.repeats
+
+    loads = [os.getloadavg()[0]]
+    best: dict[str, float] = {}
+    compiled: dict[str, float] = {}
+
+    def measure(name: str, arguments: list[str], cache: str) -> None:
+        seconds, output = timed(arguments, cache)
+        print(f"{name}: {seconds:.2f} s", file=sys.stderr)
+        best[name] = min(best.get(name, float("inf")), seconds)
+        if arguments[:2] == ["-m", "fppo_jax"] and arguments[2] == "train":
+            compiled[name] = min(compiled.get(name, float("inf")), compile_seconds(output))
+
+    with tempfile.TemporaryDirectory() as scratch:
+        for repeat in range(repeats):
+            for name, arguments in IMPORTS.items():
+                measure(name, arguments, "off")
+            cache = str(Path(scratch) / f"cache{repeat}")  # new and empty: cold
+            for name, directory in [("cold", cache), ("warm", cache), ("cache off", "off")]:
+                measure(name, ["-m", "fppo_jax", *command], directory)
+    loads.append(os.getloadavg()[0])
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    shared = max(loads) > 0.5 * cores
+    first = " ".join(["fppo-jax", *command])
+    lines = [
+        *header("Startup: importing, and the first command cold and warm"),
+        "- Load average (1 min) at the start and the end: "
+        + " and ".join(f"{load:.1f}" for load in loads)
+        + f" on {cores} cores"
+        + (": the machine was shared with other work while this ran" if shared else ""),
+        "",
+        f"Wall time of a fresh process, best of {repeats}, the arms interleaved.",
+        "",
+        "| import | seconds | beyond `import jax` |",
+        "|---|---|---|",
+        *[
+            f"| `{name}` | {best[name]:.2f} | {best[name] - best['import jax']:+.2f} |"
+            for name in IMPORTS
+        ],
+        "",
+        f"`{first}`: cold in a new empty compilation cache, warm in the cache it filled.",
+        "",
+        "| run | seconds | compile (its summary) | ratio to cold |",
+        "|---|---|---|---|",
+        *[
+            f"| {name} | {best[name]:.2f} | {compiled[name]:.2f} s | "
+            f"{best[name] / best['cold']:.2f} |"
+            for name in ("cold", "warm", "cache off")
+        ],
+    ]
+    write_result(path, lines)
+    print("\n".join(lines))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,126 @@
+"""The persistent compilation cache: on by default in a directory per JAX version, moved or
+turned off by FPPO_JAX_CACHE_DIR, a cache directory the user gave JAX kept. Each case runs in a
+process of its own, as the cache is the process's (and this one's is the test session's)."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import jax
+import jaxlib
+from conftest import TINY
+
+from fppo_jax import compile_cache
+from fppo_jax.cli import build_parser
+
+ROOT = Path(__file__).resolve().parents[1]
+VERSIONS = f"jax-{jax.__version__}-jaxlib-{jaxlib.__version__}"
+
+# Trains a tiny run, counting the programs JAX loaded from the cache and those it wrote there.
+TRAIN = textwrap.dedent(f"""
+    import json, jax, fppo_jax
+    heard = {{"/jax/compilation_cache/cache_hits": 0, "/jax/compilation_cache/cache_misses": 0}}
+    def listen(event, **_):
+        if event in heard:
+            heard[event] += 1
+    jax.monitoring.register_event_listener(listen)
+    result = fppo_jax.train("cartpole", total_steps=128, **{TINY!r})
+    print(json.dumps({{
+        "dir": jax.config.jax_compilation_cache_dir,
+        "loaded": heard["/jax/compilation_cache/cache_hits"],
+        "written": heard["/jax/compilation_cache/cache_misses"],
+        "return": result.metrics["average_return"].tolist(),
+    }}))
+""")
+
+
+def run(code: str, tmp_path: Path, **environ: str) -> dict:
+    """`code`'s last line of output, as JSON, from a fresh process whose environment has no
+    cache settings but `environ` and a cache home in `tmp_path`."""
+    unset = ("FPPO_JAX_CACHE_DIR", "JAX_COMPILATION_CACHE_DIR")
+    env = {k: v for k, v in os.environ.items() if k not in unset}
+    env |= {"XDG_CACHE_HOME": str(tmp_path / "home-cache"), "PYTHONPATH": str(ROOT), **environ}
+    done = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+def entries(directory: Path) -> list[Path]:
+    return sorted(directory.glob("*-cache")) if directory.is_dir() else []
+
+
+def test_the_directory_is_per_user_and_per_version_unless_moved_or_off(tmp_path):
+    home = {"XDG_CACHE_HOME": str(tmp_path)}
+    assert compile_cache.directory(home) == tmp_path / "fppo-jax" / VERSIONS
+    moved = {**home, "FPPO_JAX_CACHE_DIR": str(tmp_path / "elsewhere")}
+    assert compile_cache.directory(moved) == tmp_path / "elsewhere" / VERSIONS
+    for off in ("", "off", " OFF "):
+        assert compile_cache.directory({**home, "FPPO_JAX_CACHE_DIR": off}) is None
+    assert compile_cache.directory({}) == Path.home() / ".cache" / "fppo-jax" / VERSIONS
+
+
+def test_on_by_default_and_a_second_process_loads_what_the_first_compiled(tmp_path):
+    first = run(TRAIN, tmp_path)
+    where = tmp_path / "home-cache" / "fppo-jax" / VERSIONS
+    assert first["dir"] == str(where)
+    assert first["written"] > 0 and first["loaded"] == 0
+    assert len(entries(where)) == first["written"]
+    again = run(TRAIN, tmp_path)
+    assert again["loaded"] == first["written"]
+    assert again["return"] == first["return"]  # the programs loaded compute the same
+
+
+def test_off_by_the_environment_variable(tmp_path):
+    ran = run(TRAIN, tmp_path, FPPO_JAX_CACHE_DIR="off")
+    assert ran["dir"] is None and ran["written"] == ran["loaded"] == 0
+    assert not (tmp_path / "home-cache" / "fppo-jax").exists()
+
+
+def test_the_command_line_turns_it_on(tmp_path):
+    where = tmp_path / "cache"
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+    subprocess.run(
+        [sys.executable, "-m", "fppo_jax", "list"],
+        env=env | {"PYTHONPATH": str(ROOT), "FPPO_JAX_CACHE_DIR": str(where)},
+        capture_output=True,
+        check=True,
+    )
+    assert (where / VERSIONS).is_dir()
+
+
+def test_the_command_lines_help_names_the_switch():
+    assert "FPPO_JAX_CACHE_DIR=off" in " ".join(build_parser().format_help().split())
+
+
+def test_a_cache_directory_given_to_jax_is_kept(tmp_path):
+    theirs, ours = tmp_path / "theirs", tmp_path / "ours"
+    check = TRAIN + textwrap.dedent("""
+        print(json.dumps({"min_seconds": jax.config.jax_persistent_cache_min_compile_time_secs,
+                          "dir": jax.config.jax_compilation_cache_dir}))
+    """)
+    ran = run(check, tmp_path, JAX_COMPILATION_CACHE_DIR=str(theirs), FPPO_JAX_CACHE_DIR=str(ours))
+    assert ran == {"min_seconds": 1.0, "dir": str(theirs)}  # JAX's own threshold, too
+    assert not ours.exists()
+
+
+def test_a_change_of_the_variable_moves_or_turns_off_only_the_cache_it_set(tmp_path):
+    a, b, c, user = (str(tmp_path / name) for name in ("a", "b", "c", "user"))
+    code = textwrap.dedent(f"""
+        import json, os, jax
+        from fppo_jax import compile_cache
+from fppo_jax.cli import build_parser
+        def enabled(value):
+            os.environ["FPPO_JAX_CACHE_DIR"] = value
+            compile_cache.enable()
+            return jax.config.jax_compilation_cache_dir
+        seen = [enabled(value) for value in ({a!r}, {b!r}, "off", "")]
+        jax.config.update("jax_compilation_cache_dir", {user!r})
+        seen += [enabled({c!r}), enabled("off")]
+        print(json.dumps(seen))
+    """)
+    versioned = [str(Path(d) / VERSIONS) for d in (a, b)]
+    assert run(code, tmp_path) == [*versioned, None, None, user, user]

@@ -1,0 +1,68 @@
+"""What importing loads: the package nothing, training none of the optional or heavy parts
+(checkpoints, statistics, plots, the other environment families), ``--help`` no trainer; and
+every public name is still there."""
+
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+import fppo_jax
+
+ROOT = Path(__file__).resolve().parents[1]
+OPTIONAL = ["envpool", "gymnasium", "mujoco_playground", "wandb", "onnx", "onnxruntime"]
+TRAINING = ["orbax", "scipy", "matplotlib", "brax", "mujoco", "tensorboardX", *OPTIONAL]
+TRAINER = ["flax", "optax", "orbax", "scipy", "matplotlib"]
+
+
+def loaded(code: str) -> set[str]:
+    """The top-level packages in sys.modules after `code`, in a fresh process."""
+    report = "import json, sys; print(json.dumps(sorted({m.split('.')[0] for m in sys.modules})))"
+    done = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code) + "\n" + report],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return set(json.loads(done.stdout.splitlines()[-1]))
+
+
+@pytest.mark.parametrize(
+    "code, absent",
+    [
+        ("import fppo_jax", ["jax", *TRAINING]),
+        ("from fppo_jax import train, sweep, TrainResult, load_policy", TRAINING),
+        (
+            """
+            from fppo_jax.cli import main
+            try:
+                main(["train", "--help"])
+            except SystemExit:
+                pass
+            """,
+            TRAINER + OPTIONAL,
+        ),
+    ],
+    ids=["package", "train", "help"],
+)
+def test_only_what_is_used_is_imported(code, absent):
+    assert loaded(code).isdisjoint(absent)
+
+
+def test_every_public_name_is_importable_and_listed():
+    for name in fppo_jax.__all__:
+        assert getattr(fppo_jax, name) is not None
+    assert set(fppo_jax.__all__) <= set(dir(fppo_jax))
+    # A submodule is an attribute, but the name of both sweep() and its module is the function's.
+    from fppo_jax import statistics, sweep
+    from fppo_jax.sweep import expand_grid
+
+    assert fppo_jax.statistics is statistics
+    assert fppo_jax.sweep is sweep is sys.modules["fppo_jax.sweep"].sweep
+    assert fppo_jax.expand_grid is expand_grid
+    with pytest.raises(AttributeError, match="no_such_name"):
+        fppo_jax.no_such_name  # noqa: B018

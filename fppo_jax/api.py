@@ -14,7 +14,14 @@ from fppo_jax.config import (
 from fppo_jax.distributed import is_main_process
 from fppo_jax.driver import Plan, drive
 from fppo_jax.envs import Environment
-from fppo_jax.objectives import BUILTINS, EPSILON, hyperparameter_names, identities, resolve
+from fppo_jax.objectives import (
+    BUILTINS,
+    DEFAULT_VARIANT,
+    EPSILON,
+    hyperparameter_names,
+    identities,
+    resolve,
+)
 from fppo_jax.policy import make_policy
 from fppo_jax.prepare import prepare
 from fppo_jax.results import TrainResult
@@ -23,7 +30,7 @@ from fppo_jax.surrogates import Surrogate
 
 def train(
     env: str | Environment | Any = "cartpole",
-    variant: str | Surrogate = "fppo-lp",
+    variant: str | Surrogate = DEFAULT_VARIANT,
     alpha: float | None = None,
     *,
     k: float | None = None,

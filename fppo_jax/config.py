@@ -23,6 +23,7 @@ import numpy as np
 from fppo_jax.envs import MUJOCO_TASKS, lookup
 from fppo_jax.objectives import (
     BUILTINS,
+    DEFAULT_VARIANT,
     EPSILON,
     Objective,
     hyperparameter_names,
@@ -262,7 +263,7 @@ _RANGES: dict[str, tuple[str, object]] = {
 
 
 def hyperparameters(
-    variant: str | Surrogate = "ppo", *, epsilon: float = EPSILON, **values: float | None
+    variant: str | Surrogate = DEFAULT_VARIANT, *, epsilon: float = EPSILON, **values: float | None
 ) -> Hyperparameters:
     """Checked hyperparameters: the objective of `variant` (a built-in's name or a surrogate of
     one's own; ε and its own hyperparameters, see :func:`~fppo_jax.objectives.objective`) and

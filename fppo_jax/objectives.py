@@ -219,6 +219,8 @@ BUILTINS: dict[str, Surrogate] = {
     )
 }
 VARIANTS: tuple[str, ...] = tuple(BUILTINS)
+# What trains when no variant is named: the paper's own.
+DEFAULT_VARIANT = "fppo-lp"
 # The paper's six, computed in every program: the loss's kernel is then the very one every
 # recorded run was trained with (XLA's rounding of the loss follows the kernel's whole body),
 # and computing the six costs one fused element-wise kernel.

@@ -71,7 +71,9 @@ class TrainResult:
         m, c = self.metrics, self.config
         steps = int(m["env_steps"][-1])
         returns = m["average_return"]
-        settings = ", ".join(f"{k} = {c[k]:g}" for k in VARIANT_SPECIFIC if k in c)
+        own = (c.get("surrogates") or {}).get(c["variant"], {}).get("hyperparameters", {})
+        shown = dict.fromkeys((*VARIANT_SPECIFIC, *own))
+        settings = ", ".join(f"{k} = {c[k]:g}" for k in shown if k in c)
         settings = ", ".join(filter(None, [settings, f"epsilon = {c['epsilon']:g}"]))
         samples = c["num_envs"] * c["num_steps"]
         trained = steps - self.resumed_from * samples

@@ -28,6 +28,7 @@ from fppo_jax.driver import Outcome, Plan, drive
 from fppo_jax.envs import Environment
 from fppo_jax.objectives import (
     BUILTINS,
+    DEFAULT_VARIANT,
     hyperparameter_names,
     identities,
     resolve,
@@ -77,7 +78,7 @@ def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[s
 
 def grid_surrogates(grid: Mapping[str, Any]) -> dict[str, Surrogate]:
     """The surrogates a grid's variants name, by name, in the grid's order (default: FPPO-LP)."""
-    given = [resolve(v) for v in _as_list("variant", grid.get("variant", ["fppo-lp"]))]
+    given = [resolve(v) for v in _as_list("variant", grid.get("variant", [DEFAULT_VARIANT]))]
     union(given)  # two different surrogates under one name are refused
     return {s.name: s for s in given}
 

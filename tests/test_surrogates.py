@@ -2,6 +2,7 @@
 compiled program as the built-ins, and recorded so that two functions under one name are told
 apart."""
 
+import inspect
 import json
 
 import jax
@@ -174,3 +175,23 @@ def test_a_record_tells_two_functions_under_one_name_apart(tiny):
         fppo_jax.merge([first, second])
     same = sweep("cartpole", {"variant": [my_ppo]}, seeds=[1], total_steps=TINY_STEPS, **tiny)
     assert len(fppo_jax.merge([first, same]).runs) == 2
+
+
+def test_a_resumed_run_refuses_another_function_under_the_same_name(tiny, tmp_path):
+    train("cartpole", my_ppo, total_steps=TINY_STEPS, checkpoint_dir=tmp_path, **tiny)
+    other = surrogate("my-ppo", lambda ratio, advantage: ratio * advantage)
+    with pytest.raises(fppo_jax.ConfigMismatch, match="surrogates"):
+        train(
+            "cartpole", other, total_steps=TINY_STEPS, checkpoint_dir=tmp_path, resume=True, **tiny
+        )
+
+
+def test_one_default_variant_everywhere():
+    from fppo_jax.cli.parser import build_parser
+    from fppo_jax.objectives import DEFAULT_VARIANT
+
+    assert fppo_jax.hyperparameters().objective.name == DEFAULT_VARIANT
+    assert inspect.signature(train).parameters["variant"].default == DEFAULT_VARIANT
+    assert fppo_jax.expand_grid({}) == [{"variant": DEFAULT_VARIANT}]
+    assert build_parser().parse_args(["train"]).variant.name == DEFAULT_VARIANT
+    assert [s.name for s in build_parser().parse_args(["sweep"]).variant] == [DEFAULT_VARIANT]

@@ -25,7 +25,7 @@ from fppo_jax.cli.flags import (
     variants,
 )
 from fppo_jax.extras import install_hint
-from fppo_jax.objectives import VARIANTS
+from fppo_jax.objectives import DEFAULT_VARIANT, VARIANTS
 from fppo_jax.options import Options
 from fppo_jax.statistics import STATISTICS
 from fppo_jax.surrogates import Surrogate
@@ -61,7 +61,7 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     run.add_argument(
         "--variant",
         type=variant,
-        default="fppo-lp",
+        default=DEFAULT_VARIANT,
         help=f"the surrogate: {', '.join(VARIANTS)}, or module:attribute for one's own "
         "(fppo_jax.surrogate)",
     )
@@ -89,7 +89,7 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     grid.add_argument(
         "--variant",
         type=variants,
-        default="fppo-lp",
+        default=DEFAULT_VARIANT,
         help="variants, e.g. ppo,fppo-lp,fppo-qp, or module:attribute for a surrogate of one's own",
     )
     add_hyperparameter_flags(grid, surrogates, values)

@@ -242,11 +242,6 @@ def resolve(variant: object) -> Surrogate:
     )
 
 
-def check_variant(variant: object) -> str:
-    """The name of the surrogate `variant` names (see :func:`resolve`)."""
-    return resolve(variant).name
-
-
 def _imported(path: str) -> Surrogate:
     module_name, _, attribute = path.partition(":")
     try:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fppo_jax import VARIANTS, negative_regions, objective, stack
-from fppo_jax.objectives import PAPERS, check_variant, resolve
+from fppo_jax.objectives import PAPERS, resolve
 
 EPS = 0.2
 LO, HI = 1 - EPS, 1 + EPS
@@ -315,13 +315,13 @@ def test_an_optimisation_setting_that_is_not_a_number_is_refused():
         sweep("cartpole", {"variant": "fppo-qp", "k": ["0.4"]}, seeds=1)
 
 
-def test_check_variant_takes_each_variant_and_lists_them_when_refusing():
-    assert [check_variant(v) for v in VARIANTS] == list(VARIANTS)
+def test_resolve_takes_each_variant_and_lists_them_when_refusing():
+    assert [resolve(v).name for v in VARIANTS] == list(VARIANTS)
     listed = "ppo, fppo-lp, fppo-qp, tr-ppo, ppo-rb, tr-ppo-rb, spo, clip-higher, dpo"
     for wrong in ("PPO", "fppo", None):
         with pytest.raises(
             ValueError, match=re.escape(f"unknown variant {wrong!r}; valid variants: {listed}")
         ):
-            check_variant(wrong)
+            resolve(wrong)
     with pytest.raises(ValueError, match="unknown variant 'fppo'"):
         objective("fppo")

@@ -147,6 +147,9 @@ def drive(plan: Plan, options: Options) -> Outcome:
                 "device: devices must be 1, in a single process"
             )
         devices = 1
+    check_runs = getattr(trainer.env, "check_runs", None)  # a vector environment instance's
+    if check_runs is not None:
+        check_runs(plan.num_runs, options.eval_every is not None)
     mesh = make_mesh(devices, config.num_envs, plan.data_parallel)
     main = is_main_process()
     checkpoints: Checkpoints | None = None

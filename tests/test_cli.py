@@ -1,5 +1,7 @@
 import csv
+import errno
 import json
+import os
 import subprocess
 import sys
 
@@ -7,7 +9,10 @@ import numpy as np
 import pytest
 from helpers import sweep_by_hand
 
+import fppo_jax.cli.commands
 import fppo_jax.driver
+import fppo_jax.files
+import fppo_jax.metric_log
 from fppo_jax import SweepResult
 from fppo_jax.cli import build_parser, main
 
@@ -203,6 +208,40 @@ def test_outputs_that_cannot_be_written_are_refused_before_training(tmp_path, ca
     ]:
         assert main(["train", "--quiet", flag, str(path)]) == 2
         assert f"cannot write to {under_a_file}: Not a directory" in capsys.readouterr().err
+    assert main(["train", "--quiet", "--checkpoint-dir", str(under_a_file)]) == 2
+    assert capsys.readouterr().err == (
+        f"fppo-jax: error: cannot write to {under_a_file}: Not a directory\n"
+    )
+    read_only = tmp_path / "read-only"
+
+    def refused(*_, dir, **__):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS), dir)
+
+    with monkeypatch.context() as m:  # as root, a directory's permissions refuse nothing
+        m.setattr(fppo_jax.files.tempfile, "TemporaryFile", refused)
+        for flag in ("--checkpoint-dir", "--output"):
+            assert main(["train", "--quiet", flag, str(read_only)]) == 2
+            error = capsys.readouterr().err
+            assert error == f"fppo-jax: error: cannot write to {read_only}: Read-only file system\n"
+
+
+def test_a_disk_that_fills_while_writing_is_one_line_naming_the_file(tmp_path, capsys, monkeypatch):
+    def full(path, value):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(fppo_jax.metric_log, "write_json", full)
+    assert main(["train", "--quiet", *TINY_FLAGS, "--output", str(tmp_path)]) == 2
+    error = capsys.readouterr().err
+    assert error == f"fppo-jax: error: {tmp_path / 'config.json'}: No space left on device\n"
+
+
+def test_an_os_error_that_names_no_file_is_not_taken_for_a_user_s_error(monkeypatch):
+    def broken(*_):
+        raise OSError("a bug, not a path")
+
+    monkeypatch.setattr(fppo_jax.cli.commands, "COMMANDS", {"list": broken})
+    with pytest.raises(OSError, match="a bug"):
+        main(["list"])
 
 
 def test_sweep_then_table_then_plot(tmp_path, capsys):

@@ -68,6 +68,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         ) as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
+        except OSError as error:
+            # A file or directory the command reads or writes (a full disk, a read-only or
+            # vanished directory); one with no path named is another failure, left to raise.
+            if error.filename is None:
+                raise
+            print(f"fppo-jax: error: {error.filename}: {error.strerror or error}", file=sys.stderr)
+            return 2
         except StoppedBySignal as stopped:
             print(f"fppo-jax: {stopped}", file=sys.stderr)
             # What a shell reports for a program the signal ended: a job script tells a time

@@ -271,6 +271,13 @@ def test_sweep_then_table_then_plot(tmp_path, capsys):
     assert len(rows) == 8 * 2 and {r["variant"] for r in rows} == {"ppo", "fppo-lp"}
     assert main(["table", str(tmp_path)]) == 0
     assert len(capsys.readouterr().out.strip().splitlines()) == 2 + 4  # header, rule, 4 settings
+    assert main(["table", str(tmp_path), "--stat", "iqm", "--endpoint", "auc", "--ci", "0.9"]) == 0
+    assert "IQM of the auc score [90% CI]" in capsys.readouterr().out
+    for given in (["--ci", "0.9"], ["--endpoint", "auc"], ["--endpoint", "max", "--ci", "0.5"]):
+        assert main(["table", str(tmp_path), *given]) == 2
+        error = capsys.readouterr().err
+        assert error.startswith(f"fppo-jax: error: {given[0]}") and "--stat paper" in error
+        assert "for --stat iqm or mean or median" in error
     assert main(["plot", str(tmp_path)]) == 0
     for name in ("curves.png", "ablation.png"):
         assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"

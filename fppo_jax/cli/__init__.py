@@ -52,11 +52,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     from fppo_jax.distributed import initialize
     from fppo_jax.driver import StoppedBySignal, TrainingDiverged
 
-    if getattr(args, "distributed", False):
-        initialize()
-    compile_cache.enable()
     with _warnings_as_lines():
         try:
+            if getattr(args, "distributed", False):
+                initialize()
+            compile_cache.enable()
             return COMMANDS[args.command](args)
         except (
             ValueError,

@@ -394,3 +394,31 @@ def test_a_settings_file_s_switches_and_keys_are_read_strictly(
     (tmp_path / name).write_text(text)
     assert main(["train", "--config", str(tmp_path / name)]) == 2
     assert problem in capsys.readouterr().err
+
+
+def test_a_recorded_run_s_shape_and_another_preset_are_refused_not_mislabelled(
+    tmp_path, capsys, monkeypatch
+):
+    paper = {"env": "cartpole", "preset": "paper", "num_envs": 8, "num_steps": 256}
+    (tmp_path / "paper.json").write_text(json.dumps(paper))
+    (tmp_path / "shape.json").write_text(json.dumps({"num_envs": 16}))
+    (tmp_path / "massive.json").write_text(json.dumps({"preset": "massive"}))
+    presets = []
+    monkeypatch.setattr(
+        fppo_jax.cli.commands, "COMMANDS", {"train": lambda args: presets.append(args.preset)}
+    )
+    for command in ("train", "sweep"):
+        assert main([command, "--config", str(tmp_path / "paper.json"), "--preset", "massive"]) == 2
+        error = capsys.readouterr().err
+        assert error.startswith(f"fppo-jax: error: {tmp_path / 'paper.json'} records a run of the")
+        assert "paper preset, with its run shape (num_envs=8, num_steps=256)" in error
+        assert "override --preset massive" in error and "drop --preset" in error
+    for config, given, preset in [
+        ("paper.json", [], "paper"),  # rerun as recorded
+        ("paper.json", ["--preset", "paper"], "paper"),
+        ("shape.json", ["--preset", "massive"], "massive"),  # a shape of one's own over it
+        ("shape.json", [], "paper"),
+        ("massive.json", [], "massive"),
+    ]:
+        assert main(["train", "--config", str(tmp_path / config), *given]) is None
+        assert presets.pop() == preset, config

@@ -9,6 +9,7 @@ them; :mod:`.parser` assembles the commands; :mod:`.settings` reads ``--config F
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import sys
 import warnings
@@ -17,7 +18,7 @@ from typing import Any
 
 from fppo_jax.cli.flags import own_surrogates, surrogates_named
 from fppo_jax.cli.parser import build_parser
-from fppo_jax.cli.settings import check_settings, settings_file
+from fppo_jax.cli.settings import check_preset, check_settings, settings_file
 
 __all__ = ["build_parser", "main"]
 
@@ -39,6 +40,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 parser = build_parser([*surrogates, *named])
             command = parser.parse_args(argv).commands[args.command]
             check_settings(args.config, settings, command)
+            check_preset(args.config, settings, _given(parser, argv, command, "preset"))
             command.set_defaults(**settings)
         except (ValueError, FileNotFoundError) as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
@@ -80,6 +82,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             # What a shell reports for a program the signal ended: a job script tells a time
             # limit's warning (SIGUSR1, 138) from a preemption or scancel (SIGTERM, 143).
             return 128 + stopped.signal
+
+
+def _given(
+    parser: argparse.ArgumentParser, argv: list[str], command: argparse.ArgumentParser, dest: str
+) -> Any:
+    """The value `argv` gives `command`'s flag `dest`, or None where it gives none."""
+    default = command.get_default(dest)
+    command.set_defaults(**{dest: None})
+    try:
+        return getattr(parser.parse_args(argv), dest)
+    finally:
+        command.set_defaults(**{dest: default})
 
 
 def _variants(variant: object) -> list[object]:

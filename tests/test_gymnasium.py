@@ -13,6 +13,7 @@ import pytest
 from conftest import TINY
 
 import fppo_jax.driver
+import fppo_jax.memory
 from fppo_jax import make_env, sweep, train
 from fppo_jax.envs import Discrete, Step, as_environment, draw_resets
 from fppo_jax.envs.gymnasium import gymnasium_environment
@@ -333,6 +334,26 @@ def test_environments_a_vector_environment_cannot_serve_are_refused_before_compi
         sweep(instance, {"variant": "ppo"}, seeds=[0, 1], total_steps=512, **TINY)
     with pytest.raises(ValueError, match=r"cannot serve an evaluation during training"):
         train(instance, "ppo", total_steps=512, **TINY, eval_every=1, eval_episodes=4)
+
+
+def test_environments_that_would_not_fit_in_host_memory_are_refused_before_compiling(
+    monkeypatch, capsys
+):
+    env = as_environment(Corridor)
+    assert 1000 < env.host_bytes < 100_000  # a Python object of a few KiB
+    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    monkeypatch.setattr(fppo_jax.memory, "host_available_bytes", lambda: 2 * 7 * env.host_bytes)
+    with pytest.raises(MemoryError, match=r"Corridor: 1 run\(s\) of 8 environments, each a Py"):
+        train(Corridor, "ppo", total_steps=512, **{**TINY, "num_envs": 8})
+    with pytest.raises(MemoryError, match=r"2 run\(s\) of 4 .*lower num_envs, or the runs per"):
+        sweep(Corridor, {"variant": "ppo"}, seeds=2, total_steps=512, chunk=2, **TINY)
+    # Without a chunk given, a sweep takes as many runs per call as fit: one here.
+    monkeypatch.setattr(fppo_jax.memory, "host_available_bytes", lambda: 2 * 5 * env.host_bytes)
+    monkeypatch.setattr(fppo_jax.driver, "HOST_BYTES_SHOWN", 4 * env.host_bytes)
+    with pytest.raises(pytest.fail.Exception, match="compiled"):
+        sweep(Corridor, {"variant": "ppo"}, seeds=2, total_steps=512, progress=True, **TINY)
+    shown = capsys.readouterr().err
+    assert "Corridor: 4 environments, made on the host at the first reset, take about" in shown
 
 
 @pytest.mark.slow

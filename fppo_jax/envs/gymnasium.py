@@ -62,6 +62,7 @@ import importlib
 import importlib.util
 import threading
 import traceback
+import tracemalloc
 from collections.abc import Callable
 from typing import Any
 
@@ -149,6 +150,7 @@ class GymnasiumEnvironment(OnHost):
     action_start = 0  # a Discrete space's first action
     vector_size = 0  # sub-environments per vector environment; 0: one gymnasium.Env each
     same_step = False  # a vector environment's autoreset mode is SAME_STEP
+    host_bytes = 0  # what each gymnasium.Env of a run holds on the host (0: not measured)
 
     def __post_init__(self) -> None:
         gymnasium = import_gymnasium()
@@ -199,6 +201,26 @@ class GymnasiumEnvironment(OnHost):
         finally:
             if not self.instance:
                 probe.close()
+        if not vector:
+            object.__setattr__(self, "host_bytes", self._bytes_per_environment())
+
+    def _bytes_per_environment(self) -> int:
+        """The Python memory one more environment takes, made and reset, as tracemalloc counts
+        it (what a C library allocates itself, such as a simulator's state, is not counted):
+        a run's pool holds num_envs of them, which :mod:`fppo_jax.memory` checks. Measured on a
+        second one, since the first also imported the environment's modules."""
+        tracing = tracemalloc.is_tracing()
+        if not tracing:
+            tracemalloc.start()
+        before = tracemalloc.get_traced_memory()[0]
+        env = self.make()
+        try:
+            self._reset(env, seed=0)
+            return max(0, tracemalloc.get_traced_memory()[0] - before)
+        finally:
+            env.close()
+            if not tracing:
+                tracemalloc.stop()
 
     def _check_first_step(self, env: Any) -> None:
         """Reset `env` and step it once, on the host, with the checks every step has: an

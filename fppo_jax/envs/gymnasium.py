@@ -60,6 +60,7 @@ import collections
 import dataclasses
 import importlib
 import importlib.util
+import math
 import threading
 import traceback
 import tracemalloc
@@ -73,6 +74,9 @@ from fppo_jax.extras import install_hint
 from fppo_jax.files import first_line
 
 MAX_POOLS = 16  # pools kept alive at once: training's, and a few evaluations' beside it
+# What one environment's step gives as its reward, and as terminated and truncated, mostly.
+SCALARS = (float, int, np.float32, np.float64, np.int64)
+FLAGS = (bool, np.bool_)
 
 
 def import_gymnasium() -> Any:
@@ -378,7 +382,7 @@ class GymnasiumEnvironment(OnHost):
             terminated = self._flags(terminated, "terminated")
             truncated = self._flags(truncated, "truncated")
             out.terminated[row] = terminated
-            out.truncated[row] = truncated & ~terminated
+            out.truncated[row] = truncated and not terminated
             out.next_obs[row] = out.obs[row]
             if terminated or truncated:
                 out.next_obs[row] = self._observation(self._reset(env), "reset")
@@ -477,8 +481,10 @@ class GymnasiumEnvironment(OnHost):
         space = self.action_space
         return np.clip(actions, space.low, space.high).astype(np.float32)
 
-    def _reward(self, reward: Any, count: int | None = None) -> np.ndarray:
+    def _reward(self, reward: Any, count: int | None = None) -> Any:
         """`reward` checked: one finite number, or `count` of them from a vector environment."""
+        if count is None and type(reward) in SCALARS and math.isfinite(reward):
+            return reward  # the usual case, at every step of every environment
         shape = () if count is None else (count,)
         values = _numbers(reward)
         if values is None or values.shape != shape or not np.isfinite(values).all():
@@ -488,8 +494,10 @@ class GymnasiumEnvironment(OnHost):
             )
         return values
 
-    def _flags(self, flags: Any, which: str, count: int | None = None) -> np.ndarray:
+    def _flags(self, flags: Any, which: str, count: int | None = None) -> np.ndarray | bool:
         """`terminated` or `truncated` checked: one flag, or `count` of them."""
+        if count is None and type(flags) in FLAGS:
+            return bool(flags)  # the usual case, at every step of every environment
         shape = () if count is None else (count,)
         values = np.asarray(flags)
         if values.shape != shape or values.dtype.kind not in "biu":
@@ -584,19 +592,19 @@ def _registered(env_id: str, kwargs: tuple) -> GymnasiumEnvironment:
     key = (env_id, kwargs)
     if key not in _MADE:
         gymnasium = import_gymnasium()
-        module, _, name = env_id.rpartition(":")
+        module, _, registered_id = env_id.rpartition(":")
         if module:
             try:
                 importlib.import_module(module)
             except ImportError as error:
                 raise ImportError(
                     f"gymnasium/{env_id}: cannot import {module!r}, which should register "
-                    f"{name!r}: {first_line(error)}"
+                    f"{registered_id!r}: {first_line(error)}"
                 ) from None
-        if name not in gymnasium.registry:
+        if registered_id not in gymnasium.registry:
             imported = f" once {module!r} is imported" if module else ""
             raise ValueError(
-                f"Gymnasium has no environment {name!r} registered{imported} "
+                f"Gymnasium has no environment {registered_id!r} registered{imported} "
                 "(gymnasium.pprint_registry() lists them; an environment of one's own is "
                 "registered by its module, named as gymnasium/module:id)"
             )

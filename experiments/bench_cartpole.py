@@ -82,7 +82,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="a tenth of the steps, 1 repeat")
     add_output_flags(parser, RESULTS / "bench_cartpole.md")
     args = parser.parse_args()
-    refuse_to_replace([args.output], args.force)
+    refuse_to_replace([args.output], args.force, elsewhere="--output FILE")
     if not (args.purejaxrl / "ppo.py").exists():
         sys.exit(f"PureJaxRL's ppo.py is not in {args.purejaxrl}: pass --purejaxrl DIR")
     sys.path.insert(0, str(args.purejaxrl))

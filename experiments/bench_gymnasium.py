@@ -14,6 +14,7 @@ experiments/results/bench_gymnasium_<task>.md.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 from common import add_record_flags, argument_parser, header, refuse_to_replace, write_result
@@ -24,19 +25,26 @@ from fppo_jax.envs.native import import_envpool
 NUM_ENVS = 8
 
 
+def random_actions(space: Any, steps: int) -> np.ndarray:
+    """[step, environment, …] random actions of `space`, a Discrete or a Box, seeded."""
+    rng = np.random.default_rng(0)
+    shape = (steps // NUM_ENVS, NUM_ENVS)
+    if hasattr(space, "n"):  # Discrete: its actions start at `start`
+        return rng.integers(space.start, space.start + space.n, shape)
+    return rng.uniform(space.low, space.high, (*shape, *space.shape)).astype(np.float32)
+
+
 def gymnasium_alone(task: str, steps: int) -> float:
     import gymnasium
 
     envs = [gymnasium.make(task) for _ in range(NUM_ENVS)]
     for seed, env in enumerate(envs):
         env.reset(seed=seed)
-    rng = np.random.default_rng(0)
-    space = envs[0].action_space
-    actions = rng.uniform(space.low, space.high, (steps // NUM_ENVS, NUM_ENVS, space.shape[0]))
+    actions = random_actions(envs[0].action_space, steps)
     start = time.perf_counter()
     for row in actions:
         for env, action in zip(envs, row, strict=True):
-            _, _, terminated, truncated, _ = env.step(action.astype(np.float32))
+            _, _, terminated, truncated, _ = env.step(action)
             if terminated or truncated:
                 env.reset()
     return steps / (time.perf_counter() - start)
@@ -46,9 +54,7 @@ def envpool_alone(task: str, steps: int) -> float:
     envpool = import_envpool()
     pool = envpool.make(task, env_type="gymnasium", num_envs=NUM_ENVS, seed=0, num_threads=1)
     pool.reset()
-    space = pool.action_space
-    rng = np.random.default_rng(0)
-    actions = rng.uniform(space.low, space.high, (steps // NUM_ENVS, NUM_ENVS, space.shape[0]))
+    actions = random_actions(pool.action_space, steps)
     ids = np.arange(NUM_ENVS)
     start = time.perf_counter()
     for row in actions:

@@ -34,7 +34,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=100_000)
     add_output_flags(parser, RESULTS / "bench_sweep.md")
     args = parser.parse_args()
-    refuse_to_replace([args.output], args.force)
+    refuse_to_replace([args.output], args.force, elsewhere="--output FILE")
     runs = len(PAPER_VARIANTS) * args.seeds
 
     start = time.perf_counter()

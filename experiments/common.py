@@ -88,14 +88,15 @@ def add_output_flags(parser: argparse.ArgumentParser, default: Path) -> None:
     add_force_flag(parser)
 
 
-def refuse_to_replace(paths: Iterable[Path], force: bool) -> None:
-    """Exit, before any work, if one of `paths` is already recorded and `force` is not set."""
+def refuse_to_replace(paths: Iterable[Path], force: bool, elsewhere: str = "--results DIR") -> None:
+    """Exit, before any work, if one of `paths` is already recorded and `force` is not set;
+    `elsewhere`: the script's own flags that record in other places."""
     existing = [path for path in paths if path.exists()]
     if existing and not force:
         more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
         sys.exit(
             f"{existing[0]}{more} is already recorded: pass --force to replace it, or "
-            "--results DIR (--output FILE) to record elsewhere and keep both"
+            f"{elsewhere} to record elsewhere and keep both"
         )
 
 

@@ -15,13 +15,16 @@ reward normalisation everywhere); ``unnormalised`` is baselines' classic-control
 Each part goes to <results>/study/<task>/<protocol>/<part>/ (`curves.csv`, `sweep.json`,
 `run.json` with the machine, date, wall time, command and the commit it ran at), written into a
 fresh directory and renamed into place whole. A part already recorded is refused unless
-`--force`: the study's records are never replaced by accident.
+`--force`: the study's records are never replaced by accident. So is, before it trains, a part
+that would hold a run another part of the same task and protocol holds (a seed of a variant
+both have): the parts could not be merged.
 """
 
 from __future__ import annotations
 
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -73,6 +76,45 @@ def part_name(variants: list[str], seeds: list[int]) -> str:
     return f"seeds-{span}_{'+'.join(variants)}"
 
 
+def part_runs(name: str) -> tuple[list[str], list[int]] | None:
+    """The variants and seeds of the part :func:`part_name` named `name`; None for a name it
+    does not make (a part being written, say)."""
+    prefix, _, rest = name.partition("seeds-")
+    span, _, variants = rest.partition("_")
+    if prefix or not variants:
+        return None
+    try:
+        if "," in span or "-" not in span:
+            seeds = [int(seed) for seed in span.split(",")]
+        else:
+            first, last = span.split("-")
+            seeds = list(range(int(first), int(last) + 1))
+    except ValueError:
+        return None
+    return variants.split("+"), seeds
+
+
+def overlapping_parts(folder: Path, variants: list[str], seeds: list[int]) -> list[str]:
+    """The parts recorded in `folder` (a task's protocol) other than the one `variants` ×
+    `seeds` makes that hold one of its runs: a seed of a variant both have, which would keep the
+    study's parts from being merged."""
+    clashes = []
+    own = part_name(variants, seeds)
+    for part in sorted(folder.iterdir()) if folder.is_dir() else []:
+        runs = part_runs(part.name)
+        if part.name == own or runs is None:
+            continue
+        shared = [v for v in variants if v in runs[0]]
+        both = sorted(set(seeds) & set(runs[1]))
+        if shared and both:
+            clashes.append(f"{part.name} ({', '.join(shared)} at seeds {_listed(both)})")
+    return clashes
+
+
+def _listed(seeds: list[int]) -> str:
+    return ", ".join(map(str, seeds[:5])) + (", …" if len(seeds) > 5 else "")
+
+
 def main() -> None:
     parser = argument_parser(__doc__)
     parser.add_argument("--task", required=True, choices=[*CLASSIC_TASKS, *MUJOCO_TASKS])
@@ -95,8 +137,16 @@ def main() -> None:
         parser.error(f"unknown variant {', '.join(unknown)}; valid: {', '.join(VARIANTS)}")
     backend = args.backend or ("native" if args.task in MUJOCO_TASKS else "auto")
 
-    directory = args.results / "study" / args.task / args.protocol / part_name(variants, args.seeds)
+    folder = args.results / "study" / args.task / args.protocol
+    directory = folder / part_name(variants, args.seeds)
     refuse_to_replace([directory], args.force)
+    clashes = overlapping_parts(folder, variants, args.seeds)
+    if clashes:
+        sys.exit(
+            f"{folder} holds these runs already, in {'; '.join(clashes)}: a study's parts hold "
+            "each run once (merging refuses a run two parts hold); choose other seeds, or "
+            "remove that part to record it again"
+        )
     print(f"part: {directory}", flush=True)
     code = commit()  # the code that trains, whatever is committed while it runs
     start = time.perf_counter()

@@ -42,7 +42,8 @@ def main() -> None:
     parser.add_argument("--curves", type=Path, default=RESULTS / "table1_classic")
     add_output_flags(parser, RESULTS / "table1_classic.md")
     args = parser.parse_args()
-    refuse_to_replace([args.output, *(args.curves / task for task in args.tasks)], args.force)
+    recorded = [args.output, *(args.curves / task for task in args.tasks)]
+    refuse_to_replace(recorded, args.force, elsewhere="--output FILE and --curves DIR")
 
     config = TrainConfig(total_steps=args.steps)
     runs = len(PAPER_VARIANTS) * args.seeds

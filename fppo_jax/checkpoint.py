@@ -30,7 +30,14 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import jax
 import numpy as np
 
-from fppo_jax.files import DirectoryBusy, DirectoryLock, first_line, json_value, tree_digest
+from fppo_jax.files import (
+    DirectoryBusy,
+    DirectoryLock,
+    first_line,
+    json_value,
+    tree_digest,
+    writable_directory,
+)
 from fppo_jax.policy import Policy
 
 if TYPE_CHECKING:
@@ -101,6 +108,7 @@ def open_checkpoints(
     directory)."""
     if directory is None:
         return None, None
+    writable_directory(directory)  # else orbax's own error, a traceback, when it first writes
     checkpoints = Checkpoints(directory, keep)
     try:
         checkpoints.lock()

@@ -82,7 +82,14 @@ def initialize() -> None:
     variables = {"num_processes": "JAX_NUM_PROCESSES", "process_id": "JAX_PROCESS_ID"}
     options = {name: int(os.environ[v]) for name, v in variables.items() if v in os.environ}
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
-    jax.distributed.initialize(**options)
+    try:
+        jax.distributed.initialize(**options)
+    except ValueError as error:  # what JAX could not detect, such as the coordinator
+        raise ValueError(
+            f"cannot join a multi-process run: {str(error).rstrip('.')}; set "
+            "JAX_COORDINATOR_ADDRESS (host:port of process 0), JAX_NUM_PROCESSES and "
+            "JAX_PROCESS_ID, or start it under SLURM, Open MPI or Kubernetes, which JAX detects"
+        ) from error
 
 
 def place(tree: Any, shardings: Any) -> Any:

@@ -44,7 +44,7 @@ from fppo_jax.envs import resets_itself
 from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
 from fppo_jax.files import DirectoryLock
-from fppo_jax.memory import runs_per_call
+from fppo_jax.memory import check_host_memory, host_run_bytes, runs_per_call
 from fppo_jax.metric_log import Block, open_logs, prepare_log_dir
 from fppo_jax.options import Options, Snapshot, stops
 from fppo_jax.policy import Policy, make_policy
@@ -70,6 +70,7 @@ class TrainingDiverged(FloatingPointError):
 # What a cluster sends a job it is about to stop: SIGTERM on preemption, at its time limit and
 # on scancel; SIGUSR1 when asked for ahead of the time limit (sbatch --signal=USR1@SECONDS).
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
+HOST_BYTES_SHOWN = 2**30  # host-stepped environments' memory, said before compiling from here
 
 
 class StoppedBySignal(Exception):
@@ -147,6 +148,9 @@ def drive(plan: Plan, options: Options) -> Outcome:
                 "device: devices must be 1, in a single process"
             )
         devices = 1
+    check_runs = getattr(trainer.env, "check_runs", None)  # a vector environment instance's
+    if check_runs is not None:
+        check_runs(plan.num_runs, options.eval_every is not None)
     mesh = make_mesh(devices, config.num_envs, plan.data_parallel)
     main = is_main_process()
     checkpoints: Checkpoints | None = None
@@ -180,6 +184,17 @@ def drive(plan: Plan, options: Options) -> Outcome:
         if plan.runs_per_call is None and checkpointed is None:
             runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
             size = runs_per_call(trainer, *_first_run(plan), size, runs, data)
+        check_host_memory(trainer, size)
+        host = host_run_bytes(trainer) * size
+        if options.progress is True and main and host >= HOST_BYTES_SHOWN:
+            # Making that many Python environments, at the first reset, takes minutes.
+            print(
+                f"{getattr(trainer.env, 'name', 'the environment')}: "
+                f"{size * config.num_envs:,} environments, made on the host at the first reset, "
+                f"take about {host / 2**30:.1f} GiB there",
+                file=sys.stderr,
+                flush=True,
+            )
         program = compile_program(trainer, *_group(plan, 0, size), per_call, mesh)
         with (
             reporter(options.progress if main else False, plan.description) as report,

@@ -6,6 +6,10 @@ buffers (the reset states drawn for a rollout, the trajectory and its batch), wi
 the temporaries an update makes of them (the shuffled minibatches, gradients). Only the
 state's shapes are traced (``jax.eval_shape`` of ``init``); an update's buffers follow from
 them and the configuration, so that the estimate costs a fraction of a compilation.
+
+Host-stepped environments (Gymnasium's) also hold a pool of Python objects on the host, one
+per environment of each run, whose size the adapter measured on one of them
+(``host_bytes``): those runs must fit in half the host's available memory too.
 """
 
 from __future__ import annotations
@@ -43,6 +47,28 @@ def run_bytes(trainer: Trainer, key: jax.Array, hp: Hyperparameters) -> int:
     return int(STATE_COPIES * _bytes(state) + UPDATE_COPIES * (resets + samples))
 
 
+def host_run_bytes(trainer: Trainer) -> int:
+    """Bytes one run's environments hold on the host outside JAX: a host-stepped environment's
+    pool of Python objects (Gymnasium's ``host_bytes`` each), 0 for the others."""
+    return getattr(trainer.env, "host_bytes", 0) * trainer.config.num_envs
+
+
+def check_host_memory(trainer: Trainer, runs: int) -> None:
+    """Raise ``MemoryError``, before anything compiles, if `runs` runs' host-stepped
+    environments would not fit in half the host's available memory."""
+    per_run, budget = host_run_bytes(trainer), host_available_bytes() / 2
+    if per_run * runs <= budget:
+        return
+    env, count = trainer.env, trainer.config.num_envs
+    raise MemoryError(
+        f"{getattr(env, 'name', type(env).__name__)}: {runs} run(s) of {count:,} environments, "
+        f"each a Python object of about {env.host_bytes / 2**10:.1f} KiB on the host, need "
+        f"about {per_run * runs / 2**30:.2f} GiB and {budget / 2**30:.2f} GiB (half the "
+        "host's available memory) is available: lower num_envs"
+        + (", or the runs per call (chunk)" if runs > 1 else "")
+    )
+
+
 def runs_per_call(
     trainer: Trainer,
     key: jax.Array,
@@ -53,8 +79,9 @@ def runs_per_call(
 ) -> int:
     """How many of `wanted` runs to train per compiled call: all of them if they fit in half
     the free memory of the `across` devices that share them (each run's environments split
-    over `split` devices), else the most that do, a multiple of `across`. Raises
-    ``MemoryError``, before anything compiles, if even one run per device does not fit."""
+    over `split` devices), else the most that do, a multiple of `across`; host-stepped
+    environments' runs also fit in half the host's available memory. Raises ``MemoryError``,
+    before anything compiles, if even one run per device does not fit."""
     need, budget = run_bytes(trainer, key, hp) / split, free_bytes() / 2
     if need > budget:
         raise MemoryError(
@@ -63,6 +90,10 @@ def runs_per_call(
             "resets_per_rollout or hidden_sizes (each layer's width)"
         )
     fit = math.floor(budget / need) * across
+    host = host_run_bytes(trainer)
+    if host:  # host-stepped environments, on one device in one process (across is 1)
+        check_host_memory(trainer, 1)
+        fit = min(fit, math.floor(host_available_bytes() / 2 / host))
     return min(wanted, max(across, fit - fit % across))
 
 
@@ -73,6 +104,19 @@ def free_bytes() -> float:
     stats = device.memory_stats() if hasattr(device, "memory_stats") else None
     if stats and "bytes_limit" in stats:
         return float(stats["bytes_limit"] - stats.get("bytes_in_use", 0))
+    return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+
+
+def host_available_bytes() -> float:
+    """The host's available memory: what the kernel could give without swapping (Linux's
+    MemAvailable, which counts the page cache it would drop), else its free memory."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
     return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
 
 

@@ -20,7 +20,10 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import zipfile
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -74,9 +77,8 @@ class NumpyPolicy:
     def load(cls, directory: str | Path) -> NumpyPolicy:
         """The policy saved in `directory` (``policy.json`` and ``policy.npz``)."""
         directory = Path(directory)
-        description = json.loads((directory / POLICY_FILE).read_text())
-        with np.load(directory / ARRAYS_FILE, allow_pickle=False) as npz:
-            arrays = dict(npz)
+        description = _read(directory / POLICY_FILE, lambda path: json.loads(path.read_text()))
+        arrays = _read(directory / ARRAYS_FILE, _arrays)
         if digest(arrays) != description["digest"]:
             raise ValueError(
                 f"{directory / ARRAYS_FILE} does not match the digest in {POLICY_FILE}: damaged "
@@ -96,6 +98,22 @@ class NumpyPolicy:
         if "discrete" not in space:
             low, high = (np.asarray(space[k], np.float32) for k in ("low", "high"))
         return cls(layers, mean, var, low, high)
+
+
+def _read(path: Path, read: Callable[[Path], Any]) -> Any:
+    """`read(path)`; a file that is there but cannot be read back (cut short, say) is damaged,
+    and the error names it."""
+    try:
+        return read(path)
+    except (ValueError, EOFError, zipfile.BadZipFile) as error:
+        raise ValueError(
+            f"{path} is damaged: it cannot be read back ({type(error).__name__}: {error})"
+        ) from error
+
+
+def _arrays(path: Path) -> dict[str, np.ndarray]:
+    with np.load(path, allow_pickle=False) as npz:
+        return dict(npz)
 
 
 def digest(arrays: dict[str, np.ndarray]) -> str:

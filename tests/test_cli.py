@@ -1,5 +1,7 @@
 import csv
+import errno
 import json
+import os
 import subprocess
 import sys
 
@@ -7,7 +9,10 @@ import numpy as np
 import pytest
 from helpers import sweep_by_hand
 
+import fppo_jax.cli.commands
 import fppo_jax.driver
+import fppo_jax.files
+import fppo_jax.metric_log
 from fppo_jax import SweepResult
 from fppo_jax.cli import build_parser, main
 
@@ -203,6 +208,40 @@ def test_outputs_that_cannot_be_written_are_refused_before_training(tmp_path, ca
     ]:
         assert main(["train", "--quiet", flag, str(path)]) == 2
         assert f"cannot write to {under_a_file}: Not a directory" in capsys.readouterr().err
+    assert main(["train", "--quiet", "--checkpoint-dir", str(under_a_file)]) == 2
+    assert capsys.readouterr().err == (
+        f"fppo-jax: error: cannot write to {under_a_file}: Not a directory\n"
+    )
+    read_only = tmp_path / "read-only"
+
+    def refused(*_, dir, **__):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS), dir)
+
+    with monkeypatch.context() as m:  # as root, a directory's permissions refuse nothing
+        m.setattr(fppo_jax.files.tempfile, "TemporaryFile", refused)
+        for flag in ("--checkpoint-dir", "--output"):
+            assert main(["train", "--quiet", flag, str(read_only)]) == 2
+            error = capsys.readouterr().err
+            assert error == f"fppo-jax: error: cannot write to {read_only}: Read-only file system\n"
+
+
+def test_a_disk_that_fills_while_writing_is_one_line_naming_the_file(tmp_path, capsys, monkeypatch):
+    def full(path, value):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(fppo_jax.metric_log, "write_json", full)
+    assert main(["train", "--quiet", *TINY_FLAGS, "--output", str(tmp_path)]) == 2
+    error = capsys.readouterr().err
+    assert error == f"fppo-jax: error: {tmp_path / 'config.json'}: No space left on device\n"
+
+
+def test_an_os_error_that_names_no_file_is_not_taken_for_a_user_s_error(monkeypatch):
+    def broken(*_):
+        raise OSError("a bug, not a path")
+
+    monkeypatch.setattr(fppo_jax.cli.commands, "COMMANDS", {"list": broken})
+    with pytest.raises(OSError, match="a bug"):
+        main(["list"])
 
 
 def test_sweep_then_table_then_plot(tmp_path, capsys):
@@ -232,6 +271,13 @@ def test_sweep_then_table_then_plot(tmp_path, capsys):
     assert len(rows) == 8 * 2 and {r["variant"] for r in rows} == {"ppo", "fppo-lp"}
     assert main(["table", str(tmp_path)]) == 0
     assert len(capsys.readouterr().out.strip().splitlines()) == 2 + 4  # header, rule, 4 settings
+    assert main(["table", str(tmp_path), "--stat", "iqm", "--endpoint", "auc", "--ci", "0.9"]) == 0
+    assert "IQM of the auc score [90% CI]" in capsys.readouterr().out
+    for given in (["--ci", "0.9"], ["--endpoint", "auc"], ["--endpoint", "max", "--ci", "0.5"]):
+        assert main(["table", str(tmp_path), *given]) == 2
+        error = capsys.readouterr().err
+        assert error.startswith(f"fppo-jax: error: {given[0]}") and "--stat paper" in error
+        assert "for --stat iqm or mean or median" in error
     assert main(["plot", str(tmp_path)]) == 0
     for name in ("curves.png", "ablation.png"):
         assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
@@ -348,3 +394,31 @@ def test_a_settings_file_s_switches_and_keys_are_read_strictly(
     (tmp_path / name).write_text(text)
     assert main(["train", "--config", str(tmp_path / name)]) == 2
     assert problem in capsys.readouterr().err
+
+
+def test_a_recorded_run_s_shape_and_another_preset_are_refused_not_mislabelled(
+    tmp_path, capsys, monkeypatch
+):
+    paper = {"env": "cartpole", "preset": "paper", "num_envs": 8, "num_steps": 256}
+    (tmp_path / "paper.json").write_text(json.dumps(paper))
+    (tmp_path / "shape.json").write_text(json.dumps({"num_envs": 16}))
+    (tmp_path / "massive.json").write_text(json.dumps({"preset": "massive"}))
+    presets = []
+    monkeypatch.setattr(
+        fppo_jax.cli.commands, "COMMANDS", {"train": lambda args: presets.append(args.preset)}
+    )
+    for command in ("train", "sweep"):
+        assert main([command, "--config", str(tmp_path / "paper.json"), "--preset", "massive"]) == 2
+        error = capsys.readouterr().err
+        assert error.startswith(f"fppo-jax: error: {tmp_path / 'paper.json'} records a run of the")
+        assert "paper preset, with its run shape (num_envs=8, num_steps=256)" in error
+        assert "override --preset massive" in error and "drop --preset" in error
+    for config, given, preset in [
+        ("paper.json", [], "paper"),  # rerun as recorded
+        ("paper.json", ["--preset", "paper"], "paper"),
+        ("shape.json", ["--preset", "massive"], "massive"),  # a shape of one's own over it
+        ("shape.json", [], "paper"),
+        ("massive.json", [], "massive"),
+    ]:
+        assert main(["train", "--config", str(tmp_path / config), *given]) is None
+        assert presets.pop() == preset, config

@@ -144,3 +144,19 @@ def test_two_processes_killed_and_resumed_end_as_if_never_stopped(tmp_path):
         for key in before:
             if key != "resumed_from":
                 np.testing.assert_array_equal(after[key], before[key], err_msg=key)
+
+
+def test_distributed_without_a_coordinator_is_one_line_saying_what_to_set(tmp_path):
+    cluster = ("JAX_", "SLURM_", "OMPI_", "PMI_", "KUBERNETES_")
+    alone = {k: v for k, v in os.environ.items() if not k.startswith(cluster)}
+    done = subprocess.run(
+        [sys.executable, "-m", "fppo_jax", "train", "--distributed", "--quiet"],
+        env={**alone, "PYTHONPATH": str(Path(fppo_jax.__file__).parent.parent)},
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("fppo-jax: error: cannot join a multi-process run: ")
+    assert "set JAX_COORDINATOR_ADDRESS" in done.stderr and len(done.stderr.splitlines()) == 1

@@ -308,6 +308,8 @@ def test_a_log_dir_that_cannot_be_written_is_refused_before_compiling(tmp_path, 
         with pytest.raises(ValueError, match=f"cannot write to {path}: {why}"):
             train(**RUN, log_dir=path)
         with pytest.raises(ValueError, match=f"cannot write to {path}: {why}"):
+            train(**RUN, checkpoint_dir=path)
+        with pytest.raises(ValueError, match=f"cannot write to {path}: {why}"):
             sweep("cartpole", {"variant": "ppo"}, seeds=2, **TINY, log_dir=path)
 
 

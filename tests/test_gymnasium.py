@@ -3,6 +3,7 @@
 program."""
 
 import functools
+import importlib.util
 
 import gymnasium
 import jax
@@ -12,6 +13,7 @@ import pytest
 from conftest import TINY
 
 import fppo_jax.driver
+import fppo_jax.memory
 from fppo_jax import make_env, sweep, train
 from fppo_jax.envs import Discrete, Step, as_environment, draw_resets
 from fppo_jax.envs.gymnasium import gymnasium_environment
@@ -121,11 +123,111 @@ def test_keyword_arguments_reach_gymnasium_make():
     assert ends.size and np.diff(np.concatenate([[0], ends])).max() <= 10
 
 
-def test_environments_that_fail_are_named_with_what_they_did():
-    with pytest.raises(Exception, match="Broken: step raised RuntimeError: the simulator crashed"):
-        train(Broken, "ppo", total_steps=256, **TINY)
-    with pytest.raises(Exception, match="NaNs: step returned a non-finite observation"):
-        train(NaNs, "ppo", total_steps=256, **TINY)
+def faulty(name: str, reset=None, step=None, space=None) -> type:
+    """A Corridor whose reset or step returns what `reset` or `step` make of its own outcome,
+    or whose observation space is `space`."""
+
+    def own_reset(self, *, seed=None, options=None):
+        out = Corridor.reset(self, seed=seed, options=options)
+        return out if reset is None else reset(out)
+
+    def own_step(self, action):
+        out = Corridor.step(self, action)
+        return out if step is None else step(out)
+
+    body = {"reset": own_reset, "step": own_step}
+    return type(name, (Corridor,), body | ({"observation_space": space} if space else {}))
+
+
+def reward(value):
+    return lambda out: (out[0], value, *out[2:])
+
+
+def observation(value):
+    return lambda out: (value, *out[1:])
+
+
+MISBEHAVING = {
+    "raises in reset": (
+        faulty("ResetRaises", reset=lambda out: 1 / 0),
+        r"ResetRaises: reset raised ZeroDivisionError: division by zero \(at .*test_gymnasium",
+    ),
+    "raises in step": (Broken, "Broken: step raised RuntimeError: the simulator crashed"),
+    "a NaN observation": (NaNs, r"NaNs: step returned a non-finite observation \[nan nan\]"),
+    "an infinite observation": (
+        faulty("Infinite", reset=lambda out: (out[0] + np.inf, out[1])),
+        "Infinite: reset returned a non-finite observation",
+    ),
+    "an observation of another shape": (
+        faulty("Longer", step=observation(np.zeros(3))),
+        r"Longer: step returned observations of shape \(3,\), not \(2,\)",
+    ),
+    "a string observation": (
+        faulty("Text", step=observation("position 1")),
+        r"Text: step returned the observation 'position 1' \(str\), not numbers",
+    ),
+    "a NaN reward": (faulty("NaNReward", step=reward(np.nan)), "reward nan .*a finite number"),
+    "an infinite reward": (faulty("InfReward", step=reward(-np.inf)), "reward -inf"),
+    "an array reward": (
+        faulty("ArrayReward", step=reward(np.ones(2))),
+        r"ArrayReward: step returned the reward an array of shape \(2,\) \(float64\), not a",
+    ),
+    "a None reward": (faulty("NoReward", step=reward(None)), r"reward None \(NoneType\)"),
+    "a string reward": (faulty("TextReward", step=reward("1")), r"reward '1' \(str\)"),
+    "flags of another shape": (
+        faulty("Flags", step=lambda out: (*out[:2], np.zeros(2, bool), *out[3:])),
+        r"Flags: step returned terminated=an array of shape \(2,\) \(bool\), not a bool",
+    ),
+    "the old four values from step": (
+        faulty("OldStep", step=lambda out: (*out[:2], out[2] or out[3], out[4])),
+        r"OldStep: step returned a 4-tuple, not the five values .*old Gym API",
+    ),
+    "a bare observation from reset": (
+        faulty("BareReset", reset=lambda out: out[0]),
+        r"BareReset: reset returned an array of shape \(2,\) \(float32\), not the pair",
+    ),
+    "an empty observation space": (
+        faulty("Empty", space=gymnasium.spaces.Box(0.0, 1.0, (0,), np.float32)),
+        r"Empty: its observation space Box\(.*\) is empty",
+    ),
+}
+
+
+@pytest.mark.parametrize("env, message", MISBEHAVING.values(), ids=MISBEHAVING.keys())
+def test_an_environment_that_breaks_the_api_is_named_with_its_fault_before_compiling(
+    env, message, monkeypatch
+):
+    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    with pytest.raises(ValueError, match=message):
+        train(env, "ppo", total_steps=256, **TINY)
+
+
+def test_faults_after_the_first_step_stop_training_naming_the_environment():
+    class LaterNaN(Corridor):
+        def step(self, action):
+            obs, reward, terminated, truncated, info = super().step(action)
+            return obs, np.nan if self.steps == 4 else reward, terminated, truncated, info
+
+    with pytest.raises(Exception, match=r"LaterNaN: step returned the reward nan"):
+        train(LaterNaN, "ppo", total_steps=256, **TINY)
+    vector = gymnasium.vector.SyncVectorEnv([LaterNaN, LaterNaN])
+    with pytest.raises(Exception, match=r"SyncVectorEnv.*: step returned the reward .*2 finite"):
+        rollouts(as_environment(vector), [0, 0], 5)
+
+
+def test_a_missing_extra_and_a_module_s_own_id_are_named():
+    if importlib.util.find_spec("Box2D") is None:
+        with pytest.raises(
+            ImportError, match=r"gymnasium/CarRacing-v3 cannot be made: Box2D .*box2d"
+        ):
+            make_env("gymnasium/CarRacing-v3")
+    env = make_env("gymnasium/gymnasium.envs.classic_control.cartpole:CartPole-v1")
+    assert env.name == "gymnasium/gymnasium.envs.classic_control.cartpole:CartPole-v1"
+    assert env.observation_size == 4
+    with pytest.raises(ImportError, match=r"cannot import 'no_such_package.envs', which should"):
+        make_env("gymnasium/no_such_package.envs:Mine-v0")
+    with pytest.raises(ValueError, match=r"no environment 'Mine-v0' registered once 'json' is"):
+        make_env("gymnasium/json:Mine-v0")
 
 
 def test_unsupported_spaces_and_unknown_ids_are_refused_naming_what_to_do():
@@ -227,6 +329,31 @@ def test_environments_a_vector_environment_cannot_serve_are_refused_before_compi
         train(pairs, "ppo", total_steps=512, **{**TINY, "num_envs": 3})
     with pytest.raises(ValueError, match="2 sub-environments, which cannot serve 5 "):
         train(pairs, "ppo", total_steps=512, **TINY, eval_every=1, eval_episodes=5)
+    instance = gymnasium.vector.SyncVectorEnv([Corridor] * 4)
+    with pytest.raises(ValueError, match=r"one vector environment.*a sweep's 2 runs: pass a func"):
+        sweep(instance, {"variant": "ppo"}, seeds=[0, 1], total_steps=512, **TINY)
+    with pytest.raises(ValueError, match=r"cannot serve an evaluation during training"):
+        train(instance, "ppo", total_steps=512, **TINY, eval_every=1, eval_episodes=4)
+
+
+def test_environments_that_would_not_fit_in_host_memory_are_refused_before_compiling(
+    monkeypatch, capsys
+):
+    env = as_environment(Corridor)
+    assert 1000 < env.host_bytes < 100_000  # a Python object of a few KiB
+    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    monkeypatch.setattr(fppo_jax.memory, "host_available_bytes", lambda: 2 * 7 * env.host_bytes)
+    with pytest.raises(MemoryError, match=r"Corridor: 1 run\(s\) of 8 environments, each a Py"):
+        train(Corridor, "ppo", total_steps=512, **{**TINY, "num_envs": 8})
+    with pytest.raises(MemoryError, match=r"2 run\(s\) of 4 .*lower num_envs, or the runs per"):
+        sweep(Corridor, {"variant": "ppo"}, seeds=2, total_steps=512, chunk=2, **TINY)
+    # Without a chunk given, a sweep takes as many runs per call as fit: one here.
+    monkeypatch.setattr(fppo_jax.memory, "host_available_bytes", lambda: 2 * 5 * env.host_bytes)
+    monkeypatch.setattr(fppo_jax.driver, "HOST_BYTES_SHOWN", 4 * env.host_bytes)
+    with pytest.raises(pytest.fail.Exception, match="compiled"):
+        sweep(Corridor, {"variant": "ppo"}, seeds=2, total_steps=512, progress=True, **TINY)
+    shown = capsys.readouterr().err
+    assert "Corridor: 4 environments, made on the host at the first reset, take about" in shown
 
 
 @pytest.mark.slow

@@ -61,3 +61,10 @@ def test_damaged_arrays_and_bad_observations_are_refused(saved_policies, tmp_pat
     np.savez(edited / "policy.npz", **arrays)
     with pytest.raises(ValueError, match="does not match the digest"):
         NumpyPolicy.load(edited)
+    whole = (saved_policies["discrete"] / "policy.npz").read_bytes()
+    (edited / "policy.npz").write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(ValueError, match=f"{edited / 'policy.npz'} is damaged: .*BadZipFile"):
+        NumpyPolicy.load(edited)
+    (edited / "policy.json").write_text('{"digest": ')
+    with pytest.raises(ValueError, match=f"{edited / 'policy.json'} is damaged: .*JSONDecode"):
+        NumpyPolicy.load(edited)

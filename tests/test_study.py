@@ -39,6 +39,15 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
     assert again.returncode != 0 and "is already recorded" in again.stderr
     assert (parts / "seeds-0-2_ppo+fppo-lp" / "curves.csv").read_bytes() == curves
 
+    overlap = _run("study.py", *tiny, "--seeds", "2:4", "--variants", "fppo-lp", "--force")
+    assert overlap.returncode != 0 and "holds these runs already" in overlap.stderr
+    assert "seeds-0-2_ppo+fppo-lp (fppo-lp at seeds 2)" in overlap.stderr
+    assert "seeds-3-5_ppo+fppo-lp (fppo-lp at seeds 3)" in overlap.stderr
+    assert sorted(p.name for p in parts.iterdir()) == [
+        "seeds-0-2_ppo+fppo-lp",
+        "seeds-3-5_ppo+fppo-lp",
+    ]
+
     other = _run("study.py", *tiny, "--seeds", "0:2", "--variants", "tr-ppo")  # another grid
     assert other.returncode == 0, other.stdout + other.stderr
 

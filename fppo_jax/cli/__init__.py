@@ -9,6 +9,7 @@ them; :mod:`.parser` assembles the commands; :mod:`.settings` reads ``--config F
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import sys
 import warnings
@@ -17,7 +18,7 @@ from typing import Any
 
 from fppo_jax.cli.flags import own_surrogates, surrogates_named
 from fppo_jax.cli.parser import build_parser
-from fppo_jax.cli.settings import check_settings, settings_file
+from fppo_jax.cli.settings import check_preset, check_settings, settings_file
 
 __all__ = ["build_parser", "main"]
 
@@ -39,6 +40,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 parser = build_parser([*surrogates, *named])
             command = parser.parse_args(argv).commands[args.command]
             check_settings(args.config, settings, command)
+            check_preset(args.config, settings, _given(parser, argv, command, "preset"))
             command.set_defaults(**settings)
         except (ValueError, FileNotFoundError) as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
@@ -52,11 +54,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     from fppo_jax.distributed import initialize
     from fppo_jax.driver import StoppedBySignal, TrainingDiverged
 
-    if getattr(args, "distributed", False):
-        initialize()
-    compile_cache.enable()
     with _warnings_as_lines():
         try:
+            if getattr(args, "distributed", False):
+                initialize()
+            compile_cache.enable()
             return COMMANDS[args.command](args)
         except (
             ValueError,
@@ -68,11 +70,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         ) as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
+        except OSError as error:
+            # A file or directory the command reads or writes (a full disk, a read-only or
+            # vanished directory); one with no path named is another failure, left to raise.
+            if error.filename is None:
+                raise
+            print(f"fppo-jax: error: {error.filename}: {error.strerror or error}", file=sys.stderr)
+            return 2
         except StoppedBySignal as stopped:
             print(f"fppo-jax: {stopped}", file=sys.stderr)
             # What a shell reports for a program the signal ended: a job script tells a time
             # limit's warning (SIGUSR1, 138) from a preemption or scancel (SIGTERM, 143).
             return 128 + stopped.signal
+
+
+def _given(
+    parser: argparse.ArgumentParser, argv: list[str], command: argparse.ArgumentParser, dest: str
+) -> Any:
+    """The value `argv` gives `command`'s flag `dest`, or None where it gives none."""
+    default = command.get_default(dest)
+    command.set_defaults(**{dest: None})
+    try:
+        return getattr(parser.parse_args(argv), dest)
+    finally:
+        command.set_defaults(**{dest: default})
 
 
 def _variants(variant: object) -> list[object]:

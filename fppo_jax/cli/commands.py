@@ -34,6 +34,7 @@ from fppo_jax.saved_policy import (
     load_policy,
     read_policy,
 )
+from fppo_jax.statistics import CONFIDENCE, STATISTICS
 from fppo_jax.sweep import sweep
 
 
@@ -178,10 +179,19 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _table(args: argparse.Namespace) -> int:
+    given = [flag for flag in ("endpoint", "ci") if getattr(args, flag) is not None]
+    if args.stat == "paper" and given:
+        flags = " and ".join(f"--{flag}" for flag in given)
+        raise ValueError(
+            f"{flags}: --stat paper (the default), Table 1's max average return of the "
+            "seed-mean curve, scores no run alone and has no interval; "
+            f"{'they are' if len(given) > 1 else 'it is'} for --stat {' or '.join(STATISTICS)}"
+        )
+    endpoint = args.endpoint or "final"
     result = SweepResult.read(args.directory)
-    print(result.table(args.stat, args.endpoint, args.ci))
+    print(result.table(args.stat, endpoint, args.ci or CONFIDENCE))
     if args.stat != "paper":  # the paper's statistic has no interval
-        _warn_of_missing_intervals(result, args.endpoint)
+        _warn_of_missing_intervals(result, endpoint)
     return 0
 
 

@@ -310,15 +310,19 @@ def add_render_flag(command: argparse.ArgumentParser, which: str) -> None:
     )
 
 
-def add_score_flags(command: argparse.ArgumentParser) -> None:
+def add_score_flags(command: argparse.ArgumentParser, only_for: str = "") -> None:
+    """--endpoint and --ci. `only_for`: the statistics that use them, where others do not;
+    then they default to None, so that the command can tell them given from left out."""
+    endpoint = "each run's score: " + "; ".join(f"{k}: {v}" for k, v in ENDPOINTS.items())
+    level = "the confidence intervals' level"
+    if only_for:
+        endpoint += f" ({only_for} only; default: final)"
+        level += f" ({only_for} only; default: {CONFIDENCE})"
     command.add_argument(
-        "--endpoint",
-        default="final",
-        choices=list(ENDPOINTS),
-        help="each run's score: " + "; ".join(f"{k}: {v}" for k, v in ENDPOINTS.items()),
+        "--endpoint", default=None if only_for else "final", choices=list(ENDPOINTS), help=endpoint
     )
     command.add_argument(
-        "--ci", type=confidence, default=CONFIDENCE, help="the confidence intervals' level"
+        "--ci", type=confidence, default=None if only_for else CONFIDENCE, help=level
     )
 
 

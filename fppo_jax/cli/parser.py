@@ -137,7 +137,7 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
         help="paper: Table 1's max average return; or that statistic of each run's score, "
         "with its bootstrap CI",
     )
-    add_score_flags(table)
+    add_score_flags(table, only_for="--stat " + ", ".join(STATISTICS))
     compare = commands.add_parser(
         "compare",
         help="each setting of a sweep against a baseline: probability of improvement, with CIs",

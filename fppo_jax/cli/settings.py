@@ -8,6 +8,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from fppo_jax.config import PRESETS
+
 # What a run's config.json records beside its settings (metric_log.environment_record).
 RECORD_ONLY = ("versions", "platform")
 
@@ -82,6 +84,23 @@ def check_settings(path: Path, settings: dict[str, Any], command: argparse.Argum
             value = settings[action.dest]
             if not isinstance(value, bool) and (value is not None or action.default is not None):
                 raise ValueError(f"{path}: {action.dest} must be true or false, got {value!r}")
+
+
+def check_preset(path: Path, settings: dict[str, Any], preset: str | None) -> None:
+    """Refuse `preset`, given on the command line, beside a file that records a run of another
+    preset with that preset's run shape: the file's shape would win and the run would be
+    labelled `preset` without having its shape."""
+    recorded = settings.get("preset")
+    shape = [name for name in PRESETS.get(recorded, {}) if name in settings]
+    if preset is None or recorded in (None, preset) or not shape:
+        return
+    fields = ", ".join(f"{name}={settings[name]}" for name in shape)
+    raise ValueError(
+        f"{path} records a run of the {recorded} preset, with its run shape ({fields}), which "
+        f"would override --preset {preset} and leave the run labelled {preset} without its "
+        f"shape; drop --preset to rerun it as recorded, or, for the {preset} preset, write "
+        "the settings to keep in a file without the run shape"
+    )
 
 
 def _without_repeated_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:

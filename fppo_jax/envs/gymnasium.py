@@ -45,14 +45,25 @@ environment takes one seed, its first sub-environment's.
 
 Observations must be a 1-D ``Box``; actions a ``Discrete`` or a 1-D ``Box`` (an action is
 clipped to its bounds before ``step``). Other spaces are refused, naming the wrapper to use.
+
+An environment is reset and stepped once on the host when its adapter is made, before anything
+compiles, with the checks every later step has: one that breaks Gymnasium's API (a ``reset`` or
+``step`` that raises or gives the wrong values, an observation or reward that is not finite
+numbers of the right shape, an empty observation space) is refused with a ``ValueError`` that
+names it and the fault. An id may be ``gymnasium.make``'s ``module:id``, whose module is imported
+to register it.
 """
 
 from __future__ import annotations
 
 import collections
 import dataclasses
+import importlib
 import importlib.util
+import math
 import threading
+import traceback
+import tracemalloc
 from collections.abc import Callable
 from typing import Any
 
@@ -60,8 +71,12 @@ import numpy as np
 
 from fppo_jax.envs.core import Box, Discrete, HostState, OnHost, Step, seeds_of
 from fppo_jax.extras import install_hint
+from fppo_jax.files import first_line
 
 MAX_POOLS = 16  # pools kept alive at once: training's, and a few evaluations' beside it
+# What one environment's step gives as its reward, and as terminated and truncated, mostly.
+SCALARS = (float, int, np.float32, np.float64, np.int64)
+FLAGS = (bool, np.bool_)
 
 
 def import_gymnasium() -> Any:
@@ -139,10 +154,14 @@ class GymnasiumEnvironment(OnHost):
     action_start = 0  # a Discrete space's first action
     vector_size = 0  # sub-environments per vector environment; 0: one gymnasium.Env each
     same_step = False  # a vector environment's autoreset mode is SAME_STEP
+    host_bytes = 0  # what each gymnasium.Env of a run holds on the host (0: not measured)
 
     def __post_init__(self) -> None:
         gymnasium = import_gymnasium()
-        probe = self.make()
+        try:
+            probe = self.make()
+        except gymnasium.error.DependencyNotInstalled as error:
+            raise ImportError(f"{self.name} cannot be made: {first_line(error)}") from None
         vector = isinstance(probe, gymnasium.vector.VectorEnv)
         if not vector and not isinstance(probe, gymnasium.Env):
             raise TypeError(
@@ -162,6 +181,11 @@ class GymnasiumEnvironment(OnHost):
                     f"{self.name}: observations must be a 1-D Box, got {observations}; wrap the "
                     f"environment in {wrappers[0]}FlattenObservation"
                 )
+            if observations.shape[0] == 0:
+                raise ValueError(
+                    f"{self.name}: its observation space {observations} is empty, and a policy "
+                    "needs at least one number to act on"
+                )
             if isinstance(actions, spaces.Discrete):
                 space: Discrete | Box = Discrete(int(actions.n))
                 object.__setattr__(self, "action_start", int(actions.start))
@@ -172,13 +196,49 @@ class GymnasiumEnvironment(OnHost):
                     f"{self.name}: actions must be Discrete or a 1-D Box, got {actions}; wrap "
                     f"the environment in a {wrappers[1]} that maps one of those onto it"
                 )
+            object.__setattr__(self, "observation_size", int(observations.shape[0]))
+            object.__setattr__(self, "action_space", space)
             if vector:
                 self._check_autoreset(probe)
+            else:
+                self._check_first_step(probe)
         finally:
             if not self.instance:
                 probe.close()
-        object.__setattr__(self, "observation_size", int(observations.shape[0]))
-        object.__setattr__(self, "action_space", space)
+        if not vector:
+            object.__setattr__(self, "host_bytes", self._bytes_per_environment())
+
+    def _bytes_per_environment(self) -> int:
+        """The Python memory one more environment takes, made and reset, as tracemalloc counts
+        it (what a C library allocates itself, such as a simulator's state, is not counted):
+        a run's pool holds num_envs of them, which :mod:`fppo_jax.memory` checks. Measured on a
+        second one, since the first also imported the environment's modules."""
+        tracing = tracemalloc.is_tracing()
+        if not tracing:
+            tracemalloc.start()
+        before = tracemalloc.get_traced_memory()[0]
+        env = self.make()
+        try:
+            self._reset(env, seed=0)
+            return max(0, tracemalloc.get_traced_memory()[0] - before)
+        finally:
+            env.close()
+            if not tracing:
+                tracemalloc.stop()
+
+    def _check_first_step(self, env: Any) -> None:
+        """Reset `env` and step it once, on the host, with the checks every step has: an
+        environment that breaks the API is named before a program is compiled around it."""
+        self._observation(self._reset(env, seed=0), "reset")
+        self._check_step(self._step(env, self._still_actions(1)[0]))
+
+    def _check_step(self, out: tuple, count: int | None = None) -> None:
+        """A step's outcome (`count` of them from a vector environment) checked."""
+        obs, reward, terminated, truncated, _ = out
+        self._observation(obs, "step", count)
+        self._reward(reward, count)
+        self._flags(terminated, "terminated", count)
+        self._flags(truncated, "truncated", count)
 
     def _check_autoreset(self, vector: Any) -> None:
         """Take `vector`'s size and autoreset mode, and refuse it where an ended episode cannot
@@ -203,19 +263,32 @@ class GymnasiumEnvironment(OnHost):
                 "reset, ignoring its action; make it with shared_memory=True (the default) or "
                 'autoreset_mode="SameStep"'
             )
-        if self.same_step or vector.num_envs == 1:
+        size = self.vector_size
+        self._observation(self._reset(vector, seed=0), "reset", size)
+        stepped = self._step(vector, self._still_actions(size))
+        self._check_step(stepped, size)
+        if self.same_step or size == 1:
             return
-        vector.reset(seed=0)
-        stepped = np.array(vector.step(vector.action_space.sample())[0])
-        first_alone = np.arange(vector.num_envs) == 0
-        kept = np.array(vector.reset(options={"reset_mask": first_alone})[0])
-        if not np.array_equal(kept[1:], stepped[1:]):
+        first_alone = np.arange(size) == 0
+        kept = self._reset(vector, options={"reset_mask": first_alone})
+        if not np.array_equal(np.array(kept)[1:], np.array(stepped[0])[1:]):
             raise ValueError(
                 f"{self.name}: reset(options={{'reset_mask': mask}}) restarts sub-environments "
                 f"outside the mask, so in its {mode.name} autoreset mode an episode that ends "
                 "cannot restart alone without an action ignored on the next step; use a vector "
                 "environment that resets the masked ones alone (gymnasium.vector.SyncVectorEnv "
                 'or AsyncVectorEnv: gymnasium.make_vec(..., vectorization_mode="sync"))'
+            )
+
+    def check_runs(self, runs: int, evaluates: bool) -> None:
+        """Refuse, before compiling, what a vector environment instance cannot serve: the one
+        vector environment there is serves one run, and no evaluation beside it."""
+        if self.instance and (runs > 1 or evaluates):
+            what = f"a sweep's {runs} runs" if runs > 1 else "an evaluation during training"
+            raise ValueError(
+                f"{self.name} is one vector environment, for one run and no evaluation beside "
+                f"it, so it cannot serve {what}: pass a function that makes one, "
+                "gymnasium_environment(lambda: gymnasium.make_vec(...)), or its class"
             )
 
     def check_batch(self, per_run: int) -> None:
@@ -240,7 +313,7 @@ class GymnasiumEnvironment(OnHost):
             envs = [self.make() for _ in seeds]
             first = np.stack(
                 [
-                    self._observation(env.reset(seed=seed)[0], "reset")
+                    self._observation(self._reset(env, seed=seed), "reset")
                     for env, seed in zip(envs, seeds, strict=True)
                 ]
             )
@@ -269,7 +342,9 @@ class GymnasiumEnvironment(OnHost):
         vectors = [self.make() for _ in range(count)]
         first = [
             self._observation(
-                _seeded_reset(vector, seeds[i * size : (i + 1) * size]), "reset", size
+                self._reset(vector, seed=_vector_seeds(vector, seeds[i * size : (i + 1) * size])),
+                "reset",
+                size,
             )
             for i, vector in enumerate(vectors)
         ]
@@ -303,13 +378,14 @@ class GymnasiumEnvironment(OnHost):
             env = envs[env_slot]
             obs, reward, terminated, truncated, _ = self._step(env, action)
             out.obs[row] = self._observation(obs, "step")
-            self._check_reward(reward)
-            out.reward[row] = reward
-            out.terminated[row] = bool(terminated)
-            out.truncated[row] = bool(truncated) and not terminated
+            out.reward[row] = self._reward(reward)
+            terminated = self._flags(terminated, "terminated")
+            truncated = self._flags(truncated, "truncated")
+            out.terminated[row] = terminated
+            out.truncated[row] = truncated and not terminated
             out.next_obs[row] = out.obs[row]
             if terminated or truncated:
-                out.next_obs[row] = self._observation(env.reset()[0], "reset")
+                out.next_obs[row] = self._observation(self._reset(env), "reset")
 
     def _step_vectors(
         self,
@@ -333,9 +409,11 @@ class GymnasiumEnvironment(OnHost):
 
     def _step_vector(self, vector: Any, actions: np.ndarray, rows: np.ndarray, out: Step) -> None:
         obs, reward, terminated, truncated, info = self._step(vector, actions)
-        obs = self._observation(obs, "step", self.vector_size)
-        self._check_reward(reward)
-        terminated, truncated = np.asarray(terminated, bool), np.asarray(truncated, bool)
+        size = self.vector_size
+        obs = self._observation(obs, "step", size)
+        reward = self._reward(reward, size)
+        terminated = self._flags(terminated, "terminated", size)
+        truncated = self._flags(truncated, "truncated", size)
         ended = terminated | truncated
         final = first = obs
         if ended.any() and self.same_step:
@@ -343,8 +421,8 @@ class GymnasiumEnvironment(OnHost):
             final[ended] = self._final_observations(info, ended)
         elif ended.any():
             first = obs.copy()
-            reset = vector.reset(options={"reset_mask": ended})[0]
-            first[ended] = self._observation(reset, "reset", self.vector_size)[ended]
+            reset = self._reset(vector, options={"reset_mask": ended})
+            first[ended] = self._observation(reset, "reset", size)[ended]
         out.obs[rows] = final
         out.reward[rows] = reward
         out.terminated[rows] = terminated
@@ -361,13 +439,39 @@ class GymnasiumEnvironment(OnHost):
         final = np.stack([info["final_obs"][i] for i in np.flatnonzero(ended)])
         return self._observation(final, "step's info['final_obs']", int(ended.sum()))
 
-    def _step(self, env: Any, action: Any) -> tuple:
+    def _reset(self, env: Any, **arguments: Any) -> Any:
+        """`env`'s first observation(s) from ``reset(**arguments)``, which must give
+        (observation, info)."""
         try:
-            return env.step(action)
+            out = env.reset(**arguments)
         except Exception as error:
-            raise RuntimeError(
-                f"{self.name}: step raised {type(error).__name__}: {error}"
-            ) from error
+            raise ValueError(f"{self.name}: reset {_raised(error)}") from error
+        if not (isinstance(out, tuple) and len(out) == 2):
+            raise ValueError(
+                f"{self.name}: reset returned {_described(out)}, not the pair (observation, "
+                "info) of Gymnasium's API"
+            )
+        return out[0]
+
+    def _step(self, env: Any, action: Any) -> tuple:
+        """``env.step(action)``, which must give Gymnasium's five values."""
+        try:
+            out = env.step(action)
+        except Exception as error:
+            raise ValueError(f"{self.name}: step {_raised(error)}") from error
+        if not (isinstance(out, tuple) and len(out) == 5):
+            raise ValueError(
+                f"{self.name}: step returned {_described(out)}, not the five values (observation, "
+                "reward, terminated, truncated, info) of Gymnasium's API (four are the old Gym "
+                "API's, with one done for both terminated and truncated)"
+            )
+        return out
+
+    def _still_actions(self, count: int) -> np.ndarray:
+        """`count` actions for a check, as Gymnasium takes them: a Discrete space's first, or
+        the Box's point nearest zero."""
+        width = 1 if isinstance(self.action_space, Discrete) else self.action_space.size
+        return self._actions(np.zeros((count, width), np.float32))
 
     def _actions(self, actions: np.ndarray) -> np.ndarray:
         """The actions [count, …] as Gymnasium takes them: a Discrete space's from its first
@@ -377,14 +481,41 @@ class GymnasiumEnvironment(OnHost):
         space = self.action_space
         return np.clip(actions, space.low, space.high).astype(np.float32)
 
-    def _check_reward(self, reward: Any) -> None:
-        if not np.isfinite(reward).all():
-            raise ValueError(f"{self.name}: step returned the reward {reward}")
+    def _reward(self, reward: Any, count: int | None = None) -> Any:
+        """`reward` checked: one finite number, or `count` of them from a vector environment."""
+        if count is None and type(reward) in SCALARS and math.isfinite(reward):
+            return reward  # the usual case, at every step of every environment
+        shape = () if count is None else (count,)
+        values = _numbers(reward)
+        if values is None or values.shape != shape or not np.isfinite(values).all():
+            expected = "a finite number" if count is None else f"{count} finite numbers"
+            raise ValueError(
+                f"{self.name}: step returned the reward {_described(reward)}, not {expected}"
+            )
+        return values
+
+    def _flags(self, flags: Any, which: str, count: int | None = None) -> np.ndarray | bool:
+        """`terminated` or `truncated` checked: one flag, or `count` of them."""
+        if count is None and type(flags) in FLAGS:
+            return bool(flags)  # the usual case, at every step of every environment
+        shape = () if count is None else (count,)
+        values = np.asarray(flags)
+        if values.shape != shape or values.dtype.kind not in "biu":
+            raise ValueError(
+                f"{self.name}: step returned {which}={_described(flags)}, not "
+                + ("a bool" if count is None else f"{count} bools")
+            )
+        return values.astype(bool)
 
     def _observation(self, obs: Any, where: str, count: int | None = None) -> np.ndarray:
         """`obs` checked: one observation, or `count` of them from a vector environment. A copy,
         since a vector environment may hand back a buffer of its own that its reset rewrites."""
-        obs = np.array(obs, np.float32)
+        checked = _numbers(obs)
+        if checked is None:
+            raise ValueError(
+                f"{self.name}: {where} returned the observation {_described(obs)}, not numbers"
+            )
+        obs = checked.astype(np.float32)
         shape = (self.observation_size,) if count is None else (count, self.observation_size)
         if obs.shape != shape:
             raise ValueError(
@@ -396,13 +527,40 @@ class GymnasiumEnvironment(OnHost):
         return obs
 
 
-def _seeded_reset(vector: Any, seeds: list[int]) -> np.ndarray:
-    """The first observations of `vector`, reset from its sub-environments' seeds: one each
-    where it takes them (SyncVectorEnv, AsyncVectorEnv), else the first one."""
+def _numbers(value: Any) -> np.ndarray | None:
+    """`value` as an array of numbers (a copy), or None where it holds something else (None, a
+    string, a ragged list)."""
+    try:
+        array = np.array(value)
+    except (TypeError, ValueError):
+        return None
+    return array if array.dtype.kind in "biuf" else None
+
+
+def _described(value: Any) -> str:
+    """`value` in a few words, for an error: its type, and its shape or text."""
+    if isinstance(value, tuple):
+        return f"a {len(value)}-tuple"
+    if isinstance(value, np.ndarray):
+        return f"an array of shape {value.shape} ({value.dtype})"
+    text = repr(value)
+    return f"{text[:60]}…" if len(text) > 60 else f"{text} ({type(value).__name__})"
+
+
+def _raised(error: Exception) -> str:
+    """What an environment's own exception says, and where in its code it was raised."""
+    frame = traceback.extract_tb(error.__traceback__)[-1]
+    where = f"{frame.filename}:{frame.lineno}"
+    return f"raised {type(error).__name__}: {first_line(error)} (at {where})"
+
+
+def _vector_seeds(vector: Any, seeds: list[int]) -> list[int] | int:
+    """What `vector` is reset from, given its sub-environments' seeds: one each where it takes
+    them (SyncVectorEnv, AsyncVectorEnv), else the first one."""
     from gymnasium.vector import AsyncVectorEnv, SyncVectorEnv
 
     each = isinstance(vector.unwrapped, SyncVectorEnv | AsyncVectorEnv)
-    return vector.reset(seed=seeds if each else seeds[0])[0]
+    return seeds if each else seeds[0]
 
 
 def gymnasium_environment(
@@ -429,13 +587,26 @@ _MADE: dict[tuple, GymnasiumEnvironment] = {}
 
 
 def _registered(env_id: str, kwargs: tuple) -> GymnasiumEnvironment:
+    """`env_id` as ``gymnasium.make`` takes it: a registered id, or ``module:id``, whose module
+    is imported first to register it."""
     key = (env_id, kwargs)
     if key not in _MADE:
         gymnasium = import_gymnasium()
-        if env_id not in gymnasium.registry:
+        module, _, registered_id = env_id.rpartition(":")
+        if module:
+            try:
+                importlib.import_module(module)
+            except ImportError as error:
+                raise ImportError(
+                    f"gymnasium/{env_id}: cannot import {module!r}, which should register "
+                    f"{registered_id!r}: {first_line(error)}"
+                ) from None
+        if registered_id not in gymnasium.registry:
+            imported = f" once {module!r} is imported" if module else ""
             raise ValueError(
-                f"Gymnasium has no environment {env_id!r} registered (gymnasium.pprint_registry() "
-                "lists them)"
+                f"Gymnasium has no environment {registered_id!r} registered{imported} "
+                "(gymnasium.pprint_registry() lists them; an environment of one's own is "
+                "registered by its module, named as gymnasium/module:id)"
             )
         arguments = ", ".join(f"{name}={value!r}" for name, value in kwargs)
         _MADE[key] = GymnasiumEnvironment(

@@ -65,7 +65,7 @@ def study(
     output: str | Path,
     max_seeds: int = 30,
     group_size: int = 5,
-    alpha: float = 0.05,
+    level: float = 0.05,
     endpoint: str = "final",
     groups: int | None = None,
     total_steps: int | None = None,
@@ -76,9 +76,10 @@ def study(
 ) -> StudyResult:
     """Compare each of `candidates` with `baseline` on each of `tasks`, adding seeds in groups
     of `group_size` (per setting) until the rule of :mod:`fppo_jax.sequential` decides each
-    comparison, at family-wise level `alpha`, or `max_seeds` is reached.
+    comparison, at family-wise error `level`, or `max_seeds` is reached.
 
-    Variants are as :func:`~fppo_jax.sweep` takes them: built-ins' names, surrogates of one's
+    `level` is the test's α, named apart from the hyperparameter ``alpha`` that `settings` may
+    fix. Variants are as :func:`~fppo_jax.sweep` takes them: built-ins' names, surrogates of one's
     own or ``"module:attribute"``. `endpoint` (``final`` or ``auc``, see
     :data:`fppo_jax.statistics.ENDPOINTS`) is the primary endpoint, the one decided on; the
     other is reported beside it. `total_steps`, `preset`, `backend`, `chunk` and `settings`
@@ -95,7 +96,7 @@ def study(
     tasks = _names_of_tasks(tasks)
     candidates = [resolve(c) for c in ([candidates] if isinstance(candidates, str) else candidates)]
     baseline = resolve(baseline)
-    design = Design(group_size, max_seeds, alpha)
+    design = Design(group_size, max_seeds, level)
     _check_variants(candidates, baseline)
     if endpoint not in ENDPOINTS:
         raise ValueError(f"a study decides on {' or '.join(ENDPOINTS)}, got endpoint {endpoint!r}")
@@ -221,7 +222,7 @@ def make_plan(
             "primary_endpoint": endpoint,
             "secondary_endpoints": [e for e in ENDPOINTS if e != endpoint],
             "test": TEST,
-            "alpha": design.alpha,
+            "level": design.alpha,
             "group_size": design.group_size,
             "max_seeds": design.max_seeds,
             "looks": list(design.looks),

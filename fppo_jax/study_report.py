@@ -40,7 +40,7 @@ def write_report(
         f"Planned in plan.json before any run (commit {plan['commit']}). Primary endpoint: "
         f"{plan['primary_endpoint']} ({statistics.ENDPOINTS[plan['primary_endpoint']]}); "
         f"reported beside it: {', '.join(plan['secondary_endpoints'])}. Test: {plan['test']}; "
-        f"family-wise error at most {plan['alpha']:g} over the {comparisons} comparisons. Seeds "
+        f"family-wise error at most {plan['level']:g} over the {comparisons} comparisons. Seeds "
         f"per setting at the looks: {looks}.",
         "",
         status,

@@ -144,7 +144,7 @@ def _study(args: argparse.Namespace) -> int:
         output=args.output,
         max_seeds=args.max_seeds,
         group_size=args.group_size,
-        alpha=args.alpha,
+        level=args.level,
         endpoint=args.endpoint,
         groups=args.groups,
         chunk=args.chunk,

@@ -157,7 +157,7 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
         "--group-size", type=count, default=5, help="seeds per setting added at each look"
     )
     studied.add_argument(
-        "--alpha",
+        "--level",
         type=level,
         default=0.05,
         help="the chance of any wrong decision in the family when candidates and baseline "

@@ -2,6 +2,10 @@
 published ones, its statistic against SciPy's, its replay of the looks, Holm's recycling, and
 its error rates by simulation on synthetic scores (no training)."""
 
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -96,3 +100,22 @@ def test_the_family_wise_error_is_at_most_alpha_and_a_real_difference_takes_fewe
         >= shifted["power"]
     )
     assert shifted["seeds"] < needed - 3
+
+
+def test_the_experiments_smoke_run_writes_its_table_into_a_temporary_directory():
+    script = Path(__file__).resolve().parent.parent / "experiments" / "sequential_rule.py"
+    done = subprocess.run(
+        [sys.executable, str(script), "--smoke"], capture_output=True, text=True, timeout=600
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    written = Path(done.stdout.split("wrote ")[-1].strip())
+    assert written.parent.name.startswith("fppo-sequential-rule-smoke-")
+    table = written.read_text()
+    assert "- 200 simulated studies per row" in table
+    assert "| 2 tasks × 2 candidates | 1 | 0.000 | 0.9" in table
+    refused = subprocess.run(
+        [sys.executable, str(script), "--smoke", "--results", str(script.parent / "results")],
+        capture_output=True,
+        text=True,
+    )
+    assert refused.returncode != 0 and "never writes into the recorded results" in refused.stderr

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from fppo_jax import statistics
-from fppo_jax.config import resolve_hyperparameters, sweepable
+from fppo_jax.config import positive_int, resolve_hyperparameters, sweepable
 from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
 from fppo_jax.objectives import BUILTINS, hyperparameter_names, identities, resolve, takers, union
 from fppo_jax.options import Options
@@ -90,11 +90,12 @@ def study(
     there goes on where it stopped, and one whose plan differs is refused, naming the field.
     Each look trains, per task, one sweep of the seeds of the next group for the candidates
     still undecided, and the baseline while any of them is. `groups` limits the looks this call
-    trains (then it stops; calling again goes on). Each look's decisions go to
-    ``decisions.json``, and ``report.md`` is written when the call ends.
+    trains (then it stops; calling again goes on; 0 writes the plan alone). Each look's
+    decisions go to ``decisions.json``, and ``report.md`` is written when the call ends.
     """
     tasks = _names_of_tasks(tasks)
-    candidates = [resolve(c) for c in ([candidates] if isinstance(candidates, str) else candidates)]
+    one = isinstance(candidates, str | Surrogate)
+    candidates = [resolve(c) for c in ([candidates] if one else candidates)]
     baseline = resolve(baseline)
     design = Design(group_size, max_seeds, level)
     _check_variants(candidates, baseline)
@@ -104,6 +105,8 @@ def study(
         isinstance(groups, bool) or not isinstance(groups, int) or groups < 0
     ):
         raise ValueError(f"groups must be a count of groups (0 or more), got {groups!r}")
+    if chunk is not None:
+        positive_int("chunk", chunk)
     taken = sorted(set(OWN_SETTINGS) & set(settings))
     if taken:
         raise ValueError(f"a study sets {', '.join(taken)} itself, for each group's sweep")

@@ -29,12 +29,13 @@ from fppo_jax.options import Options
 from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, merge
 from fppo_jax.sequential import Decision, Design, boundaries, decide
-from fppo_jax.study_report import write_report
+from fppo_jax.study_report import SHARES, Scores, steps_name, write_report
 from fppo_jax.surrogates import Surrogate
 from fppo_jax.sweep import expand_grid, sweep
 
 # The endpoints a study decides on; the one not chosen is reported beside it, undecided.
 ENDPOINTS = ("final", "auc")
+
 # What the study sets itself for every group's sweep.
 OWN_SETTINGS = ("log_dir", "checkpoint_dir", "resume", "checkpoint_every", "keep", "callback")
 TEST = (
@@ -262,10 +263,13 @@ def check_plan(output: Path, plan: dict[str, Any]) -> None:
             key = next(k for k in dict.fromkeys([*was, *now]) if was.get(k) != now.get(k))
             field, was, now = f"{field}.{key}", was.get(key), now.get(key)
         raise ValueError(
-            f"{output} holds a study planned with {field} = {json.dumps(was)}, not "
-            f"{json.dumps(now)}: a study goes on only under its plan (start another in a new "
-            "directory)"
+            f"{output} holds a study planned with {field} = {_shown(was)}, not {_shown(now)}: "
+            "a study goes on only under its plan (start another in a new directory)"
         )
+
+
+def _shown(value: Any) -> str:
+    return "none" if value is None else json.dumps(value)
 
 
 def sweep_group(
@@ -295,12 +299,17 @@ def recorded_group(where: Path, variants: list[Surrogate], seeds: list[int]) -> 
     return result if len(result.runs) == len(variants) * len(seeds) else None
 
 
+def _runs_of(result: SweepResult, variant: str) -> list[int]:
+    """`variant`'s runs in `result` (indices), in seed order."""
+    index = [s["variant"] for s in result.settings].index(variant)
+    runs = [i for i, run in enumerate(result.runs) if run["setting"] == index]
+    return sorted(runs, key=lambda i: result.runs[i]["seed"])
+
+
 def run_scores(result: SweepResult, variant: str, endpoint: str) -> np.ndarray:
     """`variant`'s score per run in `result`, in seed order; a run that diverged or finished no
     episode scores −inf, below every other (a run that failed)."""
-    index = [s["variant"] for s in result.settings].index(variant)
-    runs = [i for i, run in enumerate(result.runs) if run["setting"] == index]
-    runs.sort(key=lambda i: result.runs[i]["seed"])
+    runs = _runs_of(result, variant)
     scores = statistics.endpoint(result.metrics["average_return"][runs], endpoint)
     failed = (np.asarray(result.diverged)[runs] > 0) | ~np.isfinite(scores)
     return np.where(failed, -np.inf, scores)
@@ -348,16 +357,29 @@ def _run(
         _write_decisions(output, decisions, baseline, trained)  # a killed study keeps them
     rows = _write_decisions(output, decisions, baseline, trained)
     results = {task: merge(parts) for task, parts in recorded.items() if parts}
-    scores = {
-        task: {
-            variant: {e: run_scores(result, variant, e) for e in ENDPOINTS}
-            for variant in (*plan["candidates"], plan["baseline"])
-        }
-        for task, result in results.items()
-    }
+    scores = {task: _task_scores(result, plan) for task, result in results.items()}
     finished = all(row["final"] for row in rows)
     write_report(output / REPORT_FILE, plan, rows, scores, finished)
     return StudyResult(plan, rows, results, finished)
+
+
+def _task_scores(result: SweepResult, plan: dict[str, Any]) -> Scores:
+    """What the report shows of a task's runs: each variant's scores by endpoint, and its env
+    steps to each share of the baseline's final IQM (``steps to 50%``; none where that IQM is
+    not positive, where a share of it is no lower bar)."""
+    variants = (*plan["candidates"], plan["baseline"])
+    scores = {v: {e: run_scores(result, v, e) for e in ENDPOINTS} for v in variants}
+    final = scores[plan["baseline"]]["final"]
+    target = float(statistics.iqm(final[np.isfinite(final)]))
+    if not target > 0:
+        return scores
+    for variant in variants:
+        runs = _runs_of(result, variant)
+        curves, steps = result.metrics["average_return"][runs], result.metrics["env_steps"][runs]
+        for share in SHARES:
+            reached = statistics.steps_to_threshold(curves, steps, share * target)
+            scores[variant][steps_name(share)] = reached
+    return scores
 
 
 def _directory_name(task: str) -> str:

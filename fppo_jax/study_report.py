@@ -14,8 +14,15 @@ import numpy as np
 from fppo_jax import statistics
 from fppo_jax.files import write_atomically
 
-# A task's scores: variant → endpoint → one score per run, in seed order.
+# A task's scores: variant → endpoint (or steps_name(share)) → one per run, in seed order.
 Scores = dict[str, dict[str, np.ndarray]]
+# Shares of the baseline's final IQM whose env steps to reach are reported (lower is faster).
+SHARES = (0.5, 0.8)
+
+
+def steps_name(share: float) -> str:
+    """The key of the env steps to `share` of the baseline's final IQM in :data:`Scores`."""
+    return f"steps to {share:.0%}"
 
 
 def write_report(
@@ -60,6 +67,7 @@ def write_report(
         for endpoint in (plan["primary_endpoint"], *plan["secondary_endpoints"]):
             primary = endpoint == plan["primary_endpoint"]
             lines += ["", *_table(scores[task], task_rows, endpoint, primary)]
+        lines += ["", *_speed_table(scores[task], plan)]
     write_atomically(path, ("\n".join(lines) + "\n").encode())
 
 
@@ -98,6 +106,38 @@ def _table(
             _interval(level, ".1f"),
             ruled_out(difference, level[0]),
         ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def _speed_table(scores: Scores, plan: dict[str, Any]) -> list[str]:
+    """Env steps until a run's curve first reaches 50% and 80% of the baseline's final IQM,
+    per setting over all its recorded runs: how many did, and the median (reported, not
+    tested)."""
+    baseline = plan["baseline"]
+    if steps_name(SHARES[0]) not in scores[baseline]:
+        return [f"Speed: not reported, {baseline}'s final IQM is not positive."]
+    final = scores[baseline]["final"]
+    target = float(statistics.iqm(final[np.isfinite(final)]))
+    shares = " and ".join(f"{share:.0%} ({share * target:.1f})" for share in SHARES)
+    lines = [
+        f"Speed, reported, not tested: env steps until a run's average return first reaches "
+        f"{shares} of {baseline}'s final IQM, over every recorded run of each setting.",
+        "",
+        "| setting | runs | "
+        + " | ".join(f"reached {s:.0%} | median steps" for s in SHARES)
+        + " |",
+        "|---|---|" + "---|---|" * len(SHARES),
+    ]
+    for variant in (*plan["candidates"], baseline):
+        cells = [variant, str(len(scores[variant]["final"]))]
+        for share in SHARES:
+            steps = scores[variant][steps_name(share)]
+            median = np.median(steps)
+            cells += [
+                f"{int(np.isfinite(steps).sum())}",
+                f"{median:,.0f}" if np.isfinite(median) else "not reached",
+            ]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 

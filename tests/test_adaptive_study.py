@@ -79,6 +79,7 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
     assert sorted(p.name for p in (output / "cartpole").iterdir()) == ["group-1", "group-2"]
     report = (output / "report.md").read_text()
     assert "Secondary endpoint, auc" in report and "of the baseline's IQM" in report
+    assert "| frozen | 8 | 0 | not reached | 0 | not reached |" in report  # never learns
 
 
 def test_a_group_cut_short_is_not_taken_for_a_recorded_one(tmp_path, tiny):

@@ -32,7 +32,7 @@ from common import (
 
 from fppo_jax.sequential import Design, simulate
 
-DESIGN = Design(group_size=5, max_seeds=30, alpha=0.05)
+DESIGN = Design(group_size=5, max_seeds=30, level=0.05)
 FAMILIES = {"1 task × 1 candidate": [1], "2 tasks × 2 candidates": [2, 2]}
 SHIFTS = (0.0, 0.5, 1.0)
 LARGEST_FIXED = 200  # seeds per setting: beyond it the fixed design is reported as "> 200"
@@ -43,7 +43,7 @@ def fixed_seeds_for(power: float, family: list[int], shift: float, studies: int)
     power is at least `power`, or None beyond :data:`LARGEST_FIXED`."""
 
     def reaches(n: int) -> bool:
-        fixed = Design(n, n, DESIGN.alpha)
+        fixed = Design(n, n, DESIGN.level)
         return simulate(fixed, family, shift=shift, studies=studies, seed=1)["power"] >= power
 
     if not reaches(LARGEST_FIXED):
@@ -80,10 +80,10 @@ def main() -> None:
     for name, family in FAMILIES.items():
         for shift in SHIFTS:
             found = simulate(DESIGN, family, shift=shift, studies=studies, seed=1)
-            error = (DESIGN.alpha * (1 - DESIGN.alpha) / studies) ** 0.5
+            error = (DESIGN.level * (1 - DESIGN.level) / studies) ** 0.5
             cells = [name, f"{shift:g}", f"{found['false_decision_rate']:.3f}"]
             if shift == 0:
-                cells += [f"≤ {DESIGN.alpha:g} (+3 SE: {DESIGN.alpha + 3 * error:.3f})"]
+                cells += [f"≤ {DESIGN.level:g} (+3 SE: {DESIGN.level + 3 * error:.3f})"]
                 cells += [f"{found['seeds']:.1f}", f"{found['runs']:.0f}", "–", "–"]
             else:
                 fixed = fixed_seeds_for(found["power"], family, shift, studies)
@@ -99,7 +99,7 @@ def main() -> None:
         f"- {studies} simulated studies per row, {wall:.0f} s in all",
         "",
         f"Design: looks after {', '.join(map(str, DESIGN.looks))} seeds per setting, "
-        f"family-wise level {DESIGN.alpha:g}; scores normal with sd 1, each candidate `shift` sd "
+        f"family-wise level {DESIGN.level:g}; scores normal with sd 1, each candidate `shift` sd "
         "above its task's baseline. *False decisions*: the share of studies with any comparison "
         "decided against the truth (with no shift, any decision: the family-wise error). "
         "*Power*: the share of comparisons decided `better`, which with no shift is replaced by "

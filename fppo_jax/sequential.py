@@ -63,7 +63,6 @@ import numpy as np
 
 from fppo_jax.config import positive_int
 
-DECISIONS = ("better", "worse", "undecided")
 # Points per look of the boundaries' integration grid, odd for Simpson's rule: enough for the
 # published boundaries to four decimals (tests/test_sequential.py).
 GRID_POINTS = 801
@@ -72,11 +71,11 @@ GRID_POINTS = 801
 @dataclasses.dataclass(frozen=True)
 class Design:
     """A study's seed schedule and error level: looks after every `group_size` seeds (per
-    setting) up to `max_seeds`, two-sided family-wise level `alpha`."""
+    setting) up to `max_seeds`, two-sided family-wise error `level` (α)."""
 
     group_size: int = 5
     max_seeds: int = 30
-    alpha: float = 0.05
+    level: float = 0.05
 
     def __post_init__(self) -> None:
         positive_int("group_size", self.group_size)
@@ -85,8 +84,8 @@ class Design:
             raise ValueError(
                 f"group_size ({self.group_size}) is larger than max_seeds ({self.max_seeds})"
             )
-        if not (isinstance(self.alpha, float | int) and 0 < self.alpha < 1):
-            raise ValueError(f"alpha must be in (0, 1), got {self.alpha!r}")
+        if not (isinstance(self.level, float | int) and 0 < self.level < 1):
+            raise ValueError(f"the error level must be in (0, 1), got {self.level!r}")
 
     @property
     def looks(self) -> tuple[int, ...]:
@@ -97,9 +96,9 @@ class Design:
 
 @dataclasses.dataclass(frozen=True)
 class Decision:
-    """One comparison's state: `decision` (:data:`DECISIONS`), or ``None`` while it awaits
-    seeds; the `seeds` per setting its decision used (or it holds so far); its latest
-    statistic `z` and the boundary it was held against; and why it stopped, in words."""
+    """One comparison's state: `decision` (``better``, ``worse``, ``undecided``), or ``None``
+    while it awaits seeds; the `seeds` per setting its decision used (or it holds so far); its
+    latest statistic `z` and the boundary it was held against; and why it stopped, in words."""
 
     decision: str | None
     seeds: int
@@ -212,7 +211,7 @@ def decide(scores: Sequence[tuple[np.ndarray, np.ndarray]], design: Design) -> l
             open_ = [i for i in range(len(pairs)) if i not in decided and len(z[i]) > look]
             if not open_:
                 break
-            level = design.alpha / (len(pairs) - len(decided))
+            level = design.level / (len(pairs) - len(decided))
             critical = boundaries(level, fractions)
             crossed = [
                 (i, k) for i in open_ for k in range(look + 1) if abs(z[i][k]) >= critical[k]
@@ -230,7 +229,7 @@ def decide(scores: Sequence[tuple[np.ndarray, np.ndarray]], design: Design) -> l
                         f"z = {z[i][k]:.2f} crossed ±{critical[k]:.2f} at look {k + 1} "
                         f"({looks[k]} seeds, level {level:.3g})",
                     )
-    level = design.alpha / max(1, len(pairs) - len(decided))
+    level = design.level / max(1, len(pairs) - len(decided))
     critical = boundaries(level, fractions)
     decisions = []
     for i, (candidate, baseline) in enumerate(pairs):

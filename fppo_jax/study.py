@@ -108,6 +108,8 @@ def study(
         raise ValueError(f"groups must be a count of groups (0 or more), got {groups!r}")
     if chunk is not None:
         positive_int("chunk", chunk)
+    if "variant" in settings:
+        raise ValueError("a study's variants are its candidates and its baseline, not variant")
     taken = sorted(set(OWN_SETTINGS) & set(settings))
     if taken:
         raise ValueError(f"a study sets {', '.join(taken)} itself, for each group's sweep")
@@ -226,12 +228,12 @@ def make_plan(
             "primary_endpoint": endpoint,
             "secondary_endpoints": [e for e in ENDPOINTS if e != endpoint],
             "test": TEST,
-            "level": design.alpha,
+            "level": design.level,
             "group_size": design.group_size,
             "max_seeds": design.max_seeds,
             "looks": list(design.looks),
             "boundaries_if_none_decided": list(
-                boundaries(design.alpha / (len(tasks) * len(candidates)), _fractions(design))
+                boundaries(design.level / (len(tasks) * len(candidates)), _fractions(design))
             ),
             "settings": settings,
             **identities([*candidates, baseline]),

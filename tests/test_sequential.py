@@ -58,7 +58,7 @@ def test_a_clear_difference_stops_at_its_first_look_and_a_null_one_runs_to_the_m
 
 
 def test_the_looks_are_replayed_so_that_later_seeds_never_change_a_decision():
-    design = Design(group_size=5, max_seeds=30, alpha=0.2)
+    design = Design(group_size=5, max_seeds=30, level=0.2)
     rng = np.random.default_rng(2)
     for _ in range(20):
         pairs = [(rng.normal(0.6, 1, 30), rng.normal(0, 1, 30)) for _ in range(3)]
@@ -76,18 +76,18 @@ def test_one_look_is_holms_procedure_on_the_normal_p_values():
     for _ in range(50):
         pairs = [(rng.normal(shift, 1, 12), rng.normal(0, 1, 12)) for shift in (0.0, 0.8, 1.2)]
         p = [2 * stats.norm.sf(abs(mann_whitney_z(c, b))) for c, b in pairs]
-        rejected = statistics.holm(p) < design.alpha
+        rejected = statistics.holm(p) < design.level
         decided = [d.decision != "undecided" for d in decide(pairs, design)]
         assert decided == rejected.tolist()
 
 
 def test_the_family_wise_error_is_at_most_alpha_and_a_real_difference_takes_fewer_seeds():
-    design = Design(group_size=5, max_seeds=30, alpha=0.05)
+    design = Design(group_size=5, max_seeds=30, level=0.05)
     family = [2, 2]  # two tasks, two candidates each against the task's baseline
     studies = 2000
     null = simulate(design, family, shift=0.0, studies=studies, seed=0)
-    standard_error = np.sqrt(design.alpha * (1 - design.alpha) / studies)
-    assert null["false_decision_rate"] <= design.alpha + 3 * standard_error
+    standard_error = np.sqrt(design.level * (1 - design.level) / studies)
+    assert null["false_decision_rate"] <= design.level + 3 * standard_error
 
     shifted = simulate(design, family, shift=1.0, studies=1000, seed=1)
     assert shifted["false_decision_rate"] == 0 and shifted["power"] > 0.9

@@ -115,3 +115,28 @@ def test_the_command_decides_at_the_first_look_and_refuses_a_changed_plan(tmp_pa
     assert "planned with max_seeds = 16, not 32" in capsys.readouterr().err
     assert main([*common[:2], "ppo", *common[3:], "--max-seeds", "16"]) == 2
     assert "the baseline ppo is also a candidate" in capsys.readouterr().err
+
+
+def test_no_group_writes_the_plan_alone_and_a_bad_setting_writes_nothing(tmp_path, tiny):
+    output = tmp_path / "study"
+    with pytest.raises(ValueError, match="no variant of the grid \\(spo, ppo\\) takes k"):
+        fppo_jax.study("cartpole", "spo", output=output, k=0.3, **tiny)
+    with pytest.raises(ValueError, match="unknown setting num_envz"):
+        fppo_jax.study("cartpole", "spo", output=output, num_envz=3)
+    assert not output.exists()  # refused before the plan was written
+
+    planned = fppo_jax.study(["cartpole", "acrobot"], ["spo", "dpo"], output=output, groups=0)
+    plan = json.loads((output / "plan.json").read_text())
+    assert len(plan["comparisons"]) == 4 and plan["looks"] == [5, 10, 15, 20, 25, 30]
+    # Holm's first level, 0.05 / 4, spent over six looks: the last boundary above the one of a
+    # single look at that level (2.498).
+    assert plan["boundaries_if_none_decided"][-1] == pytest.approx(2.551, abs=1e-3)
+    assert not planned.finished and not planned.results
+    assert [row["seeds"] for row in planned.decisions] == [0, 0, 0, 0]
+    assert sorted(p.name for p in output.iterdir()) == [
+        ".lock",
+        "decisions.json",
+        "plan.json",
+        "report.md",
+    ]
+    assert "No group recorded yet." in (output / "report.md").read_text()

@@ -1,7 +1,8 @@
 """A study's ``report.md`` (:mod:`fppo_jax.study`): per task each comparison's decision, the
 seeds it used and why it stopped, its probability of improvement and IQM difference with
 bootstrap intervals (:mod:`fppo_jax.statistics`), and the relative effects the interval
-rules out, on the primary endpoint and then on the secondary ones."""
+rules out, on the primary endpoint and then on the secondary ones; and how soon each setting's
+runs reach shares of the baseline's final IQM."""
 
 from __future__ import annotations
 
@@ -52,11 +53,11 @@ def write_report(
         "",
         status,
         "",
-        "Intervals are 95% percentile bootstrap intervals over the runs a decision used (the "
-        "first seeds, the same for both settings). They describe those runs: unlike the "
-        "decision, they are not adjusted for stopping early or for the number of comparisons. "
-        "A run that diverged or finished no episode ranks below every other in the test and "
-        "is left out of the intervals.",
+        f"Intervals are {statistics.CONFIDENCE:.0%} percentile bootstrap intervals over the runs "
+        "a decision used (the first seeds, the same for both settings). They describe those "
+        "runs: unlike the decision, they are not adjusted for stopping early or for the number "
+        "of comparisons. A run that diverged or finished no episode ranks below every other in "
+        "the test and is left out of the intervals.",
     ]
     for task in plan["tasks"]:
         lines += ["", f"## {task}"]

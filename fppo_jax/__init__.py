@@ -7,7 +7,8 @@ seeds, variants and their hyperparameters vmap into one program. :func:`train` r
 policy, checkpointed and resumable; :func:`sweep` runs a grid of settings × seeds as one
 program; :func:`load_policy` reads a trained policy back, saved or from its checkpoints;
 :func:`merge` joins sweeps of other seeds into one, and :mod:`fppo_jax.statistics` compares
-settings with interval estimates.
+settings with interval estimates; :func:`study` compares candidates with a baseline, adding
+seeds until a preregistered test decides.
 
 Each public name is imported from its module on first use (PEP 562), so that importing the
 package, or a light part of it such as :mod:`fppo_jax.numpy_policy` or the command line's
@@ -46,6 +47,7 @@ _MODULES = {
     "fppo_jax.progress": ("Progress",),
     "fppo_jax.results": ("SweepResult", "TrainResult", "merge"),
     "fppo_jax.saved_policy": ("load_policy",),
+    "fppo_jax.study": ("study",),
     "fppo_jax.surrogates": ("Surrogate", "surrogate"),
     "fppo_jax.sweep": ("expand_grid", "sweep"),
     "fppo_jax.trainer": ("METRICS", "Metrics", "Trainer", "TrainState", "make_train"),
@@ -85,6 +87,7 @@ __all__ = [
     "objective",
     "stack",
     "stack_hyperparameters",
+    "study",
     "surrogate",
     "sweep",
     "train",

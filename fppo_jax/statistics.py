@@ -67,6 +67,18 @@ def endpoint(curves: np.ndarray, name: str = "final") -> np.ndarray:
         return np.where(counts > 0, filled.sum(axis=1) / counts, np.nan)
 
 
+def steps_to_threshold(curves: np.ndarray, steps: np.ndarray, threshold: float) -> np.ndarray:
+    """The env steps at which each run's curve, [run, update], first reaches `threshold`
+    (``steps``: the env steps after each update, [update] or [run, update]); ``inf`` for a run
+    that never does. Lower is better: how fast, where ``auc`` mixes speed and level."""
+    curves = np.asarray(curves, dtype=float)
+    steps = np.broadcast_to(np.asarray(steps, dtype=float), curves.shape)
+    with np.errstate(invalid="ignore"):
+        reached = curves >= threshold  # NaN (no episode finished yet) never reaches
+    first = np.argmax(reached, axis=1)
+    return np.where(reached.any(axis=1), steps[np.arange(len(curves)), first], np.inf)
+
+
 def iqm(x: np.ndarray, axis: int = -1) -> np.ndarray:
     """The interquartile mean: the mean after ⌊n/4⌋ of the n values are cut from each end, as
     ``scipy.stats.trim_mean(x, 0.25)`` (and so rliable) computes it; NaNs are left out first."""

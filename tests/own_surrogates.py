@@ -25,3 +25,12 @@ my_clip_higher = fppo_jax.surrogate(
     ranges={"eps_low": "(0, 1)", "eps_high": "> 0"},
     clip_range=("eps_low", "eps_high"),
 )
+
+
+def unmoved(ratio, advantage):
+    """An objective whose gradient is zero everywhere: the policy never moves, so it never
+    learns, whatever the learning rate: a candidate any study can tell from one that learns."""
+    return 0.0 * ratio * advantage
+
+
+frozen = fppo_jax.surrogate("frozen", unmoved)

@@ -23,6 +23,17 @@ def test_endpoints_of_a_curve_with_updates_before_any_episode():
         statistics.endpoint(curves[0], "final")
 
 
+def test_steps_to_threshold_is_the_first_update_that_reaches_it():
+    curves = np.array([[np.nan, 1.0, 3.0, 2.0], [np.nan, np.nan, np.nan, np.nan], [4, 0, 0, 0]])
+    steps = np.array([100, 200, 300, 400])
+    reached = statistics.steps_to_threshold(curves, steps, 3.0)
+    np.testing.assert_array_equal(reached, [300, np.inf, 100])
+    per_run = np.array([[1, 2, 3, 4], [10, 20, 30, 40], [5, 6, 7, 8]])
+    np.testing.assert_array_equal(
+        statistics.steps_to_threshold(curves, per_run, 1.0), [2, np.inf, 5]
+    )
+
+
 def test_the_iqm_is_the_mean_of_the_middle_half():
     assert statistics.iqm(np.arange(1.0, 9.0)) == pytest.approx(4.5)  # mean of 3, 4, 5, 6
     x = np.random.default_rng(0).normal(size=40)

@@ -1,6 +1,7 @@
 """What each ``fppo-jax`` command does with its parsed flags: ``train`` one policy, ``sweep``
-a grid, ``eval`` (and render) or ``export`` a trained policy, ``table``, ``compare``, ``merge``
-and ``plot`` sweeps' results, ``list`` the tasks and variants."""
+a grid, ``study`` candidates against a baseline, ``eval`` (and render) or ``export`` a trained
+policy, ``table``, ``compare``, ``merge`` and ``plot`` sweeps' results, ``list`` the tasks and
+variants."""
 
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ from fppo_jax.saved_policy import (
     read_policy,
 )
 from fppo_jax.statistics import CONFIDENCE, STATISTICS
+from fppo_jax.study import study
 from fppo_jax.sweep import sweep
 
 
@@ -132,6 +134,34 @@ def _sweep(args: argparse.Namespace) -> int:
     print(result.table())
     if args.output:  # written by the sweep as each group of runs finished
         print(f"wrote {args.output}/curves.csv, sweep.json")
+    return 0
+
+
+def _study(args: argparse.Namespace) -> int:
+    result = study(
+        args.tasks,
+        args.candidates,
+        args.baseline,
+        output=args.output,
+        max_seeds=args.max_seeds,
+        group_size=args.group_size,
+        level=args.level,
+        endpoint=args.endpoint,
+        groups=args.groups,
+        chunk=args.chunk,
+        backend=args.backend,
+        progress=not args.quiet,
+        **hyperparameters_given(args),
+        **config_overrides(args),
+    )
+    for row in result.decisions:
+        print(
+            f"{row['task']}: {row['candidate']} against {row['baseline']}: {row['decision']} "
+            f"with {row['seeds']} seeds ({row['reason']})"
+        )
+    print(f"wrote {args.output}/plan.json, decisions.json, report.md")
+    if not result.finished:
+        print("not finished: the same command again goes on")
     return 0
 
 
@@ -282,6 +312,7 @@ def _export(args: argparse.Namespace) -> int:
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "train": _train,
     "sweep": _sweep,
+    "study": _study,
     "table": _table,
     "compare": _compare,
     "merge": _merge,

@@ -123,6 +123,27 @@ def values(text: str) -> list[float]:
 
 
 @_argument
+def level(text: str) -> float:
+    """An error level in (0, 1), such as 0.05."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value < 1:
+        raise ValueError(f"an error level in (0, 1) such as 0.05, got {text}")
+    return value
+
+
+@_argument
+def names(text: str) -> list[str]:
+    """A comma list of names: ``hopper,walker2d``."""
+    listed = [name.strip() for name in text.split(",")]
+    if not all(listed):
+        raise ValueError(f"expected a comma list of names such as hopper,walker2d, got {text!r}")
+    return listed
+
+
+@_argument
 def variant(text: str) -> Surrogate:
     """A built-in variant's name, or ``module:attribute`` naming a surrogate of one's own."""
     return resolve(text.strip())
@@ -134,15 +155,21 @@ def variants(text: str) -> list[Surrogate]:
     return [resolve(name.strip()) for name in text.split(",")]
 
 
+# The flags that name variants: train's and sweep's, and study's.
+VARIANT_FLAGS = ("--variant", "--candidates", "--baseline")
+
+
 def surrogates_named(argv: Sequence[str]) -> list[Surrogate]:
-    """The surrogates of one's own that `argv`'s ``--variant`` names (``module:attribute``),
-    imported, so that their hyperparameters get flags before the command line is parsed."""
+    """The surrogates of one's own that `argv`'s variant flags (:data:`VARIANT_FLAGS`) name
+    (``module:attribute``), imported, so that their hyperparameters get flags before the
+    command line is parsed."""
     named = []
     for i, token in enumerate(argv):
-        if token == "--variant" and i + 1 < len(argv):
+        flag, equals, value = token.partition("=")
+        if flag in VARIANT_FLAGS and equals:
+            named += value.split(",")
+        elif token in VARIANT_FLAGS and i + 1 < len(argv):
             named += argv[i + 1].split(",")
-        elif token.startswith("--variant="):
-            named += token.partition("=")[2].split(",")
     return own_surrogates([name for name in named if ":" in name])  # the rest: the parser's
 
 
@@ -364,13 +391,8 @@ def hyperparameters_given(args: argparse.Namespace) -> dict[str, Any]:
     return {name: value for name, value in given.items() if value is not None}
 
 
-def add_run_flags(command: argparse.ArgumentParser) -> None:
-    """The task, the preset, the run's shape and how it is driven, shared by train and sweep."""
-    command.add_argument(
-        "--env",
-        default="cartpole",
-        help="a registered task (fppo-jax list) or a namespaced id such as gymnax/Pendulum-v1",
-    )
+def add_shape_flags(command: argparse.ArgumentParser) -> None:
+    """The backend, the preset and the run-shape flags over it."""
     add_backend_flag(command, "auto")
     command.add_argument(
         "--preset",
@@ -381,6 +403,16 @@ def add_run_flags(command: argparse.ArgumentParser) -> None:
         "override it",
     )
     add_config_flags(command)
+
+
+def add_run_flags(command: argparse.ArgumentParser) -> None:
+    """The task, the preset, the run's shape and how it is driven, shared by train and sweep."""
+    command.add_argument(
+        "--env",
+        default="cartpole",
+        help="a registered task (fppo-jax list) or a namespaced id such as gymnax/Pendulum-v1",
+    )
+    add_shape_flags(command)
     command.add_argument(
         "--config",
         type=path,

@@ -15,8 +15,11 @@ from fppo_jax.cli.flags import (
     add_render_flag,
     add_run_flags,
     add_score_flags,
+    add_shape_flags,
     count,
     float_value,
+    level,
+    names,
     part,
     path,
     seeds,
@@ -27,7 +30,7 @@ from fppo_jax.cli.flags import (
 from fppo_jax.extras import install_hint
 from fppo_jax.objectives import DEFAULT_VARIANT, VARIANTS
 from fppo_jax.options import Options
-from fppo_jax.statistics import STATISTICS
+from fppo_jax.statistics import ENDPOINTS, STATISTICS
 from fppo_jax.surrogates import Surrogate
 
 
@@ -119,6 +122,69 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
         "the runs)",
     )
     add_run_flags(grid)
+
+    studied = commands.add_parser(
+        "study",
+        help="candidates against a baseline, adding seeds until a preregistered test decides",
+        description="Compare each candidate with the baseline on each task. Before any run, "
+        "--output gets plan.json (the comparisons, endpoints, test, error level, seed schedule "
+        "and commit); then seeds are trained in groups (one sweep per task and group) until a "
+        "group-sequential Mann-Whitney test (O'Brien-Fleming-type alpha-spending, Holm across "
+        "comparisons) decides each comparison better or worse, or --max-seeds is reached. A "
+        "decided comparison stops training; the baseline trains while a candidate on its task "
+        "is undecided. decisions.json and report.md say what was decided, with how many seeds "
+        "and why. The same command again goes on where the study stopped; a changed plan is "
+        "refused.",
+        formatter_class=formatter,
+    )
+    studied.add_argument(
+        "--candidates",
+        type=variants,
+        required=True,
+        help="variants, e.g. spo,dpo, or module:attribute for a surrogate of one's own",
+    )
+    studied.add_argument(
+        "--baseline",
+        type=variant,
+        default="ppo",
+        help="the variant each candidate is tested against",
+    )
+    studied.add_argument(
+        "--tasks", type=names, required=True, help="tasks, e.g. hopper,walker2d (fppo-jax list)"
+    )
+    studied.add_argument("--max-seeds", type=count, default=30, help="seeds per setting at most")
+    studied.add_argument(
+        "--group-size", type=count, default=5, help="seeds per setting added at each look"
+    )
+    studied.add_argument(
+        "--level",
+        type=level,
+        default=0.05,
+        help="the chance of any wrong decision in the family when candidates and baseline "
+        "score alike, at most",
+    )
+    studied.add_argument(
+        "--endpoint",
+        default="final",
+        choices=["final", "auc"],
+        help="the score decided on (the other is reported): final: "
+        f"{ENDPOINTS['final']}; auc: {ENDPOINTS['auc']}",
+    )
+    studied.add_argument(
+        "--groups",
+        type=count,
+        metavar="N",
+        help="train at most N more looks now, then stop (the same command goes on later)",
+    )
+    studied.add_argument(
+        "--output", type=path, required=True, metavar="DIR", help="the study's directory"
+    )
+    add_hyperparameter_flags(studied, surrogates, float_value)
+    studied.add_argument(
+        "--chunk", type=count, help="runs per compiled call (default: what fits in memory)"
+    )
+    add_shape_flags(studied)
+    studied.add_argument("--quiet", action="store_true", help="no progress bar or lines")
 
     table = commands.add_parser(
         "table",

@@ -1,0 +1,452 @@
+"""A preregistered comparison that adds seeds until it can answer: candidates against a
+baseline on a list of tasks, trained in groups of seeds until :mod:`fppo_jax.sequential`'s
+rule decides each comparison or the seeds run out.
+
+The study's directory holds ``plan.json`` (written before any run: the preregistration),
+each group of each task as one sweep (``<task>/group-<k>/``, recorded by the sweep itself
+when it ends), ``decisions.json`` after every look and ``report.md``
+(:mod:`fppo_jax.study_report`). The same call again goes on from the groups recorded, and a
+changed plan is refused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import subprocess
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fppo_jax import statistics
+from fppo_jax.config import positive_int, resolve_hyperparameters, sweepable
+from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
+from fppo_jax.objectives import BUILTINS, hyperparameter_names, identities, resolve, takers, union
+from fppo_jax.options import Options
+from fppo_jax.prepare import prepare
+from fppo_jax.results import SweepResult, merge
+from fppo_jax.sequential import Decision, Design, boundaries, decide
+from fppo_jax.study_report import SHARES, Scores, steps_name, write_report
+from fppo_jax.surrogates import Surrogate
+from fppo_jax.sweep import expand_grid, sweep
+
+# The endpoints a study decides on; the one not chosen is reported beside it, undecided.
+ENDPOINTS = ("final", "auc")
+
+# What the study sets itself for every group's sweep.
+OWN_SETTINGS = ("log_dir", "checkpoint_dir", "resume", "checkpoint_every", "keep", "callback")
+TEST = (
+    "two-sided group-sequential Mann–Whitney test of P(candidate > baseline) = 1/2, "
+    "Lan–DeMets O'Brien–Fleming-type alpha-spending over the looks, Holm's procedure across "
+    "the comparisons (fppo_jax.sequential)"
+)
+PLAN_FILE, DECISIONS_FILE, REPORT_FILE = "plan.json", "decisions.json", "report.md"
+
+
+@dataclasses.dataclass
+class StudyResult:
+    """What a study holds so far: its `plan` (as ``plan.json`` has it), one row per comparison
+    in `decisions` (as ``decisions.json`` has them), each task's recorded runs merged into one
+    sweep (`results`, by task), and whether every comparison is `finished`."""
+
+    plan: dict[str, Any]
+    decisions: list[dict[str, Any]]
+    results: dict[str, SweepResult]
+    finished: bool
+
+
+def study(
+    tasks: str | Sequence[str],
+    candidates: Any,
+    baseline: str | Surrogate = "ppo",
+    *,
+    output: str | Path,
+    max_seeds: int = 30,
+    group_size: int = 5,
+    level: float = 0.05,
+    endpoint: str = "final",
+    groups: int | None = None,
+    total_steps: int | None = None,
+    preset: str = "paper",
+    backend: str = "auto",
+    chunk: int | None = None,
+    **settings: Any,
+) -> StudyResult:
+    """Compare each of `candidates` with `baseline` on each of `tasks`, adding seeds in groups
+    of `group_size` (per setting) until the rule of :mod:`fppo_jax.sequential` decides each
+    comparison, at family-wise error `level`, or `max_seeds` is reached.
+
+    `level` is the test's α, named apart from the hyperparameter ``alpha`` that `settings` may
+    fix. Variants are as :func:`~fppo_jax.sweep` takes them: built-ins' names, surrogates of one's
+    own or ``"module:attribute"``. `endpoint` (``final`` or ``auc``, see
+    :data:`fppo_jax.statistics.ENDPOINTS`) is the primary endpoint, the one decided on; the
+    other is reported beside it. `total_steps`, `preset`, `backend`, `chunk` and `settings`
+    (run-shape fields, fixed hyperparameters, ``progress``, ``devices`` …) are the sweeps'.
+
+    Before any run, ``plan.json`` in `output` records the comparisons, the endpoints, the test
+    and its level, the seed schedule, the settings and the code's commit; a study already
+    there goes on where it stopped, and one whose plan differs is refused, naming the field.
+    Each look trains, per task, one sweep of the seeds of the next group for the candidates
+    still undecided, and the baseline while any of them is. `groups` limits the looks this call
+    trains (then it stops; calling again goes on; 0 writes the plan alone). Each look's
+    decisions go to ``decisions.json``, and ``report.md`` is written when the call ends.
+    """
+    tasks = _names_of_tasks(tasks)
+    one = isinstance(candidates, str | Surrogate)
+    candidates = [resolve(c) for c in ([candidates] if one else candidates)]
+    baseline = resolve(baseline)
+    design = Design(group_size, max_seeds, level)
+    _check_variants(candidates, baseline)
+    if endpoint not in ENDPOINTS:
+        raise ValueError(f"a study decides on {' or '.join(ENDPOINTS)}, got endpoint {endpoint!r}")
+    if groups is not None and (
+        isinstance(groups, bool) or not isinstance(groups, int) or groups < 0
+    ):
+        raise ValueError(f"groups must be a count of groups (0 or more), got {groups!r}")
+    if chunk is not None:
+        positive_int("chunk", chunk)
+    if "variant" in settings:
+        raise ValueError("a study's variants are its candidates and its baseline, not variant")
+    taken = sorted(set(OWN_SETTINGS) & set(settings))
+    if taken:
+        raise ValueError(f"a study sets {', '.join(taken)} itself, for each group's sweep")
+    everyone = [*candidates, baseline]
+    specific = set(hyperparameter_names([*BUILTINS.values(), *everyone]))
+    for task in tasks:  # every setting checked before the plan is written, as a sweep checks
+        run = prepare(
+            task,
+            dict(settings),
+            total_steps=total_steps,
+            preset=preset,
+            backend=backend,
+            hyperparameters=sweepable(everyone),
+        )
+        by_name = {s.name: s for s in everyone}
+        for setting in expand_grid({"variant": everyone, **run.hyperparameters}, task):
+            values = {k: v for k, v in setting.items() if k != "variant"}
+            resolve_hyperparameters(by_name[setting["variant"]], None, **values)
+    plan = make_plan(
+        tasks,
+        candidates,
+        baseline,
+        design,
+        endpoint,
+        {
+            "total_steps": total_steps,
+            "preset": preset,
+            "backend": backend,
+            **{k: v for k, v in settings.items() if k not in Options.names()},
+        },
+    )
+    output = writable_directory(output)
+    lock = DirectoryLock(output, "a study")
+    try:
+        check_plan(output, plan)
+
+        def train_group(task: str, variants: list[Surrogate], seeds: list[int], where: Path):
+            fixed = {
+                name: value
+                for name, value in settings.items()
+                if name not in specific or takers(name, {s.name: s for s in variants})
+            }
+            return sweep_group(
+                task,
+                variants,
+                seeds,
+                where,
+                total_steps=total_steps,
+                preset=preset,
+                backend=backend,
+                chunk=chunk,
+                **fixed,
+            )
+
+        return _run(output, plan, tasks, candidates, baseline, design, groups, train_group)
+    finally:
+        lock.release()
+
+
+def _names_of_tasks(tasks: str | Sequence[str]) -> list[str]:
+    tasks = [tasks] if isinstance(tasks, str) else list(tasks)
+    if not tasks or not all(isinstance(task, str) and task for task in tasks):
+        raise ValueError(f"a study's tasks are named tasks (fppo-jax list), got {tasks!r}")
+    if len(set(tasks)) < len(tasks):
+        raise ValueError(f"a task is named twice among {', '.join(tasks)}")
+    return tasks
+
+
+def _check_variants(candidates: list[Surrogate], baseline: Surrogate) -> None:
+    if not candidates:
+        raise ValueError("a study needs at least one candidate")
+    union([*candidates, baseline])  # two different surrogates under one name are refused
+    names = [c.name for c in candidates]
+    if baseline.name in names:
+        raise ValueError(f"the baseline {baseline.name} is also a candidate")
+    if len(set(names)) < len(names):
+        raise ValueError(f"a candidate is named twice among {', '.join(names)}")
+
+
+def commit() -> str:
+    """The commit of the code that runs (``git rev-parse HEAD`` in the package's directory), or
+    ``unknown`` outside a git checkout."""
+    try:
+        done = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=30,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return done.stdout.strip() or "unknown"
+
+
+def make_plan(
+    tasks: list[str],
+    candidates: list[Surrogate],
+    baseline: Surrogate,
+    design: Design,
+    endpoint: str,
+    settings: dict[str, Any],
+) -> dict[str, Any]:
+    """What ``plan.json`` records: the preregistration, decided before any run."""
+    return json_value(
+        {
+            "tasks": tasks,
+            "baseline": baseline.name,
+            "candidates": [c.name for c in candidates],
+            "comparisons": [
+                {"task": task, "candidate": c.name, "baseline": baseline.name}
+                for task in tasks
+                for c in candidates
+            ],
+            "primary_endpoint": endpoint,
+            "secondary_endpoints": [e for e in ENDPOINTS if e != endpoint],
+            "test": TEST,
+            "level": design.level,
+            "group_size": design.group_size,
+            "max_seeds": design.max_seeds,
+            "looks": list(design.looks),
+            "boundaries_if_none_decided": list(
+                boundaries(design.level / (len(tasks) * len(candidates)), _fractions(design))
+            ),
+            "settings": settings,
+            **identities([*candidates, baseline]),
+            "commit": commit(),
+        }
+    )
+
+
+def _fractions(design: Design) -> tuple[float, ...]:
+    return tuple(n / design.max_seeds for n in design.looks)
+
+
+def check_plan(output: Path, plan: dict[str, Any]) -> None:
+    """Write `plan` as ``plan.json`` in `output`, or check it against the one there: a study
+    goes on only under the plan it started with (the commit aside: a group records its own)."""
+    path = output / PLAN_FILE
+    if not path.exists():
+        write_json(path, plan)
+        return
+    try:
+        recorded = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        raise ValueError(f"cannot read the study's plan {path}: {error}") from None
+    for field in dict.fromkeys([*recorded, *plan]):
+        if field == "commit" or recorded.get(field) == plan.get(field):
+            continue
+        was, now = recorded.get(field), plan.get(field)
+        if isinstance(was, dict) and isinstance(now, dict):
+            key = next(k for k in dict.fromkeys([*was, *now]) if was.get(k) != now.get(k))
+            field, was, now = f"{field}.{key}", was.get(key), now.get(key)
+        raise ValueError(
+            f"{output} holds a study planned with {field} = {_shown(was)}, not {_shown(now)}: "
+            "a study goes on only under its plan (start another in a new directory)"
+        )
+
+
+def _shown(value: Any) -> str:
+    return "none" if value is None else json.dumps(value)
+
+
+def sweep_group(
+    task: str, variants: list[Surrogate], seeds: list[int], where: Path, **settings: Any
+) -> SweepResult:
+    """One group: `variants` × `seeds` on `task` as one sweep that records itself in `where`,
+    read back from there (as a resumed study reads it). One cut short (a killed study) is
+    trained again."""
+    if where.exists():
+        shutil.rmtree(where)
+    sweep(task, {"variant": variants}, seeds, log_dir=where, **settings)
+    return SweepResult.read(where)
+
+
+def recorded_group(where: Path, variants: list[Surrogate], seeds: list[int]) -> SweepResult | None:
+    """The group in `where` if it holds every run of `variants` × `seeds`; None if it holds
+    none or part of them. A group of other runs is refused: the plan did not make it."""
+    if not (where / "sweep.json").exists():
+        return None
+    result = SweepResult.read(where)
+    names = [s["variant"] for s in result.settings]
+    if names != [v.name for v in variants] or result.config["seeds"] != seeds:
+        raise ValueError(
+            f"{where} holds a group of {', '.join(names)} on seeds {result.config['seeds']}, "
+            f"where the study's plan needs {', '.join(v.name for v in variants)} on {seeds}"
+        )
+    return result if len(result.runs) == len(variants) * len(seeds) else None
+
+
+def _runs_of(result: SweepResult, variant: str) -> list[int]:
+    """`variant`'s runs in `result` (indices), in seed order."""
+    index = [s["variant"] for s in result.settings].index(variant)
+    runs = [i for i, run in enumerate(result.runs) if run["setting"] == index]
+    return sorted(runs, key=lambda i: result.runs[i]["seed"])
+
+
+def run_scores(result: SweepResult, variant: str, endpoint: str) -> np.ndarray:
+    """`variant`'s score per run in `result`, in seed order; a run that diverged or finished no
+    episode scores −inf, below every other (a run that failed)."""
+    runs = _runs_of(result, variant)
+    scores = statistics.endpoint(result.metrics["average_return"][runs], endpoint)
+    failed = (np.asarray(result.diverged)[runs] > 0) | ~np.isfinite(scores)
+    return np.where(failed, -np.inf, scores)
+
+
+def _run(
+    output: Path,
+    plan: dict[str, Any],
+    tasks: list[str],
+    candidates: list[Surrogate],
+    baseline: Surrogate,
+    design: Design,
+    groups: int | None,
+    train_group: Callable[[str, list[Surrogate], list[int], Path], SweepResult],
+) -> StudyResult:
+    """The looks: each task's next group while some comparison awaits seeds, then the rule."""
+    recorded: dict[str, list[SweepResult]] = {task: [] for task in tasks}
+    trained: list[dict[str, Any]] = []
+    endpoint = plan["primary_endpoint"]
+    decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
+    for look, seeds in enumerate(design.looks):
+        waiting = {key for key, d in decisions.items() if d.decision is None}
+        if not waiting:
+            break
+        group_seeds = list(range(design.looks[look - 1] if look else 0, seeds))
+        found = {}
+        for task in tasks:
+            variants = [c for c in candidates if (task, c.name) in waiting]
+            if variants:  # the baseline only while one of its task's candidates waits
+                where = output / _directory_name(task) / f"group-{look + 1}"
+                variants.append(baseline)
+                found[task] = (variants, where, recorded_group(where, variants, group_seeds))
+        to_train = [task for task, (_, _, result) in found.items() if result is None]
+        looks_trained = len({entry["group"] for entry in trained})
+        if to_train and groups is not None and looks_trained >= groups:
+            break
+        for task, (variants, where, result) in found.items():
+            if result is None:
+                result = train_group(task, variants, group_seeds, where)
+                trained.append(
+                    {"task": task, "group": look + 1, "seeds": group_seeds, "commit": commit()}
+                )
+            recorded[task].append(result)
+        decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
+        _write_decisions(output, decisions, baseline, trained)  # a killed study keeps them
+    rows = _write_decisions(output, decisions, baseline, trained)
+    results = {task: merge(parts) for task, parts in recorded.items() if parts}
+    scores = {task: _task_scores(result, plan) for task, result in results.items()}
+    finished = all(row["final"] for row in rows)
+    write_report(output / REPORT_FILE, plan, rows, scores, finished)
+    return StudyResult(plan, rows, results, finished)
+
+
+def _task_scores(result: SweepResult, plan: dict[str, Any]) -> Scores:
+    """What the report shows of a task's runs: each variant's scores by endpoint, and its env
+    steps to each share of the baseline's final IQM (``steps to 50%``; none where that IQM is
+    not positive, where a share of it is no lower bar)."""
+    variants = (*plan["candidates"], plan["baseline"])
+    scores = {v: {e: run_scores(result, v, e) for e in ENDPOINTS} for v in variants}
+    final = scores[plan["baseline"]]["final"]
+    target = float(statistics.iqm(final[np.isfinite(final)]))
+    if not target > 0:
+        return scores
+    for variant in variants:
+        runs = _runs_of(result, variant)
+        curves, steps = result.metrics["average_return"][runs], result.metrics["env_steps"][runs]
+        for share in SHARES:
+            reached = statistics.steps_to_threshold(curves, steps, share * target)
+            scores[variant][steps_name(share)] = reached
+    return scores
+
+
+def _directory_name(task: str) -> str:
+    """A task's directory in the study: its name, a namespace's slash made a double underscore."""
+    return task.replace("/", "__")
+
+
+def _decide(
+    recorded: dict[str, list[SweepResult]],
+    tasks: list[str],
+    candidates: list[Surrogate],
+    baseline: Surrogate,
+    design: Design,
+    endpoint: str,
+) -> dict[tuple[str, str], Decision]:
+    """The rule on every comparison's scores so far (seeds in order, group after group)."""
+    keys = [(task, c.name) for task in tasks for c in candidates]
+    scores = []
+    for task, candidate in keys:
+        pair = []
+        for variant in (candidate, baseline.name):
+            parts = [
+                run_scores(group, variant, endpoint)
+                for group in recorded[task]
+                if variant in [s["variant"] for s in group.settings]
+            ]
+            pair.append(np.concatenate(parts) if parts else np.zeros(0))
+        scores.append(tuple(pair))
+    return dict(zip(keys, decide(scores, design), strict=True))
+
+
+def _rows(decisions: dict[tuple[str, str], Decision], baseline: Surrogate) -> list[dict[str, Any]]:
+    return [
+        {
+            "task": task,
+            "candidate": candidate,
+            "baseline": baseline.name,
+            "decision": decision.decision or "undecided",
+            "final": decision.decision is not None,
+            "seeds": decision.seeds,
+            "z": decision.z if np.isfinite(decision.z) else None,
+            "boundary": decision.boundary if np.isfinite(decision.boundary) else None,
+            "reason": decision.reason,
+        }
+        for (task, candidate), decision in decisions.items()
+    ]
+
+
+def _write_decisions(
+    output: Path,
+    decisions: dict[tuple[str, str], Decision],
+    baseline: Surrogate,
+    trained: list[dict[str, Any]],
+) -> list[dict[str, Any]]:
+    """``decisions.json``: a row per comparison (returned), and every group trained with the
+    commit it ran at, earlier calls' groups kept."""
+    path = output / DECISIONS_FILE
+    earlier = json.loads(path.read_text()).get("groups", []) if path.exists() else []
+    known = {(g["task"], g["group"]) for g in trained}
+    groups = [g for g in earlier if (g["task"], g["group"]) not in known] + trained
+    rows = _rows(decisions, baseline)
+    record = {
+        "finished": all(row["final"] for row in rows),
+        "comparisons": rows,
+        "groups": sorted(groups, key=lambda g: (g["group"], g["task"])),
+    }
+    write_json(path, record)
+    return rows

@@ -1,0 +1,162 @@
+"""A study's ``report.md`` (:mod:`fppo_jax.study`): per task each comparison's decision, the
+seeds it used and why it stopped, its probability of improvement and IQM difference with
+bootstrap intervals (:mod:`fppo_jax.statistics`), and the relative effects the interval
+rules out, on the primary endpoint and then on the secondary ones; and how soon each setting's
+runs reach shares of the baseline's final IQM."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fppo_jax import statistics
+from fppo_jax.files import write_atomically
+
+# A task's scores: variant → endpoint (or steps_name(share)) → one per run, in seed order.
+Scores = dict[str, dict[str, np.ndarray]]
+# Shares of the baseline's final IQM whose env steps to reach are reported (lower is faster).
+SHARES = (0.5, 0.8)
+
+
+def steps_name(share: float) -> str:
+    """The key of the env steps to `share` of the baseline's final IQM in :data:`Scores`."""
+    return f"steps to {share:.0%}"
+
+
+def write_report(
+    path: Path,
+    plan: dict[str, Any],
+    rows: Sequence[dict[str, Any]],
+    scores: dict[str, Scores],
+    finished: bool,
+) -> None:
+    """``report.md`` at `path`: the plan in a paragraph, then a section per task, from each
+    comparison's row of ``decisions.json`` and each task's `scores` so far."""
+    comparisons = len(rows)
+    looks = ", ".join(map(str, plan["looks"]))
+    status = (
+        "Every comparison is decided or reached the maximum of seeds."
+        if finished
+        else "**Not finished**: some comparisons await seeds; the same command again goes on."
+    )
+    lines = [
+        f"# {', '.join(plan['candidates'])} against {plan['baseline']}",
+        "",
+        f"Planned in plan.json before any run (commit {plan['commit']}). Primary endpoint: "
+        f"{plan['primary_endpoint']} ({statistics.ENDPOINTS[plan['primary_endpoint']]}); "
+        f"reported beside it: {', '.join(plan['secondary_endpoints'])}. Test: {plan['test']}; "
+        f"family-wise error at most {plan['level']:g} over the {comparisons} comparisons. Seeds "
+        f"per setting at the looks: {looks}.",
+        "",
+        status,
+        "",
+        f"Intervals are {statistics.CONFIDENCE:.0%} percentile bootstrap intervals over the runs "
+        "a decision used (the first seeds, the same for both settings). They describe those "
+        "runs: unlike the decision, they are not adjusted for stopping early or for the number "
+        "of comparisons. A run that diverged or finished no episode ranks below every other in "
+        "the test and is left out of the intervals.",
+    ]
+    for task in plan["tasks"]:
+        lines += ["", f"## {task}"]
+        if task not in scores:
+            lines += ["", "No group recorded yet."]
+            continue
+        task_rows = [row for row in rows if row["task"] == task]
+        for endpoint in (plan["primary_endpoint"], *plan["secondary_endpoints"]):
+            primary = endpoint == plan["primary_endpoint"]
+            lines += ["", *_table(scores[task], task_rows, endpoint, primary)]
+        lines += ["", *_speed_table(scores[task], plan)]
+    write_atomically(path, ("\n".join(lines) + "\n").encode())
+
+
+def _table(
+    scores: Scores, rows: Sequence[dict[str, Any]], endpoint: str, primary: bool
+) -> list[str]:
+    baseline = rows[0]["baseline"]
+    if primary:
+        head = f"Primary endpoint, {endpoint}: decided by the test."
+        columns = ["candidate", "decision", "seeds", "why it stopped"]
+    else:
+        head = f"Secondary endpoint, {endpoint}: reported, not tested."
+        columns = ["candidate", "seeds"]
+    columns += [
+        f"P(candidate > {baseline})",
+        "IQM difference",
+        f"IQM of {baseline}",
+        "what the interval rules out",
+    ]
+    lines = [head, "", "| " + " | ".join(columns) + " |", "|---" * len(columns) + "|"]
+    for row in rows:
+        seeds = row["seeds"]
+        candidate = scores[row["candidate"]][endpoint][:seeds]
+        reference = scores[baseline][endpoint][:seeds]
+        compared = statistics.compare(candidate, reference)
+        level = statistics.interval(reference)
+        probability, difference = compared["probability_of_improvement"], compared["iqm_difference"]
+        cells = [row["candidate"]]
+        if primary:
+            cells += [row["decision"], str(seeds), row["reason"]]
+        else:
+            cells += [str(seeds)]
+        cells += [
+            _interval(probability, ".2f"),
+            _interval(difference, ".1f"),
+            _interval(level, ".1f"),
+            ruled_out(difference, level[0]),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def _speed_table(scores: Scores, plan: dict[str, Any]) -> list[str]:
+    """Env steps until a run's curve first reaches 50% and 80% of the baseline's final IQM,
+    per setting over all its recorded runs: how many did, and the median (reported, not
+    tested)."""
+    baseline = plan["baseline"]
+    if steps_name(SHARES[0]) not in scores[baseline]:
+        return [f"Speed: not reported, {baseline}'s final IQM is not positive."]
+    final = scores[baseline]["final"]
+    target = float(statistics.iqm(final[np.isfinite(final)]))
+    shares = " and ".join(f"{share:.0%} ({share * target:.1f})" for share in SHARES)
+    lines = [
+        f"Speed, reported, not tested: env steps until a run's average return first reaches "
+        f"{shares} of {baseline}'s final IQM, over every recorded run of each setting.",
+        "",
+        "| setting | runs | "
+        + " | ".join(f"reached {s:.0%} | median steps" for s in SHARES)
+        + " |",
+        "|---|---|" + "---|---|" * len(SHARES),
+    ]
+    for variant in (*plan["candidates"], baseline):
+        cells = [variant, str(len(scores[variant]["final"]))]
+        for share in SHARES:
+            steps = scores[variant][steps_name(share)]
+            median = np.median(steps)
+            cells += [
+                f"{int(np.isfinite(steps).sum())}",
+                f"{median:,.0f}" if np.isfinite(median) else "not reached",
+            ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def _interval(values: tuple[float, float, float], form: str) -> str:
+    point, low, high = values
+    return "–" if np.isnan(point) else f"{point:{form}} [{low:{form}}, {high:{form}}]"
+
+
+def ruled_out(difference: tuple[float, float, float], baseline_iqm: float) -> str:
+    """The relative effects an IQM difference's interval excludes, as a share of the
+    baseline's IQM: "a gain above 12% and a loss above 30% of the baseline's IQM"."""
+    _, low, high = difference
+    if not (np.isfinite(low) and np.isfinite(high)):
+        return "–"
+    if not np.isfinite(baseline_iqm) or baseline_iqm == 0:
+        return f"a gain above {max(high, 0):.1f} and a loss above {max(-low, 0):.1f}"
+    scale = abs(baseline_iqm)
+    gain = "any gain" if high <= 0 else f"a gain above {high / scale:.0%}"
+    loss = "any loss" if low >= 0 else f"a loss above {-low / scale:.0%}"
+    return f"{gain} and {loss} of the baseline's IQM"

@@ -1,0 +1,142 @@
+"""fppo_jax.study and ``fppo-jax study``: a tiny study on CartPole end to end, stopping early on
+a comparison that is clearly decided, resuming after a stop without training again, and
+refusing a changed plan; all in temporary directories."""
+
+import json
+
+import numpy as np
+import pytest
+from own_surrogates import frozen
+
+import fppo_jax
+from fppo_jax.cli import main
+from fppo_jax.results import SweepResult
+from fppo_jax.sequential import Design, decide
+from fppo_jax.study import recorded_group, run_scores
+
+# PPO learns CartPole in this budget (its final return 57–106 over 8 seeds against 20–24 for
+# `frozen`, which never moves its policy): 8 seeds a side are enough to decide at the first look.
+BUDGET = {"total_steps": 4096, "learning_rate": 0.003}
+FLAGS = ["--steps", "4096", "--learning-rate", "0.003", "--quiet"]
+
+
+def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(tmp_path, tiny):
+    output = tmp_path / "study"
+    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
+    candidates = [frozen, "fppo-lp"]
+
+    first = fppo_jax.study("cartpole", candidates, "ppo", groups=1, **settings)
+    assert not first.finished
+    plan = json.loads((output / "plan.json").read_text())
+    assert plan["comparisons"] == [
+        {"task": "cartpole", "candidate": "frozen", "baseline": "ppo"},
+        {"task": "cartpole", "candidate": "fppo-lp", "baseline": "ppo"},
+    ]
+    assert (plan["primary_endpoint"], plan["secondary_endpoints"]) == ("final", ["auc"])
+    assert (plan["level"], plan["looks"], plan["settings"]["learning_rate"]) == (
+        0.05,
+        [8, 16],
+        0.003,
+    )
+    assert len(plan["commit"]) == 40 and "frozen" in plan["surrogates"]
+    frozen_row, fppo_row = first.decisions
+    assert (frozen_row["decision"], frozen_row["final"], frozen_row["seeds"]) == ("worse", True, 8)
+    assert (fppo_row["final"], fppo_row["seeds"]) == (False, 8)
+    assert not (output / "cartpole" / "group-2").exists()
+    group_1 = output / "cartpole" / "group-1"
+    curves = (group_1 / "curves.csv").read_bytes()
+    report = (output / "report.md").read_text()
+    assert "**Not finished**" in report and "| frozen | worse | 8 | z = -" in report
+
+    with pytest.raises(ValueError, match="planned with max_seeds = 16, not 24"):
+        fppo_jax.study("cartpole", candidates, "ppo", **{**settings, "max_seeds": 24})
+    with pytest.raises(ValueError, match=r"settings\.learning_rate = 0\.003, not 0\.001"):
+        fppo_jax.study("cartpole", candidates, "ppo", **{**settings, "learning_rate": 0.001})
+
+    resumed = fppo_jax.study("cartpole", candidates, "ppo", **settings)
+    assert resumed.finished
+    assert (group_1 / "curves.csv").read_bytes() == curves  # the first group was not trained again
+    group_2 = SweepResult.read(output / "cartpole" / "group-2")
+    # The decided candidate stopped: the second group is fppo-lp and its baseline only.
+    assert [s["variant"] for s in group_2.settings] == ["fppo-lp", "ppo"]
+    assert group_2.seeds == list(range(8, 16))
+    assert resumed.decisions[0] == frozen_row
+    assert resumed.decisions[1]["seeds"] == 16 and resumed.decisions[1]["final"]
+    # The decisions are the rule's on the recorded scores, as one uninterrupted study makes them.
+    merged = resumed.results["cartpole"]
+    scores = [
+        (run_scores(merged, v, "final"), run_scores(merged, "ppo", "final"))
+        for v in ("frozen", "fppo-lp")
+    ]
+    expected = decide(scores, Design(8, 16))
+    assert [row["decision"] for row in resumed.decisions] == [d.decision for d in expected]
+    recorded = json.loads((output / "decisions.json").read_text())
+    assert recorded["finished"] and recorded["comparisons"] == resumed.decisions
+    assert [(g["group"], g["seeds"][0]) for g in recorded["groups"]] == [(1, 0), (2, 8)]
+
+    again = fppo_jax.study("cartpole", candidates, "ppo", **settings)  # nothing left to train
+    assert again.decisions == resumed.decisions
+    assert sorted(p.name for p in (output / "cartpole").iterdir()) == ["group-1", "group-2"]
+    report = (output / "report.md").read_text()
+    assert "Secondary endpoint, auc" in report and "of the baseline's IQM" in report
+    assert "| frozen | 8 | 0 | not reached | 0 | not reached |" in report  # never learns
+
+
+def test_a_group_cut_short_is_not_taken_for_a_recorded_one(tmp_path, tiny):
+    where = tmp_path / "group"
+    fppo_jax.sweep("cartpole", {"variant": ["ppo"]}, [0, 1], total_steps=256, log_dir=where, **tiny)
+    whole = SweepResult.read(where)
+    ppo = fppo_jax.objectives.resolve("ppo")
+    assert recorded_group(where, [ppo], [0, 1]) is not None
+    cut = SweepResult(**{**whole.__dict__, "runs": whole.runs[:1], "diverged": whole.diverged[:1]})
+    cut.metrics = {name: values[:1] for name, values in whole.metrics.items()}
+    cut.write(tmp_path / "cut")
+    assert recorded_group(tmp_path / "cut", [ppo], [0, 1]) is None
+    with pytest.raises(ValueError, match="holds a group of ppo on seeds \\[0, 1\\], where"):
+        recorded_group(where, [ppo], [0, 1, 2])
+    # A run that failed ranks below every other.
+    whole.diverged = np.array([3, 0])
+    assert run_scores(whole, "ppo", "final")[0] == -np.inf
+
+
+def test_the_command_decides_at_the_first_look_and_refuses_a_changed_plan(tmp_path, capsys):
+    output = tmp_path / "study"
+    common = ["study", "--candidates", "own_surrogates:frozen", "--baseline", "ppo"]
+    common += ["--tasks", "cartpole", "--group-size", "8", "--output", str(output), *FLAGS]
+    common += ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+    assert main([*common, "--max-seeds", "16"]) == 0
+    out = capsys.readouterr().out
+    assert "cartpole: frozen against ppo: worse with 8 seeds (z = -" in out
+    assert "not finished" not in out
+    assert not (output / "cartpole" / "group-2").exists()  # decided: no second group
+    assert json.loads((output / "decisions.json").read_text())["finished"]
+
+    assert main([*common, "--max-seeds", "32"]) == 2
+    assert "planned with max_seeds = 16, not 32" in capsys.readouterr().err
+    assert main([*common[:2], "ppo", *common[3:], "--max-seeds", "16"]) == 2
+    assert "the baseline ppo is also a candidate" in capsys.readouterr().err
+
+
+def test_no_group_writes_the_plan_alone_and_a_bad_setting_writes_nothing(tmp_path, tiny):
+    output = tmp_path / "study"
+    with pytest.raises(ValueError, match="no variant of the grid \\(spo, ppo\\) takes k"):
+        fppo_jax.study("cartpole", "spo", output=output, k=0.3, **tiny)
+    with pytest.raises(ValueError, match="unknown setting num_envz"):
+        fppo_jax.study("cartpole", "spo", output=output, num_envz=3)
+    assert not output.exists()  # refused before the plan was written
+
+    planned = fppo_jax.study(["cartpole", "acrobot"], ["spo", "dpo"], output=output, groups=0)
+    plan = json.loads((output / "plan.json").read_text())
+    assert len(plan["comparisons"]) == 4 and plan["looks"] == [5, 10, 15, 20, 25, 30]
+    # Holm's first level, 0.05 / 4, spent over six looks: the last boundary above the one of a
+    # single look at that level (2.498).
+    assert plan["boundaries_if_none_decided"][-1] == pytest.approx(2.551, abs=1e-3)
+    assert not planned.finished and not planned.results
+    assert [row["seeds"] for row in planned.decisions] == [0, 0, 0, 0]
+    assert sorted(p.name for p in output.iterdir()) == [
+        ".lock",
+        "decisions.json",
+        "plan.json",
+        "report.md",
+    ]
+    assert "No group recorded yet." in (output / "report.md").read_text()

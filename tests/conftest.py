@@ -27,6 +27,8 @@ LONGEST_FIRST = (
     "test_driver.py",
     "test_mujoco.py",
     "test_sweep.py",
+    "test_adaptive_study.py",
+    "test_surrogates.py",
     "test_results.py",
     "test_study.py",
     "test_trainer.py",

@@ -112,7 +112,6 @@ def test_a_change_of_the_variable_moves_or_turns_off_only_the_cache_it_set(tmp_p
     code = textwrap.dedent(f"""
         import json, os, jax
         from fppo_jax import compile_cache
-from fppo_jax.cli import build_parser
         def enabled(value):
             os.environ["FPPO_JAX_CACHE_DIR"] = value
             compile_cache.enable()

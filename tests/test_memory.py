@@ -22,6 +22,7 @@ def sizes(monkeypatch):
     def set_sizes(need: float, free: float) -> None:
         monkeypatch.setattr(memory, "run_bytes", lambda *_: need)
         monkeypatch.setattr(memory, "free_bytes", lambda: free)
+        monkeypatch.setattr(memory, "host_run_bytes", lambda _: 0)  # a device-stepped env
 
     return set_sizes
 

@@ -6,8 +6,9 @@ A change that moves any bit of a run's metrics fails here, loudly: the seed stud
 unchanged. A change meant to alter training re-records the pins and says so in its commit; the
 study's parts recorded before it then belong to another protocol.
 
-XLA compiles for the processor it runs on, and two kinds of CPU (one with AVX-512, one without)
-round the same program differently in the last bits. So the pins are kept per kind of
+XLA compiles for the processor it runs on, and two kinds of CPU (one with AVX-512, one without;
+two AMD EPYC generations with the same AVX-512 flags, as measured) round the same program
+differently in the last bits. So the pins are kept per kind of
 processor (:func:`processor`): where this one has pins, the runs must match them bit for bit;
 a processor with none must match one recorded elsewhere bit for bit or, failing that, to
 rounding (with a warning that asks for its pins: record them with
@@ -29,7 +30,20 @@ from fppo_jax import sweep, train
 PINNED = Path(__file__).resolve().parent / "data" / "pinned_metrics.json"
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 # Where XLA's code differs between processors: the width of its vector instructions.
-VECTOR_FEATURES = ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512bw", "avx512vl", "amx_tile")
+VECTOR_FEATURES = (
+    "sse4_2",
+    "avx",
+    "avx2",
+    "fma",
+    "avx512f",
+    "avx512bw",
+    "avx512vl",
+    "avx512dq",
+    "avx512_bf16",
+    "avx512_vnni",
+    "avx512vbmi",
+    "amx_tile",
+)
 # Two kinds of processor round a few updates' metrics apart by about 1e-4 (measured: 1e-4 at
 # most, relative, on these runs); a change to the training arithmetic itself moves them further.
 ROUNDING = {"rtol": 1e-3, "atol": 1e-5}
@@ -55,20 +69,27 @@ RUNS = {
 
 def processor() -> str:
     """This kind of processor, as far as XLA's rounding goes: jaxlib's version, the CPU's
-    model and its vector instruction sets."""
-    model, flags = platform.machine(), set()
+    model, family and model number (two generations with the same vector instructions are
+    told apart) and its vector instruction sets."""
+    model, family, number, flags = platform.machine(), "", "", set()
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:
                 key, _, value = line.partition(":")
-                if key.strip() == "model name":
-                    model = value.strip()
-                elif key.strip() == "flags":
+                key, value = key.strip(), value.strip()
+                if key == "model name":
+                    model = value
+                elif key == "cpu family":
+                    family = value
+                elif key == "model":
+                    number = value
+                elif key == "flags":
                     flags = set(value.split())
     except OSError:
         pass
+    generation = f" (family {family}, model {number})" if family and number else ""
     features = " ".join(f for f in VECTOR_FEATURES if f in flags) or "features unknown"
-    return f"jaxlib {jaxlib.__version__}; {model}; {features}"
+    return f"jaxlib {jaxlib.__version__}; {model}{generation}; {features}"
 
 
 def fingerprint(metrics: dict[str, np.ndarray]) -> dict[str, dict[str, object]]:

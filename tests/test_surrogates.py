@@ -115,6 +115,12 @@ def test_a_user_ppo_trains_bit_for_bit_like_the_builtin(tiny):
         np.testing.assert_array_equal(ours.metrics[name], values, err_msg=name)
     assert ours.config["variant"] == "my-ppo"
     assert ours.config["surrogates"]["my-ppo"]["import"] == "own_surrogates:my_ppo"
+    builtin, ours = (
+        sweep("cartpole", {"variant": [v]}, seeds=[2, 3], total_steps=TINY_STEPS, **tiny)
+        for v in ("ppo", my_ppo)
+    )
+    for name, values in builtin.metrics.items():
+        np.testing.assert_array_equal(ours.metrics[name], values, err_msg=name)
 
 
 def test_a_sweep_mixing_builtins_and_own_surrogates_is_one_program(tiny, monkeypatch):

@@ -58,13 +58,16 @@ DPI = 80
 
 
 def recorded(results: Path, task: str, protocol: str) -> tuple[SweepResult | None, list[dict]]:
-    """The merged parts of `task` under `protocol`, and each part's run record."""
+    """The merged parts of `task` under `protocol` that ran this study's variants (parts of
+    other studies, such as SPO's and DPO's, share the folders), and each one's run record."""
     run_records = (results / "study" / task / protocol).glob(f"*/{RUN_RECORD}")
-    directories = sorted(p.parent for p in run_records)
-    if not directories:
+    studied = {*PLAN[task][0], *EXPLORATORY}
+    parts = {p.parent: SweepResult.read(p.parent) for p in sorted(run_records)}
+    parts = {d: r for d, r in parts.items() if studied & {s["variant"] for s in r.settings}}
+    if not parts:
         return None, []
-    records = [read_run_record(d) for d in directories]
-    return merge([SweepResult.read(d) for d in directories]), records
+    records = [read_run_record(d) for d in parts]
+    return merge(list(parts.values())), records
 
 
 def by_variant(result: SweepResult) -> dict[str, int]:

@@ -59,7 +59,10 @@ class WithoutAny(WithoutEscape, WithoutCond):
 
 # Each a context manager factory that swaps one piece of the package for the arm's compilation.
 ppo_surrogate_only = functools.partial(
-    mock.patch.object, objectives, "surrogate", lambda o, r, a, kl: objectives._ppo(o, r, a, kl)
+    mock.patch.object,
+    objectives.Objective,
+    "__call__",
+    lambda o, r, a, kl=None: objectives.ppo(r, a, o.epsilon),
 )
 jax_permutation = functools.partial(
     mock.patch.object, trainer_module, "permutation", jax.random.permutation

@@ -1,0 +1,26 @@
+"""The errors a user can act on.
+
+Every expected failure (bad input, a missing optional package, a refused or damaged record, a
+run that cannot go on) is a :class:`FppoError`; the command line prints it in one line. Any
+other exception is a bug and keeps its traceback. Each kind also derives from the built-in
+exception a caller would catch for it (``ValueError`` for bad input, ``ImportError`` for a
+missing package), so ``except ValueError`` keeps working.
+"""
+
+from __future__ import annotations
+
+
+class FppoError(Exception):
+    """An expected failure, told in one line that names the problem and what to do."""
+
+
+class InvalidInput(FppoError, ValueError):
+    """An argument, option, setting or file whose value is not accepted."""
+
+
+class MissingPackage(FppoError, ImportError):
+    """An optional package (or a piece of one) that this use needs is not installed."""
+
+
+class NotEnoughMemory(FppoError, MemoryError):
+    """What was asked for would not fit in this machine's memory."""

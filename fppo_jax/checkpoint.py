@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import jax
 import numpy as np
 
+from fppo_jax.errors import FppoError, InvalidInput, MissingFile
 from fppo_jax.files import (
     DirectoryBusy,
     DirectoryLock,
@@ -51,12 +52,12 @@ class DamagedCheckpoint(UserWarning):
     """A checkpoint could not be read back intact and was set aside."""
 
 
-class CheckpointsUnavailable(RuntimeError):
+class CheckpointsUnavailable(FppoError, RuntimeError):
     """A checkpoint directory cannot be used: another process writes there, or none of its
     checkpoints is intact."""
 
 
-class ConfigMismatch(ValueError):
+class ConfigMismatch(InvalidInput):
     """A checkpoint belongs to a run with a different configuration."""
 
 
@@ -115,7 +116,7 @@ def open_checkpoints(
         record = checkpoints.latest_record()
         if record is None and checkpoints.steps():  # never a silent fresh start
             if not resume:
-                raise ValueError(
+                raise InvalidInput(
                     f"{checkpoints.directory} already holds checkpoints (none of whose records "
                     "can be read); choose another directory"
                 )
@@ -127,7 +128,7 @@ def open_checkpoints(
                 "afresh, remove the directory or choose another"
             )
         if record is not None and not resume:
-            raise ValueError(
+            raise InvalidInput(
                 f"{checkpoints.directory} already holds checkpoints; pass resume=True (--resume) "
                 "to continue that run, or choose another directory"
             )
@@ -185,13 +186,13 @@ class Checkpoints:
         import orbax.checkpoint as ocp
 
         if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
-            raise ValueError(f"keep must be a positive number of checkpoints, got {keep!r}")
+            raise InvalidInput(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
         _ReadsLeftBehind.quieten()
         _UNREADABLE_METADATA.install()
         if os.path.lexists(self.directory) and not self.directory.is_dir():
-            raise ValueError(
+            raise InvalidInput(
                 f"checkpoint directory {self.directory} is not a directory (a file, or a link "
                 "that leads to none)"
             )
@@ -330,12 +331,12 @@ class Checkpoints:
                 )
                 continue
             if record.get("policy") is None:
-                raise ValueError(
+                raise InvalidInput(
                     f"{self.directory} holds the checkpoints of a {record.get('kind')}, not of "
                     "one policy: load_policy reads the checkpoints of train()"
                 )
             return Policy.from_parts(record["policy"], arrays), record
-        raise FileNotFoundError(f"no readable checkpoint in {self.directory}")
+        raise MissingFile(f"no readable checkpoint in {self.directory}")
 
     def _read(self, step: int, **items: Any) -> Any:
         return self._manager.restore(step, args=_args(**items))
@@ -460,4 +461,4 @@ def _from_storable(x: np.ndarray, like: Any) -> Any:
 
 def _verify(name: str, arrays: Any, record: dict[str, Any]) -> None:
     if tree_digest(arrays) != record["digests"][name]:
-        raise ValueError(f"its {name} arrays do not match the digest written with them")
+        raise InvalidInput(f"its {name} arrays do not match the digest written with them")

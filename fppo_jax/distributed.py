@@ -23,6 +23,7 @@ from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from fppo_jax.errors import InvalidInput
 from fppo_jax.trainer import TrainState
 
 
@@ -30,21 +31,21 @@ def make_mesh(devices: int | None, num_envs: int, data_parallel: int | None = No
     """The mesh of `devices` devices (default: all JAX sees), or None for a single device.
 
     Each run's environments are split over `data_parallel` of them (default: all, which is one
-    run's case) and the runs of a sweep over the rest. Raises ValueError, before anything is
+    run's case) and the runs of a sweep over the rest. Raises InvalidInput, before anything is
     compiled, for a count that JAX does not have or that does not divide the environments.
     """
     available = jax.devices()
     count = len(available) if devices is None else devices  # a positive count (Options)
     if count > len(available):
-        raise ValueError(
+        raise InvalidInput(
             f"devices={count}, but JAX sees {len(available)} {available[0].platform} "
             f"device{'s' if len(available) > 1 else ''}"
         )
     data = count if data_parallel is None else data_parallel  # a positive count (sweep)
     if count % data:
-        raise ValueError(f"data_parallel must divide the devices ({count}), got {data}")
+        raise InvalidInput(f"data_parallel must divide the devices ({count}), got {data}")
     if num_envs % data:
-        raise ValueError(
+        raise InvalidInput(
             f"num_envs ({num_envs}) must be divisible by the devices each run is split over "
             f"({data})"
         )
@@ -85,7 +86,7 @@ def initialize() -> None:
     try:
         jax.distributed.initialize(**options)
     except ValueError as error:  # what JAX could not detect, such as the coordinator
-        raise ValueError(
+        raise InvalidInput(
             f"cannot join a multi-process run: {str(error).rstrip('.')}; set "
             "JAX_COORDINATOR_ADDRESS (host:port of process 0), JAX_NUM_PROCESSES and "
             "JAX_PROCESS_ID, or start it under SLURM, Open MPI or Kubernetes, which JAX detects"

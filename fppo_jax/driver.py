@@ -41,6 +41,7 @@ from fppo_jax.distributed import (
     on_main_process,
 )
 from fppo_jax.envs import resets_itself
+from fppo_jax.errors import FppoError, InvalidInput
 from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
 from fppo_jax.files import DirectoryLock
@@ -52,7 +53,7 @@ from fppo_jax.progress import PROGRESS_LINES, Counter, Progress, reporter
 from fppo_jax.trainer import Trainer, TrainState
 
 
-class TrainingDiverged(FloatingPointError):
+class TrainingDiverged(FppoError, FloatingPointError):
     """The loss or the parameters became NaN or infinite."""
 
     def __init__(self, update: int, env_steps: int, checkpoint: str | None = None):
@@ -110,7 +111,7 @@ class Plan:
 
     def __post_init__(self) -> None:
         if (self.runs is None) == self.batched or (self.runs and len(self.runs) != self.num_runs):
-            raise ValueError("a batched plan names each of its runs, and only a batched one")
+            raise InvalidInput("a batched plan names each of its runs, and only a batched one")
 
     @property
     def batched(self) -> bool:
@@ -143,7 +144,7 @@ def drive(plan: Plan, options: Options) -> Outcome:
     devices = options.devices
     if resets_itself(trainer.env):
         if devices not in (None, 1) or jax.process_count() > 1:
-            raise ValueError(
+            raise InvalidInput(
                 "native MuJoCo and Gymnasium step their environments on this host, for one "
                 "device: devices must be 1, in a single process"
             )

@@ -23,6 +23,7 @@ from matplotlib.ticker import PercentFormatter
 
 from fppo_jax import statistics
 from fppo_jax.config import VARIANT_SPECIFIC
+from fppo_jax.errors import InvalidInput
 from fppo_jax.objectives import EPSILON, VARIANTS, objective
 from fppo_jax.results import SweepResult, labels, max_average_return, nanmean
 
@@ -219,7 +220,7 @@ def plot_ablation(result: SweepResult, *, axes: Sequence[Axes] | None = None) ->
     many did."""
     keys = ablation_keys(result)
     if not keys:
-        raise ValueError("no numeric hyperparameter takes several values in this sweep")
+        raise InvalidInput("no numeric hyperparameter takes several values in this sweep")
     if axes is None:
         _, axes = plt.subplots(
             1, len(keys), figsize=(5 * len(keys), 4), squeeze=False, layout="constrained"

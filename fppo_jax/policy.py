@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.envs import Box, Discrete
+from fppo_jax.errors import InvalidInput
 from fppo_jax.networks import make_networks
 from fppo_jax.normalization import RunningStats
 from fppo_jax.trainer import Trainer, TrainState
@@ -37,7 +38,7 @@ class Policy:
     def act(self, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
         obs = jnp.asarray(obs, jnp.float32)
         if obs.shape[-1:] != (self.observation_size,):
-            raise ValueError(
+            raise InvalidInput(
                 f"the policy takes observations of size {self.observation_size} (the last "
                 f"axis), got shape {obs.shape}"
             )
@@ -59,7 +60,7 @@ class Policy:
             values = np.asarray(obs, np.float32)
             bad = np.argwhere(~np.isfinite(values))
             if bad.size:
-                raise ValueError(
+                raise InvalidInput(
                     f"the observation holds {values[tuple(bad[0])]} at index "
                     f"{tuple(int(i) for i in bad[0])} ({len(bad)} non-finite values in all): "
                     "no action follows from it"
@@ -102,7 +103,7 @@ class Policy:
         return policy
 
     def _check_shapes(self) -> None:
-        """Raise ValueError unless the parameters are those of the network the action space and
+        """Raise InvalidInput unless the parameters are those of the network the action space and
         hidden sizes make (a description edited apart from its arrays, say)."""
         networks = make_networks(self.action_space, self.hidden_sizes)
         obs = jax.ShapeDtypeStruct((self.observation_size,), jnp.float32)
@@ -118,7 +119,7 @@ class Policy:
         if shapes != found:
             where = sorted(set(shapes) ^ set(found)) or [k for k in shapes if shapes[k] != found[k]]
             name = where[0]
-            raise ValueError(
+            raise InvalidInput(
                 f"its arrays are not those of a {list(self.hidden_sizes)} network for its action "
                 f"space: {name} is {found.get(name, 'missing')}, expected "
                 f"{shapes.get(name, 'none')}"

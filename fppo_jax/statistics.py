@@ -25,6 +25,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from fppo_jax.errors import InvalidInput
+
 CONFIDENCE = 0.95
 RESAMPLES = 2000
 
@@ -49,9 +51,9 @@ def endpoint(curves: np.ndarray, name: str = "final") -> np.ndarray:
     episode (or no evaluation) scores NaN."""
     curves = np.asarray(curves, dtype=float)
     if name not in ENDPOINTS:
-        raise ValueError(f"unknown endpoint {name!r}; valid endpoints: {', '.join(ENDPOINTS)}")
+        raise InvalidInput(f"unknown endpoint {name!r}; valid endpoints: {', '.join(ENDPOINTS)}")
     if curves.ndim != 2:
-        raise ValueError(f"curves must be [run, update], got shape {curves.shape}")
+        raise InvalidInput(f"curves must be [run, update], got shape {curves.shape}")
     if name == "final":
         return curves[:, -1]
     finite = np.isfinite(curves)
@@ -110,7 +112,7 @@ ESTIMATORS: dict[str, Callable[..., np.ndarray]] = {"iqm": iqm, "mean": _mean, "
 def estimator(name: str) -> Callable[..., np.ndarray]:
     """The point estimate called `name` (:data:`STATISTICS`), as ``f(x, axis=-1)``."""
     if name not in ESTIMATORS:
-        raise ValueError(f"unknown statistic {name!r}; valid statistics: {', '.join(STATISTICS)}")
+        raise InvalidInput(f"unknown statistic {name!r}; valid statistics: {', '.join(STATISTICS)}")
     return ESTIMATORS[name]
 
 
@@ -127,7 +129,7 @@ def _finite(x: np.ndarray) -> np.ndarray:
 
 def _check_confidence(confidence: float) -> float:
     if not 0 < confidence < 1:
-        raise ValueError(f"the confidence level must be in (0, 1), got {confidence!r}")
+        raise InvalidInput(f"the confidence level must be in (0, 1), got {confidence!r}")
     return float(confidence)
 
 
@@ -235,7 +237,7 @@ def holm(p_values: Sequence[float]) -> np.ndarray:
     dependence between the tests. A comparison not yet made can be entered as 1."""
     p = np.asarray(p_values, dtype=float)
     if p.ndim != 1 or np.any(~np.isfinite(p)) or np.any((p < 0) | (p > 1)):
-        raise ValueError(f"Holm's adjustment needs finite p-values in [0, 1], got {p_values!r}")
+        raise InvalidInput(f"Holm's adjustment needs finite p-values in [0, 1], got {p_values!r}")
     order = np.argsort(p, kind="stable")
     scaled = np.minimum(1.0, (len(p) - np.arange(len(p))) * p[order])
     adjusted = np.empty_like(p)
@@ -298,7 +300,7 @@ def max_average_difference(
 def normalise(scores: np.ndarray, low: float, high: float) -> np.ndarray:
     """Scores on a task's own scale mapped so that `low` is 0 and `high` is 1."""
     if not np.isfinite(low) or not np.isfinite(high) or high == low:
-        raise ValueError(f"normalising needs two different finite scores, got {low} and {high}")
+        raise InvalidInput(f"normalising needs two different finite scores, got {low} and {high}")
     return (np.asarray(scores, float) - low) / (high - low)
 
 
@@ -335,7 +337,7 @@ def aggregate(
     """`statistic` (:data:`AGGREGATES`) of one setting's normalised scores pooled over `tasks`
     (one array of runs per task), with a stratified bootstrap interval."""
     if statistic not in AGGREGATES:
-        raise ValueError(f"unknown aggregate {statistic!r}; valid: {', '.join(AGGREGATES)}")
+        raise InvalidInput(f"unknown aggregate {statistic!r}; valid: {', '.join(AGGREGATES)}")
     f = _pooled(AGGREGATES[statistic])
     return bootstrap(tasks, f, confidence=confidence, resamples=resamples, seed=seed)
 

@@ -15,6 +15,7 @@ import fppo_jax.files
 import fppo_jax.metric_log
 from fppo_jax import SweepResult
 from fppo_jax.cli import build_parser, main
+from fppo_jax.errors import InvalidInput, MissingFile, MissingPackage, NotEnoughMemory
 
 TINY_FLAGS = ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
 
@@ -242,6 +243,26 @@ def test_an_os_error_that_names_no_file_is_not_taken_for_a_user_s_error(monkeypa
     monkeypatch.setattr(fppo_jax.cli.commands, "COMMANDS", {"list": broken})
     with pytest.raises(OSError, match="a bug"):
         main(["list"])
+
+
+@pytest.mark.parametrize("error", [ValueError, ImportError, MemoryError, ZeroDivisionError])
+def test_a_built_in_error_from_inside_keeps_its_traceback(error, monkeypatch):
+    def broken(*_):
+        raise error("a bug deep inside")
+
+    monkeypatch.setattr(fppo_jax.cli.commands, "COMMANDS", {"list": broken})
+    with pytest.raises(error, match="a bug deep inside"):
+        main(["list"])
+
+
+@pytest.mark.parametrize("error", [InvalidInput, MissingPackage, MissingFile, NotEnoughMemory])
+def test_a_project_error_is_one_line(error, monkeypatch, capsys):
+    def refused(*_):
+        raise error("what to do instead")
+
+    monkeypatch.setattr(fppo_jax.cli.commands, "COMMANDS", {"list": refused})
+    assert main(["list"]) == 2
+    assert capsys.readouterr().err == "fppo-jax: error: what to do instead\n"
 
 
 def test_sweep_then_table_then_plot(tmp_path, capsys):

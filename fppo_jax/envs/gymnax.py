@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.envs.core import Box, Discrete, Step
+from fppo_jax.errors import InvalidInput
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,7 +67,7 @@ def gymnax_environment(env_id: str, max_steps: int | None = None) -> GymnaxEnvir
     import gymnax
 
     if env_id not in gymnax.registered_envs:
-        raise ValueError(
+        raise InvalidInput(
             f"gymnax has no environment {env_id!r}; it offers: " + ", ".join(gymnax.registered_envs)
         )
     env, params = gymnax.make(env_id)

@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import mujoco
 
 from fppo_jax.envs.core import Box, Step, Timed, limited_step
+from fppo_jax.errors import InvalidInput
 
 
 def _import_quietly() -> None:
@@ -114,7 +115,7 @@ def brax_environment(name: str, episode_length: int = 1000, **kwargs: Any) -> Br
     from brax import envs
 
     if name not in envs._envs:
-        raise ValueError(f"Brax has no environment {name!r}; it offers: " + ", ".join(envs._envs))
+        raise InvalidInput(f"Brax has no environment {name!r}; it offers: " + ", ".join(envs._envs))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         env = envs.get_environment(name, backend="mjx", **kwargs)

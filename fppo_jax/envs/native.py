@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from fppo_jax.envs.core import Box, HostState, OnHost, Step, seeds_of
+from fppo_jax.errors import InvalidInput
 from fppo_jax.extras import install_hint
 
 INSTALL = f"{install_hint('native')}; envpool, Linux only"
@@ -44,7 +45,7 @@ def envpool_installed() -> bool:
 
 def require_envpool() -> None:
     if not envpool_installed():
-        raise ValueError(f"the native backend steps MuJoCo through envpool: {INSTALL}")
+        raise InvalidInput(f"the native backend steps MuJoCo through envpool: {INSTALL}")
 
 
 def import_envpool() -> ModuleType:
@@ -103,11 +104,11 @@ class NativeEnvironment(OnHost):
     def __post_init__(self) -> None:
         envpool = import_envpool()
         if self.task_id not in envpool.list_all_envs():
-            raise ValueError(f"envpool has no task {self.task_id!r}")
+            raise InvalidInput(f"envpool has no task {self.task_id!r}")
         spec = envpool.make_spec(self.task_id)
         space = spec.action_space
         if len(spec.observation_space.shape) != 1 or not hasattr(space, "low"):
-            raise ValueError(
+            raise InvalidInput(
                 f"envpool's {self.task_id} is not a MuJoCo task (its observations have shape "
                 f"{spec.observation_space.shape}, its actions are {type(space).__name__}): "
                 "native/ takes envpool's MuJoCo tasks, e.g. native/Hopper-v4"

@@ -1,7 +1,9 @@
+import argparse
 import csv
 import errno
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -104,7 +106,12 @@ def test_version_is_the_installed_package_s(capsys):
 
 
 def test_help_documents_every_flag():
-    text = build_parser()._subparsers._group_actions[0].choices["train"].format_help()
+    train = build_parser()._subparsers._group_actions[0].choices["train"]
+    text = train.format_help()
+    shown = set(re.findall(r"(?<![\w-])--[\w-]+", text))  # whole flags: --k is not --keep's
+    for action in train._actions:
+        if action.option_strings and action.dest != "help":
+            assert action.help and action.help != argparse.SUPPRESS, action.option_strings
     for flag in [
         "--env",
         "--variant",
@@ -135,7 +142,7 @@ def test_help_documents_every_flag():
         "--eval-episodes",
         "--wandb-project",
     ]:
-        assert flag in text
+        assert flag in shown
 
 
 def test_every_config_field_has_a_flag_named_after_it():

@@ -3,6 +3,7 @@
     python experiments/study.py --task hopper --seeds 0:10                 # PPO, FPPO-LP, FPPO-QP
     python experiments/study.py --task cartpole --seeds 0:50 --variants all --protocol unnormalised
     python experiments/study.py --task reacher --seeds 0:2 --steps 8192 --results /tmp/smoke
+    python experiments/study.py --task hopper --seeds 0:10 --doses plans/dose-response.json
 
 A part is one sweep (one compiled program) of `--variants` × `--seeds` on `--task`, with the
 `paper` preset, Table 2's α and k and the paper's budget (100k steps on the classic tasks, 1M on
@@ -11,6 +12,9 @@ with disjoint seeds or other variants are samples of one study and are merged by
 them (``experiments/verdict.py``). Protocols: ``paper`` is the project's default (observation and
 reward normalisation everywhere); ``unnormalised`` is baselines' classic-control protocol
 (no VecNormalize: baselines wraps only its MuJoCo runs).
+
+With ``--doses PLAN`` the part is instead every dose of the plan's variants (with PPO, the
+reference) in one sweep, recorded under <results>/<plan's name>/<task>/<protocol>/.
 
 Each part goes to <results>/study/<task>/<protocol>/<part>/ (`curves.csv`, `sweep.json`,
 `run.json` with the machine, date, wall time, command and the commit it ran at), written into a
@@ -22,6 +26,7 @@ both have): the parts could not be merged.
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
@@ -115,6 +120,16 @@ def _listed(seeds: list[int]) -> str:
     return ", ".join(map(str, seeds[:5])) + (", …" if len(seeds) > 5 else "")
 
 
+def dose_grid(plan: Path) -> dict[str, list]:
+    """The sweep of every dose `plan` names: its variants, and each one's values."""
+    doses = json.loads(plan.read_text())["doses"]
+    grid: dict[str, list] = {"variant": list(doses)}
+    for values in doses.values():
+        if isinstance(values, dict):
+            grid.update({name: v for name, v in values.items() if isinstance(v, list)})
+    return grid
+
+
 def main() -> None:
     parser = argument_parser(__doc__)
     parser.add_argument("--task", required=True, choices=[*CLASSIC_TASKS, *MUJOCO_TASKS])
@@ -124,6 +139,9 @@ def main() -> None:
         nargs="+",
         default=list(STUDIED),
         help=f"variants, or 'all' for {', '.join(PAPER_VARIANTS)} (default: {', '.join(STUDIED)})",
+    )
+    parser.add_argument(
+        "--doses", type=Path, help="a plan's doses (plans/dose-response.json) in one sweep"
     )
     parser.add_argument("--protocol", default="paper", choices=list(PROTOCOLS))
     parser.add_argument("--steps", type=int, help="env steps per run (default: the paper's)")
@@ -137,7 +155,12 @@ def main() -> None:
         parser.error(f"unknown variant {', '.join(unknown)}; valid: {', '.join(VARIANTS)}")
     backend = args.backend or ("native" if args.task in MUJOCO_TASKS else "auto")
 
+    grid: dict[str, list] = {"variant": variants}
     folder = args.results / "study" / args.task / args.protocol
+    if args.doses:
+        plan = args.doses if args.doses.exists() else Path(__file__).parent / args.doses
+        grid, variants = dose_grid(plan), [plan.stem]
+        folder = args.results / plan.stem.replace("-", "_") / args.task / args.protocol
     directory = folder / part_name(variants, args.seeds)
     refuse_to_replace([directory], args.force)
     clashes = overlapping_parts(folder, variants, args.seeds)
@@ -152,7 +175,7 @@ def main() -> None:
     start = time.perf_counter()
     result = sweep(
         args.task,
-        {"variant": variants},
+        grid,
         seeds=args.seeds,
         total_steps=args.steps,
         chunk=args.chunk,

@@ -25,7 +25,7 @@ import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import jax
 import numpy as np
@@ -222,7 +222,7 @@ class Checkpoints:
 
         for step in reversed(self.steps()):
             try:
-                return self._read(step, record=ocp.args.JsonRestore()).record
+                return cast(dict[str, Any], self._read(step, record=ocp.args.JsonRestore()).record)
             except Exception:  # a damaged record; restore() reports it
                 continue
         return None
@@ -442,7 +442,7 @@ def _name(index: int) -> str:
 
 
 def _is_key(x: Any) -> bool:
-    return jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)
+    return jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)  # type: ignore[attr-defined]  # jax.dtypes does not re-export it
 
 
 def _storable(x: Any) -> Any:
@@ -451,12 +451,12 @@ def _storable(x: Any) -> Any:
 
 def _storable_shape(x: Any) -> jax.ShapeDtypeStruct:
     if _is_key(x):
-        return jax.eval_shape(jax.random.key_data, x)
+        return cast(jax.ShapeDtypeStruct, jax.eval_shape(jax.random.key_data, x))
     return jax.ShapeDtypeStruct(np.shape(x), x.dtype)
 
 
 def _from_storable(x: np.ndarray, like: Any) -> Any:
-    return jax.random.wrap_key_data(x) if _is_key(like) else x
+    return jax.random.wrap_key_data(x) if _is_key(like) else x  # type: ignore[arg-type]  # host key data is a valid argument
 
 
 def _verify(name: str, arrays: Any, record: dict[str, Any]) -> None:

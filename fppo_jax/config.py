@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterable, Sequence
-from typing import Any
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -83,6 +83,7 @@ def check_seed(seed: object) -> int:
 def parse_seeds(text: str) -> list[int]:
     """Seeds written on a command line: ``20`` (seeds 0 … 19), ``10:20`` (seeds 10 … 19, as
     Python's ``range(10, 20)``) or a comma list such as ``0,3,7``; checked, and distinct."""
+    seeds: range | list[int]
     try:
         if ":" in text:
             start, stop = (int(part) for part in text.split(":"))
@@ -253,7 +254,7 @@ HYPERPARAMETER_DEFAULTS: dict[str, float] = {
     "max_grad_norm": 0.5,
 }
 
-_RANGES: dict[str, tuple[str, object]] = {
+_RANGES: dict[str, tuple[str, Callable[[float], bool]]] = {
     "learning_rate": ("> 0", lambda x: x > 0),
     "gamma": ("in (0, 1]", lambda x: 0 < x <= 1),
     "gae_lambda": ("in [0, 1]", lambda x: 0 <= x <= 1),
@@ -311,7 +312,7 @@ def stack_hyperparameters(hps: Sequence[Hyperparameters]) -> Hyperparameters:
     """`hps` as one batch (a leading run axis) over all of their surrogates, for ``vmap``."""
     menu = union([s for hp in hps for s in hp.objective.surrogates])
     among = [dataclasses.replace(hp, objective=hp.objective.among(menu)) for hp in hps]
-    return jax.tree.map(lambda *xs: jnp.stack(xs), *among)
+    return cast(Hyperparameters, jax.tree.map(lambda *xs: jnp.stack(xs), *among))
 
 
 def resolve_config(

@@ -15,7 +15,7 @@ import dataclasses
 import os
 import pickle
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import jax
 import numpy as np
@@ -61,7 +61,7 @@ def state_shardings(mesh: Mesh, state: TrainState, batched: bool) -> TrainState:
     runs = ("runs",) if batched else ()
     replicated = NamedSharding(mesh, P(*runs))
     per_environment = NamedSharding(mesh, P(*runs, "data"))
-    shardings = jax.tree.map(lambda _: replicated, state)
+    shardings: TrainState = jax.tree.map(lambda _: replicated, state)
     envs = jax.tree.map(lambda _: per_environment, state.envs)
     return dataclasses.replace(shardings, envs=envs)
 
@@ -81,7 +81,9 @@ def initialize() -> None:
     gloo.
     """
     variables = {"num_processes": "JAX_NUM_PROCESSES", "process_id": "JAX_PROCESS_ID"}
-    options = {name: int(os.environ[v]) for name, v in variables.items() if v in os.environ}
+    options: dict[str, Any] = {
+        name: int(os.environ[v]) for name, v in variables.items() if v in os.environ
+    }
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
     try:
         jax.distributed.initialize(**options)
@@ -106,9 +108,9 @@ def place(tree: Any, shardings: Any) -> Any:
         if isinstance(x, jax.Array) and x.sharding == sharding:
             return x
         if sharding.is_fully_addressable:
-            return jax.device_put(x, sharding)
-        if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
-            return jax.random.wrap_key_data(one(jax.random.key_data(x), sharding))
+            return cast(jax.Array, jax.device_put(x, sharding))
+        if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):  # type: ignore[attr-defined]  # jax.dtypes does not re-export it
+            return cast(jax.Array, jax.random.wrap_key_data(one(jax.random.key_data(x), sharding)))
         host = np.asarray(x)
         return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
 
@@ -127,8 +129,8 @@ def fetch_tree(tree: Any) -> Any:
     """Every leaf of `tree` on the host (:func:`fetch`), PRNG keys as keys of host data."""
 
     def one(x: Any) -> Any:
-        if isinstance(x, jax.Array) and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
-            return jax.random.wrap_key_data(fetch(jax.random.key_data(x)))
+        if isinstance(x, jax.Array) and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):  # type: ignore[attr-defined]  # jax.dtypes does not re-export it
+            return jax.random.wrap_key_data(fetch(jax.random.key_data(x)))  # type: ignore[arg-type]  # host key data is a valid argument
         return fetch(x)
 
     return jax.tree.map(one, tree)
@@ -148,7 +150,7 @@ def on_main_process(work: Callable[[], Any]) -> Any:
             outcome = (work(), None)
         except Exception as error:
             outcome = (None, error)
-    result, error = _from_main_process(outcome)
+    result, error = _from_main_process(outcome)  # type: ignore[misc]  # `error` of the except clause above is free again here
     if error is not None:
         raise error
     return result

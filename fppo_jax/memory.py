@@ -63,7 +63,7 @@ def check_host_memory(trainer: Trainer, runs: int) -> None:
     env, count = trainer.env, trainer.config.num_envs
     raise NotEnoughMemory(
         f"{getattr(env, 'name', type(env).__name__)}: {runs} run(s) of {count:,} environments, "
-        f"each a Python object of about {env.host_bytes / 2**10:.1f} KiB on the host, need "
+        f"each a Python object of about {env.host_bytes / 2**10:.1f} KiB on the host, need "  # type: ignore[attr-defined]  # host-stepped envs have it
         f"about {per_run * runs / 2**30:.2f} GiB and {budget / 2**30:.2f} GiB (half the "
         "host's available memory) is available: lower num_envs"
         + (", or the runs per call (chunk)" if runs > 1 else "")

@@ -40,7 +40,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -447,7 +447,9 @@ def stack(objectives: Sequence[Objective]) -> Objective:
     """`objectives` as one batch (a leading axis), over all of their surrogates: what
     ``jax.vmap`` maps over to train or evaluate them side by side in one program."""
     menu = union([s for o in objectives for s in o.surrogates])
-    return jax.tree.map(lambda *xs: jnp.stack(xs), *[o.among(menu) for o in objectives])
+    return cast(
+        Objective, jax.tree.map(lambda *xs: jnp.stack(xs), *[o.among(menu) for o in objectives])
+    )
 
 
 def hyperparameter_names(surrogates: Sequence[Surrogate]) -> tuple[str, ...]:

@@ -190,7 +190,7 @@ class Options:
             require_wandb()
 
     @classmethod
-    def flagged(cls) -> tuple[dataclasses.Field, ...]:
+    def flagged(cls) -> tuple[dataclasses.Field[Any], ...]:
         """The fields the command line sets with a flag of their own."""
         return tuple(f for f in dataclasses.fields(cls) if "help" in f.metadata)
 

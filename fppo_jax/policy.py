@@ -4,7 +4,7 @@ trainer and no environment, so that it can be saved, loaded and run anywhere."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -16,6 +16,9 @@ from fppo_jax.networks import make_networks
 from fppo_jax.normalization import RunningStats
 from fppo_jax.trainer import Trainer, TrainState
 
+if TYPE_CHECKING:
+    from fppo_jax.distributions import Distribution
+
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
@@ -25,7 +28,7 @@ class Policy:
     ended with (when it normalised them); continuous actions are clipped to the action bounds,
     as in training. :meth:`act` is the same function, pure, to use inside ``jit``."""
 
-    params: dict  # the policy network's
+    params: dict[str, Any]  # the policy network's
     obs_stats: RunningStats | None  # None: observations are used raw
     action_space: Discrete | Box = dataclasses.field(metadata={"static": True})
     hidden_sizes: tuple[int, ...] = dataclasses.field(metadata={"static": True})
@@ -45,7 +48,7 @@ class Policy:
         if self.obs_stats is not None:
             obs = self.obs_stats.normalize(obs)
         networks = make_networks(self.action_space, self.hidden_sizes)
-        dist = networks.policy.apply(self.params, obs)
+        dist = cast("Distribution", networks.policy.apply(self.params, obs))
         action = dist.mode() if key is None else dist.sample(key)
         if isinstance(self.action_space, Box):
             action = jnp.clip(
@@ -65,7 +68,7 @@ class Policy:
                     f"{tuple(int(i) for i in bad[0])} ({len(bad)} non-finite values in all): "
                     "no action follows from it"
                 )
-        return _act(self, obs, key)
+        return cast(jax.Array, _act(self, obs, key))
 
     def describe(self) -> dict[str, Any]:
         """Everything but the arrays, as JSON-ready values (see :meth:`from_parts`)."""

@@ -63,7 +63,7 @@ def episode_positions(
     def run() -> tuple[jax.Array, jax.Array]:
         state, obs = env.reset(reset_key)
 
-        def step(carry: tuple, key: jax.Array) -> tuple[tuple, tuple]:
+        def step(carry: tuple[Any, ...], key: jax.Array) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
             state, obs, ended = carry
             state, out = env.step(key, state, policy(obs))
             return (state, out.obs, ended | out.terminated | out.truncated), (

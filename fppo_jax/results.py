@@ -8,7 +8,7 @@ import dataclasses
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -33,7 +33,7 @@ class TrainResult:
     """
 
     metrics: dict[str, np.ndarray]
-    params: dict
+    params: dict[str, Any]
     config: dict[str, Any]
     state: TrainState
     policy: Policy
@@ -355,6 +355,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         parts = sorted(parts, key=lambda part: part.config["part"][0])
     settings: list[dict[str, Any]] = []
     runs: list[dict[str, Any]] = []
+    setting: dict[str, Any] | int  # a setting, then a setting's index
     for part in parts:
         for setting in part.settings:
             if setting not in settings:
@@ -416,7 +417,7 @@ def _check_shares(
 ) -> None:
     """For shares of one sweep (``part`` in their configurations): all of one split, and every
     run of the whole sweep there."""
-    shares = [p.config.get("part") for p in parts]
+    shares: list[Any] = [p.config.get("part") for p in parts]
     if all(share is None for share in shares):
         return
     if any(share is None for share in shares) or len({share[1] for share in shares}) > 1:
@@ -462,4 +463,4 @@ def nanmean(x: np.ndarray, axis: int | None = None) -> np.ndarray:
     with warnings.catch_warnings():
         # All-NaN slices (no episode finished yet in any seed) are meant to stay NaN.
         warnings.simplefilter("ignore", RuntimeWarning)
-        return np.nanmean(x, axis=axis)
+        return cast(np.ndarray, np.nanmean(x, axis=axis))

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
+from typing import Any, cast
 
 import numpy as np
 
@@ -91,19 +92,19 @@ def iqm(x: np.ndarray, axis: int = -1) -> np.ndarray:
     position = np.arange(x.shape[-1])
     kept = (position >= cut) & (position < n - cut)
     with np.errstate(invalid="ignore"):
-        return np.sum(np.where(kept, ordered, 0.0), axis=-1) / kept.sum(axis=-1)
+        return cast(np.ndarray, np.sum(np.where(kept, ordered, 0.0), axis=-1) / kept.sum(axis=-1))
 
 
 def _mean(x: np.ndarray, axis: int = -1) -> np.ndarray:
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all NaN: stays NaN
-        return np.nanmean(x, axis=axis)
+        return cast(np.ndarray, np.nanmean(x, axis=axis))
 
 
 def _median(x: np.ndarray, axis: int = -1) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        return np.nanmedian(x, axis=axis)
+        return cast(np.ndarray, np.nanmedian(x, axis=axis))
 
 
 ESTIMATORS: dict[str, Callable[..., np.ndarray]] = {"iqm": iqm, "mean": _mean, "median": _median}
@@ -124,7 +125,7 @@ def sample_std(x: np.ndarray) -> float:
 
 def _finite(x: np.ndarray) -> np.ndarray:
     x = np.asarray(x, dtype=float).ravel()
-    return x[np.isfinite(x)]
+    return cast(np.ndarray, x[np.isfinite(x)])
 
 
 def _check_confidence(confidence: float) -> float:
@@ -211,7 +212,7 @@ def probability_of_improvement(x: np.ndarray, y: np.ndarray, axis: int = -1) -> 
     the Mann–Whitney U statistic of `x` over n·m (Agarwal et al. 2021, Sect. 4)."""
     x, y = np.moveaxis(np.asarray(x, float), axis, -1), np.moveaxis(np.asarray(y, float), axis, -1)
     difference = x[..., :, None] - y[..., None, :]
-    return np.mean((difference > 0) + 0.5 * (difference == 0), axis=(-2, -1))
+    return cast(np.ndarray, np.mean((difference > 0) + 0.5 * (difference == 0), axis=(-2, -1)))
 
 
 def improvement_test(x: np.ndarray, y: np.ndarray) -> float:
@@ -255,7 +256,7 @@ def compare(
 ) -> dict[str, tuple[float, float, float]]:
     """`x`'s runs against `y`'s: the probability of improvement and the difference in IQM
     (x − y), each ``(point, low, high)`` with a bootstrap interval over both settings' runs."""
-    kwargs = {"confidence": confidence, "resamples": resamples, "seed": seed}
+    kwargs: dict[str, Any] = {"confidence": confidence, "resamples": resamples, "seed": seed}
     return {
         "probability_of_improvement": bootstrap([x, y], probability_of_improvement, **kwargs),
         "iqm_difference": bootstrap(
@@ -282,7 +283,7 @@ def max_average_difference(
     def paper_statistic(curves: np.ndarray) -> np.ndarray:  # [..., run, update] -> [...]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # updates before any episode
-            return np.nanmax(np.nanmean(curves, axis=-2), axis=-1)
+            return cast(np.ndarray, np.nanmax(np.nanmean(curves, axis=-2), axis=-1))
 
     x, y = np.asarray(x, float), np.asarray(y, float)
     point = float(paper_statistic(x) - paper_statistic(y))
@@ -315,7 +316,7 @@ def _pooled(statistic: Callable[..., np.ndarray]) -> Callable[..., np.ndarray]:
 
 def optimality_gap(x: np.ndarray, axis: int = -1, threshold: float = 1.0) -> np.ndarray:
     """The mean shortfall of normalised scores below `threshold`: mean(max(0, threshold − x))."""
-    return np.mean(threshold - np.minimum(x, threshold), axis=axis)
+    return cast(np.ndarray, np.mean(threshold - np.minimum(x, threshold), axis=axis))
 
 
 AGGREGATES: dict[str, Callable[..., np.ndarray]] = {
@@ -358,7 +359,7 @@ def aggregate_improvement(
             probability_of_improvement(x, y, axis)
             for x, y in zip(samples[::2], samples[1::2], strict=True)
         ]
-        return np.mean(values, axis=0)
+        return cast(np.ndarray, np.mean(values, axis=0))
 
     samples = [s for pair in pairs for s in pair]
     return bootstrap(
@@ -370,4 +371,6 @@ def performance_profile(scores: np.ndarray, thresholds: np.ndarray) -> np.ndarra
     """The fraction of runs whose normalised score exceeds each of `thresholds` (Agarwal et al.
     2021, Sect. 4: the score distribution's tail, run by run)."""
     scores = _finite(scores)
-    return np.mean(scores[None, :] > np.asarray(thresholds, float)[:, None], axis=1)
+    return cast(
+        np.ndarray, np.mean(scores[None, :] > np.asarray(thresholds, float)[:, None], axis=1)
+    )

@@ -17,7 +17,7 @@ import shutil
 import subprocess
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -149,7 +149,9 @@ def study(
     try:
         check_plan(output, plan)
 
-        def train_group(task: str, variants: list[Surrogate], seeds: list[int], where: Path):
+        def train_group(
+            task: str, variants: list[Surrogate], seeds: list[int], where: Path
+        ) -> SweepResult:
             fixed = {
                 name: value
                 for name, value in settings.items()
@@ -218,30 +220,33 @@ def make_plan(
     settings: dict[str, Any],
 ) -> dict[str, Any]:
     """What ``plan.json`` records: the preregistration, decided before any run."""
-    return json_value(
-        {
-            "tasks": tasks,
-            "baseline": baseline.name,
-            "candidates": [c.name for c in candidates],
-            "comparisons": [
-                {"task": task, "candidate": c.name, "baseline": baseline.name}
-                for task in tasks
-                for c in candidates
-            ],
-            "primary_endpoint": endpoint,
-            "secondary_endpoints": [e for e in ENDPOINTS if e != endpoint],
-            "test": TEST,
-            "level": design.level,
-            "group_size": design.group_size,
-            "max_seeds": design.max_seeds,
-            "looks": list(design.looks),
-            "boundaries_if_none_decided": list(
-                boundaries(design.level / (len(tasks) * len(candidates)), _fractions(design))
-            ),
-            "settings": settings,
-            **identities([*candidates, baseline]),
-            "commit": commit(),
-        }
+    return cast(
+        dict[str, Any],
+        json_value(
+            {
+                "tasks": tasks,
+                "baseline": baseline.name,
+                "candidates": [c.name for c in candidates],
+                "comparisons": [
+                    {"task": task, "candidate": c.name, "baseline": baseline.name}
+                    for task in tasks
+                    for c in candidates
+                ],
+                "primary_endpoint": endpoint,
+                "secondary_endpoints": [e for e in ENDPOINTS if e != endpoint],
+                "test": TEST,
+                "level": design.level,
+                "group_size": design.group_size,
+                "max_seeds": design.max_seeds,
+                "looks": list(design.looks),
+                "boundaries_if_none_decided": list(
+                    boundaries(design.level / (len(tasks) * len(candidates)), _fractions(design))
+                ),
+                "settings": settings,
+                **identities([*candidates, baseline]),
+                "commit": commit(),
+            }
+        ),
     )
 
 
@@ -413,7 +418,10 @@ def _decide(
             ]
             pair.append(np.concatenate(parts) if parts else np.zeros(0))
         scores.append(tuple(pair))
-    return dict(zip(keys, decide(scores, design), strict=True))
+    # each of `scores` is a (candidate, baseline) pair
+    return dict(
+        zip(keys, decide(cast("list[tuple[np.ndarray, np.ndarray]]", scores), design), strict=True)
+    )
 
 
 def _rows(decisions: dict[tuple[str, str], Decision], baseline: Surrogate) -> list[dict[str, Any]]:

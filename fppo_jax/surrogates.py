@@ -35,7 +35,7 @@ import re
 import sys
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
-from typing import Any
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -99,9 +99,9 @@ def real(name: str, value: object) -> float:
         value, numbers.Real | np.ndarray | jax.Array
     ):
         raise InvalidInput(f"{name} must be a number, got {value!r}")
-    if np.ndim(value) != 0:
+    if np.ndim(cast(Any, value)) != 0:
         raise InvalidInput(
-            f"{name} must be a single number, got an array of shape {np.shape(value)}"
+            f"{name} must be a single number, got an array of shape {np.shape(cast(Any, value))}"
         )
     return float(value)
 
@@ -304,6 +304,8 @@ def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2
     """Try `declared` with `values` on ratios 0.25 … 4 and advantages of both signs (a KL of
     0 and 0.1): its value must be a finite float array of the ratio's shape, and its slope in
     the ratio finite."""
+    ratio: np.ndarray | jax.Array
+    advantage: np.ndarray | jax.Array
     ratio, advantage = np.meshgrid(np.geomspace(0.25, 4.0, 17), [-2.0, -0.5, 0.0, 0.5, 2.0])
     ratio, advantage = (
         jnp.asarray(ratio.ravel(), jnp.float32),

@@ -1,3 +1,4 @@
+# mypy: allow-redefinition
 """Sweeps: the cartesian product of hyperparameter values, times seeds, as one compiled program.
 
 Every run is the pure ``train_fn(key, hp)`` vmapped along a run axis, so variants, α, k, δ,
@@ -84,7 +85,7 @@ def grid_surrogates(grid: Mapping[str, Any]) -> dict[str, Surrogate]:
     return {s.name: s for s in given}
 
 
-def _as_list(name: str, values: Any) -> list:
+def _as_list(name: str, values: Any) -> list[Any]:
     scalar = isinstance(values, str | int | float) or not isinstance(values, Iterable)
     values = [values] if scalar else list(values)
     if not values:
@@ -185,6 +186,7 @@ def sweep(
 
     # Written after each group, so that a crash or a stop later loses no finished run.
     def write_finished(outcome: Outcome) -> None:
+        assert options.log_dir is not None  # it is the after_group only with a log_dir
         result_of(outcome).write(options.log_dir)
 
     keys = jnp.stack([jax.random.key(run["seed"]) for run in runs])

@@ -138,7 +138,7 @@ def _run(value: Any, settings: int) -> bool:
 
 # What a sweep's reader needs of sweep.json: each key, what its value must be, and the check
 # (which may look at the keys before it, already checked).
-RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
+RECORD: dict[str, tuple[str, Callable[[Any, dict[str, Any]], bool]]] = {
     "settings": (
         "a list of settings, each a variant and numbers",
         lambda v, r: _list_of(v, _setting),
@@ -158,7 +158,7 @@ RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
     "curves_sha256": ("a SHA-256 digest in hex", lambda v, r: _digest(v)),
 }
 # Keys of sweep.json that files written before them lack, checked when there.
-OPTIONAL_RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
+OPTIONAL_RECORD: dict[str, tuple[str, Callable[[Any, dict[str, Any]], bool]]] = {
     "digest_columns": (
         "a list of metric names",
         lambda v, r: _list_of(v, lambda name: isinstance(name, str)) and "env_steps" in v,

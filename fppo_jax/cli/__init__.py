@@ -89,7 +89,7 @@ def _given(
         command.set_defaults(**{dest: default})
 
 
-def _variants(variant: object) -> list[object]:
+def _variants(variant: object) -> Sequence[object]:
     """A settings file's variant (a name, a comma list, a list, or none) as a list."""
     if isinstance(variant, str):
         return variant.split(",")
@@ -111,5 +111,5 @@ def _warnings_as_lines() -> Iterator[None]:
             else:
                 show(message, category, *rest)
 
-        warnings.showwarning = shown
+        warnings.showwarning = shown  # type: ignore[assignment]  # warnings calls it with positional arguments
         yield

@@ -10,6 +10,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -101,7 +102,7 @@ def _holds_final_policy(args: argparse.Namespace) -> bool:
         return False
     config = newest["config"]
     last = config["total_steps"] // (config["num_envs"] * config["num_steps"])
-    return saved["config"] == config and saved["update"] == newest["update"] == last
+    return cast(bool, saved["config"] == config and saved["update"] == newest["update"] == last)
 
 
 def _sweep(args: argparse.Namespace) -> int:

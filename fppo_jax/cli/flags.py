@@ -199,7 +199,7 @@ _TYPES: dict[str, Callable[[str], Any]] = {
 }
 
 
-def _type_of(owner: type, field: dataclasses.Field) -> Callable[[str], Any]:
+def _type_of(owner: type, field: dataclasses.Field[Any]) -> Callable[[str], Any]:
     if field.type not in _TYPES:
         raise TypeError(
             f"{owner.__name__}.{field.name} is a {field.type}, which has no command-line flag "
@@ -273,11 +273,11 @@ def _shown(value: Any) -> str:
     return ",".join(map(str, value)) if isinstance(value, tuple | list) else str(value)
 
 
-def _option_flag(field: dataclasses.Field) -> str:
+def _option_flag(field: dataclasses.Field[Any]) -> str:
     return field.metadata["flag"] or "--" + field.name.replace("_", "-")
 
 
-def _option_dest(field: dataclasses.Field) -> str:
+def _option_dest(field: dataclasses.Field[Any]) -> str:
     return _option_flag(field)[2:].replace("-", "_")
 
 
@@ -442,7 +442,7 @@ class Parser(argparse.ArgumentParser):
 class Defaults(argparse.ArgumentDefaultsHelpFormatter):
     """Shows a flag's default where it has one worth reading (not None, not off)."""
 
-    def _get_help_string(self, action: argparse.Action) -> str:
+    def _get_help_string(self, action: argparse.Action) -> str | None:
         if action.default in (None, False):
             return action.help or ""
         return super()._get_help_string(action)

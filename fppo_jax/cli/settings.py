@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from fppo_jax.config import PRESETS
 from fppo_jax.errors import InvalidInput
@@ -91,7 +91,7 @@ def check_preset(path: Path, settings: dict[str, Any], preset: str | None) -> No
     """Refuse `preset`, given on the command line, beside a file that records a run of another
     preset with that preset's run shape: the file's shape would win and the run would be
     labelled `preset` without having its shape."""
-    recorded = settings.get("preset")
+    recorded: Any = settings.get("preset")  # whatever the file holds
     shape = [name for name in PRESETS.get(recorded, {}) if name in settings]
     if preset is None or recorded in (None, preset) or not shape:
         return
@@ -117,10 +117,10 @@ def _yaml_without_repeated_keys(text: str) -> Any:
     """YAML's settings, refused if a mapping names a key twice (PyYAML keeps the last)."""
     import yaml
 
-    class Loader(yaml.SafeLoader):
+    class Loader(yaml.SafeLoader):  # type: ignore[misc]  # PyYAML has no type information here
         def construct_mapping(self, node: Any, deep: bool = False) -> dict[Any, Any]:
             keys = [self.construct_object(key, deep=deep) for key, _ in node.value]
             _without_repeated_keys([(key, None) for key in keys])
-            return super().construct_mapping(node, deep=deep)
+            return cast(dict[Any, Any], super().construct_mapping(node, deep=deep))
 
     return yaml.load(text, Loader=Loader)

@@ -65,7 +65,7 @@ import threading
 import traceback
 import tracemalloc
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -73,6 +73,9 @@ from fppo_jax.envs.core import Box, Discrete, HostState, OnHost, Step, seeds_of
 from fppo_jax.errors import InvalidInput, MissingPackage
 from fppo_jax.extras import install_hint
 from fppo_jax.files import first_line
+
+if TYPE_CHECKING:
+    import jax
 
 MAX_POOLS = 16  # pools kept alive at once: training's, and a few evaluations' beside it
 # What one environment's step gives as its reward, and as terminated and truncated, mostly.
@@ -233,7 +236,7 @@ class GymnasiumEnvironment(OnHost):
         self._observation(self._reset(env, seed=0), "reset")
         self._check_step(self._step(env, self._still_actions(1)[0]))
 
-    def _check_step(self, out: tuple, count: int | None = None) -> None:
+    def _check_step(self, out: tuple[Any, ...], count: int | None = None) -> None:
         """A step's outcome (`count` of them from a vector environment) checked."""
         obs, reward, terminated, truncated, _ = out
         self._observation(obs, "step", count)
@@ -320,12 +323,17 @@ class GymnasiumEnvironment(OnHost):
             )
         number = _POOLS.add(envs, self.instance)
         slots = np.arange(len(seeds), dtype=np.int32)
+        # numpy arrays in the fields typed as the jax.Arrays that pure_callback makes of them
         state = HostState(
-            np.full(batch, number, np.int32), slots.reshape(batch), np.zeros(batch, np.int32)
+            cast("jax.Array", np.full(batch, number, np.int32)),
+            cast("jax.Array", slots.reshape(batch)),
+            cast("jax.Array", np.zeros(batch, np.int32)),
         )
         return state, first.reshape(*batch, self.observation_size)
 
-    def _reset_vectors(self, batch: tuple[int, ...], seeds: list[int]) -> tuple[list, np.ndarray]:
+    def _reset_vectors(
+        self, batch: tuple[int, ...], seeds: list[int]
+    ) -> tuple[list[Any], np.ndarray]:
         """A vector environment per `vector_size` environments of each run (the last axis of
         `batch`: a run's environments, or an evaluation's episodes), reset from their seeds."""
         size = self.vector_size
@@ -358,23 +366,25 @@ class GymnasiumEnvironment(OnHost):
         pools, slots = np.asarray(pool).reshape(-1), np.asarray(slot).reshape(-1)
         actions = self._actions(np.asarray(action).reshape(len(slots), -1))
         count = len(slots)
+        # numpy arrays in the fields typed as the jax.Arrays that pure_callback makes of them
         out = Step(
-            obs=np.empty((count, self.observation_size), np.float32),
-            reward=np.empty(count, np.float32),
-            terminated=np.empty(count, bool),
-            truncated=np.empty(count, bool),
-            next_obs=np.empty((count, self.observation_size), np.float32),
+            obs=cast("jax.Array", np.empty((count, self.observation_size), np.float32)),
+            reward=cast("jax.Array", np.empty(count, np.float32)),
+            terminated=cast("jax.Array", np.empty(count, bool)),
+            truncated=cast("jax.Array", np.empty(count, bool)),
+            next_obs=cast("jax.Array", np.empty((count, self.observation_size), np.float32)),
         )
         step = self._step_vectors if self.vector_size else self._step_envs
         for number in np.unique(pools):
             rows = np.flatnonzero(pools == number)
             step(_POOLS[int(number)], slots[rows], actions[rows], rows, out)
-        return Step(*(x.reshape(batch + x.shape[1:]) for x in out))
+        return Step(*(x.reshape(batch + x.shape[1:]) for x in cast("tuple[jax.Array, ...]", out)))
 
     def _step_envs(
         self, envs: list[Any], slots: np.ndarray, actions: np.ndarray, rows: np.ndarray, out: Step
     ) -> None:
         """Step `envs`' `slots` (one ``gymnasium.Env`` each) and write `rows` of `out`."""
+        assert out.next_obs is not None  # given, as by every environment that resets itself
         for env_slot, action, row in zip(slots, actions, rows, strict=True):
             env = envs[env_slot]
             obs, reward, terminated, truncated, _ = self._step(env, action)
@@ -409,12 +419,14 @@ class GymnasiumEnvironment(OnHost):
             self._step_vector(vector, actions[block], rows[block], out)
 
     def _step_vector(self, vector: Any, actions: np.ndarray, rows: np.ndarray, out: Step) -> None:
+        assert out.next_obs is not None  # given, as by every environment that resets itself
         obs, reward, terminated, truncated, info = self._step(vector, actions)
         size = self.vector_size
         obs = self._observation(obs, "step", size)
         reward = self._reward(reward, size)
-        terminated = self._flags(terminated, "terminated", size)
-        truncated = self._flags(truncated, "truncated", size)
+        # casts: with a count, _flags gives an array
+        terminated = cast(np.ndarray, self._flags(terminated, "terminated", size))
+        truncated = cast(np.ndarray, self._flags(truncated, "truncated", size))
         ended = terminated | truncated
         final = first = obs
         if ended.any() and self.same_step:
@@ -454,7 +466,7 @@ class GymnasiumEnvironment(OnHost):
             )
         return out[0]
 
-    def _step(self, env: Any, action: Any) -> tuple:
+    def _step(self, env: Any, action: Any) -> tuple[Any, ...]:
         """``env.step(action)``, which must give Gymnasium's five values."""
         try:
             out = env.step(action)
@@ -478,9 +490,9 @@ class GymnasiumEnvironment(OnHost):
         """The actions [count, …] as Gymnasium takes them: a Discrete space's from its first
         action (integers, as its ``sample`` gives), a Box's clipped to its bounds."""
         if isinstance(self.action_space, Discrete):
-            return actions[:, 0].astype(np.int64) + self.action_start
+            return cast(np.ndarray, actions[:, 0].astype(np.int64) + self.action_start)
         space = self.action_space
-        return np.clip(actions, space.low, space.high).astype(np.float32)
+        return cast(np.ndarray, np.clip(actions, space.low, space.high).astype(np.float32))
 
     def _reward(self, reward: Any, count: int | None = None) -> Any:
         """`reward` checked: one finite number, or `count` of them from a vector environment."""
@@ -525,7 +537,7 @@ class GymnasiumEnvironment(OnHost):
             )
         if not np.isfinite(obs).all():
             raise InvalidInput(f"{self.name}: {where} returned a non-finite observation {obs}")
-        return obs
+        return cast(np.ndarray, obs)  # `obs`, the parameter, is Any; it is `checked` now
 
 
 def _numbers(value: Any) -> np.ndarray | None:
@@ -584,10 +596,10 @@ def gymnasium_environment(
     return GymnasiumEnvironment(env, name)
 
 
-_MADE: dict[tuple, GymnasiumEnvironment] = {}
+_MADE: dict[tuple[str, tuple[tuple[str, Any], ...]], GymnasiumEnvironment] = {}
 
 
-def _registered(env_id: str, kwargs: tuple) -> GymnasiumEnvironment:
+def _registered(env_id: str, kwargs: tuple[tuple[str, Any], ...]) -> GymnasiumEnvironment:
     """`env_id` as ``gymnasium.make`` takes it: a registered id, or ``module:id``, whose module
     is imported first to register it."""
     key = (env_id, kwargs)

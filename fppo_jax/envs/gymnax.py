@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
-from typing import Any
+from typing import Any, TypeGuard
 
 import jax
 import jax.numpy as jnp
@@ -76,7 +76,7 @@ def gymnax_environment(env_id: str, max_steps: int | None = None) -> GymnaxEnvir
     return GymnaxEnvironment(env, params)
 
 
-def is_gymnax_env(env: Any) -> bool:
+def is_gymnax_env(env: Any) -> TypeGuard[Any]:
     """Whether `env` is a gymnax environment (checked without importing gymnax if it is not
     loaded)."""
     if "gymnax" not in sys.modules:

@@ -12,7 +12,8 @@ import dataclasses
 import functools
 import io
 import warnings
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -98,7 +99,7 @@ class BraxEnvironment:
 
     def qpos(self, state: Timed) -> jax.Array:
         """Generalised positions, for rendering."""
-        return state.inner.pipeline_state.q
+        return cast(jax.Array, state.inner.pipeline_state.q)
 
     def reset(self, key: jax.Array) -> tuple[Timed, jax.Array]:
         state = self.env.reset(key)
@@ -154,6 +155,11 @@ class Swimmer:
 
         object.__setattr__(self, "_model", mjx.put_model(self.mj_model))
 
+    if TYPE_CHECKING:  # set by __post_init__, and no field
+
+        @property
+        def _model(self) -> Any: ...  # mujoco.mjx.Model
+
     @property
     def observation_size(self) -> int:
         return int(self.mj_model.nq - 2 + self.mj_model.nv)
@@ -167,14 +173,16 @@ class Swimmer:
         return float(self.mj_model.opt.timestep) * self.frame_skip
 
     def qpos(self, state: Timed) -> jax.Array:
-        return state.inner.qpos
+        return cast(jax.Array, state.inner.qpos)
 
     def reset(self, key: jax.Array) -> tuple[Timed, jax.Array]:
         from mujoco import mjx
 
         qpos_key, qvel_key = jax.random.split(key)
         m, scale = self.mj_model, self.reset_noise_scale
-        noise = lambda key, n: jax.random.uniform(key, (n,), minval=-scale, maxval=scale)  # noqa: E731
+        noise: Callable[[jax.Array, int], jax.Array] = lambda key, n: jax.random.uniform(  # noqa: E731
+            key, (n,), minval=-scale, maxval=scale
+        )
         qpos = jnp.asarray(m.qpos0) + noise(qpos_key, m.nq)
         qvel = noise(qvel_key, m.nv)
         data = mjx.make_data(self._model).replace(qpos=qpos, qvel=qvel)

@@ -27,13 +27,16 @@ import importlib.util
 import os
 import threading
 from types import ModuleType
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from fppo_jax.envs.core import Box, HostState, OnHost, Step, seeds_of
 from fppo_jax.errors import InvalidInput
 from fppo_jax.extras import install_hint
+
+if TYPE_CHECKING:
+    import jax
 
 INSTALL = f"{install_hint('native')}; envpool, Linux only"
 MAX_POOLS = 16  # pools kept alive at once: training's, and a few evaluations' beside it
@@ -140,9 +143,12 @@ class NativeEnvironment(OnHost):
         slots = np.arange(count, dtype=np.int32)
         first = np.empty_like(obs)
         first[info["env_id"]] = obs
+        # numpy arrays in the fields typed as the jax.Arrays that pure_callback makes of them
         return (
             HostState(
-                np.full(batch, number, np.int32), slots.reshape(batch), np.zeros(batch, np.int32)
+                cast("jax.Array", np.full(batch, number, np.int32)),
+                cast("jax.Array", slots.reshape(batch)),
+                cast("jax.Array", np.zeros(batch, np.int32)),
             ),
             first.reshape(*batch, -1).astype(np.float32),
         )
@@ -153,17 +159,18 @@ class NativeEnvironment(OnHost):
         batch = np.shape(pool)
         pools, slots = np.asarray(pool).reshape(-1), np.asarray(slot).reshape(-1)
         actions = np.asarray(action, np.float64).reshape(len(slots), -1)
+        # numpy arrays in the fields typed as the jax.Arrays that pure_callback makes of them
         out = Step(
-            obs=np.empty((len(slots), self.observation_size), np.float32),
-            reward=np.empty(len(slots), np.float32),
-            terminated=np.empty(len(slots), bool),
-            truncated=np.empty(len(slots), bool),
-            next_obs=np.empty((len(slots), self.observation_size), np.float32),
+            obs=cast("jax.Array", np.empty((len(slots), self.observation_size), np.float32)),
+            reward=cast("jax.Array", np.empty(len(slots), np.float32)),
+            terminated=cast("jax.Array", np.empty(len(slots), bool)),
+            truncated=cast("jax.Array", np.empty(len(slots), bool)),
+            next_obs=cast("jax.Array", np.empty((len(slots), self.observation_size), np.float32)),
         )
         for number in np.unique(pools):
             rows = np.flatnonzero(pools == number)
             _step_pool(_POOLS[int(number)], slots[rows], actions[rows], rows, out)
-        return Step(*(x.reshape(*batch, *x.shape[1:]) for x in out))
+        return Step(*(x.reshape(*batch, *x.shape[1:]) for x in cast("tuple[jax.Array, ...]", out)))
 
 
 def usable_cores() -> int:
@@ -186,6 +193,7 @@ def _step_pool(
 ) -> None:
     """Step `slots` of `pool` with `actions`, reset the ones whose episode ended, and write
     their outcome to `out`'s `rows`."""
+    assert out.next_obs is not None  # given, as by every environment that resets itself
     obs, reward, terminated, truncated, info = pool.step(actions, slots)
     # envpool answers in its own order: each answer is placed by the slot it names.
     where = rows[_positions(slots, info["env_id"])]

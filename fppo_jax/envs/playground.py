@@ -12,7 +12,7 @@ import dataclasses
 import functools
 from collections.abc import Mapping
 from types import ModuleType
-from typing import Any
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -30,7 +30,7 @@ def _registry() -> ModuleType:
             f"MuJoCo Playground is not installed: {install_hint('playground')}, or pip "
             "install playground"
         ) from error
-    return registry
+    return cast(ModuleType, registry)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -65,7 +65,7 @@ class PlaygroundEnvironment:
 
     def qpos(self, state: Timed) -> jax.Array:
         """Generalised positions, for rendering."""
-        return state.inner.data.qpos
+        return cast(jax.Array, state.inner.data.qpos)
 
     def reset(self, key: jax.Array) -> tuple[Timed, jax.Array]:
         state = self.env.reset(key)

@@ -44,9 +44,6 @@ from fppo_jax.policy import Policy
 if TYPE_CHECKING:
     import orbax.checkpoint as ocp
 
-# Orbax reports every save and restore through absl logging at INFO and WARNING.
-logging.getLogger("absl").setLevel(logging.ERROR)
-
 
 class DamagedCheckpoint(UserWarning):
     """A checkpoint could not be read back intact and was set aside."""
@@ -189,8 +186,7 @@ class Checkpoints:
             raise InvalidInput(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
-        _ReadsLeftBehind.quieten()
-        _UNREADABLE_METADATA.install()
+        _ORBAX_CHATTER.install()
         if os.path.lexists(self.directory) and not self.directory.is_dir():
             raise InvalidInput(
                 f"checkpoint directory {self.directory} is not a directory (a file, or a link "
@@ -339,6 +335,7 @@ class Checkpoints:
         raise MissingFile(f"no readable checkpoint in {self.directory}")
 
     def _read(self, step: int, **items: Any) -> Any:
+        _ReadsLeftBehind.quieten()
         return self._manager.restore(step, args=_args(**items))
 
     def wait(self) -> None:
@@ -383,12 +380,17 @@ class Checkpoints:
         )
 
 
-class _UnreadableMetadata(logging.Filter):
-    """Drops orbax's log line for each damaged checkpoint's metadata file, once per look at the
-    directory: the damaged checkpoint is reported once, by this module, as such."""
+class _OrbaxChatter(logging.Filter):
+    """Drops orbax's own log records (through absl's logger) but for its errors: a line for
+    every save and restore at INFO and WARNING, and a line for each damaged checkpoint's
+    metadata file at every look at the directory, which this module reports once, as damage.
+    Every other record, the user's own through absl included, passes at its own level."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        return not str(record.msg).startswith("Failed to json parse Metadata file")
+        if f"{os.sep}orbax{os.sep}" not in record.pathname:
+            return True
+        damaged = str(record.msg).startswith("Failed to json parse Metadata file")
+        return record.levelno >= logging.ERROR and not damaged
 
     def install(self) -> None:
         logger = logging.getLogger("absl")
@@ -396,7 +398,7 @@ class _UnreadableMetadata(logging.Filter):
             logger.addFilter(self)
 
 
-_UNREADABLE_METADATA = _UnreadableMetadata()
+_ORBAX_CHATTER = _OrbaxChatter()
 
 
 class _ReadsLeftBehind:
@@ -426,7 +428,8 @@ class _ReadsLeftBehind:
 
     @classmethod
     def quieten(cls) -> None:
-        """Install the hook, unless it is the one installed."""
+        """Install the hook, unless it is the one installed: before the process first reads a
+        checkpoint, never in one that only writes them."""
         if not isinstance(sys.unraisablehook, cls):
             sys.unraisablehook = cls(sys.unraisablehook)
 

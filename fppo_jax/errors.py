@@ -29,3 +29,10 @@ class MissingFile(FppoError, FileNotFoundError):
 
 class NotEnoughMemory(FppoError, MemoryError):
     """What was asked for would not fit in this machine's memory."""
+
+
+def install_hint(extra: str) -> str:
+    """The command that installs the package's optional `extra` (``pyproject.toml``), for an
+    install from the package index and from a clone of the repository alike: what a
+    :class:`MissingPackage` tells the user to run."""
+    return f"pip install 'fppo-jax[{extra}]' (from a clone: pip install -e '.[{extra}]')"

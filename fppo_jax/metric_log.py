@@ -21,8 +21,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from fppo_jax.errors import InvalidInput, MissingPackage
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
 from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
 from fppo_jax.trainer import METRICS
 

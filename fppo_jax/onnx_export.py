@@ -16,8 +16,7 @@ from typing import Any
 import numpy as np
 
 from fppo_jax.envs import Discrete
-from fppo_jax.errors import MissingPackage
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import MissingPackage, install_hint
 from fppo_jax.policy import Policy
 
 OPSET = 17

@@ -14,8 +14,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from fppo_jax.config import positive_int
-from fppo_jax.errors import InvalidInput
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import InvalidInput, install_hint
 
 if TYPE_CHECKING:  # the trainer, not needed to declare or check options (the command's flags)
     from fppo_jax.policy import Policy

@@ -70,8 +70,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from fppo_jax.envs.core import Box, Discrete, HostState, OnHost, Step, seeds_of
-from fppo_jax.errors import InvalidInput, MissingPackage
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
 from fppo_jax.files import first_line
 
 if TYPE_CHECKING:

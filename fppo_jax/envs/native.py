@@ -32,8 +32,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from fppo_jax.envs.core import Box, HostState, OnHost, Step, seeds_of
-from fppo_jax.errors import InvalidInput
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import InvalidInput, install_hint
 
 if TYPE_CHECKING:
     import jax

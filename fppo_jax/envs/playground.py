@@ -18,8 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from fppo_jax.envs.core import Box, Step, Timed, limited_step
-from fppo_jax.errors import InvalidInput, MissingPackage
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
 
 
 def _registry() -> ModuleType:

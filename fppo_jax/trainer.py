@@ -13,9 +13,8 @@ Each part of an update runs under a ``jax.named_scope`` (``rollout``, ``advantag
 
 from __future__ import annotations
 
-import collections
 import dataclasses
-from typing import TYPE_CHECKING, Any, NamedTuple, cast
+from typing import Any, NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
@@ -73,24 +72,26 @@ class TrainState:
 # speed: the fraction of the batch in R+ ∪ R- as each minibatch meets it before training on it.
 _FIRST_EPOCH = {"negative_fraction": "negative_fraction_before"}
 
-METRICS: tuple[str, ...] = (
-    "env_steps",
-    "average_return",  # mean return of the last 100 finished episodes (NaN before any)
-    # Each of LossInfo's diagnostics, averaged over the update.
-    *(_FIRST_EPOCH.get(name, name) for name in LossInfo._fields),
+
+class Metrics(NamedTuple):
+    """One row per update."""
+
+    env_steps: jax.Array
+    average_return: jax.Array  # mean return of the last 100 finished episodes (NaN before any)
+    # LossInfo's diagnostics, averaged over the update (the first epoch's, where renamed).
+    policy_loss: jax.Array
+    value_loss: jax.Array
+    entropy: jax.Array
+    approx_kl: jax.Array
+    clip_fraction: jax.Array
+    negative_fraction_before: jax.Array
     # The escape speed, under the parameters after the last epoch: the fraction of the batch in
     # R+ ∪ R-, and how far past the bound those samples sit on average.
-    "negative_fraction_after",
-    "negative_distance_after",
-)
+    negative_fraction_after: jax.Array
+    negative_distance_after: jax.Array
 
 
-class Metrics(collections.namedtuple("Metrics", METRICS)):  # type: ignore[misc]  # fields: METRICS
-    """One row per update: a value for each name of :data:`METRICS`."""
-
-    if TYPE_CHECKING:  # the constructor mypy cannot see: one value per name of METRICS
-
-        def __new__(cls, *values: jax.Array, **named: jax.Array) -> Metrics: ...
+METRICS: tuple[str, ...] = Metrics._fields
 
 
 class Transition(NamedTuple):

@@ -3,7 +3,8 @@
     python experiments/study.py --task hopper --seeds 0:10                 # PPO, FPPO-LP, FPPO-QP
     python experiments/study.py --task cartpole --seeds 0:50 --variants all --protocol unnormalised
     python experiments/study.py --task reacher --seeds 0:2 --steps 8192 --results /tmp/smoke
-    python experiments/study.py --task hopper --seeds 0:10 --doses plans/dose-response.json
+    python experiments/study.py --task hopper --seeds 0:2 --plan plans/dose-response.json
+    python experiments/study.py --task swimmer --seeds 0:5 --plan plans/baseline-shape.json
 
 A part is one sweep (one compiled program) of `--variants` × `--seeds` on `--task`, with the
 `paper` preset, Table 2's α and k and the paper's budget (100k steps on the classic tasks, 1M on
@@ -13,8 +14,9 @@ them (``experiments/verdict.py``). Protocols: ``paper`` is the project's default
 reward normalisation everywhere); ``unnormalised`` is baselines' classic-control protocol
 (no VecNormalize: baselines wraps only its MuJoCo runs).
 
-With ``--doses PLAN`` the part is instead every dose of the plan's variants (with PPO, the
-reference) in one sweep, recorded under <results>/<plan's name>/<task>/<protocol>/.
+With ``--plan PLAN`` the part is the plan's own, recorded under
+<results>/<plan's name>/<task>/<protocol>/: every dose of its variants in one sweep (its
+``doses``), or its ``candidates`` with its ``settings`` (such as another rollout shape).
 
 Each part goes to <results>/study/<task>/<protocol>/<part>/ (`curves.csv`, `sweep.json`,
 `run.json` with the machine, date, wall time, command and the commit it ran at), written into a
@@ -33,6 +35,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from common import (
     CLASSIC_TASKS,
@@ -120,14 +123,16 @@ def _listed(seeds: list[int]) -> str:
     return ", ".join(map(str, seeds[:5])) + (", …" if len(seeds) > 5 else "")
 
 
-def dose_grid(plan: Path) -> dict[str, list]:
-    """The sweep of every dose `plan` names: its variants, and each one's values."""
-    doses = json.loads(plan.read_text())["doses"]
-    grid: dict[str, list] = {"variant": list(doses)}
-    for values in doses.values():
+def planned_sweep(plan: dict) -> tuple[dict[str, list], dict[str, Any]]:
+    """The grid and the fixed settings of `plan`'s part: every dose of its variants (``doses``:
+    each one's values), or its ``candidates`` with its ``settings``."""
+    if "doses" not in plan:
+        return {"variant": list(plan["candidates"])}, plan.get("settings", {})
+    grid: dict[str, list] = {"variant": list(plan["doses"])}
+    for values in plan["doses"].values():
         if isinstance(values, dict):
             grid.update({name: v for name, v in values.items() if isinstance(v, list)})
-    return grid
+    return grid, {}
 
 
 def main() -> None:
@@ -141,7 +146,7 @@ def main() -> None:
         help=f"variants, or 'all' for {', '.join(PAPER_VARIANTS)} (default: {', '.join(STUDIED)})",
     )
     parser.add_argument(
-        "--doses", type=Path, help="a plan's doses (plans/dose-response.json) in one sweep"
+        "--plan", type=Path, help="a plan's own part (plans/dose-response.json, say)"
     )
     parser.add_argument("--protocol", default="paper", choices=list(PROTOCOLS))
     parser.add_argument("--steps", type=int, help="env steps per run (default: the paper's)")
@@ -157,9 +162,11 @@ def main() -> None:
 
     grid: dict[str, list] = {"variant": variants}
     folder = args.results / "study" / args.task / args.protocol
-    if args.doses:
-        plan = args.doses if args.doses.exists() else Path(__file__).parent / args.doses
-        grid, variants = dose_grid(plan), [plan.stem]
+    settings: dict[str, Any] = {}
+    if args.plan:
+        plan = args.plan if args.plan.exists() else Path(__file__).parent / args.plan
+        grid, settings = planned_sweep(json.loads(plan.read_text()))
+        variants = [plan.stem]
         folder = args.results / plan.stem.replace("-", "_") / args.task / args.protocol
     directory = folder / part_name(variants, args.seeds)
     refuse_to_replace([directory], args.force)
@@ -182,6 +189,7 @@ def main() -> None:
         backend=backend,
         progress=True,
         **PROTOCOLS[args.protocol],
+        **settings,
     )
     wall = time.perf_counter() - start
     directory.parent.mkdir(parents=True, exist_ok=True)

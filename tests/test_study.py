@@ -90,3 +90,16 @@ def test_a_dose_response_part_is_one_sweep_whose_controls_train_as_ppo(tmp_path)
             np.testing.assert_array_equal(metrics[name], ppo[name], err_msg=f"{control} {name}")
     strongest = result.setting_metrics(index[(("k", 2.0), ("variant", "fppo-qp"))])
     assert not np.array_equal(strongest["average_return"], ppo["average_return"])
+
+
+def test_a_planned_part_trains_the_plan_s_settings(tmp_path):
+    tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
+    done = _run("study.py", *tiny, "--seeds", "0:1", "--plan", "plans/baseline-shape.json")
+    assert done.returncode == 0, done.stdout + done.stderr
+    part = tmp_path / "baseline_shape" / "cartpole" / "paper" / "seeds-0-0_baseline-shape"
+    result = SweepResult.read(part)
+    assert [s["variant"] for s in result.settings] == ["ppo"]
+    assert (result.config["num_envs"], result.config["num_steps"]) == (1, 2048)
+    assert (
+        "--plan plans/baseline-shape.json" in json.loads((part / "run.json").read_text())["command"]
+    )

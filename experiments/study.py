@@ -3,6 +3,8 @@
     python experiments/study.py --task hopper --seeds 0:10                 # PPO, FPPO-LP, FPPO-QP
     python experiments/study.py --task cartpole --seeds 0:50 --variants all --protocol unnormalised
     python experiments/study.py --task reacher --seeds 0:2 --steps 8192 --results /tmp/smoke
+    python experiments/study.py --task hopper --seeds 0:2 --plan plans/dose-response.json
+    python experiments/study.py --task swimmer --seeds 0:5 --plan plans/baseline-shape.json
 
 A part is one sweep (one compiled program) of `--variants` × `--seeds` on `--task`, with the
 `paper` preset, Table 2's α and k and the paper's budget (100k steps on the classic tasks, 1M on
@@ -11,6 +13,10 @@ with disjoint seeds or other variants are samples of one study and are merged by
 them (``experiments/verdict.py``). Protocols: ``paper`` is the project's default (observation and
 reward normalisation everywhere); ``unnormalised`` is baselines' classic-control protocol
 (no VecNormalize: baselines wraps only its MuJoCo runs).
+
+With ``--plan PLAN`` the part is the plan's own, recorded under
+<results>/<plan's name>/<task>/<protocol>/: every dose of its variants in one sweep (its
+``doses``), or its ``candidates`` with its ``settings`` (such as another rollout shape).
 
 Each part goes to <results>/study/<task>/<protocol>/<part>/ (`curves.csv`, `sweep.json`,
 `run.json` with the machine, date, wall time, command and the commit it ran at), written into a
@@ -22,12 +28,14 @@ both have): the parts could not be merged.
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from common import (
     CLASSIC_TASKS,
@@ -115,6 +123,18 @@ def _listed(seeds: list[int]) -> str:
     return ", ".join(map(str, seeds[:5])) + (", …" if len(seeds) > 5 else "")
 
 
+def planned_sweep(plan: dict) -> tuple[dict[str, list], dict[str, Any]]:
+    """The grid and the fixed settings of `plan`'s part: every dose of its variants (``doses``:
+    each one's values), or its ``candidates`` with its ``settings``."""
+    if "doses" not in plan:
+        return {"variant": list(plan["candidates"])}, plan.get("settings", {})
+    grid: dict[str, list] = {"variant": list(plan["doses"])}
+    for values in plan["doses"].values():
+        if isinstance(values, dict):
+            grid.update({name: v for name, v in values.items() if isinstance(v, list)})
+    return grid, {}
+
+
 def main() -> None:
     parser = argument_parser(__doc__)
     parser.add_argument("--task", required=True, choices=[*CLASSIC_TASKS, *MUJOCO_TASKS])
@@ -124,6 +144,9 @@ def main() -> None:
         nargs="+",
         default=list(STUDIED),
         help=f"variants, or 'all' for {', '.join(PAPER_VARIANTS)} (default: {', '.join(STUDIED)})",
+    )
+    parser.add_argument(
+        "--plan", type=Path, help="a plan's own part (plans/dose-response.json, say)"
     )
     parser.add_argument("--protocol", default="paper", choices=list(PROTOCOLS))
     parser.add_argument("--steps", type=int, help="env steps per run (default: the paper's)")
@@ -137,7 +160,14 @@ def main() -> None:
         parser.error(f"unknown variant {', '.join(unknown)}; valid: {', '.join(VARIANTS)}")
     backend = args.backend or ("native" if args.task in MUJOCO_TASKS else "auto")
 
+    grid: dict[str, list] = {"variant": variants}
     folder = args.results / "study" / args.task / args.protocol
+    settings: dict[str, Any] = {}
+    if args.plan:
+        plan = args.plan if args.plan.exists() else Path(__file__).parent / args.plan
+        grid, settings = planned_sweep(json.loads(plan.read_text()))
+        variants = [plan.stem]
+        folder = args.results / plan.stem.replace("-", "_") / args.task / args.protocol
     directory = folder / part_name(variants, args.seeds)
     refuse_to_replace([directory], args.force)
     clashes = overlapping_parts(folder, variants, args.seeds)
@@ -152,13 +182,14 @@ def main() -> None:
     start = time.perf_counter()
     result = sweep(
         args.task,
-        {"variant": variants},
+        grid,
         seeds=args.seeds,
         total_steps=args.steps,
         chunk=args.chunk,
         backend=backend,
         progress=True,
         **PROTOCOLS[args.protocol],
+        **settings,
     )
     wall = time.perf_counter() - start
     directory.parent.mkdir(parents=True, exist_ok=True)

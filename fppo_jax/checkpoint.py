@@ -25,11 +25,12 @@ import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import jax
 import numpy as np
 
+from fppo_jax.errors import FppoError, InvalidInput, MissingFile
 from fppo_jax.files import (
     DirectoryBusy,
     DirectoryLock,
@@ -43,20 +44,17 @@ from fppo_jax.policy import Policy
 if TYPE_CHECKING:
     import orbax.checkpoint as ocp
 
-# Orbax reports every save and restore through absl logging at INFO and WARNING.
-logging.getLogger("absl").setLevel(logging.ERROR)
-
 
 class DamagedCheckpoint(UserWarning):
     """A checkpoint could not be read back intact and was set aside."""
 
 
-class CheckpointsUnavailable(RuntimeError):
+class CheckpointsUnavailable(FppoError, RuntimeError):
     """A checkpoint directory cannot be used: another process writes there, or none of its
     checkpoints is intact."""
 
 
-class ConfigMismatch(ValueError):
+class ConfigMismatch(InvalidInput):
     """A checkpoint belongs to a run with a different configuration."""
 
 
@@ -115,7 +113,7 @@ def open_checkpoints(
         record = checkpoints.latest_record()
         if record is None and checkpoints.steps():  # never a silent fresh start
             if not resume:
-                raise ValueError(
+                raise InvalidInput(
                     f"{checkpoints.directory} already holds checkpoints (none of whose records "
                     "can be read); choose another directory"
                 )
@@ -127,7 +125,7 @@ def open_checkpoints(
                 "afresh, remove the directory or choose another"
             )
         if record is not None and not resume:
-            raise ValueError(
+            raise InvalidInput(
                 f"{checkpoints.directory} already holds checkpoints; pass resume=True (--resume) "
                 "to continue that run, or choose another directory"
             )
@@ -185,13 +183,12 @@ class Checkpoints:
         import orbax.checkpoint as ocp
 
         if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
-            raise ValueError(f"keep must be a positive number of checkpoints, got {keep!r}")
+            raise InvalidInput(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
-        _ReadsLeftBehind.quieten()
-        _UNREADABLE_METADATA.install()
+        _ORBAX_CHATTER.install()
         if os.path.lexists(self.directory) and not self.directory.is_dir():
-            raise ValueError(
+            raise InvalidInput(
                 f"checkpoint directory {self.directory} is not a directory (a file, or a link "
                 "that leads to none)"
             )
@@ -221,7 +218,7 @@ class Checkpoints:
 
         for step in reversed(self.steps()):
             try:
-                return self._read(step, record=ocp.args.JsonRestore()).record
+                return cast(dict[str, Any], self._read(step, record=ocp.args.JsonRestore()).record)
             except Exception:  # a damaged record; restore() reports it
                 continue
         return None
@@ -330,14 +327,15 @@ class Checkpoints:
                 )
                 continue
             if record.get("policy") is None:
-                raise ValueError(
+                raise InvalidInput(
                     f"{self.directory} holds the checkpoints of a {record.get('kind')}, not of "
                     "one policy: load_policy reads the checkpoints of train()"
                 )
             return Policy.from_parts(record["policy"], arrays), record
-        raise FileNotFoundError(f"no readable checkpoint in {self.directory}")
+        raise MissingFile(f"no readable checkpoint in {self.directory}")
 
     def _read(self, step: int, **items: Any) -> Any:
+        _ReadsLeftBehind.quieten()
         return self._manager.restore(step, args=_args(**items))
 
     def wait(self) -> None:
@@ -382,12 +380,17 @@ class Checkpoints:
         )
 
 
-class _UnreadableMetadata(logging.Filter):
-    """Drops orbax's log line for each damaged checkpoint's metadata file, once per look at the
-    directory: the damaged checkpoint is reported once, by this module, as such."""
+class _OrbaxChatter(logging.Filter):
+    """Drops orbax's own log records (through absl's logger) but for its errors: a line for
+    every save and restore at INFO and WARNING, and a line for each damaged checkpoint's
+    metadata file at every look at the directory, which this module reports once, as damage.
+    Every other record, the user's own through absl included, passes at its own level."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        return not str(record.msg).startswith("Failed to json parse Metadata file")
+        if f"{os.sep}orbax{os.sep}" not in record.pathname:
+            return True
+        damaged = str(record.msg).startswith("Failed to json parse Metadata file")
+        return record.levelno >= logging.ERROR and not damaged
 
     def install(self) -> None:
         logger = logging.getLogger("absl")
@@ -395,7 +398,7 @@ class _UnreadableMetadata(logging.Filter):
             logger.addFilter(self)
 
 
-_UNREADABLE_METADATA = _UnreadableMetadata()
+_ORBAX_CHATTER = _OrbaxChatter()
 
 
 class _ReadsLeftBehind:
@@ -425,7 +428,8 @@ class _ReadsLeftBehind:
 
     @classmethod
     def quieten(cls) -> None:
-        """Install the hook, unless it is the one installed."""
+        """Install the hook, unless it is the one installed: before the process first reads a
+        checkpoint, never in one that only writes them."""
         if not isinstance(sys.unraisablehook, cls):
             sys.unraisablehook = cls(sys.unraisablehook)
 
@@ -441,7 +445,7 @@ def _name(index: int) -> str:
 
 
 def _is_key(x: Any) -> bool:
-    return jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)
+    return jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)  # type: ignore[attr-defined]  # jax.dtypes does not re-export it
 
 
 def _storable(x: Any) -> Any:
@@ -450,14 +454,14 @@ def _storable(x: Any) -> Any:
 
 def _storable_shape(x: Any) -> jax.ShapeDtypeStruct:
     if _is_key(x):
-        return jax.eval_shape(jax.random.key_data, x)
+        return cast(jax.ShapeDtypeStruct, jax.eval_shape(jax.random.key_data, x))
     return jax.ShapeDtypeStruct(np.shape(x), x.dtype)
 
 
 def _from_storable(x: np.ndarray, like: Any) -> Any:
-    return jax.random.wrap_key_data(x) if _is_key(like) else x
+    return jax.random.wrap_key_data(x) if _is_key(like) else x  # type: ignore[arg-type]  # host key data is a valid argument
 
 
 def _verify(name: str, arrays: Any, record: dict[str, Any]) -> None:
     if tree_digest(arrays) != record["digests"][name]:
-        raise ValueError(f"its {name} arrays do not match the digest written with them")
+        raise InvalidInput(f"its {name} arrays do not match the digest written with them")

@@ -44,12 +44,13 @@ _ours: str | None = None  # the directory this module gave JAX, if any
 def directory(environ: Mapping[str, str] = os.environ) -> Path | None:
     """Where compiled programs are cached (None: off), from `environ`'s ``FPPO_JAX_CACHE_DIR``
     or the user's cache directory, in a subdirectory of this JAX's and jaxlib's versions."""
+    root: str | Path | None  # the variable as given, else the default directory
     root = environ.get(ENVIRONMENT_VARIABLE)
     if root is None:
         root = Path(environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "fppo-jax"
     elif root.strip().lower() in OFF:
         return None
-    return Path(root).expanduser() / f"jax-{jax.__version__}-jaxlib-{jaxlib.__version__}"
+    return Path(root).expanduser() / f"jax-{jax.__version__}-jaxlib-{jaxlib.__version__}"  # type: ignore[attr-defined]  # jaxlib does not re-export it
 
 
 def enable() -> Path | None:
@@ -57,7 +58,7 @@ def enable() -> Path | None:
     module had turned it on), unless the user set one for JAX; returns the directory JAX caches
     in now, if any. Cheap to call again: only a change of ``FPPO_JAX_CACHE_DIR`` does anything."""
     global _ours
-    current = jax.config.jax_compilation_cache_dir
+    current: str | None = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]  # options are attributes set at run time
     if current is not None and current != _ours:
         return Path(current)  # the user's
     wanted = directory()

@@ -13,14 +13,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterable, Sequence
-from typing import Any
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.envs import MUJOCO_TASKS, lookup
+from fppo_jax.errors import InvalidInput
 from fppo_jax.objectives import (
     BUILTINS,
     DEFAULT_VARIANT,
@@ -66,22 +67,23 @@ SYMBOLS = {
 def positive_int(name: str, value: object) -> int:
     """`value` if it is a positive integer (numpy integers included, booleans not)."""
     if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer) or value < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        raise InvalidInput(f"{name} must be a positive integer, got {value!r}")
     return int(value)
 
 
 def check_seed(seed: object) -> int:
     """`seed` if it is an integer that ``jax.random.key`` takes (numpy integers included)."""
     if isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer):
-        raise ValueError(f"a seed must be an integer, got {seed!r}")
+        raise InvalidInput(f"a seed must be an integer, got {seed!r}")
     if not -(2**63) <= seed < 2**64:
-        raise ValueError(f"a seed must fit in 64 bits, got {seed}")
+        raise InvalidInput(f"a seed must fit in 64 bits, got {seed}")
     return int(seed)
 
 
 def parse_seeds(text: str) -> list[int]:
     """Seeds written on a command line: ``20`` (seeds 0 … 19), ``10:20`` (seeds 10 … 19, as
     Python's ``range(10, 20)``) or a comma list such as ``0,3,7``; checked, and distinct."""
+    seeds: range | list[int]
     try:
         if ":" in text:
             start, stop = (int(part) for part in text.split(":"))
@@ -93,16 +95,16 @@ def parse_seeds(text: str) -> list[int]:
     except ValueError as error:
         if "must be" in str(error):
             raise
-        raise ValueError(
+        raise InvalidInput(
             f"seeds {text!r} are not a count (20), a range (10:20) or a list (0,3,7)"
         ) from None
     count = max(0, seeds.stop - seeds.start) if isinstance(seeds, range) else len(seeds)
     if not count:
-        raise ValueError(f"seeds {text!r} name no seed (a range start:stop needs start < stop)")
+        raise InvalidInput(f"seeds {text!r} name no seed (a range start:stop needs start < stop)")
     if count > MAX_SEEDS:
-        raise ValueError(f"seeds {text!r} name {count:,} seeds, more than {MAX_SEEDS:,}")
+        raise InvalidInput(f"seeds {text!r} name {count:,} seeds, more than {MAX_SEEDS:,}")
     if len(set(seeds)) < len(seeds):
-        raise ValueError(f"seeds {text!r} repeat a seed")
+        raise InvalidInput(f"seeds {text!r} repeat a seed")
     return [check_seed(seed) for seed in seeds]
 
 
@@ -148,13 +150,13 @@ class TrainConfig:
             pool = positive_int("resets_per_rollout", self.resets_per_rollout)
             object.__setattr__(self, "resets_per_rollout", pool)
         if self.total_steps > MAX_STEPS:
-            raise ValueError(
+            raise InvalidInput(
                 f"total_steps must be at most {MAX_STEPS:,} (the compiled program counts env "
                 f"steps in 32-bit integers), got {self.total_steps:,}"
             )
         sizes = self.hidden_sizes
         if isinstance(sizes, str) or not isinstance(sizes, tuple | list) or not sizes:
-            raise ValueError(
+            raise InvalidInput(
                 f"hidden_sizes must be a sequence of positive layer widths such as (64, 64), "
                 f"got {sizes!r}"
             )
@@ -167,14 +169,14 @@ class TrainConfig:
             "anneal_learning_rate",
         ):
             if not isinstance(getattr(self, name), bool | np.bool_):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+                raise InvalidInput(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.samples_per_update % self.num_minibatches:
-            raise ValueError(
+            raise InvalidInput(
                 f"num_minibatches ({self.num_minibatches}) must divide the samples per update "
                 f"(num_envs × num_steps = {self.samples_per_update})"
             )
         if self.total_steps < self.samples_per_update:
-            raise ValueError(
+            raise InvalidInput(
                 f"total_steps ({self.total_steps}) is less than one update's samples "
                 f"(num_envs × num_steps = {self.samples_per_update})"
             )
@@ -225,7 +227,7 @@ def task_preset(preset: str, task: str | None) -> dict[str, Any]:
 def preset_config(preset: str, **overrides: Any) -> TrainConfig:
     """The :class:`TrainConfig` of preset `preset` ("paper" or "massive"), with `overrides`."""
     if preset not in PRESETS:
-        raise ValueError(f"unknown preset {preset!r}; valid presets: {', '.join(PRESETS)}")
+        raise InvalidInput(f"unknown preset {preset!r}; valid presets: {', '.join(PRESETS)}")
     return TrainConfig(**{**PRESETS[preset], **overrides})
 
 
@@ -252,7 +254,7 @@ HYPERPARAMETER_DEFAULTS: dict[str, float] = {
     "max_grad_norm": 0.5,
 }
 
-_RANGES: dict[str, tuple[str, object]] = {
+_RANGES: dict[str, tuple[str, Callable[[float], bool]]] = {
     "learning_rate": ("> 0", lambda x: x > 0),
     "gamma": ("in (0, 1]", lambda x: 0 < x <= 1),
     "gae_lambda": ("in [0, 1]", lambda x: 0 <= x <= 1),
@@ -270,14 +272,14 @@ def hyperparameters(
     the optimisation settings.
 
     Unset settings take :data:`HYPERPARAMETER_DEFAULTS`; unknown names and out-of-range values
-    raise ``ValueError`` naming the parameter.
+    raise ``InvalidInput`` naming the parameter.
     """
     surrogate = resolve(variant)
     taken_by_some = hyperparameter_names([*BUILTINS.values(), surrogate])
     own = {name: values.pop(name) for name in taken_by_some if name in values}
     unknown = sorted(set(values) - set(HYPERPARAMETER_DEFAULTS))
     if unknown:
-        raise ValueError(
+        raise InvalidInput(
             f"unknown hyperparameter {', '.join(unknown)}; valid: "
             + ", ".join(["epsilon", *taken_by_some, *HYPERPARAMETER_DEFAULTS])
         )
@@ -286,7 +288,7 @@ def hyperparameters(
         bound, ok = _RANGES[name]
         value = real(name, value)
         if not (math.isfinite(value) and ok(value)):
-            raise ValueError(f"{name} must be {bound}, got {value}")
+            raise InvalidInput(f"{name} must be {bound}, got {value}")
     return Hyperparameters(
         objective=objective(surrogate, epsilon=epsilon, **own),
         **{name: jnp.asarray(value, jnp.float32) for name, value in settings.items()},
@@ -310,7 +312,7 @@ def stack_hyperparameters(hps: Sequence[Hyperparameters]) -> Hyperparameters:
     """`hps` as one batch (a leading run axis) over all of their surrogates, for ``vmap``."""
     menu = union([s for hp in hps for s in hp.objective.surrogates])
     among = [dataclasses.replace(hp, objective=hp.objective.among(menu)) for hp in hps]
-    return jax.tree.map(lambda *xs: jnp.stack(xs), *among)
+    return cast(Hyperparameters, jax.tree.map(lambda *xs: jnp.stack(xs), *among))
 
 
 def resolve_config(
@@ -325,7 +327,7 @@ def resolve_config(
     task = lookup(env) if isinstance(env, str) else None  # an unknown name is refused here
     unknown = sorted(set(overrides) - set(CONFIG_FIELDS))
     if unknown:
-        raise ValueError(
+        raise InvalidInput(
             f"unknown setting {', '.join(unknown)}; valid: "
             + ", ".join([*CONFIG_FIELDS, *also_valid])
         )

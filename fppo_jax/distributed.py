@@ -15,7 +15,7 @@ import dataclasses
 import os
 import pickle
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import jax
 import numpy as np
@@ -23,6 +23,7 @@ from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from fppo_jax.errors import InvalidInput
 from fppo_jax.trainer import TrainState
 
 
@@ -30,21 +31,21 @@ def make_mesh(devices: int | None, num_envs: int, data_parallel: int | None = No
     """The mesh of `devices` devices (default: all JAX sees), or None for a single device.
 
     Each run's environments are split over `data_parallel` of them (default: all, which is one
-    run's case) and the runs of a sweep over the rest. Raises ValueError, before anything is
+    run's case) and the runs of a sweep over the rest. Raises InvalidInput, before anything is
     compiled, for a count that JAX does not have or that does not divide the environments.
     """
     available = jax.devices()
     count = len(available) if devices is None else devices  # a positive count (Options)
     if count > len(available):
-        raise ValueError(
+        raise InvalidInput(
             f"devices={count}, but JAX sees {len(available)} {available[0].platform} "
             f"device{'s' if len(available) > 1 else ''}"
         )
     data = count if data_parallel is None else data_parallel  # a positive count (sweep)
     if count % data:
-        raise ValueError(f"data_parallel must divide the devices ({count}), got {data}")
+        raise InvalidInput(f"data_parallel must divide the devices ({count}), got {data}")
     if num_envs % data:
-        raise ValueError(
+        raise InvalidInput(
             f"num_envs ({num_envs}) must be divisible by the devices each run is split over "
             f"({data})"
         )
@@ -60,7 +61,7 @@ def state_shardings(mesh: Mesh, state: TrainState, batched: bool) -> TrainState:
     runs = ("runs",) if batched else ()
     replicated = NamedSharding(mesh, P(*runs))
     per_environment = NamedSharding(mesh, P(*runs, "data"))
-    shardings = jax.tree.map(lambda _: replicated, state)
+    shardings: TrainState = jax.tree.map(lambda _: replicated, state)
     envs = jax.tree.map(lambda _: per_environment, state.envs)
     return dataclasses.replace(shardings, envs=envs)
 
@@ -80,12 +81,14 @@ def initialize() -> None:
     gloo.
     """
     variables = {"num_processes": "JAX_NUM_PROCESSES", "process_id": "JAX_PROCESS_ID"}
-    options = {name: int(os.environ[v]) for name, v in variables.items() if v in os.environ}
+    options: dict[str, Any] = {
+        name: int(os.environ[v]) for name, v in variables.items() if v in os.environ
+    }
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
     try:
         jax.distributed.initialize(**options)
     except ValueError as error:  # what JAX could not detect, such as the coordinator
-        raise ValueError(
+        raise InvalidInput(
             f"cannot join a multi-process run: {str(error).rstrip('.')}; set "
             "JAX_COORDINATOR_ADDRESS (host:port of process 0), JAX_NUM_PROCESSES and "
             "JAX_PROCESS_ID, or start it under SLURM, Open MPI or Kubernetes, which JAX detects"
@@ -105,9 +108,9 @@ def place(tree: Any, shardings: Any) -> Any:
         if isinstance(x, jax.Array) and x.sharding == sharding:
             return x
         if sharding.is_fully_addressable:
-            return jax.device_put(x, sharding)
-        if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
-            return jax.random.wrap_key_data(one(jax.random.key_data(x), sharding))
+            return cast(jax.Array, jax.device_put(x, sharding))
+        if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):  # type: ignore[attr-defined]  # jax.dtypes does not re-export it
+            return cast(jax.Array, jax.random.wrap_key_data(one(jax.random.key_data(x), sharding)))
         host = np.asarray(x)
         return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
 
@@ -126,8 +129,8 @@ def fetch_tree(tree: Any) -> Any:
     """Every leaf of `tree` on the host (:func:`fetch`), PRNG keys as keys of host data."""
 
     def one(x: Any) -> Any:
-        if isinstance(x, jax.Array) and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
-            return jax.random.wrap_key_data(fetch(jax.random.key_data(x)))
+        if isinstance(x, jax.Array) and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):  # type: ignore[attr-defined]  # jax.dtypes does not re-export it
+            return jax.random.wrap_key_data(fetch(jax.random.key_data(x)))  # type: ignore[arg-type]  # host key data is a valid argument
         return fetch(x)
 
     return jax.tree.map(one, tree)
@@ -147,7 +150,7 @@ def on_main_process(work: Callable[[], Any]) -> Any:
             outcome = (work(), None)
         except Exception as error:
             outcome = (None, error)
-    result, error = _from_main_process(outcome)
+    result, error = _from_main_process(outcome)  # type: ignore[misc]  # `error` of the except clause above is free again here
     if error is not None:
         raise error
     return result

@@ -17,7 +17,7 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import jax
 import numpy as np
@@ -41,6 +41,7 @@ from fppo_jax.distributed import (
     on_main_process,
 )
 from fppo_jax.envs import resets_itself
+from fppo_jax.errors import FppoError, InvalidInput
 from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
 from fppo_jax.files import DirectoryLock
@@ -52,7 +53,7 @@ from fppo_jax.progress import PROGRESS_LINES, Counter, Progress, reporter
 from fppo_jax.trainer import Trainer, TrainState
 
 
-class TrainingDiverged(FloatingPointError):
+class TrainingDiverged(FppoError, FloatingPointError):
     """The loss or the parameters became NaN or infinite."""
 
     def __init__(self, update: int, env_steps: int, checkpoint: str | None = None):
@@ -110,7 +111,7 @@ class Plan:
 
     def __post_init__(self) -> None:
         if (self.runs is None) == self.batched or (self.runs and len(self.runs) != self.num_runs):
-            raise ValueError("a batched plan names each of its runs, and only a batched one")
+            raise InvalidInput("a batched plan names each of its runs, and only a batched one")
 
     @property
     def batched(self) -> bool:
@@ -143,7 +144,7 @@ def drive(plan: Plan, options: Options) -> Outcome:
     devices = options.devices
     if resets_itself(trainer.env):
         if devices not in (None, 1) or jax.process_count() > 1:
-            raise ValueError(
+            raise InvalidInput(
                 "native MuJoCo and Gymnasium step their environments on this host, for one "
                 "device: devices must be 1, in a single process"
             )
@@ -177,7 +178,7 @@ def drive(plan: Plan, options: Options) -> Outcome:
         restored = None
         if checkpointed is not None:
             like = jax.eval_shape(_init(plan), *_group(plan, 0, size))
-            restored = on_main_process(lambda: _restore(checkpoints, like, plan))
+            restored = on_main_process(lambda: _restore(cast(Checkpoints, checkpoints), like, plan))
         if options.progress is True and main:
             where = f" on {mesh.size} devices" if mesh else ""
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
@@ -226,12 +227,15 @@ def _restore(checkpoints: Checkpoints, like: Any, plan: Plan) -> Restored:
     return restored
 
 
-def _init(plan: Plan) -> Callable:
+def _init(plan: Plan) -> Callable[..., Any]:
     return jax.vmap(plan.trainer.init) if plan.batched else plan.trainer.init
 
 
 def _group_size(
-    plan: Plan, mesh: Mesh | None, checkpointed: dict | None, checkpoint_dir: str | Path | None
+    plan: Plan,
+    mesh: Mesh | None,
+    checkpointed: dict[str, Any] | None,
+    checkpoint_dir: str | Path | None,
 ) -> int:
     """Runs per compiled call: the sweep's chunk, or its recorded one when resuming, rounded
     up to split evenly over the devices that share the runs."""
@@ -315,7 +319,7 @@ class _Chunks:
         self.finished: list[dict[str, np.ndarray]] = []  # each finished group's metrics
         self.diverged = np.zeros(0, np.int32)
         self.saved: list[int] = []  # updates checkpointed, for a diverged run's message
-        self.evaluate = None
+        self.evaluate: Callable[[Policy], Any] | None = None
         if options.eval_every is not None:
             evaluator = make_evaluator(plan.trainer.env, options.eval_episodes)
             self.evaluate = jax.jit(jax.vmap(evaluator) if plan.batched else evaluator)
@@ -400,6 +404,8 @@ class _Chunks:
                     stopped_at = update
                     break
                 if self.signalled and (update < self.num_updates or group < groups - 1):
+                    # Signals are caught only in a run with checkpoints, in one process.
+                    assert self.checkpoints is not None and self.options.checkpoint_dir is not None
                     self.checkpoints.wait()
                     raise StoppedBySignal(self.signalled[0], update, self.options.checkpoint_dir)
             kept = slice(0, min(self.size, self.plan.num_runs - group * self.size))
@@ -415,7 +421,7 @@ class _Chunks:
                 self.after_group(self._outcome(state, resumed_from, stopped_at))
             if stopped_at is not None:
                 break
-        outcome = self._outcome(state, resumed_from, stopped_at)
+        outcome = self._outcome(cast(TrainState, state), resumed_from, stopped_at)
         if self.checkpoints:
             self.checkpoints.wait()
         return outcome
@@ -432,7 +438,7 @@ class _Chunks:
             file=sys.stderr,
         )
         restart = jax.vmap(trainer.restart_envs) if self.plan.batched else trainer.restart_envs
-        return jax.jit(restart)(state)
+        return cast(TrainState, jax.jit(restart)(state))
 
     def _outcome(self, state: TrainState, resumed_from: int, stopped_at: int | None) -> Outcome:
         """The runs finished so far, ending with the group whose final state is `state`."""
@@ -501,6 +507,7 @@ class _Chunks:
         """`eval_return` beside a chunk's training metrics: the deterministic policy's mean
         return, every `eval_every` updates and at the end, NaN between."""
         column = np.full(chunk["env_steps"].shape, np.nan, np.float32)
+        assert self.evaluate is not None and self.options.eval_every is not None  # evaluating
         if update % self.options.eval_every == 0 or update == self.num_updates:
             column[..., -1] = np.asarray(self.evaluate(policy)).mean(axis=-1)
         chunk["eval_return"] = column

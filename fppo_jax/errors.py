@@ -4,7 +4,8 @@ Every expected failure (bad input, a missing optional package, a refused or dama
 run that cannot go on) is a :class:`FppoError`; the command line prints it in one line. Any
 other exception is a bug and keeps its traceback. Each kind also derives from the built-in
 exception a caller would catch for it (``ValueError`` for bad input, ``ImportError`` for a
-missing package), so ``except ValueError`` keeps working.
+missing package, ``FileNotFoundError`` for a missing file), so ``except ValueError`` keeps
+working.
 """
 
 from __future__ import annotations
@@ -22,5 +23,16 @@ class MissingPackage(FppoError, ImportError):
     """An optional package (or a piece of one) that this use needs is not installed."""
 
 
+class MissingFile(FppoError, FileNotFoundError):
+    """A file or directory that was named, or that a record needs, is not there."""
+
+
 class NotEnoughMemory(FppoError, MemoryError):
     """What was asked for would not fit in this machine's memory."""
+
+
+def install_hint(extra: str) -> str:
+    """The command that installs the package's optional `extra` (``pyproject.toml``), for an
+    install from the package index and from a clone of the repository alike: what a
+    :class:`MissingPackage` tells the user to run."""
+    return f"pip install 'fppo-jax[{extra}]' (from a clone: pip install -e '.[{extra}]')"

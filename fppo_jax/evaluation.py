@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -47,11 +48,15 @@ def make_evaluator(
         ended = jnp.zeros(episodes, bool)
         returns = jnp.zeros(episodes)
 
-        def going(carry: tuple) -> jax.Array:
+        def going(
+            carry: tuple[jax.Array, jax.Array, Any, jax.Array, jax.Array, jax.Array],
+        ) -> jax.Array:
             t, *_, ended, _ = carry
             return (t < max_steps) & ~jnp.all(ended)
 
-        def step(carry: tuple) -> tuple:
+        def step(
+            carry: tuple[jax.Array, jax.Array, Any, jax.Array, jax.Array, jax.Array],
+        ) -> tuple[jax.Array, jax.Array, Any, jax.Array, jax.Array, jax.Array]:
             t, key, state, obs, ended, returns = carry
             key, act_key, step_key = jax.random.split(key, 3)
             action = policy.act(obs, None if deterministic else act_key)

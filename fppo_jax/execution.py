@@ -50,23 +50,25 @@ class _Programs:
     configuration and environment, so equal keys make equal programs."""
 
     def __init__(self) -> None:
-        self.entries: collections.OrderedDict[tuple, tuple[Any, Program]] = (
+        self.entries: collections.OrderedDict[tuple[Any, ...], tuple[Any, Program]] = (
             collections.OrderedDict()
         )
 
     @staticmethod
-    def key(trainer: Trainer, inputs: tuple, updates_per_call: int, mesh: Mesh | None) -> tuple:
+    def key(
+        trainer: Trainer, inputs: tuple[Any, ...], updates_per_call: int, mesh: Mesh | None
+    ) -> tuple[Any, ...]:
         leaves, treedef = jax.tree.flatten(inputs)
         shapes = tuple((x.shape, str(x.dtype)) for x in leaves)
         return (trainer.config, id(trainer.env), treedef, shapes, updates_per_call, mesh)
 
-    def get(self, key: tuple) -> Program | None:
+    def get(self, key: tuple[Any, ...]) -> Program | None:
         if key not in self.entries:
             return None
         self.entries.move_to_end(key)
         return self.entries[key][1]
 
-    def add(self, key: tuple, program: Program) -> None:
+    def add(self, key: tuple[Any, ...], program: Program) -> None:
         self.entries[key] = (program.trainer.env, program)
         while len(self.entries) > PROGRAMS_KEPT:
             self.entries.popitem(last=False)
@@ -103,8 +105,8 @@ def compile_program(
     start = time.perf_counter()
     state = jax.eval_shape(init, keys, hps)
     if mesh is None:
-        compiled_init = jax.jit(init).lower(keys, hps).compile()
-        compiled_run = jax.jit(run).lower(state, hps).compile()
+        compiled_init: Callable[..., Any] = jax.jit(init).lower(keys, hps).compile()
+        compiled_run: Callable[..., Any] = jax.jit(run).lower(state, hps).compile()
     else:
         inputs = input_sharding(mesh, runs is not None)
         placed = state_shardings(mesh, state, runs is not None)
@@ -135,7 +137,7 @@ class _Placed:
     already so, such as the state it returned)."""
 
     compiled: Any
-    shardings: tuple
+    shardings: tuple[Any, ...]
 
     def __call__(self, *args: Any) -> Any:
         return self.compiled(*(place(a, s) for a, s in zip(args, self.shardings, strict=True)))
@@ -155,6 +157,7 @@ def run_chunks(
     calls = -(-(config.num_updates - first) // program.updates_per_call)
     pending = program.run(state, hps) if calls else None
     for call in range(calls):
+        assert pending is not None  # calls > 0: a call is always dispatched ahead
         state, metrics = pending
         if call + 1 < calls:
             pending = program.run(state, hps)
@@ -178,7 +181,7 @@ def concatenate(parts: list[dict[str, np.ndarray]], axis: int = -1) -> dict[str,
     length = max(p["env_steps"].shape[-1] for p in parts)
 
     def column(p: dict[str, np.ndarray], name: str) -> np.ndarray:
-        values = (
+        values: np.ndarray = (
             np.asarray(p[name]) if name in p else np.full(p["env_steps"].shape, np.nan, np.float32)
         )
         if axis == -1:

@@ -16,9 +16,11 @@ from typing import Any
 import jax
 import numpy as np
 
+from fppo_jax.errors import InvalidInput
+
 
 def writable_directory(path: str | Path) -> Path:
-    """`path` as a directory that can be written, made if missing; a ValueError naming it and
+    """`path` as a directory that can be written, made if missing; an InvalidInput naming it and
     the reason otherwise, so that a run finds out before it trains rather than after."""
     path = Path(path)
     try:
@@ -26,19 +28,19 @@ def writable_directory(path: str | Path) -> Path:
         with tempfile.TemporaryFile(dir=path):
             pass
     except FileExistsError:
-        raise ValueError(
+        raise InvalidInput(
             f"cannot write to {path}: it is not a directory (a file, or a link that leads to none)"
         ) from None
     except OSError as error:
-        raise ValueError(f"cannot write to {path}: {error.strerror or error}") from None
+        raise InvalidInput(f"cannot write to {path}: {error.strerror or error}") from None
     return path
 
 
-class DirectoryBusy(ValueError):
+class DirectoryBusy(InvalidInput):
     """Another process is writing in a directory a run would write in."""
 
 
-class DirectoryLost(ValueError):
+class DirectoryLost(InvalidInput):
     """A directory a run writes in vanished, or was replaced, while the run was writing."""
 
 

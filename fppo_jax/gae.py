@@ -33,7 +33,9 @@ def gae(
     # A_t = δ_t + c_t A_{t+1} is the affine map x ↦ δ_t + c_t x applied backwards in time.
     # Composing affine maps is associative, so a log-depth associative scan replaces a
     # sequential loop over the rollout's steps.
-    def compose(later: tuple, earlier: tuple) -> tuple:
+    def compose(
+        later: tuple[jax.Array, jax.Array], earlier: tuple[jax.Array, jax.Array]
+    ) -> tuple[jax.Array, jax.Array]:
         c_later, d_later = later
         c_earlier, d_earlier = earlier
         return c_earlier * c_later, d_earlier + c_earlier * d_later

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
@@ -35,7 +35,7 @@ class LossInfo(NamedTuple):
 
 
 def ppo_loss(
-    params: dict,
+    params: dict[str, Any],
     batch: Batch,
     hp: Hyperparameters,
     networks: Networks,
@@ -51,7 +51,7 @@ def ppo_loss(
     dist = networks.distribution(params, batch.obs)
     log_ratio = dist.log_prob(batch.action) - batch.log_prob
     ratio = jnp.exp(log_ratio)
-    kl = jax.lax.stop_gradient(batch.distribution.kl(dist))
+    kl = jax.lax.stop_gradient(batch.distribution.kl(cast(Any, dist)))  # dist: the same kind
     policy_loss = -jnp.mean(o(ratio, batch.advantage, kl))
 
     value = networks.values(params, batch.obs)

@@ -22,6 +22,7 @@ import jax
 
 from fppo_jax.config import Hyperparameters
 from fppo_jax.envs import Discrete
+from fppo_jax.errors import NotEnoughMemory
 from fppo_jax.trainer import Trainer
 
 STATE_COPIES = 2  # the state a call takes and the one it returns
@@ -60,9 +61,9 @@ def check_host_memory(trainer: Trainer, runs: int) -> None:
     if per_run * runs <= budget:
         return
     env, count = trainer.env, trainer.config.num_envs
-    raise MemoryError(
+    raise NotEnoughMemory(
         f"{getattr(env, 'name', type(env).__name__)}: {runs} run(s) of {count:,} environments, "
-        f"each a Python object of about {env.host_bytes / 2**10:.1f} KiB on the host, need "
+        f"each a Python object of about {env.host_bytes / 2**10:.1f} KiB on the host, need "  # type: ignore[attr-defined]  # host-stepped envs have it
         f"about {per_run * runs / 2**30:.2f} GiB and {budget / 2**30:.2f} GiB (half the "
         "host's available memory) is available: lower num_envs"
         + (", or the runs per call (chunk)" if runs > 1 else "")
@@ -84,7 +85,7 @@ def runs_per_call(
     before anything compiles, if even one run per device does not fit."""
     need, budget = run_bytes(trainer, key, hp) / split, free_bytes() / 2
     if need > budget:
-        raise MemoryError(
+        raise NotEnoughMemory(
             f"one run needs about {need / 2**30:.2f} GiB and {budget / 2**30:.2f} GiB (half the "
             "free memory of a device) is available: lower num_envs, num_steps, "
             "resets_per_rollout or hidden_sizes (each layer's width)"

@@ -21,7 +21,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
 from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
 from fppo_jax.trainer import METRICS
 
@@ -57,7 +57,7 @@ def environment_record() -> dict[str, Any]:
 
 
 def prepare_log_dir(directory: str | Path, resumed: dict[str, Any] | None) -> DirectoryLock:
-    """Make `directory` for a run's logs and hold it as its one writer, or raise ValueError,
+    """Make `directory` for a run's logs and hold it as its one writer, or raise InvalidInput,
     before anything is compiled: if it cannot be written, if another process writes there, or
     if it holds a run's outputs (:data:`OUTPUTS`), which are never overwritten unasked. Only
     the run resumed, configured as `resumed`, continues there, when the ``config.json`` there
@@ -77,13 +77,13 @@ def _check_outputs(directory: Path, resumed: dict[str, Any] | None) -> None:
     if not found:
         return
     if resumed is None:
-        raise ValueError(
+        raise InvalidInput(
             f"{directory} already holds a run's outputs ({', '.join(found)}); choose another "
             "directory, or resume that run (resume=True, --resume) from its checkpoint "
             "directory to continue it"
         )
     if _recorded(directory) != json_value(resumed):
-        raise ValueError(
+        raise InvalidInput(
             f"{directory} holds the outputs of another run than the one resumed (its "
             "config.json records other settings, or none); choose another directory"
         )
@@ -192,7 +192,7 @@ def require_wandb() -> Any:
     try:
         import wandb
     except ImportError:
-        raise ImportError(
+        raise MissingPackage(
             f"wandb_project needs Weights & Biases: {install_hint('wandb')}"
         ) from None
     return wandb

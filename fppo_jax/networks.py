@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import flax.linen as nn
 import jax
@@ -29,7 +29,8 @@ def orthogonal(scale: float) -> nn.initializers.Initializer:
     base = nn.initializers.orthogonal(scale)
 
     def init(key: jax.Array, shape: tuple[int, ...], dtype: Any = jnp.float32) -> jax.Array:
-        return jax.custom_batching.sequential_vmap(lambda k: base(k, shape, dtype))(key)
+        per_seed = jax.custom_batching.sequential_vmap(lambda k: base(k, shape, dtype))
+        return cast(jax.Array, per_seed(key))
 
     return init
 
@@ -84,7 +85,7 @@ class Networks:
     value: nn.Module
     action_space: Discrete | Box
 
-    def init(self, key: jax.Array, observation_size: int) -> dict:
+    def init(self, key: jax.Array, observation_size: int) -> dict[str, Any]:
         policy_key, value_key = jax.random.split(key)
         dummy = jnp.zeros((1, observation_size))
         return {
@@ -92,11 +93,11 @@ class Networks:
             "value": self.value.init(value_key, dummy),
         }
 
-    def distribution(self, params: dict, obs: jax.Array) -> Distribution:
-        return self.policy.apply(params["policy"], obs)
+    def distribution(self, params: dict[str, Any], obs: jax.Array) -> Distribution:
+        return cast(Distribution, self.policy.apply(params["policy"], obs))
 
-    def values(self, params: dict, obs: jax.Array) -> jax.Array:
-        return self.value.apply(params["value"], obs)
+    def values(self, params: dict[str, Any], obs: jax.Array) -> jax.Array:
+        return cast(jax.Array, self.value.apply(params["value"], obs))
 
     def action_noise(self, key: jax.Array, batch_shape: tuple[int, ...]) -> jax.Array:
         """Standard noise for `batch_shape` samples of the policy (see ``sample_from``)."""
@@ -108,6 +109,7 @@ class Networks:
 def make_networks(action_space: Discrete | Box, hidden_sizes: Sequence[int]) -> Networks:
     """The policy for `action_space` (categorical or Gaussian) and the value function."""
     hidden_sizes = tuple(hidden_sizes)
+    policy: CategoricalPolicy | GaussianPolicy
     if isinstance(action_space, Discrete):
         policy = CategoricalPolicy(hidden_sizes, action_space.n)
     else:

@@ -23,7 +23,7 @@ import json
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -63,15 +63,15 @@ class NumpyPolicy:
         if not np.isfinite(x).all():
             raise ValueError("the observation holds NaN or infinity: no action follows from it")
         if self.obs_mean is not None:
-            scale = np.sqrt(self.obs_var + np.float32(1e-8))
+            scale = np.sqrt(cast(np.ndarray, self.obs_var) + np.float32(1e-8))
             x = np.clip((x - self.obs_mean) / scale, -10.0, 10.0).astype(np.float32)
         *hidden, (kernel, bias) = self.layers
         for w, b in hidden:
             x = np.tanh(x @ w + b)
         out = x @ kernel + bias
         if self.discrete:
-            return np.argmax(out, axis=-1)
-        return np.clip(out, self.low, self.high)
+            return cast(np.ndarray, np.argmax(out, axis=-1))
+        return cast(np.ndarray, np.clip(out, self.low, self.high))
 
     @classmethod
     def load(cls, directory: str | Path) -> NumpyPolicy:

@@ -40,12 +40,13 @@ from __future__ import annotations
 import dataclasses
 import importlib
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from fppo_jax.errors import InvalidInput
 from fppo_jax.surrogates import Range, Surrogate, declare, probe, real
 
 EPSILON = 0.2  # the clip range every variant takes, as the paper and baselines use it
@@ -236,7 +237,7 @@ def resolve(variant: object) -> Surrogate:
         return BUILTINS[variant]
     if isinstance(variant, str) and ":" in variant:
         return _imported(variant)
-    raise ValueError(
+    raise InvalidInput(
         f"unknown variant {variant!r}; valid variants: {', '.join(VARIANTS)}, or a surrogate of "
         "one's own (fppo_jax.surrogate, or module:attribute on the command line)"
     )
@@ -247,13 +248,13 @@ def _imported(path: str) -> Surrogate:
     try:
         found: Any = importlib.import_module(module_name)
     except ImportError as error:
-        raise ValueError(f"variant {path!r}: cannot import {module_name!r} ({error})") from None
+        raise InvalidInput(f"variant {path!r}: cannot import {module_name!r} ({error})") from None
     for name in attribute.split("."):
         if not hasattr(found, name):
-            raise ValueError(f"variant {path!r}: {module_name} has no {attribute!r}")
+            raise InvalidInput(f"variant {path!r}: {module_name} has no {attribute!r}")
         found = getattr(found, name)
     if not isinstance(found, Surrogate):
-        raise ValueError(
+        raise InvalidInput(
             f"variant {path!r} is a {type(found).__name__}, not a surrogate: declare it with "
             "fppo_jax.surrogate(name, function, **defaults)"
         )
@@ -268,7 +269,7 @@ def union(surrogates: Sequence[Surrogate]) -> tuple[Surrogate, ...]:
     names: dict[str, Surrogate] = {}
     for s in distinct:
         if names.setdefault(s.name, s) is not s:
-            raise ValueError(
+            raise InvalidInput(
                 f"two different surrogates are named {s.name!r}: give each of them its own name"
             )
     order = {name: i for i, name in enumerate(VARIANTS)}
@@ -336,14 +337,14 @@ class Objective:
             return
         if isinstance(self.variant, jax.core.Tracer):
             # Which surrogate runs is known only when it runs: a KL-gated one would go ungated.
-            raise ValueError(
+            raise InvalidInput(
                 "the variant is traced (under jit or vmap), so it may gate on the KL "
                 "divergence: pass kl= (per-sample KL(π_old ‖ π_θ))"
             )
         chosen = dict.fromkeys(self.surrogates[int(v)] for v in np.ravel(self.variant))
         gated = [s.name for s in chosen if s.needs_kl]
         if gated:
-            raise ValueError(
+            raise InvalidInput(
                 f"{', '.join(gated)} gates on the KL divergence: pass kl= (per-sample "
                 "KL(π_old ‖ π_θ))"
             )
@@ -423,10 +424,10 @@ def objective(
     extra = sorted(set(given) - set(s.defaults))
     if extra:
         takes = ", ".join(["epsilon", *s.defaults])
-        raise ValueError(f"{s.name} has no hyperparameter {', '.join(extra)} (it takes: {takes})")
+        raise InvalidInput(f"{s.name} has no hyperparameter {', '.join(extra)} (it takes: {takes})")
     eps = real("epsilon", epsilon)
     if eps not in EPSILON_RANGE:
-        raise ValueError(f"epsilon must be {EPSILON_RANGE}, got {eps}")
+        raise InvalidInput(f"epsilon must be {EPSILON_RANGE}, got {eps}")
     values = {key: s.check(key, value) for key, value in {**s.defaults, **given}.items()}
     if not s.builtin:
         probe(s, values, eps)
@@ -446,7 +447,9 @@ def stack(objectives: Sequence[Objective]) -> Objective:
     """`objectives` as one batch (a leading axis), over all of their surrogates: what
     ``jax.vmap`` maps over to train or evaluate them side by side in one program."""
     menu = union([s for o in objectives for s in o.surrogates])
-    return jax.tree.map(lambda *xs: jnp.stack(xs), *[o.among(menu) for o in objectives])
+    return cast(
+        Objective, jax.tree.map(lambda *xs: jnp.stack(xs), *[o.among(menu) for o in objectives])
+    )
 
 
 def hyperparameter_names(surrogates: Sequence[Surrogate]) -> tuple[str, ...]:

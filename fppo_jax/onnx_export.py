@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from fppo_jax.envs import Discrete
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import MissingPackage, install_hint
 from fppo_jax.policy import Policy
 
 OPSET = 17
@@ -28,7 +28,7 @@ def export_onnx(policy: Policy, path: str | Path) -> Path:
         import onnx
         from onnx import TensorProto, helper, numpy_helper
     except ImportError:
-        raise ImportError(
+        raise MissingPackage(
             f"exporting to ONNX needs the onnx package: {install_hint('onnx')}"
         ) from None
     constants: list[Any] = []

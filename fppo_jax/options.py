@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from fppo_jax.config import positive_int
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import InvalidInput, install_hint
 
 if TYPE_CHECKING:  # the trainer, not needed to declare or check options (the command's flags)
     from fppo_jax.policy import Policy
@@ -162,11 +162,11 @@ class Options:
     def __post_init__(self) -> None:
         for name in ("resume",):
             if not isinstance(getattr(self, name), bool | np.bool_):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+                raise InvalidInput(f"{name} must be True or False, got {getattr(self, name)!r}")
         if not (isinstance(self.progress, bool | np.bool_) or callable(self.progress)):
-            raise ValueError(f"progress must be True, False or a callable, got {self.progress!r}")
+            raise InvalidInput(f"progress must be True, False or a callable, got {self.progress!r}")
         if self.callback is not None and not callable(self.callback):
-            raise ValueError(f"callback must be a callable, got {self.callback!r}")
+            raise InvalidInput(f"callback must be a callable, got {self.callback!r}")
         positive_int("keep", self.keep)
         positive_int("eval_episodes", self.eval_episodes)
         for name in ("checkpoint_every", "eval_every", "devices"):
@@ -175,21 +175,21 @@ class Options:
         for name in ("checkpoint_dir", "log_dir"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, str | os.PathLike):
-                raise ValueError(f"{name} must be a path, got {value!r}")
+                raise InvalidInput(f"{name} must be a path, got {value!r}")
             if value is not None and os.fspath(value) == "":
-                raise ValueError(f"{name} is an empty path: name a directory ('.' for this one)")
+                raise InvalidInput(f"{name} is an empty path: name a directory ('.' for this one)")
         if self.checkpoint_dir is None and (self.resume or self.checkpoint_every is not None):
             flag = "resume" if self.resume else "checkpoint_every"
-            raise ValueError(f"{flag} needs a checkpoint directory")
+            raise InvalidInput(f"{flag} needs a checkpoint directory")
         if self.wandb_project is not None:
             if not isinstance(self.wandb_project, str):
-                raise ValueError(f"wandb_project must be a name, got {self.wandb_project!r}")
+                raise InvalidInput(f"wandb_project must be a name, got {self.wandb_project!r}")
             from fppo_jax.metric_log import require_wandb
 
             require_wandb()
 
     @classmethod
-    def flagged(cls) -> tuple[dataclasses.Field, ...]:
+    def flagged(cls) -> tuple[dataclasses.Field[Any], ...]:
         """The fields the command line sets with a flag of their own."""
         return tuple(f for f in dataclasses.fields(cls) if "help" in f.metadata)
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import cast
 
 import jax
 import jax.numpy as jnp
@@ -23,6 +24,7 @@ from matplotlib.ticker import PercentFormatter
 
 from fppo_jax import statistics
 from fppo_jax.config import VARIANT_SPECIFIC
+from fppo_jax.errors import InvalidInput
 from fppo_jax.objectives import EPSILON, VARIANTS, objective
 from fppo_jax.results import SweepResult, labels, max_average_return, nanmean
 
@@ -57,16 +59,16 @@ def plot_objective(
         # Where variants coincide, the first (PPO, the reference) stays in sight.
         ax.plot(ratio, curve, label=variant, zorder=2 + len(variants) - i)
     if advantage > 0:
-        ax.axvspan(ratio[0], 1 - epsilon, color="grey", alpha=0.15, lw=0)
+        ax.axvspan(ratio[0], 1 - epsilon, color="grey", alpha=0.15, lw=0)  # type: ignore[arg-type]  # matplotlib takes array scalars
         where = "A > 0 (R+ shaded)"
     else:
-        ax.axvspan(1 + epsilon, ratio[-1], color="grey", alpha=0.15, lw=0)
+        ax.axvspan(1 + epsilon, ratio[-1], color="grey", alpha=0.15, lw=0)  # type: ignore[arg-type]  # as above
         where = "A < 0 (R- shaded)"
     ax.set(xlabel="ratio r", ylabel="∂L/∂r" if slope else f"L(r, A = {advantage:+g})")
     ax.set_title(f"{'slope' if slope else 'surrogate'}, {where}")
     ax.legend(fontsize="small")
     ax.grid(alpha=0.3)
-    return ax.figure
+    return cast(Figure, ax.figure)
 
 
 def _surrogate(variant: str, epsilon: float, advantage: float) -> Callable[[jax.Array], jax.Array]:
@@ -97,7 +99,7 @@ def plot_objectives(
                 ax.get_legend().remove()
             if row == 0:
                 ax.set_xlabel("")
-    return axes[0][0].figure
+    return cast(Figure, axes[0][0].figure)
 
 
 def plot_curves(
@@ -147,7 +149,7 @@ def plot_curves(
         ax.yaxis.set_major_formatter(PercentFormatter(1.0))
     ax.legend(fontsize="small")
     ax.grid(alpha=0.3)
-    return ax.figure
+    return cast(Figure, ax.figure)
 
 
 def _sample_std(values: np.ndarray) -> np.ndarray:
@@ -180,7 +182,7 @@ def plot_profiles(
     ax.set(xlabel=xlabel, ylabel="fraction of runs with score > τ", ylim=(-0.02, 1.02))
     ax.legend(fontsize="small")
     ax.grid(alpha=0.3)
-    return ax.figure
+    return cast(Figure, ax.figure)
 
 
 def plot_improvement(
@@ -204,7 +206,7 @@ def plot_improvement(
     ax.set_yticks(rows, names)
     ax.set(xlim=(0, 1), xlabel=f"P(setting > {baseline}), {confidence:.0%} bootstrap CI")
     ax.grid(alpha=0.3, axis="x")
-    return ax.figure
+    return cast(Figure, ax.figure)
 
 
 def ablation_keys(result: SweepResult) -> list[str]:
@@ -212,14 +214,16 @@ def ablation_keys(result: SweepResult) -> list[str]:
     return [key for key in SWEPT if len({s[key] for s in result.settings if key in s}) > 1]
 
 
-def plot_ablation(result: SweepResult, *, axes: Sequence[Axes] | None = None) -> Figure:
+def plot_ablation(
+    result: SweepResult, *, axes: Sequence[Axes] | np.ndarray | None = None
+) -> Figure:
     """Max average return (the paper's statistic) against each swept hyperparameter
     (:func:`ablation_keys`), one panel per hyperparameter (on `axes` if given) and one line per
     variant. Runs that diverged are left out, as the table leaves them out, and the legend says how
     many did."""
     keys = ablation_keys(result)
     if not keys:
-        raise ValueError("no numeric hyperparameter takes several values in this sweep")
+        raise InvalidInput("no numeric hyperparameter takes several values in this sweep")
     if axes is None:
         _, axes = plt.subplots(
             1, len(keys), figsize=(5 * len(keys), 4), squeeze=False, layout="constrained"
@@ -242,7 +246,7 @@ def plot_ablation(result: SweepResult, *, axes: Sequence[Axes] | None = None) ->
         ax.set_title(f"{result.config['env']}: mean ± sample std over {len(result.seeds)} seeds")
         ax.legend(fontsize="small")
         ax.grid(alpha=0.3)
-    return axes[0].figure
+    return cast(Figure, axes[0].figure)
 
 
 def _lost(result: SweepResult, settings: list[int]) -> str:
@@ -272,7 +276,7 @@ def plot_escape_speed(
     ax.yaxis.set_major_formatter(PercentFormatter(1.0))
     ax.legend(fontsize="small")
     ax.grid(alpha=0.3)
-    return ax.figure
+    return cast(Figure, ax.figure)
 
 
 def plot_sweep(result: SweepResult, directory: str | Path) -> list[Path]:

@@ -4,16 +4,20 @@ trainer and no environment, so that it can be saved, loaded and run anywhere."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.envs import Box, Discrete
+from fppo_jax.errors import InvalidInput
 from fppo_jax.networks import make_networks
 from fppo_jax.normalization import RunningStats
 from fppo_jax.trainer import Trainer, TrainState
+
+if TYPE_CHECKING:
+    from fppo_jax.distributions import Distribution
 
 
 @jax.tree_util.register_dataclass
@@ -24,7 +28,7 @@ class Policy:
     ended with (when it normalised them); continuous actions are clipped to the action bounds,
     as in training. :meth:`act` is the same function, pure, to use inside ``jit``."""
 
-    params: dict  # the policy network's
+    params: dict[str, Any]  # the policy network's
     obs_stats: RunningStats | None  # None: observations are used raw
     action_space: Discrete | Box = dataclasses.field(metadata={"static": True})
     hidden_sizes: tuple[int, ...] = dataclasses.field(metadata={"static": True})
@@ -37,14 +41,14 @@ class Policy:
     def act(self, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
         obs = jnp.asarray(obs, jnp.float32)
         if obs.shape[-1:] != (self.observation_size,):
-            raise ValueError(
+            raise InvalidInput(
                 f"the policy takes observations of size {self.observation_size} (the last "
                 f"axis), got shape {obs.shape}"
             )
         if self.obs_stats is not None:
             obs = self.obs_stats.normalize(obs)
         networks = make_networks(self.action_space, self.hidden_sizes)
-        dist = networks.policy.apply(self.params, obs)
+        dist = cast("Distribution", networks.policy.apply(self.params, obs))
         action = dist.mode() if key is None else dist.sample(key)
         if isinstance(self.action_space, Box):
             action = jnp.clip(
@@ -59,12 +63,12 @@ class Policy:
             values = np.asarray(obs, np.float32)
             bad = np.argwhere(~np.isfinite(values))
             if bad.size:
-                raise ValueError(
+                raise InvalidInput(
                     f"the observation holds {values[tuple(bad[0])]} at index "
                     f"{tuple(int(i) for i in bad[0])} ({len(bad)} non-finite values in all): "
                     "no action follows from it"
                 )
-        return _act(self, obs, key)
+        return cast(jax.Array, _act(self, obs, key))
 
     def describe(self) -> dict[str, Any]:
         """Everything but the arrays, as JSON-ready values (see :meth:`from_parts`)."""
@@ -102,7 +106,7 @@ class Policy:
         return policy
 
     def _check_shapes(self) -> None:
-        """Raise ValueError unless the parameters are those of the network the action space and
+        """Raise InvalidInput unless the parameters are those of the network the action space and
         hidden sizes make (a description edited apart from its arrays, say)."""
         networks = make_networks(self.action_space, self.hidden_sizes)
         obs = jax.ShapeDtypeStruct((self.observation_size,), jnp.float32)
@@ -118,7 +122,7 @@ class Policy:
         if shapes != found:
             where = sorted(set(shapes) ^ set(found)) or [k for k in shapes if shapes[k] != found[k]]
             name = where[0]
-            raise ValueError(
+            raise InvalidInput(
                 f"its arrays are not those of a {list(self.hidden_sizes)} network for its action "
                 f"space: {name} is {found.get(name, 'missing')}, expected "
                 f"{shapes.get(name, 'none')}"

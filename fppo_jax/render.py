@@ -19,18 +19,19 @@ import mujoco
 import numpy as np
 
 from fppo_jax.envs import Environment
+from fppo_jax.errors import FppoError, InvalidInput
 from fppo_jax.files import writable_directory
 
 
-class RenderingUnavailable(RuntimeError):
+class RenderingUnavailable(FppoError, RuntimeError):
     """MuJoCo could not create an OpenGL context on this machine."""
 
 
 def check_render_path(path: str | Path) -> None:
-    """Raise ValueError unless `path` names a format that :func:`save_frames` writes, in a
+    """Raise InvalidInput unless `path` names a format that :func:`save_frames` writes, in a
     directory that can be written (made if missing)."""
     if Path(path).suffix not in (".png", ".gif", ".mp4"):
-        raise ValueError(
+        raise InvalidInput(
             "render to a .png (image strip), a .gif (animation) or an .mp4 (video), not "
             f"{Path(path).name}"
         )
@@ -38,12 +39,12 @@ def check_render_path(path: str | Path) -> None:
 
 
 def check_renderable(env: str) -> None:
-    """Raise ValueError, before any training, for a task MuJoCo cannot draw: the classic tasks
+    """Raise InvalidInput, before any training, for a task MuJoCo cannot draw: the classic tasks
     and gymnax's environments, which have no MuJoCo model."""
     from fppo_jax.envs import MUJOCO_TASKS, TASKS
 
     if (env in TASKS and env not in MUJOCO_TASKS) or env.startswith("gymnax/"):
-        raise ValueError(
+        raise InvalidInput(
             f"{env} is a classic (gymnax) task, which MuJoCo cannot render; --render takes a "
             f"MuJoCo task ({', '.join(MUJOCO_TASKS)}, or brax/, playground/ and native/ ids)"
         )
@@ -62,7 +63,7 @@ def episode_positions(
     def run() -> tuple[jax.Array, jax.Array]:
         state, obs = env.reset(reset_key)
 
-        def step(carry: tuple, key: jax.Array) -> tuple[tuple, tuple]:
+        def step(carry: tuple[Any, ...], key: jax.Array) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
             state, obs, ended = carry
             state, out = env.step(key, state, policy(obs))
             return (state, out.obs, ended | out.terminated | out.truncated), (

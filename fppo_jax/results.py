@@ -8,13 +8,14 @@ import dataclasses
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from fppo_jax import statistics
 from fppo_jax.config import SYMBOLS, VARIANT_SPECIFIC
 from fppo_jax.envs import Environment, resets_itself
+from fppo_jax.errors import InvalidInput
 from fppo_jax.files import write_atomically
 from fppo_jax.policy import Policy
 from fppo_jax.saved_policy import save_policy
@@ -32,7 +33,7 @@ class TrainResult:
     """
 
     metrics: dict[str, np.ndarray]
-    params: dict
+    params: dict[str, Any]
     config: dict[str, Any]
     state: TrainState
     policy: Policy
@@ -164,7 +165,7 @@ class SweepResult:
         curve, or of its evaluation returns for ``eval`` (:data:`fppo_jax.statistics.ENDPOINTS`)."""
         metric = "eval_return" if endpoint == "eval" else "average_return"
         if metric not in self.metrics:
-            raise ValueError(
+            raise InvalidInput(
                 "the eval endpoint needs evaluations, and this sweep recorded none: train it "
                 "with eval_every (--eval-every)"
             )
@@ -266,7 +267,9 @@ class SweepResult:
         if len(matches) == 1:
             return matches[0]
         found = "several settings" if matches else "no setting"
-        raise ValueError(f"{found} of the sweep called {name!r}; its settings: {', '.join(names)}")
+        raise InvalidInput(
+            f"{found} of the sweep called {name!r}; its settings: {', '.join(names)}"
+        )
 
     def _figures(self, runs: np.ndarray) -> list[str]:
         """The table's figures over `runs`, "–" for what is not known (no episode finished, a
@@ -327,13 +330,13 @@ PART_FIELDS = ("grid", "seeds", "runs_per_call", "part", "surrogates")
 def merge(parts: Sequence[SweepResult]) -> SweepResult:
     """One sweep of the runs of `parts`, sweeps of the same task and protocol that ran other
     seeds or other settings: what ``table``, ``compare`` and ``plot`` read as if one process had
-    run them all. The merged grid holds each axis's values from every part. A ``ValueError``
+    run them all. The merged grid holds each axis's values from every part. An ``InvalidInput``
     names the configuration field on which two parts differ and a (setting, seed) run that two
     parts both hold; for the shares of one sweep (``sweep(..., part=(K, N))``), which share one
     grid, it also names the runs, and the parts, still missing, and joins them in the order of
     their part numbers. Metrics not in every part are left out."""
     if not parts:
-        raise ValueError("merge needs at least one sweep")
+        raise InvalidInput("merge needs at least one sweep")
     first = parts[0]
     common = {k: v for k, v in first.config.items() if k not in PART_FIELDS}
     for number, part in enumerate(parts[1:], start=2):
@@ -341,7 +344,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         differ = sorted(k for k in common.keys() | other.keys() if common.get(k) != other.get(k))
         if differ:
             field = differ[0]
-            raise ValueError(
+            raise InvalidInput(
                 f"sweep {number} is not a part of the same sweep as sweep 1: its {field} is "
                 f"{other.get(field)!r}, sweep 1's {common.get(field)!r}"
             )
@@ -352,6 +355,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         parts = sorted(parts, key=lambda part: part.config["part"][0])
     settings: list[dict[str, Any]] = []
     runs: list[dict[str, Any]] = []
+    setting: dict[str, Any] | int  # a setting, then a setting's index
     for part in parts:
         for setting in part.settings:
             if setting not in settings:
@@ -366,7 +370,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         seen[key] = seen.get(key, 0) + 1
     repeated = [f"{names[s]} seed {seed}" for (s, seed), count in seen.items() if count > 1]
     if repeated:
-        raise ValueError(f"more than one part holds the run {', '.join(repeated[:5])}")
+        raise InvalidInput(f"more than one part holds the run {', '.join(repeated[:5])}")
     _check_shares(parts, settings, runs)
     metrics = [name for name in first.metrics if all(name in p.metrics for p in parts)]
     seeds = list(dict.fromkeys(seed for part in parts for seed in part.seeds))
@@ -400,7 +404,7 @@ def _own_surrogates(parts: Sequence[SweepResult]) -> dict[str, Any]:
         for name, identity in (part.config.get("surrogates") or {}).items():
             first = own.setdefault(name, identity)
             if first != identity:
-                raise ValueError(
+                raise InvalidInput(
                     f"sweep {number} ran another surrogate named {name!r} than an earlier sweep "
                     f"(digest {identity.get('digest')} against {first.get('digest')}): give "
                     "each its own name"
@@ -413,16 +417,16 @@ def _check_shares(
 ) -> None:
     """For shares of one sweep (``part`` in their configurations): all of one split, and every
     run of the whole sweep there."""
-    shares = [p.config.get("part") for p in parts]
+    shares: list[Any] = [p.config.get("part") for p in parts]
     if all(share is None for share in shares):
         return
     if any(share is None for share in shares) or len({share[1] for share in shares}) > 1:
-        raise ValueError(
+        raise InvalidInput(
             "the sweeps are not shares of one split: their parts are "
             + ", ".join("whole" if s is None else f"{s[0]} of {s[1]}" for s in shares)
         )
     if any(p.config.get("grid") != parts[0].config.get("grid") for p in parts):
-        raise ValueError("the sweeps are not shares of one split: their grids differ")
+        raise InvalidInput("the sweeps are not shares of one split: their grids differ")
     count = shares[0][1]
     missing_parts = sorted(set(range(1, count + 1)) - {share[0] for share in shares})
     found = {(run["setting"], run["seed"]) for run in runs}
@@ -440,7 +444,7 @@ def _check_shares(
             f"parts {', '.join(map(str, missing_parts))} of {count} ({spelled}) are missing: "
             * bool(missing_parts)
         )
-        raise ValueError(f"{which}the sweep's runs {', '.join(missing[:5])}{more} are not there")
+        raise InvalidInput(f"{which}the sweep's runs {', '.join(missing[:5])}{more} are not there")
 
 
 def max_average_return(average_return: np.ndarray) -> tuple[float, float, int]:
@@ -459,4 +463,4 @@ def nanmean(x: np.ndarray, axis: int | None = None) -> np.ndarray:
     with warnings.catch_warnings():
         # All-NaN slices (no episode finished yet in any seed) are meant to stay NaN.
         warnings.simplefilter("ignore", RuntimeWarning)
-        return np.nanmean(x, axis=axis)
+        return cast(np.ndarray, np.nanmean(x, axis=axis))

@@ -17,6 +17,7 @@ import numpy as np
 from flax.traverse_util import flatten_dict, unflatten_dict
 
 from fppo_jax.checkpoint import Checkpoints
+from fppo_jax.errors import InvalidInput, MissingFile
 from fppo_jax.files import first_line, json_value, tree_digest, write_atomically
 from fppo_jax.policy import Policy
 
@@ -57,10 +58,10 @@ def save_policy(
 def check_no_saved_policy(
     directory: str | Path, overwrite: bool = False, *, replace: str = "pass overwrite=True"
 ) -> None:
-    """Raise ValueError if `directory` holds a saved policy and not `overwrite`; the message
+    """Raise InvalidInput if `directory` holds a saved policy and not `overwrite`; the message
     says how to replace it (`replace`: the Python way unless told)."""
     if not overwrite and (Path(directory) / POLICY_FILE).exists():
-        raise ValueError(
+        raise InvalidInput(
             f"{directory} already holds a saved policy; {replace} to replace it, or choose "
             "another directory"
         )
@@ -79,18 +80,18 @@ def read_policy(directory: str | Path) -> tuple[Policy, dict[str, Any]]:
     ``"policy"`` for a saved policy, ``"train"`` for a checkpoint)."""
     directory = Path(directory)
     if directory.is_file():
-        raise FileNotFoundError(
+        raise MissingFile(
             f"{directory} is a file: name the directory that holds a saved policy "
             f"({POLICY_FILE} and {ARRAYS_FILE}) or a run's checkpoints"
         )
     if not directory.is_dir():
-        raise FileNotFoundError(f"policy or checkpoint directory {directory} not found")
+        raise MissingFile(f"policy or checkpoint directory {directory} not found")
     if (directory / POLICY_FILE).exists():
         return _read_saved_policy(directory)
     checkpoints = Checkpoints(directory)
     try:
         if not checkpoints.steps():
-            raise FileNotFoundError(
+            raise MissingFile(
                 f"{directory} holds neither a saved policy ({POLICY_FILE} and {ARRAYS_FILE}) "
                 "nor checkpoints"
             )
@@ -105,10 +106,10 @@ def _read_saved_policy(directory: Path) -> tuple[Policy, dict[str, Any]]:
         with np.load(directory / ARRAYS_FILE, allow_pickle=False) as npz:
             arrays = dict(npz)
         if tree_digest(arrays) != saved["digest"]:
-            raise ValueError("its arrays do not match the digest written with them")
+            raise InvalidInput("its arrays do not match the digest written with them")
         policy = Policy.from_parts(saved["policy"], unflatten_dict(arrays, sep="/"))
     except Exception as error:  # any failure to read back is damage
-        raise ValueError(
+        raise InvalidInput(
             f"the saved policy in {directory} is damaged ({type(error).__name__}: "
             f"{first_line(error)})"
         ) from error

@@ -62,6 +62,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fppo_jax.config import positive_int
+from fppo_jax.errors import InvalidInput
 
 # Points per look of the boundaries' integration grid, odd for Simpson's rule: enough for the
 # published boundaries to four decimals (tests/test_sequential.py).
@@ -81,11 +82,11 @@ class Design:
         positive_int("group_size", self.group_size)
         positive_int("max_seeds", self.max_seeds)
         if self.group_size > self.max_seeds:
-            raise ValueError(
+            raise InvalidInput(
                 f"group_size ({self.group_size}) is larger than max_seeds ({self.max_seeds})"
             )
         if not (isinstance(self.level, float | int) and 0 < self.level < 1):
-            raise ValueError(f"the error level must be in (0, 1), got {self.level!r}")
+            raise InvalidInput(f"the error level must be in (0, 1), got {self.level!r}")
 
     @property
     def looks(self) -> tuple[int, ...]:
@@ -135,9 +136,9 @@ def boundaries(alpha: float, fractions: tuple[float, ...]) -> tuple[float, ...]:
     from scipy import optimize
 
     if not fractions or any(b <= a for a, b in zip((0.0, *fractions), fractions, strict=False)):
-        raise ValueError(f"information fractions must increase from above 0, got {fractions}")
+        raise InvalidInput(f"information fractions must increase from above 0, got {fractions}")
     if fractions[-1] > 1:
-        raise ValueError(f"information fractions must be at most 1, got {fractions}")
+        raise InvalidInput(f"information fractions must be at most 1, got {fractions}")
     critical: list[float] = []
     # The density of the paths that have not crossed, at the previous look, on its grid and
     # times Simpson's weights; before the first look every path is at 0.
@@ -194,7 +195,7 @@ def decide(scores: Sequence[tuple[np.ndarray, np.ndarray]], design: Design) -> l
     for index, (candidate, baseline) in enumerate(scores):
         pair = np.asarray(candidate, float), np.asarray(baseline, float)
         if any((np.isnan(s) | (s == np.inf)).any() for s in pair):
-            raise ValueError(
+            raise InvalidInput(
                 f"comparison {index} has a score of NaN or +inf: the rule ranks numbers, and "
                 "−inf for a failed run"
             )
@@ -275,7 +276,7 @@ def simulate(
     setting a comparison used; ``runs``: the mean runs a study trained (a task's baseline runs
     as long as any of its candidates). Seeded, so it repeats."""
     if shift < 0:
-        raise ValueError(f"shift must be at least 0, got {shift}")
+        raise InvalidInput(f"shift must be at least 0, got {shift}")
     rng = np.random.default_rng(seed)
     n = design.max_seeds
     false, better, seeds, runs = 0, 0, 0, 0

@@ -22,8 +22,11 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
+from typing import Any, cast
 
 import numpy as np
+
+from fppo_jax.errors import InvalidInput
 
 CONFIDENCE = 0.95
 RESAMPLES = 2000
@@ -49,9 +52,9 @@ def endpoint(curves: np.ndarray, name: str = "final") -> np.ndarray:
     episode (or no evaluation) scores NaN."""
     curves = np.asarray(curves, dtype=float)
     if name not in ENDPOINTS:
-        raise ValueError(f"unknown endpoint {name!r}; valid endpoints: {', '.join(ENDPOINTS)}")
+        raise InvalidInput(f"unknown endpoint {name!r}; valid endpoints: {', '.join(ENDPOINTS)}")
     if curves.ndim != 2:
-        raise ValueError(f"curves must be [run, update], got shape {curves.shape}")
+        raise InvalidInput(f"curves must be [run, update], got shape {curves.shape}")
     if name == "final":
         return curves[:, -1]
     finite = np.isfinite(curves)
@@ -89,19 +92,19 @@ def iqm(x: np.ndarray, axis: int = -1) -> np.ndarray:
     position = np.arange(x.shape[-1])
     kept = (position >= cut) & (position < n - cut)
     with np.errstate(invalid="ignore"):
-        return np.sum(np.where(kept, ordered, 0.0), axis=-1) / kept.sum(axis=-1)
+        return cast(np.ndarray, np.sum(np.where(kept, ordered, 0.0), axis=-1) / kept.sum(axis=-1))
 
 
 def _mean(x: np.ndarray, axis: int = -1) -> np.ndarray:
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all NaN: stays NaN
-        return np.nanmean(x, axis=axis)
+        return cast(np.ndarray, np.nanmean(x, axis=axis))
 
 
 def _median(x: np.ndarray, axis: int = -1) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        return np.nanmedian(x, axis=axis)
+        return cast(np.ndarray, np.nanmedian(x, axis=axis))
 
 
 ESTIMATORS: dict[str, Callable[..., np.ndarray]] = {"iqm": iqm, "mean": _mean, "median": _median}
@@ -110,7 +113,7 @@ ESTIMATORS: dict[str, Callable[..., np.ndarray]] = {"iqm": iqm, "mean": _mean, "
 def estimator(name: str) -> Callable[..., np.ndarray]:
     """The point estimate called `name` (:data:`STATISTICS`), as ``f(x, axis=-1)``."""
     if name not in ESTIMATORS:
-        raise ValueError(f"unknown statistic {name!r}; valid statistics: {', '.join(STATISTICS)}")
+        raise InvalidInput(f"unknown statistic {name!r}; valid statistics: {', '.join(STATISTICS)}")
     return ESTIMATORS[name]
 
 
@@ -122,12 +125,12 @@ def sample_std(x: np.ndarray) -> float:
 
 def _finite(x: np.ndarray) -> np.ndarray:
     x = np.asarray(x, dtype=float).ravel()
-    return x[np.isfinite(x)]
+    return cast(np.ndarray, x[np.isfinite(x)])
 
 
 def _check_confidence(confidence: float) -> float:
     if not 0 < confidence < 1:
-        raise ValueError(f"the confidence level must be in (0, 1), got {confidence!r}")
+        raise InvalidInput(f"the confidence level must be in (0, 1), got {confidence!r}")
     return float(confidence)
 
 
@@ -209,7 +212,7 @@ def probability_of_improvement(x: np.ndarray, y: np.ndarray, axis: int = -1) -> 
     the Mann–Whitney U statistic of `x` over n·m (Agarwal et al. 2021, Sect. 4)."""
     x, y = np.moveaxis(np.asarray(x, float), axis, -1), np.moveaxis(np.asarray(y, float), axis, -1)
     difference = x[..., :, None] - y[..., None, :]
-    return np.mean((difference > 0) + 0.5 * (difference == 0), axis=(-2, -1))
+    return cast(np.ndarray, np.mean((difference > 0) + 0.5 * (difference == 0), axis=(-2, -1)))
 
 
 def improvement_test(x: np.ndarray, y: np.ndarray) -> float:
@@ -235,7 +238,7 @@ def holm(p_values: Sequence[float]) -> np.ndarray:
     dependence between the tests. A comparison not yet made can be entered as 1."""
     p = np.asarray(p_values, dtype=float)
     if p.ndim != 1 or np.any(~np.isfinite(p)) or np.any((p < 0) | (p > 1)):
-        raise ValueError(f"Holm's adjustment needs finite p-values in [0, 1], got {p_values!r}")
+        raise InvalidInput(f"Holm's adjustment needs finite p-values in [0, 1], got {p_values!r}")
     order = np.argsort(p, kind="stable")
     scaled = np.minimum(1.0, (len(p) - np.arange(len(p))) * p[order])
     adjusted = np.empty_like(p)
@@ -253,7 +256,7 @@ def compare(
 ) -> dict[str, tuple[float, float, float]]:
     """`x`'s runs against `y`'s: the probability of improvement and the difference in IQM
     (x − y), each ``(point, low, high)`` with a bootstrap interval over both settings' runs."""
-    kwargs = {"confidence": confidence, "resamples": resamples, "seed": seed}
+    kwargs: dict[str, Any] = {"confidence": confidence, "resamples": resamples, "seed": seed}
     return {
         "probability_of_improvement": bootstrap([x, y], probability_of_improvement, **kwargs),
         "iqm_difference": bootstrap(
@@ -280,7 +283,7 @@ def max_average_difference(
     def paper_statistic(curves: np.ndarray) -> np.ndarray:  # [..., run, update] -> [...]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # updates before any episode
-            return np.nanmax(np.nanmean(curves, axis=-2), axis=-1)
+            return cast(np.ndarray, np.nanmax(np.nanmean(curves, axis=-2), axis=-1))
 
     x, y = np.asarray(x, float), np.asarray(y, float)
     point = float(paper_statistic(x) - paper_statistic(y))
@@ -298,7 +301,7 @@ def max_average_difference(
 def normalise(scores: np.ndarray, low: float, high: float) -> np.ndarray:
     """Scores on a task's own scale mapped so that `low` is 0 and `high` is 1."""
     if not np.isfinite(low) or not np.isfinite(high) or high == low:
-        raise ValueError(f"normalising needs two different finite scores, got {low} and {high}")
+        raise InvalidInput(f"normalising needs two different finite scores, got {low} and {high}")
     return (np.asarray(scores, float) - low) / (high - low)
 
 
@@ -313,7 +316,7 @@ def _pooled(statistic: Callable[..., np.ndarray]) -> Callable[..., np.ndarray]:
 
 def optimality_gap(x: np.ndarray, axis: int = -1, threshold: float = 1.0) -> np.ndarray:
     """The mean shortfall of normalised scores below `threshold`: mean(max(0, threshold − x))."""
-    return np.mean(threshold - np.minimum(x, threshold), axis=axis)
+    return cast(np.ndarray, np.mean(threshold - np.minimum(x, threshold), axis=axis))
 
 
 AGGREGATES: dict[str, Callable[..., np.ndarray]] = {
@@ -335,7 +338,7 @@ def aggregate(
     """`statistic` (:data:`AGGREGATES`) of one setting's normalised scores pooled over `tasks`
     (one array of runs per task), with a stratified bootstrap interval."""
     if statistic not in AGGREGATES:
-        raise ValueError(f"unknown aggregate {statistic!r}; valid: {', '.join(AGGREGATES)}")
+        raise InvalidInput(f"unknown aggregate {statistic!r}; valid: {', '.join(AGGREGATES)}")
     f = _pooled(AGGREGATES[statistic])
     return bootstrap(tasks, f, confidence=confidence, resamples=resamples, seed=seed)
 
@@ -356,7 +359,7 @@ def aggregate_improvement(
             probability_of_improvement(x, y, axis)
             for x, y in zip(samples[::2], samples[1::2], strict=True)
         ]
-        return np.mean(values, axis=0)
+        return cast(np.ndarray, np.mean(values, axis=0))
 
     samples = [s for pair in pairs for s in pair]
     return bootstrap(
@@ -368,4 +371,6 @@ def performance_profile(scores: np.ndarray, thresholds: np.ndarray) -> np.ndarra
     """The fraction of runs whose normalised score exceeds each of `thresholds` (Agarwal et al.
     2021, Sect. 4: the score distribution's tail, run by run)."""
     scores = _finite(scores)
-    return np.mean(scores[None, :] > np.asarray(thresholds, float)[:, None], axis=1)
+    return cast(
+        np.ndarray, np.mean(scores[None, :] > np.asarray(thresholds, float)[:, None], axis=1)
+    )

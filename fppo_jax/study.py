@@ -17,12 +17,13 @@ import shutil
 import subprocess
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from fppo_jax import statistics
 from fppo_jax.config import positive_int, resolve_hyperparameters, sweepable
+from fppo_jax.errors import InvalidInput
 from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
 from fppo_jax.objectives import BUILTINS, hyperparameter_names, identities, resolve, takers, union
 from fppo_jax.options import Options
@@ -101,18 +102,20 @@ def study(
     design = Design(group_size, max_seeds, level)
     _check_variants(candidates, baseline)
     if endpoint not in ENDPOINTS:
-        raise ValueError(f"a study decides on {' or '.join(ENDPOINTS)}, got endpoint {endpoint!r}")
+        raise InvalidInput(
+            f"a study decides on {' or '.join(ENDPOINTS)}, got endpoint {endpoint!r}"
+        )
     if groups is not None and (
         isinstance(groups, bool) or not isinstance(groups, int) or groups < 0
     ):
-        raise ValueError(f"groups must be a count of groups (0 or more), got {groups!r}")
+        raise InvalidInput(f"groups must be a count of groups (0 or more), got {groups!r}")
     if chunk is not None:
         positive_int("chunk", chunk)
     if "variant" in settings:
-        raise ValueError("a study's variants are its candidates and its baseline, not variant")
+        raise InvalidInput("a study's variants are its candidates and its baseline, not variant")
     taken = sorted(set(OWN_SETTINGS) & set(settings))
     if taken:
-        raise ValueError(f"a study sets {', '.join(taken)} itself, for each group's sweep")
+        raise InvalidInput(f"a study sets {', '.join(taken)} itself, for each group's sweep")
     everyone = [*candidates, baseline]
     specific = set(hyperparameter_names([*BUILTINS.values(), *everyone]))
     for task in tasks:  # every setting checked before the plan is written, as a sweep checks
@@ -146,7 +149,9 @@ def study(
     try:
         check_plan(output, plan)
 
-        def train_group(task: str, variants: list[Surrogate], seeds: list[int], where: Path):
+        def train_group(
+            task: str, variants: list[Surrogate], seeds: list[int], where: Path
+        ) -> SweepResult:
             fixed = {
                 name: value
                 for name, value in settings.items()
@@ -172,21 +177,21 @@ def study(
 def _names_of_tasks(tasks: str | Sequence[str]) -> list[str]:
     tasks = [tasks] if isinstance(tasks, str) else list(tasks)
     if not tasks or not all(isinstance(task, str) and task for task in tasks):
-        raise ValueError(f"a study's tasks are named tasks (fppo-jax list), got {tasks!r}")
+        raise InvalidInput(f"a study's tasks are named tasks (fppo-jax list), got {tasks!r}")
     if len(set(tasks)) < len(tasks):
-        raise ValueError(f"a task is named twice among {', '.join(tasks)}")
+        raise InvalidInput(f"a task is named twice among {', '.join(tasks)}")
     return tasks
 
 
 def _check_variants(candidates: list[Surrogate], baseline: Surrogate) -> None:
     if not candidates:
-        raise ValueError("a study needs at least one candidate")
+        raise InvalidInput("a study needs at least one candidate")
     union([*candidates, baseline])  # two different surrogates under one name are refused
     names = [c.name for c in candidates]
     if baseline.name in names:
-        raise ValueError(f"the baseline {baseline.name} is also a candidate")
+        raise InvalidInput(f"the baseline {baseline.name} is also a candidate")
     if len(set(names)) < len(names):
-        raise ValueError(f"a candidate is named twice among {', '.join(names)}")
+        raise InvalidInput(f"a candidate is named twice among {', '.join(names)}")
 
 
 def commit() -> str:
@@ -215,30 +220,33 @@ def make_plan(
     settings: dict[str, Any],
 ) -> dict[str, Any]:
     """What ``plan.json`` records: the preregistration, decided before any run."""
-    return json_value(
-        {
-            "tasks": tasks,
-            "baseline": baseline.name,
-            "candidates": [c.name for c in candidates],
-            "comparisons": [
-                {"task": task, "candidate": c.name, "baseline": baseline.name}
-                for task in tasks
-                for c in candidates
-            ],
-            "primary_endpoint": endpoint,
-            "secondary_endpoints": [e for e in ENDPOINTS if e != endpoint],
-            "test": TEST,
-            "level": design.level,
-            "group_size": design.group_size,
-            "max_seeds": design.max_seeds,
-            "looks": list(design.looks),
-            "boundaries_if_none_decided": list(
-                boundaries(design.level / (len(tasks) * len(candidates)), _fractions(design))
-            ),
-            "settings": settings,
-            **identities([*candidates, baseline]),
-            "commit": commit(),
-        }
+    return cast(
+        dict[str, Any],
+        json_value(
+            {
+                "tasks": tasks,
+                "baseline": baseline.name,
+                "candidates": [c.name for c in candidates],
+                "comparisons": [
+                    {"task": task, "candidate": c.name, "baseline": baseline.name}
+                    for task in tasks
+                    for c in candidates
+                ],
+                "primary_endpoint": endpoint,
+                "secondary_endpoints": [e for e in ENDPOINTS if e != endpoint],
+                "test": TEST,
+                "level": design.level,
+                "group_size": design.group_size,
+                "max_seeds": design.max_seeds,
+                "looks": list(design.looks),
+                "boundaries_if_none_decided": list(
+                    boundaries(design.level / (len(tasks) * len(candidates)), _fractions(design))
+                ),
+                "settings": settings,
+                **identities([*candidates, baseline]),
+                "commit": commit(),
+            }
+        ),
     )
 
 
@@ -256,7 +264,7 @@ def check_plan(output: Path, plan: dict[str, Any]) -> None:
     try:
         recorded = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as error:
-        raise ValueError(f"cannot read the study's plan {path}: {error}") from None
+        raise InvalidInput(f"cannot read the study's plan {path}: {error}") from None
     for field in dict.fromkeys([*recorded, *plan]):
         if field == "commit" or recorded.get(field) == plan.get(field):
             continue
@@ -264,7 +272,7 @@ def check_plan(output: Path, plan: dict[str, Any]) -> None:
         if isinstance(was, dict) and isinstance(now, dict):
             key = next(k for k in dict.fromkeys([*was, *now]) if was.get(k) != now.get(k))
             field, was, now = f"{field}.{key}", was.get(key), now.get(key)
-        raise ValueError(
+        raise InvalidInput(
             f"{output} holds a study planned with {field} = {_shown(was)}, not {_shown(now)}: "
             "a study goes on only under its plan (start another in a new directory)"
         )
@@ -294,7 +302,7 @@ def recorded_group(where: Path, variants: list[Surrogate], seeds: list[int]) -> 
     result = SweepResult.read(where)
     names = [s["variant"] for s in result.settings]
     if names != [v.name for v in variants] or result.config["seeds"] != seeds:
-        raise ValueError(
+        raise InvalidInput(
             f"{where} holds a group of {', '.join(names)} on seeds {result.config['seeds']}, "
             f"where the study's plan needs {', '.join(v.name for v in variants)} on {seeds}"
         )
@@ -410,7 +418,10 @@ def _decide(
             ]
             pair.append(np.concatenate(parts) if parts else np.zeros(0))
         scores.append(tuple(pair))
-    return dict(zip(keys, decide(scores, design), strict=True))
+    # each of `scores` is a (candidate, baseline) pair
+    return dict(
+        zip(keys, decide(cast("list[tuple[np.ndarray, np.ndarray]]", scores), design), strict=True)
+    )
 
 
 def _rows(decisions: dict[tuple[str, str], Decision], baseline: Surrogate) -> list[dict[str, Any]]:

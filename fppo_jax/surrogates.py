@@ -35,11 +35,13 @@ import re
 import sys
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
-from typing import Any
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from fppo_jax.errors import InvalidInput
 
 # The arguments every surrogate function may take by name, besides its own hyperparameters.
 INPUTS = ("ratio", "advantage", "kl", "epsilon")
@@ -73,7 +75,7 @@ class Range:
                     return low, high, match.group(1) == "[", match.group(4) == "]"
         except ValueError:
             pass
-        raise ValueError(
+        raise InvalidInput(
             f"a range must read like '> 0', '>= 1', '< 1' or '(0, 1]', got {self.text!r}"
         )
 
@@ -96,9 +98,11 @@ def real(name: str, value: object) -> float:
     if isinstance(value, str | bool | np.bool_) or not isinstance(
         value, numbers.Real | np.ndarray | jax.Array
     ):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    if np.ndim(value) != 0:
-        raise ValueError(f"{name} must be a single number, got an array of shape {np.shape(value)}")
+        raise InvalidInput(f"{name} must be a number, got {value!r}")
+    if np.ndim(cast(Any, value)) != 0:
+        raise InvalidInput(
+            f"{name} must be a single number, got an array of shape {np.shape(cast(Any, value))}"
+        )
     return float(value)
 
 
@@ -138,14 +142,14 @@ class Surrogate:
         """`value` of hyperparameter `name` as a float, if it is a finite number in its range."""
         value = real(name, value)
         if math.isinf(value):
-            raise ValueError(f"{name} must be finite for {self.name}, got {value}")
+            raise InvalidInput(f"{name} must be finite for {self.name}, got {value}")
         valid = self.ranges.get(name)
         # NaN lies outside every range, and is finite nowhere.
         if valid is not None and value not in valid:
             why = f" ({valid.why})" if valid.why else ""
-            raise ValueError(f"{name} must be {valid} for {self.name}, got {value}{why}")
+            raise InvalidInput(f"{name} must be {valid} for {self.name}, got {value}{why}")
         if math.isnan(value):
-            raise ValueError(f"{name} must be a number for {self.name}, got {value}")
+            raise InvalidInput(f"{name} must be a number for {self.name}, got {value}")
         return value
 
     def identity(self) -> dict[str, Any]:
@@ -198,7 +202,7 @@ def surrogate(
     from fppo_jax.objectives import BUILTINS  # the built-ins are declared with this function
 
     if name in BUILTINS:
-        raise ValueError(
+        raise InvalidInput(
             f"a surrogate cannot be named {name!r}: that is a built-in variant's name "
             f"(built-ins: {', '.join(BUILTINS)})"
         )
@@ -219,14 +223,14 @@ def declare(
     """A :class:`Surrogate`, its declaration checked (the built-ins are declared through here
     too; :func:`surrogate` also refuses their names and tries the function)."""
     if not isinstance(name, str) or not _NAME.match(name):
-        raise ValueError(
+        raise InvalidInput(
             f"a surrogate's name must be lower-case letters, digits, '-', '_' or '.', got {name!r}"
         )
     if not callable(function):
-        raise ValueError(f"surrogate {name!r}: its function must be callable, got {function!r}")
+        raise InvalidInput(f"surrogate {name!r}: its function must be callable, got {function!r}")
     clash = sorted(set(defaults) & set(INPUTS))
     if clash:
-        raise ValueError(
+        raise InvalidInput(
             f"surrogate {name!r}: {', '.join(clash)} is an input every surrogate gets, not a "
             "hyperparameter of its own"
         )
@@ -237,17 +241,17 @@ def declare(
     stray = sorted(set(checked_ranges) - set(defaults))
     if clip_range is not None:
         if not (isinstance(clip_range, tuple | list) and len(clip_range) == 2):
-            raise ValueError(
+            raise InvalidInput(
                 f"surrogate {name!r}: clip_range must name two hyperparameters, got {clip_range!r}"
             )
         stray += [key for key in clip_range if key not in defaults]
     if stray:
-        raise ValueError(
+        raise InvalidInput(
             f"surrogate {name!r} has no hyperparameter {', '.join(map(repr, stray))} "
             f"(it takes: {', '.join(defaults) or 'none'})"
         )
     if not isinstance(needs_kl, bool):
-        raise ValueError(f"surrogate {name!r}: needs_kl must be True or False, got {needs_kl!r}")
+        raise InvalidInput(f"surrogate {name!r}: needs_kl must be True or False, got {needs_kl!r}")
     declared = Surrogate(
         name,
         function,
@@ -272,7 +276,7 @@ def _check_signature(
     try:
         parameters = inspect.signature(function).parameters
     except (TypeError, ValueError):
-        raise ValueError(
+        raise InvalidInput(
             f"surrogate {name!r}: the signature of {function!r} cannot be read"
         ) from None
     takes = (*INPUTS, *defaults)
@@ -283,14 +287,14 @@ def _check_signature(
         or spec.kind in (spec.VAR_POSITIONAL, spec.VAR_KEYWORD, spec.POSITIONAL_ONLY)
     ]
     if unknown:
-        raise ValueError(
+        raise InvalidInput(
             f"surrogate {name!r}: its function takes {', '.join(unknown)}, which it would not "
             f"be given; it may take {', '.join(INPUTS)} and its hyperparameters "
             f"({', '.join(defaults) or 'none declared'}), each by name"
         )
     missing = [p for p in ("ratio", "advantage", *defaults) if p not in parameters]
     if missing:
-        raise ValueError(
+        raise InvalidInput(
             f"surrogate {name!r}: its function does not take {', '.join(missing)} (a surrogate "
             "takes ratio and advantage, and each hyperparameter it declares, by name)"
         )
@@ -300,6 +304,8 @@ def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2
     """Try `declared` with `values` on ratios 0.25 … 4 and advantages of both signs (a KL of
     0 and 0.1): its value must be a finite float array of the ratio's shape, and its slope in
     the ratio finite."""
+    ratio: np.ndarray | jax.Array
+    advantage: np.ndarray | jax.Array
     ratio, advantage = np.meshgrid(np.geomspace(0.25, 4.0, 17), [-2.0, -0.5, 0.0, 0.5, 2.0])
     ratio, advantage = (
         jnp.asarray(ratio.ravel(), jnp.float32),
@@ -316,21 +322,21 @@ def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2
     try:
         out = value(ratio)
     except Exception as error:
-        raise ValueError(f"{where} failed when tried: {type(error).__name__}: {error}") from None
+        raise InvalidInput(f"{where} failed when tried: {type(error).__name__}: {error}") from None
     if not isinstance(out, jax.Array | np.ndarray) or np.shape(out) != ratio.shape:
-        raise ValueError(
+        raise InvalidInput(
             f"{where} must return one value per sample (an array of the ratio's shape "
             f"{ratio.shape}), got {_described(out)}"
         )
     if not jnp.issubdtype(out.dtype, jnp.floating):
-        raise ValueError(f"{where} must return floats, got {out.dtype}")
+        raise InvalidInput(f"{where} must return floats, got {out.dtype}")
     # Per sample: the surrogate is element-wise, so the slope of the sum is each one's slope.
     slope = jax.grad(lambda r: jnp.sum(value(r)))(ratio)
     for what, array in (("value", out), ("slope in the ratio", slope)):
         bad = ~np.isfinite(np.asarray(array))
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise ValueError(
+            raise InvalidInput(
                 f"{where} has a {what} that is not finite ({float(np.asarray(array)[i])}) at "
                 f"ratio {float(ratio[i]):.3g}, advantage {float(advantage[i]):g} with "
                 + ", ".join(f"{k} = {v:g}" for k, v in {"epsilon": epsilon, **values}.items())

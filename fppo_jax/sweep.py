@@ -1,3 +1,4 @@
+# mypy: allow-redefinition
 """Sweeps: the cartesian product of hyperparameter values, times seeds, as one compiled program.
 
 Every run is the pure ``train_fn(key, hp)`` vmapped along a run axis, so variants, α, k, δ,
@@ -26,6 +27,7 @@ from fppo_jax.config import (
 )
 from fppo_jax.driver import Outcome, Plan, drive
 from fppo_jax.envs import Environment
+from fppo_jax.errors import InvalidInput
 from fppo_jax.objectives import (
     BUILTINS,
     DEFAULT_VARIANT,
@@ -54,12 +56,12 @@ def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[s
     valid = sweepable(surrogates.values())
     unknown = sorted(set(grid) - set(valid))
     if unknown:
-        raise ValueError(f"cannot sweep {', '.join(unknown)}; sweepable: {', '.join(valid)}")
+        raise InvalidInput(f"cannot sweep {', '.join(unknown)}; sweepable: {', '.join(valid)}")
     values = {name: _as_list(name, v) for name, v in grid.items() if name != "variant"}
     for name in set(values) & set(specific):
         if not takers(name, surrogates):
             everyone = {**BUILTINS, **surrogates}
-            raise ValueError(
+            raise InvalidInput(
                 f"no variant of the grid ({', '.join(surrogates)}) takes {name}; "
                 f"it is taken by {', '.join(takers(name, everyone))}"
             )
@@ -83,11 +85,11 @@ def grid_surrogates(grid: Mapping[str, Any]) -> dict[str, Surrogate]:
     return {s.name: s for s in given}
 
 
-def _as_list(name: str, values: Any) -> list:
+def _as_list(name: str, values: Any) -> list[Any]:
     scalar = isinstance(values, str | int | float) or not isinstance(values, Iterable)
     values = [values] if scalar else list(values)
     if not values:
-        raise ValueError(f"the grid gives {name} no values")
+        raise InvalidInput(f"the grid gives {name} no values")
     return values
 
 
@@ -144,7 +146,7 @@ def sweep(
     fixed, options = run.hyperparameters, run.options
     clash = sorted(set(fixed) & set(grid))
     if clash:
-        raise ValueError(f"{', '.join(clash)} given both in the grid and as a fixed value")
+        raise InvalidInput(f"{', '.join(clash)} given both in the grid and as a fixed value")
     settings = expand_grid({**grid, **fixed}, run.task)
     # expand_grid applied Table 2 to each setting: resolved as given, not again per task.
     hps = stack_hyperparameters(
@@ -184,6 +186,7 @@ def sweep(
 
     # Written after each group, so that a crash or a stop later loses no finished run.
     def write_finished(outcome: Outcome) -> None:
+        assert options.log_dir is not None  # it is the after_group only with a log_dir
         result_of(outcome).write(options.log_dir)
 
     keys = jnp.stack([jax.random.key(run["seed"]) for run in runs])
@@ -230,10 +233,10 @@ def part_bounds(part: object, num_runs: int) -> tuple[int, int]:
         or not all(isinstance(x, int) and not isinstance(x, bool) for x in part)
         or not 1 <= part[0] <= part[1]
     ):
-        raise ValueError(f"part must be (K, N) with 1 <= K <= N, got {part!r}")
+        raise InvalidInput(f"part must be (K, N) with 1 <= K <= N, got {part!r}")
     k, n = part
     if n > num_runs:
-        raise ValueError(f"part {k} of {n}: the sweep has only {num_runs} runs to share")
+        raise InvalidInput(f"part {k} of {n}: the sweep has only {num_runs} runs to share")
     size, extra = divmod(num_runs, n)
     start = (k - 1) * size + min(k - 1, extra)
     return start, start + size + (k <= extra)
@@ -244,10 +247,10 @@ def _seeds(seeds: int | Sequence[int]) -> list[int]:
     if isinstance(seeds, int | np.integer) and not isinstance(seeds, bool | np.bool_):
         return list(range(positive_int("seeds", seeds)))
     if isinstance(seeds, str) or not isinstance(seeds, Sequence | np.ndarray):
-        raise ValueError(f"seeds must be a count or a sequence of integers, got {seeds!r}")
+        raise InvalidInput(f"seeds must be a count or a sequence of integers, got {seeds!r}")
     checked = [check_seed(seed) for seed in seeds]
     if not checked:
-        raise ValueError("a sweep needs at least one seed")
+        raise InvalidInput("a sweep needs at least one seed")
     if len(set(checked)) < len(checked):
-        raise ValueError(f"seeds must be distinct, got {checked}")
+        raise InvalidInput(f"seeds must be distinct, got {checked}")
     return checked

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from fppo_jax.errors import InvalidInput, MissingFile
 from fppo_jax.files import write_atomically, write_json
 from fppo_jax.trainer import METRICS
 
@@ -63,7 +64,7 @@ def read_sweep(directory: str | Path) -> tuple[dict[str, Any], dict[str, np.ndar
 
     Each row is placed by its ``run`` and ``update`` columns and each value by its column's
     name, so rows and columns may come in any order, and a `curves.csv` filtered to some runs
-    gives those runs (with a warning saying how many of the sweep's it holds). A ``ValueError``
+    gives those runs (with a warning saying how many of the sweep's it holds). An ``InvalidInput``
     naming the file says what is wrong with a ``sweep.json`` that is not JSON or lacks a key or
     a value of the kind written (:data:`RECORD`); with a `curves.csv` whose rows for a run are
     not the ones ``sweep.json`` was written with (by each run's digest: another sweep's curves,
@@ -73,13 +74,13 @@ def read_sweep(directory: str | Path) -> tuple[dict[str, Any], dict[str, np.ndar
     directory = Path(directory)
     for name in ("sweep.json", "curves.csv"):
         if not (directory / name).is_file():
-            raise FileNotFoundError(f"{directory / name} not found: not a sweep's output")
+            raise MissingFile(f"{directory / name} not found: not a sweep's output")
     record = _read_record(directory / "sweep.json")
     path = directory / "curves.csv"
     curves = path.read_bytes()
     whole = hashlib.sha256(curves).hexdigest() == record["curves_sha256"]
     if not whole and "run_digests" not in record:  # written before runs had digests
-        raise ValueError(
+        raise InvalidInput(
             f"{path} is not the curves.csv that {directory / 'sweep.json'} was written with "
             "(its SHA-256 digest differs from the one recorded there): the two are not one "
             "sweep's results, e.g. a sweep stopped between writing them, or a file changed "
@@ -93,7 +94,7 @@ def read_sweep(directory: str | Path) -> tuple[dict[str, Any], dict[str, np.ndar
     num_updates = metrics["env_steps"].shape[1]
     beyond = [i for i in present if record["diverged"][i] > num_updates]
     if beyond:
-        raise ValueError(
+        raise InvalidInput(
             f"{directory / 'sweep.json'}: diverged says run {_few(beyond)} diverged after "
             f"the last of the {num_updates} updates {path} holds"
         )
@@ -137,7 +138,7 @@ def _run(value: Any, settings: int) -> bool:
 
 # What a sweep's reader needs of sweep.json: each key, what its value must be, and the check
 # (which may look at the keys before it, already checked).
-RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
+RECORD: dict[str, tuple[str, Callable[[Any, dict[str, Any]], bool]]] = {
     "settings": (
         "a list of settings, each a variant and numbers",
         lambda v, r: _list_of(v, _setting),
@@ -157,7 +158,7 @@ RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
     "curves_sha256": ("a SHA-256 digest in hex", lambda v, r: _digest(v)),
 }
 # Keys of sweep.json that files written before them lack, checked when there.
-OPTIONAL_RECORD: dict[str, tuple[str, Callable[[Any, dict], bool]]] = {
+OPTIONAL_RECORD: dict[str, tuple[str, Callable[[Any, dict[str, Any]], bool]]] = {
     "digest_columns": (
         "a list of metric names",
         lambda v, r: _list_of(v, lambda name: isinstance(name, str)) and "env_steps" in v,
@@ -174,25 +175,25 @@ def _digest(value: Any) -> bool:
 
 
 def _read_record(path: Path) -> dict[str, Any]:
-    """``sweep.json`` at `path`, checked against :data:`RECORD`; a ``ValueError`` naming the
+    """``sweep.json`` at `path`, checked against :data:`RECORD`; an ``InvalidInput`` naming the
     file says what is wrong with it."""
     try:
         record = json.loads(path.read_bytes())
     except ValueError as error:  # not JSON, or not text: a file cut short or written over
-        raise ValueError(f"{path} is not valid JSON ({error})") from None
+        raise InvalidInput(f"{path} is not valid JSON ({error})") from None
     if not isinstance(record, dict):
-        raise ValueError(
+        raise InvalidInput(
             f"{path} holds a {type(record).__name__}, not a sweep's record (an object)"
         )
     missing = [key for key in RECORD if key not in record]
     if missing:
-        raise ValueError(f"{path} has no {', '.join(missing)}")
+        raise InvalidInput(f"{path} has no {', '.join(missing)}")
     checks = {**RECORD, **{k: v for k, v in OPTIONAL_RECORD.items() if k in record}}
     for key, (expected, valid) in checks.items():
         if not valid(record[key], record):
             found = json.dumps(record[key])
             found = found if len(found) <= 60 else found[:57] + "..."
-            raise ValueError(f"{path}: {key} is {found}, not {expected}")
+            raise InvalidInput(f"{path}: {key} is {found}, not {expected}")
     return record
 
 
@@ -211,41 +212,41 @@ def _read_curves(
     """The metrics of a sweep's `curves.csv` at `path`, whose `text` was read, [run, update]:
     every column but the run's, its seed's, its setting's (`keys`) and the update's, for the
     runs of `runs` (its ``sweep.json``'s) that it holds (all of them if `every_run`), and
-    those runs' indices; a ``ValueError`` naming the file says what is wrong."""
+    those runs' indices; an ``InvalidInput`` naming the file says what is wrong."""
     with io.StringIO(text, newline="") as f:
         reader = csv.DictReader(f)
         columns = reader.fieldnames or []
         missing = [name for name in CURVES_NEEDED if name not in columns]
         if missing:
-            raise ValueError(f"{path} has no {', '.join(missing)} column")
+            raise InvalidInput(f"{path} has no {', '.join(missing)} column")
         names = [name for name in METRICS if name in columns]
         names += [c for c in columns if c not in {*METRICS, *keys, "run", "seed", "update"}]
         cells: dict[tuple[int, int], list[float]] = {}
         for row in reader:
             where = f"{path}, line {reader.line_num}"
             if None in row or None in row.values():
-                raise ValueError(f"{where}: not one value per column of the header")
+                raise InvalidInput(f"{where}: not one value per column of the header")
             run, update = _cell(row, "run", where, int), _cell(row, "update", where, int)
             if update < 1:
-                raise ValueError(f"{where}: update {update}, but updates count from 1")
+                raise InvalidInput(f"{where}: update {update}, but updates count from 1")
             if (run, update) in cells:
-                raise ValueError(f"{where}: run {run}, update {update} a second time")
+                raise InvalidInput(f"{where}: run {run}, update {update} a second time")
             if "seed" in row and 0 <= run < len(runs):
                 seed = _cell(row, "seed", where, int)
                 if seed != runs[run]["seed"]:
-                    raise ValueError(
+                    raise InvalidInput(
                         f"{where}: run {run} has seed {seed}, sweep.json {runs[run]['seed']}"
                     )
             cells[run, update] = [_cell(row, name, where, float) for name in names]
     if not cells:
-        raise ValueError(f"{path} has no rows")
+        raise InvalidInput(f"{path} has no rows")
     found, expected = {run for run, _ in cells}, set(range(len(runs)))
     if found - expected:
-        raise ValueError(
+        raise InvalidInput(
             f"{path} has rows for run {_few(found - expected)}; sweep.json has {len(runs)} runs"
         )
     if every_run and expected - found:
-        raise ValueError(
+        raise InvalidInput(
             f"{path} has no rows for run {_few(expected - found)} of sweep.json's {len(runs)}"
         )
     present = sorted(found)
@@ -253,7 +254,7 @@ def _read_curves(
     for run in present:
         lacking = [u for u in range(1, num_updates + 1) if (run, u) not in cells]
         if lacking:
-            raise ValueError(
+            raise InvalidInput(
                 f"{path}: run {run} has no update {_few(lacking)} (the file goes to update "
                 f"{num_updates})"
             )
@@ -284,7 +285,7 @@ def _check_run_digests(
     columns = record["digest_columns"]
     lacking = [name for name in columns if name not in metrics]
     if lacking:
-        raise ValueError(f"{path} has no {', '.join(lacking)} column, which {record_path} lists")
+        raise InvalidInput(f"{path} has no {', '.join(lacking)} column, which {record_path} lists")
     wrong = [
         run
         for i, run in enumerate(present)
@@ -292,7 +293,7 @@ def _check_run_digests(
         != record["run_digests"][run]
     ]
     if wrong:
-        raise ValueError(
+        raise InvalidInput(
             f"{path}: the rows of run {_few(wrong)} are not those {record_path} was written with "
             "(their digests differ): another sweep's curves.csv beside it, or an edited or torn "
             "file"
@@ -304,7 +305,7 @@ def _cell(row: Mapping[str, str], column: str, where: str, kind: type) -> Any:
         return kind(row[column])
     except ValueError:
         number = "an integer" if kind is int else "a number"
-        raise ValueError(f"{where}: {column} is {row[column]!r}, not {number}") from None
+        raise InvalidInput(f"{where}: {column} is {row[column]!r}, not {number}") from None
 
 
 def _few(numbers: set[int] | list[int]) -> str:

@@ -13,9 +13,8 @@ Each part of an update runs under a ``jax.named_scope`` (``rollout``, ``advantag
 
 from __future__ import annotations
 
-import collections
 import dataclasses
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
@@ -57,7 +56,7 @@ class Envs:
 class TrainState:
     """Everything a run carries from one update to the next."""
 
-    params: dict
+    params: dict[str, Any]
     opt_state: optax.OptState
     obs_stats: RunningStats
     return_stats: RunningStats
@@ -73,20 +72,26 @@ class TrainState:
 # speed: the fraction of the batch in R+ ∪ R- as each minibatch meets it before training on it.
 _FIRST_EPOCH = {"negative_fraction": "negative_fraction_before"}
 
-METRICS: tuple[str, ...] = (
-    "env_steps",
-    "average_return",  # mean return of the last 100 finished episodes (NaN before any)
-    # Each of LossInfo's diagnostics, averaged over the update.
-    *(_FIRST_EPOCH.get(name, name) for name in LossInfo._fields),
+
+class Metrics(NamedTuple):
+    """One row per update."""
+
+    env_steps: jax.Array
+    average_return: jax.Array  # mean return of the last 100 finished episodes (NaN before any)
+    # LossInfo's diagnostics, averaged over the update (the first epoch's, where renamed).
+    policy_loss: jax.Array
+    value_loss: jax.Array
+    entropy: jax.Array
+    approx_kl: jax.Array
+    clip_fraction: jax.Array
+    negative_fraction_before: jax.Array
     # The escape speed, under the parameters after the last epoch: the fraction of the batch in
     # R+ ∪ R-, and how far past the bound those samples sit on average.
-    "negative_fraction_after",
-    "negative_distance_after",
-)
+    negative_fraction_after: jax.Array
+    negative_distance_after: jax.Array
 
 
-class Metrics(collections.namedtuple("Metrics", METRICS)):
-    """One row per update: a value for each name of :data:`METRICS`."""
+METRICS: tuple[str, ...] = Metrics._fields
 
 
 class Transition(NamedTuple):
@@ -166,7 +171,7 @@ def _keep_if_finite(new: TrainState, old: TrainState, losses: jax.Array) -> Trai
     finite = jnp.all(jnp.isfinite(losses)) & jnp.all(
         jnp.stack([jnp.all(jnp.isfinite(p)) for p in jax.tree.leaves(new.params)])
     )
-    kept = jax.tree.map(lambda n, o: jnp.where(finite, n, o), new, old)
+    kept: TrainState = jax.tree.map(lambda n, o: jnp.where(finite, n, o), new, old)
     first_bad = jnp.where((old.nonfinite_update < 0) & ~finite, old.update, old.nonfinite_update)
     return dataclasses.replace(kept, update=new.update, nonfinite_update=first_bad)
 
@@ -234,8 +239,11 @@ class Trainer:
         (their metrics are NaN), so equal chunks reuse one compiled program."""
 
         def step(state: TrainState, _: None) -> tuple[TrainState, Metrics]:
-            return jax.lax.cond(
-                state.update < self.config.num_updates, self.update, self._skip, state, hp
+            return cast(
+                "tuple[TrainState, Metrics]",
+                jax.lax.cond(
+                    state.update < self.config.num_updates, self.update, self._skip, state, hp
+                ),
             )
 
         return jax.lax.scan(step, state, None, length=num_updates)
@@ -336,14 +344,16 @@ class Trainer:
         _, rollout_key, epochs_key = jax.random.split(state.key, 3)
         if batch is None:
             batch = self.collect(state, hp, rollout_key).batch
-        return self._epochs(state, hp, batch, epochs_key, track_escape=True).escape_by_epoch
+        return cast(  # not None: track_escape
+            jax.Array, self._epochs(state, hp, batch, epochs_key, track_escape=True).escape_by_epoch
+        )
 
     def network_input(self, stats: RunningStats, obs: jax.Array) -> jax.Array:
         """Raw observations as the networks see them (normalised with `stats` if configured)."""
         return stats.normalize(obs) if self.config.normalize_observations else obs
 
     def _escape(
-        self, params: dict, batch: Batch, objective: Objective
+        self, params: dict[str, Any], batch: Batch, objective: Objective
     ) -> tuple[jax.Array, jax.Array]:
         """The fraction of the batch in R+ ∪ R- under `params`, and how far past the bound those
         samples sit on average (the escape speed's measures), by the surrogate's clip range."""
@@ -376,7 +386,7 @@ class Trainer:
         step_env = jax.vmap(env.step)
 
         def step(
-            carry: tuple[Envs, jax.Array], inputs: tuple
+            carry: tuple[Envs, jax.Array], inputs: tuple[jax.Array, jax.Array, jax.Array]
         ) -> tuple[tuple[Envs, jax.Array], Transition]:
             envs, episodes_ended = carry
             noise, keys, t = inputs
@@ -407,7 +417,7 @@ class Trainer:
                 episode_return=episode_return,
             )
             if own_resets:
-                next_state, next_obs = env_state, out.next_obs
+                next_state, next_obs = env_state, cast(jax.Array, out.next_obs)
             else:
                 # Without a pool, an environment ending at step t takes row t, so every reset
                 # is fresh; with one, its episodes take the pool's rows in turn.
@@ -444,7 +454,9 @@ class Trainer:
         optimizer = make_optimizer(hp, config)
         value_and_grad = jax.value_and_grad(ppo_loss, has_aux=True)
 
-        def minibatch_step(carry: tuple, minibatch: Batch) -> tuple[tuple, tuple]:
+        def minibatch_step(
+            carry: tuple[Any, Any], minibatch: Batch
+        ) -> tuple[tuple[Any, Any], tuple[Any, ...]]:  # (loss, info)
             params, opt_state = carry
             with jax.named_scope("gradient"):
                 (loss, info), grads = value_and_grad(
@@ -455,7 +467,9 @@ class Trainer:
                 params = optax.apply_updates(params, updates)
             return (params, opt_state), (loss, info)
 
-        def epoch(carry: tuple, order: jax.Array) -> tuple[tuple, tuple]:
+        def epoch(
+            carry: tuple[Any, Any], order: jax.Array
+        ) -> tuple[tuple[Any, Any], tuple[Any, ...]]:
             shape = (config.num_minibatches, config.minibatch_size)
             with jax.named_scope("minibatches"):
                 minibatches = jax.tree.map(lambda x: x[order].reshape(shape + x.shape[1:]), batch)

@@ -327,3 +327,26 @@ def test_checkpoints_whose_every_file_is_garbage_are_set_aside_never_a_fresh_sta
     assert f"error: no checkpoint in {tmp_path} is intact" in err
     assert "Failed to json parse" not in err and "Traceback" not in err
     assert sorted(p.name for p in (tmp_path / "damaged").iterdir()) == ["2", "3", "4"]
+
+
+def test_checkpoints_leave_the_process_s_logging_and_hooks_as_they_were(tmp_path):
+    # In a process of its own: the library sets no log level and installs no hook for a run
+    # that writes checkpoints, and orbax's chatter does not reach the user's screen.
+    script = textwrap.dedent(
+        f"""
+        import logging, sys
+        import fppo_jax
+        hook, level = sys.unraisablehook, logging.getLogger("absl").level
+        fppo_jax.train("cartpole", "ppo", total_steps=512, num_envs=4, num_steps=32,
+                       num_minibatches=4, num_epochs=2, progress=False,
+                       checkpoint_dir={str(tmp_path)!r}, checkpoint_every=2)
+        assert sys.unraisablehook is hook and logging.getLogger("absl").level == level
+        logging.getLogger("absl").warning("the user's own absl warning")
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=240
+    )
+    assert done.returncode == 0, done.stderr
+    assert "the user's own absl warning" in done.stderr
+    assert "orbax" not in done.stderr.lower(), done.stderr

@@ -1,7 +1,9 @@
+import argparse
 import csv
 import errno
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -15,6 +17,7 @@ import fppo_jax.files
 import fppo_jax.metric_log
 from fppo_jax import SweepResult
 from fppo_jax.cli import build_parser, main
+from fppo_jax.errors import InvalidInput, MissingFile, MissingPackage, NotEnoughMemory
 
 TINY_FLAGS = ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
 
@@ -103,7 +106,12 @@ def test_version_is_the_installed_package_s(capsys):
 
 
 def test_help_documents_every_flag():
-    text = build_parser()._subparsers._group_actions[0].choices["train"].format_help()
+    train = build_parser()._subparsers._group_actions[0].choices["train"]
+    text = train.format_help()
+    shown = set(re.findall(r"(?<![\w-])--[\w-]+", text))  # whole flags: --k is not --keep's
+    for action in train._actions:
+        if action.option_strings and action.dest != "help":
+            assert action.help and action.help != argparse.SUPPRESS, action.option_strings
     for flag in [
         "--env",
         "--variant",
@@ -134,7 +142,7 @@ def test_help_documents_every_flag():
         "--eval-episodes",
         "--wandb-project",
     ]:
-        assert flag in text
+        assert flag in shown
 
 
 def test_every_config_field_has_a_flag_named_after_it():
@@ -242,6 +250,26 @@ def test_an_os_error_that_names_no_file_is_not_taken_for_a_user_s_error(monkeypa
     monkeypatch.setattr(fppo_jax.cli.commands, "COMMANDS", {"list": broken})
     with pytest.raises(OSError, match="a bug"):
         main(["list"])
+
+
+@pytest.mark.parametrize("error", [ValueError, ImportError, MemoryError, ZeroDivisionError])
+def test_a_built_in_error_from_inside_keeps_its_traceback(error, monkeypatch):
+    def broken(*_):
+        raise error("a bug deep inside")
+
+    monkeypatch.setattr(fppo_jax.cli.commands, "COMMANDS", {"list": broken})
+    with pytest.raises(error, match="a bug deep inside"):
+        main(["list"])
+
+
+@pytest.mark.parametrize("error", [InvalidInput, MissingPackage, MissingFile, NotEnoughMemory])
+def test_a_project_error_is_one_line(error, monkeypatch, capsys):
+    def refused(*_):
+        raise error("what to do instead")
+
+    monkeypatch.setattr(fppo_jax.cli.commands, "COMMANDS", {"list": refused})
+    assert main(["list"]) == 2
+    assert capsys.readouterr().err == "fppo-jax: error: what to do instead\n"
 
 
 def test_sweep_then_table_then_plot(tmp_path, capsys):

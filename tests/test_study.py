@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from fppo_jax import SweepResult, merge, statistics
 
 EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
@@ -71,3 +73,33 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
     assert "hopper (paper): not started" in text
     assert (tmp_path / "study" / "curves_paper.png").stat().st_size > 0
     assert (tmp_path / "study" / "improvement.png").stat().st_size > 0
+
+
+def test_a_dose_response_part_is_one_sweep_whose_controls_train_as_ppo(tmp_path):
+    tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
+    done = _run("study.py", *tiny, "--seeds", "0:2", "--doses", "plans/dose-response.json")
+    assert done.returncode == 0, done.stdout + done.stderr
+    part = tmp_path / "dose_response" / "cartpole" / "paper" / "seeds-0-1_dose-response"
+    result = SweepResult.read(part)
+    assert len(result.settings) == 12 and len(result.runs) == 24
+    index = {tuple(sorted(s.items())): i for i, s in enumerate(result.settings)}
+    ppo = result.setting_metrics(index[(("variant", "ppo"),)])
+    for control in ((("alpha", 1.0), ("variant", "fppo-lp")), (("k", 0.0), ("variant", "fppo-qp"))):
+        metrics = result.setting_metrics(index[control])
+        for name in ppo:  # the same objective in the same program: bit for bit
+            np.testing.assert_array_equal(metrics[name], ppo[name], err_msg=f"{control} {name}")
+    strongest = result.setting_metrics(index[(("k", 2.0), ("variant", "fppo-qp"))])
+    assert not np.array_equal(strongest["average_return"], ppo["average_return"])
+
+
+def test_a_planned_part_trains_the_plan_s_settings(tmp_path):
+    tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
+    done = _run("study.py", *tiny, "--seeds", "0:1", "--plan", "plans/baseline-shape.json")
+    assert done.returncode == 0, done.stdout + done.stderr
+    part = tmp_path / "baseline_shape" / "cartpole" / "paper" / "seeds-0-0_baseline-shape"
+    result = SweepResult.read(part)
+    assert [s["variant"] for s in result.settings] == ["ppo"]
+    assert (result.config["num_envs"], result.config["num_steps"]) == (1, 2048)
+    assert (
+        "--plan plans/baseline-shape.json" in json.loads((part / "run.json").read_text())["command"]
+    )

@@ -11,6 +11,7 @@ from helpers import sweep_by_hand
 import fppo_jax
 from fppo_jax import METRICS, VARIANTS, SweepResult, expand_grid, merge, sweep, train
 from fppo_jax.cli import main
+from fppo_jax.errors import InvalidInput
 
 TINY_SHAPE = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 TINY = {**TINY_SHAPE, "total_steps": 256}
@@ -253,7 +254,7 @@ def test_a_sweep_is_split_over_a_slurm_array_only_when_asked(monkeypatch, capsys
 
     def sweep_of(*args, part, **kwargs):
         asked.append(part)
-        raise ValueError("stopped before training")
+        raise InvalidInput("stopped before training")
 
     monkeypatch.setattr(commands, "sweep", sweep_of)
     for name, text in slurm_array(4, 0, 6, 2, 4).items():

@@ -19,6 +19,7 @@ from typing import Any
 from fppo_jax.cli.flags import own_surrogates, surrogates_named
 from fppo_jax.cli.parser import build_parser
 from fppo_jax.cli.settings import check_preset, check_settings, settings_file
+from fppo_jax.errors import FppoError
 
 __all__ = ["build_parser", "main"]
 
@@ -27,7 +28,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
         surrogates = surrogates_named(argv)  # their hyperparameters become flags
-    except ValueError as error:
+    except FppoError as error:
         print(f"fppo-jax: error: {error}", file=sys.stderr)
         return 2
     parser = build_parser(surrogates)
@@ -42,17 +43,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             check_settings(args.config, settings, command)
             check_preset(args.config, settings, _given(parser, argv, command, "preset"))
             command.set_defaults(**settings)
-        except (ValueError, FileNotFoundError) as error:
+        except (FppoError, FileNotFoundError) as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
         args = parser.parse_args(argv)
     # What the commands need (the trainer, checkpoints, JAX's devices) only now: --help and a
     # mistyped flag answer without waiting for it.
     from fppo_jax import compile_cache
-    from fppo_jax.checkpoint import CheckpointsUnavailable
     from fppo_jax.cli.commands import COMMANDS
     from fppo_jax.distributed import initialize
-    from fppo_jax.driver import StoppedBySignal, TrainingDiverged
+    from fppo_jax.driver import StoppedBySignal
 
     with _warnings_as_lines():
         try:
@@ -60,14 +60,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 initialize()
             compile_cache.enable()
             return COMMANDS[args.command](args)
-        except (
-            ValueError,
-            FileNotFoundError,
-            ImportError,
-            MemoryError,
-            TrainingDiverged,
-            CheckpointsUnavailable,
-        ) as error:
+        except FppoError as error:  # what the user can act on; any other error is a bug
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
         except OSError as error:
@@ -96,7 +89,7 @@ def _given(
         command.set_defaults(**{dest: default})
 
 
-def _variants(variant: object) -> list[object]:
+def _variants(variant: object) -> Sequence[object]:
     """A settings file's variant (a name, a comma list, a list, or none) as a list."""
     if isinstance(variant, str):
         return variant.split(",")
@@ -118,5 +111,5 @@ def _warnings_as_lines() -> Iterator[None]:
             else:
                 show(message, category, *rest)
 
-        warnings.showwarning = shown
+        warnings.showwarning = shown  # type: ignore[assignment]  # warnings calls it with positional arguments
         yield

@@ -10,6 +10,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -25,6 +26,7 @@ from fppo_jax.config import (
 )
 from fppo_jax.distributed import is_main_process
 from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
+from fppo_jax.errors import InvalidInput
 from fppo_jax.files import DirectoryLock, writable_directory
 from fppo_jax.objectives import BUILTINS, EPSILON
 from fppo_jax.results import SweepResult, labels, merge
@@ -100,7 +102,7 @@ def _holds_final_policy(args: argparse.Namespace) -> bool:
         return False
     config = newest["config"]
     last = config["total_steps"] // (config["num_envs"] * config["num_steps"])
-    return saved["config"] == config and saved["update"] == newest["update"] == last
+    return cast(bool, saved["config"] == config and saved["update"] == newest["update"] == last)
 
 
 def _sweep(args: argparse.Namespace) -> int:
@@ -175,7 +177,7 @@ def _eval(args: argparse.Namespace) -> int:
     policy, record = read_policy(args.checkpoint)
     config = record["config"]
     if config["env"] not in TASKS:
-        raise ValueError(
+        raise InvalidInput(
             f"the policy's environment {config['env']!r} is not a registered task; load the "
             "policy with fppo_jax.load_policy and evaluate it on your environment"
         )
@@ -212,7 +214,7 @@ def _table(args: argparse.Namespace) -> int:
     given = [flag for flag in ("endpoint", "ci") if getattr(args, flag) is not None]
     if args.stat == "paper" and given:
         flags = " and ".join(f"--{flag}" for flag in given)
-        raise ValueError(
+        raise InvalidInput(
             f"{flags}: --stat paper (the default), Table 1's max average return of the "
             "seed-mean curve, scores no run alone and has no interval; "
             f"{'they are' if len(given) > 1 else 'it is'} for --stat {' or '.join(STATISTICS)}"
@@ -254,7 +256,7 @@ def _merge(args: argparse.Namespace) -> int:
     lock = DirectoryLock(writable_directory(args.output), "a merged sweep")
     try:
         if (args.output / "sweep.json").exists():
-            raise ValueError(f"{args.output} already holds a sweep; merge into a new directory")
+            raise InvalidInput(f"{args.output} already holds a sweep; merge into a new directory")
         result.write(args.output, metrics=list(result.metrics))
     finally:
         lock.release()
@@ -303,7 +305,7 @@ def _export(args: argparse.Namespace) -> int:
     from fppo_jax.onnx_export import export_onnx
 
     if os.path.lexists(args.onnx):
-        raise ValueError(f"{args.onnx} already exists; remove it or choose another path")
+        raise InvalidInput(f"{args.onnx} already exists; remove it or choose another path")
     writable_directory(Path(args.onnx).parent)
     print(f"wrote {export_onnx(load_policy(args.checkpoint), args.onnx)}")
     return 0

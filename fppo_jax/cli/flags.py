@@ -21,6 +21,7 @@ from fppo_jax.config import (
     positive_int,
 )
 from fppo_jax.envs import BACKENDS
+from fppo_jax.errors import InvalidInput
 from fppo_jax.objectives import BUILTINS, EPSILON, hyperparameter_names, resolve
 from fppo_jax.options import Options
 from fppo_jax.statistics import CONFIDENCE, ENDPOINTS
@@ -46,7 +47,7 @@ def count(text: str) -> int:
     try:
         number = int(text)
     except ValueError:
-        raise ValueError(f"expected a positive integer, got {text!r}") from None
+        raise InvalidInput(f"expected a positive integer, got {text!r}") from None
     return positive_int("the value", number)
 
 
@@ -62,16 +63,16 @@ def part(text: str) -> tuple[int, int] | str:
     try:
         k, n = (int(x) for x in text.split("/"))
     except ValueError:
-        raise ValueError(f"expected K/N such as 2/8, or auto, got {text!r}") from None
+        raise InvalidInput(f"expected K/N such as 2/8, or auto, got {text!r}") from None
     if not 1 <= k <= n:
-        raise ValueError(f"expected K/N with 1 <= K <= N, got {text!r}")
+        raise InvalidInput(f"expected K/N with 1 <= K <= N, got {text!r}")
     return k, n
 
 
 @_argument
 def path(text: str) -> Path:
     if not text:
-        raise ValueError("an empty path: name one ('.' for this directory)")
+        raise InvalidInput("an empty path: name one ('.' for this directory)")
     return Path(text)
 
 
@@ -82,7 +83,7 @@ def confidence(text: str) -> float:
     except ValueError:
         value = math.nan
     if not 0 < value < 1:
-        raise ValueError(f"a confidence level in (0, 1) such as 0.95, got {text}")
+        raise InvalidInput(f"a confidence level in (0, 1) such as 0.95, got {text}")
     return value
 
 
@@ -92,7 +93,7 @@ def sizes(text: str) -> tuple[int, ...]:
     try:
         return tuple(int(part) for part in text.split(","))
     except ValueError:
-        raise ValueError(f"expected comma-separated widths such as 64,64, got {text!r}") from None
+        raise InvalidInput(f"expected comma-separated widths such as 64,64, got {text!r}") from None
 
 
 # The most values one start:stop:step may give: far more than a sweep trains, so more is a
@@ -107,18 +108,20 @@ def values(text: str) -> list[float]:
     try:
         parts = [Decimal(part) for part in text.split(":" if ":" in text else ",")]
     except InvalidOperation:
-        raise ValueError(
+        raise InvalidInput(
             f"expected start:stop:step or a comma list of numbers, got {text!r}"
         ) from None
     if not all(part.is_finite() and math.isfinite(part) for part in parts):
-        raise ValueError(f"values must be finite numbers, got {text!r}")
+        raise InvalidInput(f"values must be finite numbers, got {text!r}")
     if ":" not in text:
         return [float(part) for part in parts]
     if len(parts) != 3 or parts[2] <= 0 or parts[1] < parts[0]:
-        raise ValueError(f"expected start:stop:step with stop >= start and step > 0, got {text!r}")
+        raise InvalidInput(
+            f"expected start:stop:step with stop >= start and step > 0, got {text!r}"
+        )
     start, stop, step = parts
     if (stop - start) / step >= MAX_RANGE:
-        raise ValueError(f"{text} gives more than {MAX_RANGE} values")
+        raise InvalidInput(f"{text} gives more than {MAX_RANGE} values")
     return [float(start + i * step) for i in range(int((stop - start) // step) + 1)]
 
 
@@ -130,7 +133,7 @@ def level(text: str) -> float:
     except ValueError:
         value = math.nan
     if not 0 < value < 1:
-        raise ValueError(f"an error level in (0, 1) such as 0.05, got {text}")
+        raise InvalidInput(f"an error level in (0, 1) such as 0.05, got {text}")
     return value
 
 
@@ -139,7 +142,7 @@ def names(text: str) -> list[str]:
     """A comma list of names: ``hopper,walker2d``."""
     listed = [name.strip() for name in text.split(",")]
     if not all(listed):
-        raise ValueError(f"expected a comma list of names such as hopper,walker2d, got {text!r}")
+        raise InvalidInput(f"expected a comma list of names such as hopper,walker2d, got {text!r}")
     return listed
 
 
@@ -196,7 +199,7 @@ _TYPES: dict[str, Callable[[str], Any]] = {
 }
 
 
-def _type_of(owner: type, field: dataclasses.Field) -> Callable[[str], Any]:
+def _type_of(owner: type, field: dataclasses.Field[Any]) -> Callable[[str], Any]:
     if field.type not in _TYPES:
         raise TypeError(
             f"{owner.__name__}.{field.name} is a {field.type}, which has no command-line flag "
@@ -270,11 +273,11 @@ def _shown(value: Any) -> str:
     return ",".join(map(str, value)) if isinstance(value, tuple | list) else str(value)
 
 
-def _option_flag(field: dataclasses.Field) -> str:
+def _option_flag(field: dataclasses.Field[Any]) -> str:
     return field.metadata["flag"] or "--" + field.name.replace("_", "-")
 
 
-def _option_dest(field: dataclasses.Field) -> str:
+def _option_dest(field: dataclasses.Field[Any]) -> str:
     return _option_flag(field)[2:].replace("-", "_")
 
 
@@ -439,7 +442,7 @@ class Parser(argparse.ArgumentParser):
 class Defaults(argparse.ArgumentDefaultsHelpFormatter):
     """Shows a flag's default where it has one worth reading (not None, not off)."""
 
-    def _get_help_string(self, action: argparse.Action) -> str:
+    def _get_help_string(self, action: argparse.Action) -> str | None:
         if action.default in (None, False):
             return action.help or ""
         return super()._get_help_string(action)

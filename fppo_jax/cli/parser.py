@@ -27,7 +27,7 @@ from fppo_jax.cli.flags import (
     variant,
     variants,
 )
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import install_hint
 from fppo_jax.objectives import DEFAULT_VARIANT, VARIANTS
 from fppo_jax.options import Options
 from fppo_jax.statistics import ENDPOINTS, STATISTICS

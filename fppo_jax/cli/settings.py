@@ -6,9 +6,10 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from fppo_jax.config import PRESETS
+from fppo_jax.errors import InvalidInput
 
 # What a run's config.json records beside its settings (metric_log.environment_record).
 RECORD_ONLY = ("versions", "platform")
@@ -27,11 +28,11 @@ def settings_file(path: Path) -> dict[str, Any]:
         else:
             settings = json.loads(text, object_pairs_hook=_without_repeated_keys)
     except ImportError:
-        raise ValueError(f"{path}: reading YAML needs PyYAML (pip install pyyaml)") from None
+        raise InvalidInput(f"{path}: reading YAML needs PyYAML (pip install pyyaml)") from None
     except Exception as error:
-        raise ValueError(f"{path} cannot be read as settings: {error}") from None
+        raise InvalidInput(f"{path} cannot be read as settings: {error}") from None
     if not isinstance(settings, dict):
-        raise ValueError(f"{path} must hold a mapping of settings, got {type(settings).__name__}")
+        raise InvalidInput(f"{path} must hold a mapping of settings, got {type(settings).__name__}")
     settings = {k: v for k, v in settings.items() if k not in RECORD_ONLY}
     if isinstance(settings.get("devices"), list):  # the record's device kinds, not a count
         del settings["devices"]
@@ -55,7 +56,7 @@ def _importable(path: Path, variant: Any, own: dict[str, Any]) -> Any:
         return variant
     found = own[variant].get("import")
     if not found:
-        raise ValueError(
+        raise InvalidInput(
             f"{path}: the surrogate {variant!r} was made in a script or a notebook, where no "
             "import finds it; put it in a module and pass --variant module:attribute"
         )
@@ -63,7 +64,7 @@ def _importable(path: Path, variant: Any, own: dict[str, Any]) -> Any:
 
 
 def check_settings(path: Path, settings: dict[str, Any], command: argparse.ArgumentParser) -> None:
-    """Raise ValueError naming any key of `settings` (from `path`) that `command` has no flag
+    """Raise InvalidInput naming any key of `settings` (from `path`) that `command` has no flag
     for."""
     valid = set(vars(command.parse_args([]))) - {
         "commands",
@@ -73,7 +74,7 @@ def check_settings(path: Path, settings: dict[str, Any], command: argparse.Argum
     }
     unknown = sorted(set(settings) - valid)
     if unknown:
-        raise ValueError(
+        raise InvalidInput(
             f"{path}: unknown setting{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
             f"valid: {', '.join(sorted(valid))}"
         )
@@ -83,19 +84,19 @@ def check_settings(path: Path, settings: dict[str, Any], command: argparse.Argum
         if action.nargs == 0 and action.dest in settings:
             value = settings[action.dest]
             if not isinstance(value, bool) and (value is not None or action.default is not None):
-                raise ValueError(f"{path}: {action.dest} must be true or false, got {value!r}")
+                raise InvalidInput(f"{path}: {action.dest} must be true or false, got {value!r}")
 
 
 def check_preset(path: Path, settings: dict[str, Any], preset: str | None) -> None:
     """Refuse `preset`, given on the command line, beside a file that records a run of another
     preset with that preset's run shape: the file's shape would win and the run would be
     labelled `preset` without having its shape."""
-    recorded = settings.get("preset")
+    recorded: Any = settings.get("preset")  # whatever the file holds
     shape = [name for name in PRESETS.get(recorded, {}) if name in settings]
     if preset is None or recorded in (None, preset) or not shape:
         return
     fields = ", ".join(f"{name}={settings[name]}" for name in shape)
-    raise ValueError(
+    raise InvalidInput(
         f"{path} records a run of the {recorded} preset, with its run shape ({fields}), which "
         f"would override --preset {preset} and leave the run labelled {preset} without its "
         f"shape; drop --preset to rerun it as recorded, or, for the {preset} preset, write "
@@ -108,7 +109,7 @@ def _without_repeated_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     keys = [key for key, _ in pairs]
     repeated = sorted({str(key) for key in keys if keys.count(key) > 1})
     if repeated:
-        raise ValueError(f"{', '.join(repeated)} given more than once")
+        raise InvalidInput(f"{', '.join(repeated)} given more than once")
     return dict(pairs)
 
 
@@ -116,10 +117,10 @@ def _yaml_without_repeated_keys(text: str) -> Any:
     """YAML's settings, refused if a mapping names a key twice (PyYAML keeps the last)."""
     import yaml
 
-    class Loader(yaml.SafeLoader):
+    class Loader(yaml.SafeLoader):  # type: ignore[misc]  # PyYAML has no type information here
         def construct_mapping(self, node: Any, deep: bool = False) -> dict[Any, Any]:
             keys = [self.construct_object(key, deep=deep) for key, _ in node.value]
             _without_repeated_keys([(key, None) for key in keys])
-            return super().construct_mapping(node, deep=deep)
+            return cast(dict[Any, Any], super().construct_mapping(node, deep=deep))
 
     return yaml.load(text, Loader=Loader)

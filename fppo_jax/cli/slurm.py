@@ -6,6 +6,8 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 
+from fppo_jax.errors import InvalidInput
+
 ARRAY_VARIABLES = (
     "SLURM_ARRAY_TASK_ID",
     "SLURM_ARRAY_TASK_MIN",
@@ -18,15 +20,15 @@ ARRAY_VARIABLES = (
 def array_part(environ: Mapping[str, str] = os.environ) -> tuple[int, int]:
     """``--part auto``: this job array task's share of a sweep split over the whole array,
     (its index among the array's tasks from 1, the array's task count), where the index is
-    (ID − MIN) / STEP. Raises ValueError naming the variables read where they do not describe
+    (ID − MIN) / STEP. Raises InvalidInput naming the variables read where they do not describe
     a whole array of evenly stepped indices from 0 or 1: a resubmission of some of its tasks
     (``sbatch --array=2``) looks like an array of its own, and would silently train other runs
     than the task it replaces."""
     read = {name: environ[name] for name in ARRAY_VARIABLES if name in environ}
     shown = ", ".join(f"{name}={text!r}" for name, text in read.items()) or "none of them set"
 
-    def refuse(problem: str) -> ValueError:
-        return ValueError(
+    def refuse(problem: str) -> InvalidInput:
+        return InvalidInput(
             f"--part auto cannot take this task's part from SLURM's job array: {problem} "
             f"(read {shown}); pass --part K/N instead (the K-th of N parts)"
         )

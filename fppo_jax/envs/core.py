@@ -9,7 +9,7 @@ An environment whose state lives outside JAX resets itself instead (:func:`reset
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol, cast, runtime_checkable
 
 import jax
 import jax.numpy as jnp
@@ -53,8 +53,12 @@ class Step(NamedTuple):
 class Environment(Protocol):
     """What the trainer needs of an environment."""
 
-    observation_size: int
-    action_space: Discrete | Box
+    # Read-only (properties, to a type checker): adapters compute them.
+    @property
+    def observation_size(self) -> int: ...
+
+    @property
+    def action_space(self) -> Discrete | Box: ...
 
     def reset(self, key: jax.Array) -> tuple[Any, jax.Array]:
         """(state, first observation)."""
@@ -98,21 +102,41 @@ class OnHost:
 
     resets_itself = True
     observation_size: int
+    action_space: Discrete | Box
 
+    if TYPE_CHECKING:
+
+        def _host_reset(self, key_data: np.ndarray) -> tuple[HostState, np.ndarray]: ...
+
+        def _host_step(
+            self, pool: np.ndarray, slot: np.ndarray, steps: np.ndarray, action: np.ndarray
+        ) -> Step: ...
+
+    # The result shapes below stand in for the arrays of a HostState and a Step, which are
+    # typed as the jax.Arrays they become: hence the casts.
     def reset(self, key: jax.Array) -> tuple[HostState, jax.Array]:
-        scalar = jax.ShapeDtypeStruct((), jnp.int32)
+        scalar = cast(jax.Array, jax.ShapeDtypeStruct((), jnp.int32))
         shapes = (
             HostState(scalar, scalar, scalar),
             jax.ShapeDtypeStruct((self.observation_size,), jnp.float32),
         )
-        return jax.pure_callback(
-            self._host_reset, shapes, jax.random.key_data(key), vmap_method="broadcast_all"
+        return cast(
+            tuple[HostState, jax.Array],
+            jax.pure_callback(
+                self._host_reset, shapes, jax.random.key_data(key), vmap_method="broadcast_all"
+            ),
         )
 
     def step(self, key: jax.Array, state: HostState, action: jax.Array) -> tuple[HostState, Step]:
-        obs = jax.ShapeDtypeStruct((self.observation_size,), jnp.float32)
-        flag = jax.ShapeDtypeStruct((), jnp.bool_)
-        shapes = Step(obs, jax.ShapeDtypeStruct((), jnp.float32), flag, flag, obs)
+        obs = cast(jax.Array, jax.ShapeDtypeStruct((self.observation_size,), jnp.float32))
+        flag = cast(jax.Array, jax.ShapeDtypeStruct((), jnp.bool_))
+        shapes = Step(
+            obs,
+            cast(jax.Array, jax.ShapeDtypeStruct((), jnp.float32)),
+            flag,
+            flag,
+            obs,
+        )
         out = jax.pure_callback(
             self._host_step,
             shapes,
@@ -194,7 +218,8 @@ def check_environment(env: Environment) -> None:
             + (f" of {', '.join(type(x).__name__ for x in out)}" if isinstance(out, tuple) else "")
         )
     next_state, step = out
-    if jax.tree.structure(next_state) != jax.tree.structure(state):
+    # cast: jaxlib has no stub for PyTreeDef, which only compares.
+    if cast(object, jax.tree.structure(next_state)) != jax.tree.structure(state):
         raise TypeError("step's next state must have the structure of reset's state")
     _expect("step's obs", step.obs, (size,), jnp.floating, OBSERVATION_SIZE)
     _expect("step's reward", step.reward, (), jnp.number)

@@ -49,7 +49,7 @@ clipped to its bounds before ``step``). Other spaces are refused, naming the wra
 An environment is reset and stepped once on the host when its adapter is made, before anything
 compiles, with the checks every later step has: one that breaks Gymnasium's API (a ``reset`` or
 ``step`` that raises or gives the wrong values, an observation or reward that is not finite
-numbers of the right shape, an empty observation space) is refused with a ``ValueError`` that
+numbers of the right shape, an empty observation space) is refused with an ``InvalidInput`` that
 names it and the fault. An id may be ``gymnasium.make``'s ``module:id``, whose module is imported
 to register it.
 """
@@ -65,13 +65,16 @@ import threading
 import traceback
 import tracemalloc
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from fppo_jax.envs.core import Box, Discrete, HostState, OnHost, Step, seeds_of
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
 from fppo_jax.files import first_line
+
+if TYPE_CHECKING:
+    import jax
 
 MAX_POOLS = 16  # pools kept alive at once: training's, and a few evaluations' beside it
 # What one environment's step gives as its reward, and as terminated and truncated, mostly.
@@ -81,7 +84,7 @@ FLAGS = (bool, np.bool_)
 
 def import_gymnasium() -> Any:
     if importlib.util.find_spec("gymnasium") is None:
-        raise ImportError(f"Gymnasium environments need gymnasium: {install_hint('gymnasium')}")
+        raise MissingPackage(f"Gymnasium environments need gymnasium: {install_hint('gymnasium')}")
     import gymnasium
 
     return gymnasium
@@ -161,7 +164,7 @@ class GymnasiumEnvironment(OnHost):
         try:
             probe = self.make()
         except gymnasium.error.DependencyNotInstalled as error:
-            raise ImportError(f"{self.name} cannot be made: {first_line(error)}") from None
+            raise MissingPackage(f"{self.name} cannot be made: {first_line(error)}") from None
         vector = isinstance(probe, gymnasium.vector.VectorEnv)
         if not vector and not isinstance(probe, gymnasium.Env):
             raise TypeError(
@@ -177,12 +180,12 @@ class GymnasiumEnvironment(OnHost):
                 wrappers = "gymnasium.wrappers.", "gymnasium.ActionWrapper"
             spaces = gymnasium.spaces
             if not isinstance(observations, spaces.Box) or len(observations.shape) != 1:
-                raise ValueError(
+                raise InvalidInput(
                     f"{self.name}: observations must be a 1-D Box, got {observations}; wrap the "
                     f"environment in {wrappers[0]}FlattenObservation"
                 )
             if observations.shape[0] == 0:
-                raise ValueError(
+                raise InvalidInput(
                     f"{self.name}: its observation space {observations} is empty, and a policy "
                     "needs at least one number to act on"
                 )
@@ -192,7 +195,7 @@ class GymnasiumEnvironment(OnHost):
             elif isinstance(actions, spaces.Box) and len(actions.shape) == 1:
                 space = Box(tuple(map(float, actions.low)), tuple(map(float, actions.high)))
             else:
-                raise ValueError(
+                raise InvalidInput(
                     f"{self.name}: actions must be Discrete or a 1-D Box, got {actions}; wrap "
                     f"the environment in a {wrappers[1]} that maps one of those onto it"
                 )
@@ -232,7 +235,7 @@ class GymnasiumEnvironment(OnHost):
         self._observation(self._reset(env, seed=0), "reset")
         self._check_step(self._step(env, self._still_actions(1)[0]))
 
-    def _check_step(self, out: tuple, count: int | None = None) -> None:
+    def _check_step(self, out: tuple[Any, ...], count: int | None = None) -> None:
         """A step's outcome (`count` of them from a vector environment) checked."""
         obs, reward, terminated, truncated, _ = out
         self._observation(obs, "step", count)
@@ -257,7 +260,7 @@ class GymnasiumEnvironment(OnHost):
         ):
             # Gymnasium 1.x: its workers clear their pending autoreset on a reset only when
             # they share memory, so without it each masked reset is followed by another.
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name}: an AsyncVectorEnv without shared memory, in NEXT_STEP autoreset "
                 "mode, resets an ended sub-environment again on the step after its masked "
                 "reset, ignoring its action; make it with shared_memory=True (the default) or "
@@ -272,7 +275,7 @@ class GymnasiumEnvironment(OnHost):
         first_alone = np.arange(size) == 0
         kept = self._reset(vector, options={"reset_mask": first_alone})
         if not np.array_equal(np.array(kept)[1:], np.array(stepped[0])[1:]):
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name}: reset(options={{'reset_mask': mask}}) restarts sub-environments "
                 f"outside the mask, so in its {mode.name} autoreset mode an episode that ends "
                 "cannot restart alone without an action ignored on the next step; use a vector "
@@ -285,7 +288,7 @@ class GymnasiumEnvironment(OnHost):
         vector environment there is serves one run, and no evaluation beside it."""
         if self.instance and (runs > 1 or evaluates):
             what = f"a sweep's {runs} runs" if runs > 1 else "an evaluation during training"
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name} is one vector environment, for one run and no evaluation beside "
                 f"it, so it cannot serve {what}: pass a function that makes one, "
                 "gymnasium_environment(lambda: gymnasium.make_vec(...)), or its class"
@@ -296,7 +299,7 @@ class GymnasiumEnvironment(OnHost):
         the vector environments' sub-environments cannot serve; checked before compiling."""
         size = self.vector_size
         if size and per_run % size:
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name}: its vector environment has {size} sub-environments, which cannot "
                 f"serve {per_run} environments per run (num_envs, or an evaluation's episodes): "
                 f"make them a multiple of {size} (num_envs={size}, say), or make the vector "
@@ -319,12 +322,17 @@ class GymnasiumEnvironment(OnHost):
             )
         number = _POOLS.add(envs, self.instance)
         slots = np.arange(len(seeds), dtype=np.int32)
+        # numpy arrays in the fields typed as the jax.Arrays that pure_callback makes of them
         state = HostState(
-            np.full(batch, number, np.int32), slots.reshape(batch), np.zeros(batch, np.int32)
+            cast("jax.Array", np.full(batch, number, np.int32)),
+            cast("jax.Array", slots.reshape(batch)),
+            cast("jax.Array", np.zeros(batch, np.int32)),
         )
         return state, first.reshape(*batch, self.observation_size)
 
-    def _reset_vectors(self, batch: tuple[int, ...], seeds: list[int]) -> tuple[list, np.ndarray]:
+    def _reset_vectors(
+        self, batch: tuple[int, ...], seeds: list[int]
+    ) -> tuple[list[Any], np.ndarray]:
         """A vector environment per `vector_size` environments of each run (the last axis of
         `batch`: a run's environments, or an evaluation's episodes), reset from their seeds."""
         size = self.vector_size
@@ -332,7 +340,7 @@ class GymnasiumEnvironment(OnHost):
         self.check_batch(per_run)
         count = len(seeds) // size
         if self.instance and count > 1:
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name} is one vector environment, for one run of num_envs={size}; it "
                 f"cannot serve {len(seeds) // per_run} run(s) of {per_run} environments (a "
                 "sweep's runs, say): pass a function that makes one, "
@@ -357,23 +365,25 @@ class GymnasiumEnvironment(OnHost):
         pools, slots = np.asarray(pool).reshape(-1), np.asarray(slot).reshape(-1)
         actions = self._actions(np.asarray(action).reshape(len(slots), -1))
         count = len(slots)
+        # numpy arrays in the fields typed as the jax.Arrays that pure_callback makes of them
         out = Step(
-            obs=np.empty((count, self.observation_size), np.float32),
-            reward=np.empty(count, np.float32),
-            terminated=np.empty(count, bool),
-            truncated=np.empty(count, bool),
-            next_obs=np.empty((count, self.observation_size), np.float32),
+            obs=cast("jax.Array", np.empty((count, self.observation_size), np.float32)),
+            reward=cast("jax.Array", np.empty(count, np.float32)),
+            terminated=cast("jax.Array", np.empty(count, bool)),
+            truncated=cast("jax.Array", np.empty(count, bool)),
+            next_obs=cast("jax.Array", np.empty((count, self.observation_size), np.float32)),
         )
         step = self._step_vectors if self.vector_size else self._step_envs
         for number in np.unique(pools):
             rows = np.flatnonzero(pools == number)
             step(_POOLS[int(number)], slots[rows], actions[rows], rows, out)
-        return Step(*(x.reshape(batch + x.shape[1:]) for x in out))
+        return Step(*(x.reshape(batch + x.shape[1:]) for x in cast("tuple[jax.Array, ...]", out)))
 
     def _step_envs(
         self, envs: list[Any], slots: np.ndarray, actions: np.ndarray, rows: np.ndarray, out: Step
     ) -> None:
         """Step `envs`' `slots` (one ``gymnasium.Env`` each) and write `rows` of `out`."""
+        assert out.next_obs is not None  # given, as by every environment that resets itself
         for env_slot, action, row in zip(slots, actions, rows, strict=True):
             env = envs[env_slot]
             obs, reward, terminated, truncated, _ = self._step(env, action)
@@ -408,12 +418,14 @@ class GymnasiumEnvironment(OnHost):
             self._step_vector(vector, actions[block], rows[block], out)
 
     def _step_vector(self, vector: Any, actions: np.ndarray, rows: np.ndarray, out: Step) -> None:
+        assert out.next_obs is not None  # given, as by every environment that resets itself
         obs, reward, terminated, truncated, info = self._step(vector, actions)
         size = self.vector_size
         obs = self._observation(obs, "step", size)
         reward = self._reward(reward, size)
-        terminated = self._flags(terminated, "terminated", size)
-        truncated = self._flags(truncated, "truncated", size)
+        # casts: with a count, _flags gives an array
+        terminated = cast(np.ndarray, self._flags(terminated, "terminated", size))
+        truncated = cast(np.ndarray, self._flags(truncated, "truncated", size))
         ended = terminated | truncated
         final = first = obs
         if ended.any() and self.same_step:
@@ -432,7 +444,7 @@ class GymnasiumEnvironment(OnHost):
     def _final_observations(self, info: dict[str, Any], ended: np.ndarray) -> np.ndarray:
         """The final observations of the episodes that `ended`, from a SAME_STEP step's info."""
         if "final_obs" not in info:
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name}: its autoreset mode is SAME_STEP, but step gave no "
                 "info['final_obs'] for the episodes that ended"
             )
@@ -445,22 +457,22 @@ class GymnasiumEnvironment(OnHost):
         try:
             out = env.reset(**arguments)
         except Exception as error:
-            raise ValueError(f"{self.name}: reset {_raised(error)}") from error
+            raise InvalidInput(f"{self.name}: reset {_raised(error)}") from error
         if not (isinstance(out, tuple) and len(out) == 2):
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name}: reset returned {_described(out)}, not the pair (observation, "
                 "info) of Gymnasium's API"
             )
         return out[0]
 
-    def _step(self, env: Any, action: Any) -> tuple:
+    def _step(self, env: Any, action: Any) -> tuple[Any, ...]:
         """``env.step(action)``, which must give Gymnasium's five values."""
         try:
             out = env.step(action)
         except Exception as error:
-            raise ValueError(f"{self.name}: step {_raised(error)}") from error
+            raise InvalidInput(f"{self.name}: step {_raised(error)}") from error
         if not (isinstance(out, tuple) and len(out) == 5):
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name}: step returned {_described(out)}, not the five values (observation, "
                 "reward, terminated, truncated, info) of Gymnasium's API (four are the old Gym "
                 "API's, with one done for both terminated and truncated)"
@@ -477,9 +489,9 @@ class GymnasiumEnvironment(OnHost):
         """The actions [count, …] as Gymnasium takes them: a Discrete space's from its first
         action (integers, as its ``sample`` gives), a Box's clipped to its bounds."""
         if isinstance(self.action_space, Discrete):
-            return actions[:, 0].astype(np.int64) + self.action_start
+            return cast(np.ndarray, actions[:, 0].astype(np.int64) + self.action_start)
         space = self.action_space
-        return np.clip(actions, space.low, space.high).astype(np.float32)
+        return cast(np.ndarray, np.clip(actions, space.low, space.high).astype(np.float32))
 
     def _reward(self, reward: Any, count: int | None = None) -> Any:
         """`reward` checked: one finite number, or `count` of them from a vector environment."""
@@ -489,7 +501,7 @@ class GymnasiumEnvironment(OnHost):
         values = _numbers(reward)
         if values is None or values.shape != shape or not np.isfinite(values).all():
             expected = "a finite number" if count is None else f"{count} finite numbers"
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name}: step returned the reward {_described(reward)}, not {expected}"
             )
         return values
@@ -501,7 +513,7 @@ class GymnasiumEnvironment(OnHost):
         shape = () if count is None else (count,)
         values = np.asarray(flags)
         if values.shape != shape or values.dtype.kind not in "biu":
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name}: step returned {which}={_described(flags)}, not "
                 + ("a bool" if count is None else f"{count} bools")
             )
@@ -512,19 +524,19 @@ class GymnasiumEnvironment(OnHost):
         since a vector environment may hand back a buffer of its own that its reset rewrites."""
         checked = _numbers(obs)
         if checked is None:
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name}: {where} returned the observation {_described(obs)}, not numbers"
             )
         obs = checked.astype(np.float32)
         shape = (self.observation_size,) if count is None else (count, self.observation_size)
         if obs.shape != shape:
-            raise ValueError(
+            raise InvalidInput(
                 f"{self.name}: {where} returned observations of shape {obs.shape}, not {shape} "
                 "as its observation space says"
             )
         if not np.isfinite(obs).all():
-            raise ValueError(f"{self.name}: {where} returned a non-finite observation {obs}")
-        return obs
+            raise InvalidInput(f"{self.name}: {where} returned a non-finite observation {obs}")
+        return cast(np.ndarray, obs)  # `obs`, the parameter, is Any; it is `checked` now
 
 
 def _numbers(value: Any) -> np.ndarray | None:
@@ -583,10 +595,10 @@ def gymnasium_environment(
     return GymnasiumEnvironment(env, name)
 
 
-_MADE: dict[tuple, GymnasiumEnvironment] = {}
+_MADE: dict[tuple[str, tuple[tuple[str, Any], ...]], GymnasiumEnvironment] = {}
 
 
-def _registered(env_id: str, kwargs: tuple) -> GymnasiumEnvironment:
+def _registered(env_id: str, kwargs: tuple[tuple[str, Any], ...]) -> GymnasiumEnvironment:
     """`env_id` as ``gymnasium.make`` takes it: a registered id, or ``module:id``, whose module
     is imported first to register it."""
     key = (env_id, kwargs)
@@ -597,13 +609,13 @@ def _registered(env_id: str, kwargs: tuple) -> GymnasiumEnvironment:
             try:
                 importlib.import_module(module)
             except ImportError as error:
-                raise ImportError(
+                raise MissingPackage(
                     f"gymnasium/{env_id}: cannot import {module!r}, which should register "
                     f"{registered_id!r}: {first_line(error)}"
                 ) from None
         if registered_id not in gymnasium.registry:
             imported = f" once {module!r} is imported" if module else ""
-            raise ValueError(
+            raise InvalidInput(
                 f"Gymnasium has no environment {registered_id!r} registered{imported} "
                 "(gymnasium.pprint_registry() lists them; an environment of one's own is "
                 "registered by its module, named as gymnasium/module:id)"

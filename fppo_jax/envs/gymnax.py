@@ -9,13 +9,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
-from typing import Any
+from typing import Any, TypeGuard
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.envs.core import Box, Discrete, Step
+from fppo_jax.errors import InvalidInput
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,7 +67,7 @@ def gymnax_environment(env_id: str, max_steps: int | None = None) -> GymnaxEnvir
     import gymnax
 
     if env_id not in gymnax.registered_envs:
-        raise ValueError(
+        raise InvalidInput(
             f"gymnax has no environment {env_id!r}; it offers: " + ", ".join(gymnax.registered_envs)
         )
     env, params = gymnax.make(env_id)
@@ -75,7 +76,7 @@ def gymnax_environment(env_id: str, max_steps: int | None = None) -> GymnaxEnvir
     return GymnaxEnvironment(env, params)
 
 
-def is_gymnax_env(env: Any) -> bool:
+def is_gymnax_env(env: Any) -> TypeGuard[Any]:
     """Whether `env` is a gymnax environment (checked without importing gymnax if it is not
     loaded)."""
     if "gymnax" not in sys.modules:

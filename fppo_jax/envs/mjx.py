@@ -12,13 +12,15 @@ import dataclasses
 import functools
 import io
 import warnings
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, cast
 
 import jax
 import jax.numpy as jnp
 import mujoco
 
 from fppo_jax.envs.core import Box, Step, Timed, limited_step
+from fppo_jax.errors import InvalidInput
 
 
 def _import_quietly() -> None:
@@ -97,7 +99,7 @@ class BraxEnvironment:
 
     def qpos(self, state: Timed) -> jax.Array:
         """Generalised positions, for rendering."""
-        return state.inner.pipeline_state.q
+        return cast(jax.Array, state.inner.pipeline_state.q)
 
     def reset(self, key: jax.Array) -> tuple[Timed, jax.Array]:
         state = self.env.reset(key)
@@ -114,7 +116,7 @@ def brax_environment(name: str, episode_length: int = 1000, **kwargs: Any) -> Br
     from brax import envs
 
     if name not in envs._envs:
-        raise ValueError(f"Brax has no environment {name!r}; it offers: " + ", ".join(envs._envs))
+        raise InvalidInput(f"Brax has no environment {name!r}; it offers: " + ", ".join(envs._envs))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         env = envs.get_environment(name, backend="mjx", **kwargs)
@@ -153,6 +155,11 @@ class Swimmer:
 
         object.__setattr__(self, "_model", mjx.put_model(self.mj_model))
 
+    if TYPE_CHECKING:  # set by __post_init__, and no field
+
+        @property
+        def _model(self) -> Any: ...  # mujoco.mjx.Model
+
     @property
     def observation_size(self) -> int:
         return int(self.mj_model.nq - 2 + self.mj_model.nv)
@@ -166,14 +173,16 @@ class Swimmer:
         return float(self.mj_model.opt.timestep) * self.frame_skip
 
     def qpos(self, state: Timed) -> jax.Array:
-        return state.inner.qpos
+        return cast(jax.Array, state.inner.qpos)
 
     def reset(self, key: jax.Array) -> tuple[Timed, jax.Array]:
         from mujoco import mjx
 
         qpos_key, qvel_key = jax.random.split(key)
         m, scale = self.mj_model, self.reset_noise_scale
-        noise = lambda key, n: jax.random.uniform(key, (n,), minval=-scale, maxval=scale)  # noqa: E731
+        noise: Callable[[jax.Array, int], jax.Array] = lambda key, n: jax.random.uniform(  # noqa: E731
+            key, (n,), minval=-scale, maxval=scale
+        )
         qpos = jnp.asarray(m.qpos0) + noise(qpos_key, m.nq)
         qvel = noise(qvel_key, m.nv)
         data = mjx.make_data(self._model).replace(qpos=qpos, qvel=qvel)

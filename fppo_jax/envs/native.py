@@ -27,12 +27,15 @@ import importlib.util
 import os
 import threading
 from types import ModuleType
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from fppo_jax.envs.core import Box, HostState, OnHost, Step, seeds_of
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import InvalidInput, install_hint
+
+if TYPE_CHECKING:
+    import jax
 
 INSTALL = f"{install_hint('native')}; envpool, Linux only"
 MAX_POOLS = 16  # pools kept alive at once: training's, and a few evaluations' beside it
@@ -44,7 +47,7 @@ def envpool_installed() -> bool:
 
 def require_envpool() -> None:
     if not envpool_installed():
-        raise ValueError(f"the native backend steps MuJoCo through envpool: {INSTALL}")
+        raise InvalidInput(f"the native backend steps MuJoCo through envpool: {INSTALL}")
 
 
 def import_envpool() -> ModuleType:
@@ -103,11 +106,11 @@ class NativeEnvironment(OnHost):
     def __post_init__(self) -> None:
         envpool = import_envpool()
         if self.task_id not in envpool.list_all_envs():
-            raise ValueError(f"envpool has no task {self.task_id!r}")
+            raise InvalidInput(f"envpool has no task {self.task_id!r}")
         spec = envpool.make_spec(self.task_id)
         space = spec.action_space
         if len(spec.observation_space.shape) != 1 or not hasattr(space, "low"):
-            raise ValueError(
+            raise InvalidInput(
                 f"envpool's {self.task_id} is not a MuJoCo task (its observations have shape "
                 f"{spec.observation_space.shape}, its actions are {type(space).__name__}): "
                 "native/ takes envpool's MuJoCo tasks, e.g. native/Hopper-v4"
@@ -139,9 +142,12 @@ class NativeEnvironment(OnHost):
         slots = np.arange(count, dtype=np.int32)
         first = np.empty_like(obs)
         first[info["env_id"]] = obs
+        # numpy arrays in the fields typed as the jax.Arrays that pure_callback makes of them
         return (
             HostState(
-                np.full(batch, number, np.int32), slots.reshape(batch), np.zeros(batch, np.int32)
+                cast("jax.Array", np.full(batch, number, np.int32)),
+                cast("jax.Array", slots.reshape(batch)),
+                cast("jax.Array", np.zeros(batch, np.int32)),
             ),
             first.reshape(*batch, -1).astype(np.float32),
         )
@@ -152,17 +158,18 @@ class NativeEnvironment(OnHost):
         batch = np.shape(pool)
         pools, slots = np.asarray(pool).reshape(-1), np.asarray(slot).reshape(-1)
         actions = np.asarray(action, np.float64).reshape(len(slots), -1)
+        # numpy arrays in the fields typed as the jax.Arrays that pure_callback makes of them
         out = Step(
-            obs=np.empty((len(slots), self.observation_size), np.float32),
-            reward=np.empty(len(slots), np.float32),
-            terminated=np.empty(len(slots), bool),
-            truncated=np.empty(len(slots), bool),
-            next_obs=np.empty((len(slots), self.observation_size), np.float32),
+            obs=cast("jax.Array", np.empty((len(slots), self.observation_size), np.float32)),
+            reward=cast("jax.Array", np.empty(len(slots), np.float32)),
+            terminated=cast("jax.Array", np.empty(len(slots), bool)),
+            truncated=cast("jax.Array", np.empty(len(slots), bool)),
+            next_obs=cast("jax.Array", np.empty((len(slots), self.observation_size), np.float32)),
         )
         for number in np.unique(pools):
             rows = np.flatnonzero(pools == number)
             _step_pool(_POOLS[int(number)], slots[rows], actions[rows], rows, out)
-        return Step(*(x.reshape(*batch, *x.shape[1:]) for x in out))
+        return Step(*(x.reshape(*batch, *x.shape[1:]) for x in cast("tuple[jax.Array, ...]", out)))
 
 
 def usable_cores() -> int:
@@ -185,6 +192,7 @@ def _step_pool(
 ) -> None:
     """Step `slots` of `pool` with `actions`, reset the ones whose episode ended, and write
     their outcome to `out`'s `rows`."""
+    assert out.next_obs is not None  # given, as by every environment that resets itself
     obs, reward, terminated, truncated, info = pool.step(actions, slots)
     # envpool answers in its own order: each answer is placed by the slot it names.
     where = rows[_positions(slots, info["env_id"])]

@@ -12,24 +12,24 @@ import dataclasses
 import functools
 from collections.abc import Mapping
 from types import ModuleType
-from typing import Any
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
 
 from fppo_jax.envs.core import Box, Step, Timed, limited_step
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
 
 
 def _registry() -> ModuleType:
     try:
         from mujoco_playground import registry
     except ImportError as error:
-        raise ImportError(
+        raise MissingPackage(
             f"MuJoCo Playground is not installed: {install_hint('playground')}, or pip "
             "install playground"
         ) from error
-    return registry
+    return cast(ModuleType, registry)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -64,7 +64,7 @@ class PlaygroundEnvironment:
 
     def qpos(self, state: Timed) -> jax.Array:
         """Generalised positions, for rendering."""
-        return state.inner.data.qpos
+        return cast(jax.Array, state.inner.data.qpos)
 
     def reset(self, key: jax.Array) -> tuple[Timed, jax.Array]:
         state = self.env.reset(key)
@@ -78,7 +78,7 @@ class PlaygroundEnvironment:
     def _observation(self, obs: jax.Array | Mapping[str, jax.Array]) -> jax.Array:
         if isinstance(obs, Mapping):
             if self.obs_key not in obs:
-                raise ValueError(
+                raise InvalidInput(
                     f"the observation has no {self.obs_key!r}; choose obs_key from: "
                     + ", ".join(obs)
                 )
@@ -94,7 +94,7 @@ def playground_environment(
     kernels for about a minute on a CPU)."""
     registry = _registry()
     if name not in registry.ALL_ENVS:
-        raise ValueError(
+        raise InvalidInput(
             f"MuJoCo Playground has no environment {name!r}; it offers: "
             + ", ".join(registry.ALL_ENVS)
         )

@@ -18,6 +18,7 @@ from typing import Any
 import jax
 
 from fppo_jax.envs.core import Environment
+from fppo_jax.errors import InvalidInput
 
 
 def _gymnax(env_id: str, max_steps: int | None = None) -> Callable[[], Environment]:
@@ -179,7 +180,7 @@ def lookup(name: str) -> Task:
         description = f"{env_id} from the {namespace} namespace"
         backend = _NAMESPACE_BACKENDS[namespace]
         return Task(name, _FACTORIES[namespace](env_id), 100_000, description, backend)
-    raise ValueError(
+    raise InvalidInput(
         f"unknown environment {name!r}; registered: {', '.join(TASKS)}; "
         f"namespaced: {_NAMESPACED_FORMS}{_suggestion(name)}"
     )
@@ -218,10 +219,12 @@ def choose_backend(env: str | Any, backend: str = "auto") -> tuple[str, str]:
     if isinstance(env, str) and backend == lookup(env).backend:
         return backend, ""
     if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; valid backends: {', '.join(BACKENDS)}")
+        raise InvalidInput(f"unknown backend {backend!r}; valid backends: {', '.join(BACKENDS)}")
     if not isinstance(env, str):
         if backend != "auto":
-            raise ValueError("backend applies to tasks given by name; this environment runs as is")
+            raise InvalidInput(
+                "backend applies to tasks given by name; this environment runs as is"
+            )
         from fppo_jax.envs.gymnasium import is_gymnasium_env
 
         default = "gymnasium" if is_gymnasium_env(env) else "custom"
@@ -238,12 +241,14 @@ def choose_backend(env: str | Any, backend: str = "auto") -> tuple[str, str]:
             return task.backend, f"auto: native MuJoCo needs envpool, {INSTALL}"
         return "native", "auto: JAX runs on the CPU"
     if backend == "native" and not task.native and task.backend != "native":
-        raise ValueError(
+        raise InvalidInput(
             f"{env} has no native version; tasks with one: {', '.join(NATIVE_TASKS)} "
             "(and native/<envpool id>)"
         )
     if backend == "mjx" and task.backend != "mjx":
-        raise ValueError(f"{env} runs on {task.backend}, not MJX; backend applies to MuJoCo tasks")
+        raise InvalidInput(
+            f"{env} runs on {task.backend}, not MJX; backend applies to MuJoCo tasks"
+        )
     if backend == "native":
         from fppo_jax.envs.native import require_envpool
 

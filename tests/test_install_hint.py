@@ -1,10 +1,10 @@
-"""fppo_jax.extras: how to install an optional extra, for an extra that exists."""
+"""fppo_jax.errors.install_hint: how to install an optional extra, for an extra that exists."""
 
 import re
 import tomllib
 from pathlib import Path
 
-from fppo_jax.extras import install_hint
+from fppo_jax.errors import install_hint
 
 ROOT = Path(__file__).resolve().parents[1]
 

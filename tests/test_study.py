@@ -77,7 +77,7 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
 
 def test_a_dose_response_part_is_one_sweep_whose_controls_train_as_ppo(tmp_path):
     tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
-    done = _run("study.py", *tiny, "--seeds", "0:2", "--doses", "plans/dose-response.json")
+    done = _run("study.py", *tiny, "--seeds", "0:2", "--plan", "plans/dose-response.json")
     assert done.returncode == 0, done.stdout + done.stderr
     part = tmp_path / "dose_response" / "cartpole" / "paper" / "seeds-0-1_dose-response"
     result = SweepResult.read(part)

@@ -139,14 +139,39 @@ def test_a_dose_response_is_one_sweep_whose_controls_train_as_ppo_and_its_report
     assert again.returncode != 0 and "is already recorded" in again.stderr
 
 
-def test_a_planned_part_trains_the_plan_s_settings(tmp_path):
+def test_a_planned_part_trains_the_plan_s_settings_and_is_compared_with_the_study(tmp_path):
     tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
-    done = _run("study.py", *tiny, "--seeds", "0:1", "--plan", "plans/baseline-shape.json")
+    done = _run("study.py", *tiny, "--seeds", "0:50", "--plan", "plans/baseline-shape.json")
     assert done.returncode == 0, done.stdout + done.stderr
-    part = tmp_path / "baseline_shape" / "cartpole" / "paper" / "seeds-0-0_baseline-shape"
+    part = tmp_path / "baseline_shape" / "cartpole" / "paper" / "seeds-0-49_baseline-shape"
     result = SweepResult.read(part)
     assert [s["variant"] for s in result.settings] == ["ppo"]
     assert (result.config["num_envs"], result.config["num_steps"]) == (1, 2048)
     assert (
         "--plan plans/baseline-shape.json" in json.loads((part / "run.json").read_text())["command"]
     )
+
+    plan = json.loads((EXPERIMENTS / "plans" / "baseline-shape.json").read_text())
+    plan["tasks"] = ["cartpole"]  # 50 seeds planned on a classic task
+    (tmp_path / "baseline-shape.json").write_text(json.dumps(plan))
+    verdict = [str(tmp_path / "baseline-shape.json"), "--results", str(tmp_path)]
+    early = _run("planned_verdict.py", *verdict, "--output", str(tmp_path / "v.md"))
+    assert early.returncode == 1 and "cartpole: ppo 8×256 0 of 50 seeds" in early.stderr
+
+    baseline = _run("study.py", *tiny, "--seeds", "0:50", "--variants", "ppo")
+    assert baseline.returncode == 0, baseline.stdout + baseline.stderr
+    done = _run("planned_verdict.py", *verdict, "--output", str(tmp_path / "v.md"))
+    assert done.returncode == 0, done.stdout + done.stderr
+    row = next(r for r in (tmp_path / "v.md").read_text().splitlines() if r.startswith("| cart"))
+    ours = SweepResult.read(tmp_path / "study" / "cartpole" / "paper" / "seeds-0-49_ppo")
+    wide, long = ours.scores("final")[0], result.scores("final")[0]
+    p = statistics.improvement_test(long, wide)
+    assert row.startswith(f"| cartpole | ppo 1×2048 | {statistics.iqm(long):.1f} [")
+    shown = f"{p:.1e}" if p < 0.001 else f"{p:.3f}"  # one comparison: Holm's p is the p
+    assert f"| {statistics.iqm(wide):.1f} | " in row and f"| {shown} | {shown} |" in row
+
+    plan["baseline"]["num_envs"] = 4  # a baseline the recorded runs are not
+    (tmp_path / "baseline-shape.json").write_text(json.dumps(plan))
+    wrong = _run("planned_verdict.py", *verdict, "--output", str(tmp_path / "w.md"))
+    assert wrong.returncode != 0 and "recorded runs are 8×256" in wrong.stderr
+    assert "baseline is 4×256" in wrong.stderr and not (tmp_path / "w.md").exists()

@@ -31,7 +31,12 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
 # Where each public name is defined.
 _MODULES = {
     "fppo_jax.api": ("train",),
-    "fppo_jax.checkpoint": ("CheckpointsUnavailable", "ConfigMismatch", "DamagedCheckpoint"),
+    "fppo_jax.checkpoint": (
+        "CheckpointsUnavailable",
+        "ConfigMismatch",
+        "DamagedCheckpoint",
+        "IncompatibleCheckpoint",
+    ),
     "fppo_jax.config": (
         "Hyperparameters",
         "TrainConfig",
@@ -71,6 +76,7 @@ __all__ = [
     "Environment",
     "FppoError",
     "Hyperparameters",
+    "IncompatibleCheckpoint",
     "InvalidInput",
     "Metrics",
     "MissingFile",

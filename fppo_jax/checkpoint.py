@@ -10,7 +10,9 @@ where it is (:class:`ResumePoint`: the group, the update, the finished groups). 
 step into a temporary directory and renames it once complete, so a killed process leaves whole
 checkpoints only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
 checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old
-checkpoints are deleted only after a newer one is complete.
+checkpoints are deleted only after a newer one is complete. Every record names the layout it was
+written in (:data:`FORMAT`): a checkpoint of another layout is refused as incompatible, and left
+where it is, never taken for damage.
 
 Saved policies, a trained policy on its own, are :mod:`fppo_jax.saved_policy`'s.
 """
@@ -45,6 +47,12 @@ if TYPE_CHECKING:
     import orbax.checkpoint as ocp
 
 
+# The layout of a checkpoint's items and record. Raise it when a change makes checkpoints that
+# the previous code cannot read, or that this code cannot read from it; records written before
+# it was recorded have the first layout.
+FORMAT = 1
+
+
 class DamagedCheckpoint(UserWarning):
     """A checkpoint could not be read back intact and was set aside."""
 
@@ -56,6 +64,24 @@ class CheckpointsUnavailable(FppoError, RuntimeError):
 
 class ConfigMismatch(InvalidInput):
     """A checkpoint belongs to a run with a different configuration."""
+
+
+class IncompatibleCheckpoint(InvalidInput):
+    """A checkpoint was written in another layout (:data:`FORMAT`) than this code reads."""
+
+
+def check_format(record: dict[str, Any], checkpoint: str) -> None:
+    """Raise :class:`IncompatibleCheckpoint` unless the `record` of `checkpoint` (its words:
+    "checkpoint at step 4 in …") is in the layout this code reads (:data:`FORMAT`)."""
+    written = record.get("format", 1)
+    if written != FORMAT:
+        which = "a newer" if isinstance(written, int) and written > FORMAT else "another"
+        raise IncompatibleCheckpoint(
+            f"{checkpoint} was written by {which} version of "
+            f"fppo-jax (checkpoint format {written!r}; this one reads format {FORMAT}). It is "
+            "intact and was left as it is: resume it with the fppo-jax that wrote it, or use "
+            "another checkpoint directory"
+        )
 
 
 @dataclasses.dataclass
@@ -130,6 +156,7 @@ def open_checkpoints(
                 "to continue that run, or choose another directory"
             )
         if record is not None:
+            check_format(record, f"the newest checkpoint in {checkpoints.directory}")
             check_same_run(record, kind, run_config, checkpoints.directory)
     except Exception:
         checkpoints.close()
@@ -237,6 +264,11 @@ class Checkpoints:
         for step in reversed(self.steps()):
             try:
                 record = self._read(step, record=ocp.args.JsonRestore()).record
+            except Exception as error:  # an unreadable record is damage
+                self._set_aside(step, error)
+                continue
+            check_format(record, f"checkpoint at step {step} in {self.directory}")
+            try:
                 names = ["state", "curves"] + (["policy"] if record["policy"] else [])
                 restore = {name: ocp.args.StandardRestore() for name in names}
                 restore["state"] = ocp.args.StandardRestore(abstract)
@@ -297,6 +329,7 @@ class Checkpoints:
             arrays["policy"] = jax.device_get(policy.arrays())
         record = {
             **record,
+            "format": FORMAT,
             "policy": policy.describe() if policy is not None else None,
             "digests": {name: tree_digest(value) for name, value in arrays.items()},
         }
@@ -315,16 +348,16 @@ class Checkpoints:
         for step in reversed(self.steps()):
             try:
                 record = self._read(step, record=ocp.args.JsonRestore()).record
+            except Exception as error:  # try the previous one
+                self._warn_unreadable(step, error)
+                continue
+            check_format(record, f"checkpoint at step {step} in {self.directory}")
+            try:
                 if record.get("policy") is not None:
                     arrays = self._read(step, policy=ocp.args.StandardRestore()).policy
                     _verify("policy", arrays, record)
             except Exception as error:  # try the previous one
-                warnings.warn(
-                    f"checkpoint at step {step} in {self.directory} could not be read "
-                    f"({type(error).__name__}: {first_line(error)}); trying the previous one",
-                    DamagedCheckpoint,
-                    stacklevel=2,
-                )
+                self._warn_unreadable(step, error)
                 continue
             if record.get("policy") is None:
                 raise InvalidInput(
@@ -333,6 +366,14 @@ class Checkpoints:
                 )
             return Policy.from_parts(record["policy"], arrays), record
         raise MissingFile(f"no readable checkpoint in {self.directory}")
+
+    def _warn_unreadable(self, step: int, error: Exception) -> None:
+        warnings.warn(
+            f"checkpoint at step {step} in {self.directory} could not be read "
+            f"({type(error).__name__}: {first_line(error)}); trying the previous one",
+            DamagedCheckpoint,
+            stacklevel=3,
+        )
 
     def _read(self, step: int, **items: Any) -> Any:
         _ReadsLeftBehind.quieten()

@@ -396,7 +396,9 @@ def spearman(doses: np.ndarray, scores: np.ndarray, axis: int = -1) -> np.ndarra
         return cast(np.ndarray, score_ranks @ dose_ranks / spread)
 
 
-def _dose_runs(doses: Sequence[float], groups: Sequence[np.ndarray]) -> tuple[list[np.ndarray], np.ndarray]:
+def _dose_runs(
+    doses: Sequence[float], groups: Sequence[np.ndarray]
+) -> tuple[list[np.ndarray], np.ndarray]:
     """Each dose's finite scores, and the dose of every one of them in order."""
     if len(doses) != len(groups) or len(set(doses)) < 2:
         raise InvalidInput(

@@ -11,8 +11,8 @@ step into a temporary directory and renames it once complete, so a killed proces
 checkpoints only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
 checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old
 checkpoints are deleted only after a newer one is complete. Every record names the layout it was
-written in (:data:`FORMAT`): a checkpoint of another layout is refused as incompatible, and left
-where it is, never taken for damage.
+written in (:data:`FORMAT`): a checkpoint of another layout is refused as
+:class:`~fppo_jax.files.IncompatibleFormat`, and left where it is, never taken for damage.
 
 Saved policies, a trained policy on its own, are :mod:`fppo_jax.saved_policy`'s.
 """
@@ -36,6 +36,7 @@ from fppo_jax.errors import FppoError, InvalidInput, MissingFile
 from fppo_jax.files import (
     DirectoryBusy,
     DirectoryLock,
+    check_format,
     first_line,
     json_value,
     tree_digest,
@@ -47,9 +48,8 @@ if TYPE_CHECKING:
     import orbax.checkpoint as ocp
 
 
-# The layout of a checkpoint's items and record. Raise it when a change makes checkpoints that
-# the previous code cannot read, or that this code cannot read from it; records written before
-# it was recorded have the first layout.
+# The layout of a checkpoint's items and record (files.check_format). Raise it when a change
+# makes checkpoints that the previous code cannot read, or that this code cannot read from it.
 FORMAT = 1
 
 
@@ -64,24 +64,6 @@ class CheckpointsUnavailable(FppoError, RuntimeError):
 
 class ConfigMismatch(InvalidInput):
     """A checkpoint belongs to a run with a different configuration."""
-
-
-class IncompatibleCheckpoint(InvalidInput):
-    """A checkpoint was written in another layout (:data:`FORMAT`) than this code reads."""
-
-
-def check_format(record: dict[str, Any], checkpoint: str) -> None:
-    """Raise :class:`IncompatibleCheckpoint` unless the `record` of `checkpoint` (its words:
-    "checkpoint at step 4 in …") is in the layout this code reads (:data:`FORMAT`)."""
-    written = record.get("format", 1)
-    if written != FORMAT:
-        which = "a newer" if isinstance(written, int) and written > FORMAT else "another"
-        raise IncompatibleCheckpoint(
-            f"{checkpoint} was written by {which} version of "
-            f"fppo-jax (checkpoint format {written!r}; this one reads format {FORMAT}). It is "
-            "intact and was left as it is: resume it with the fppo-jax that wrote it, or use "
-            "another checkpoint directory"
-        )
 
 
 @dataclasses.dataclass
@@ -156,7 +138,7 @@ def open_checkpoints(
                 "to continue that run, or choose another directory"
             )
         if record is not None:
-            check_format(record, f"the newest checkpoint in {checkpoints.directory}")
+            check_format(record, f"the newest checkpoint in {checkpoints.directory}", FORMAT)
             check_same_run(record, kind, run_config, checkpoints.directory)
     except Exception:
         checkpoints.close()
@@ -267,7 +249,7 @@ class Checkpoints:
             except Exception as error:  # an unreadable record is damage
                 self._set_aside(step, error)
                 continue
-            check_format(record, f"checkpoint at step {step} in {self.directory}")
+            check_format(record, f"checkpoint at step {step} in {self.directory}", FORMAT)
             try:
                 names = ["state", "curves"] + (["policy"] if record["policy"] else [])
                 restore = {name: ocp.args.StandardRestore() for name in names}
@@ -351,7 +333,7 @@ class Checkpoints:
             except Exception as error:  # try the previous one
                 self._warn_unreadable(step, error)
                 continue
-            check_format(record, f"checkpoint at step {step} in {self.directory}")
+            check_format(record, f"checkpoint at step {step} in {self.directory}", FORMAT)
             try:
                 if record.get("policy") is not None:
                     arrays = self._read(step, policy=ocp.args.StandardRestore()).policy

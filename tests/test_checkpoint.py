@@ -20,7 +20,7 @@ import fppo_jax
 from fppo_jax import (
     ConfigMismatch,
     DamagedCheckpoint,
-    IncompatibleCheckpoint,
+    IncompatibleFormat,
     TrainingDiverged,
     checkpoint,
     load_policy,
@@ -370,15 +370,15 @@ def test_a_checkpoint_of_another_format_is_refused_as_incompatible_and_left_as_i
     train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
     monkeypatch.undo()
     before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
-    incompatible = r"newer version of fppo-jax \(checkpoint format 2; this one reads format 1\)"
+    incompatible = r"newer version of fppo-jax \(format 2; this one reads format 1\)"
     with warnings.catch_warnings():
         warnings.simplefilter("error", DamagedCheckpoint)  # not damage: nothing set aside
-        with pytest.raises(IncompatibleCheckpoint, match=rf"newest checkpoint in .*{incompatible}"):
+        with pytest.raises(IncompatibleFormat, match=rf"newest checkpoint in .*{incompatible}"):
             train(**run, checkpoint_dir=tmp_path, resume=True, checkpoint_every=2)
-        with pytest.raises(IncompatibleCheckpoint, match=rf"step 4 in .*{incompatible}"):
+        with pytest.raises(IncompatibleFormat, match=rf"step 4 in .*{incompatible}"):
             load_policy(tmp_path)
         like = train(**{**run, "total_steps": 128}).state
-        with pytest.raises(IncompatibleCheckpoint, match=rf"step 4 in .*{incompatible}"):
+        with pytest.raises(IncompatibleFormat, match=rf"step 4 in .*{incompatible}"):
             Checkpoints(tmp_path).restore(like)
     assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == before
     assert not (tmp_path / "damaged").exists()

@@ -2,27 +2,33 @@
 recorded seed-study runs, with the plan's fixed seeds, test and family.
 
     python experiments/planned_verdict.py plans/spo-dpo.json    # results/spo-dpo.md
+    python experiments/planned_verdict.py plans/baseline-shape.json
     python experiments/planned_verdict.py plans/spo-dpo.json --results /tmp/smoke --output /tmp/v.md
 
-Reads the plan (its baseline, candidates and tasks), merges every part recorded under
-<results>/study/<task>/paper/ that ran one of its variants (the baseline's are the seed study's
-own, same seeds), and writes results/<plan's name>.md (or --output). The plan's seeds are 50 per
-variant on the classic tasks and 20 on MuJoCo; until every comparison has them, no verdict is
-written: the command names what is missing and exits with 1, since the planned test is over the
-whole family.
+Reads the plan (its baseline, candidates and tasks) and writes results/<plan's name>.md (or
+--output). The baseline's runs are the seed study's, recorded under <results>/study/<task>/paper/.
+The candidates' are there too (spo-dpo), or, for a plan that trains them at its own
+``settings`` (baseline-shape: PPO at 1 × 2,048), in the plan's own parts, recorded by
+``study.py --plan`` under <results>/<plan's name>/<task>/paper/; the baseline's runs are then
+checked to have the rollout shape the plan names. The plan's seeds are 0–49 on the classic tasks
+and 0–19 on MuJoCo; until every comparison has them, no verdict is written: the command names
+what is missing and exits with 1, since the planned test is over the whole family.
 
 Per comparison: Mann–Whitney's test of P(candidate > baseline) = ½ on final returns, Holm's
 step-down adjustment over the family (a *Holm p* below 0.05 is a difference that survives the
 number of comparisons), P(candidate > baseline) and the IQM difference with 95% percentile
-bootstrap intervals, and the relative effects that interval rules out.
+bootstrap intervals, and the relative effects that interval rules out. On HalfCheetah, whose
+final returns split into two clusters, each arm's share of runs in the high one.
 """
 
 from __future__ import annotations
 
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from common import (
     CLASSIC_TASKS,
     RESULTS,
@@ -33,7 +39,7 @@ from common import (
     refuse_to_replace,
     write_result,
 )
-from verdict import by_variant, interval_text, outcome, run_counts
+from verdict import by_variant, interval_text, outcome
 
 from fppo_jax import SweepResult, merge, statistics
 from fppo_jax.envs import MUJOCO_TASKS
@@ -42,53 +48,110 @@ from fppo_jax.study_report import ruled_out
 EXPERIMENTS = Path(__file__).resolve().parent
 SEEDS = {**dict.fromkeys(CLASSIC_TASKS, 50), **dict.fromkeys(MUJOCO_TASKS, 20)}
 FAMILY_ERROR = 0.05
+HIGH_CLUSTER = {"halfcheetah": 3000.0}  # its final returns split there (plans/baseline-shape.json)
 
 
-def recorded(results: Path, task: str, variants: set[str]) -> SweepResult | None:
-    """Every part of `task` under the paper protocol that ran one of `variants`, merged."""
+@dataclass
+class Arm:
+    """One side of a comparison on one task: the scores of its runs at the plan's seeds (those
+    that did not diverge), and how many runs it has there, diverged ones included."""
+
+    final: np.ndarray
+    auc: np.ndarray
+    runs: int
+
+
+def recorded(folder: Path, task: str, variants: set[str]) -> SweepResult | None:
+    """Every part of `task` under the paper protocol in `folder` that ran one of `variants`,
+    merged."""
     parts = [
         SweepResult.read(record.parent)
-        for record in sorted((results / "study" / task / "paper").glob(f"*/{RUN_RECORD}"))
+        for record in sorted((folder / task / "paper").glob(f"*/{RUN_RECORD}"))
     ]
     parts = [p for p in parts if variants & {s["variant"] for s in p.settings}]
     return merge(parts) if parts else None
 
 
-def missing(plan: dict, merged: dict[str, SweepResult | None]) -> list[str]:
+def _shape(settings: dict) -> str:
+    return f" {settings['num_envs']}×{settings['num_steps']}" if "num_envs" in settings else ""
+
+
+def arm_names(plan: dict) -> tuple[str, list[str]]:
+    """The baseline's name and the candidates', with their rollout shapes where the plan sets
+    its own: ``ppo 8×256`` against ``ppo 1×2048``."""
+    own = plan.get("settings", {})
+    baseline = plan["baseline"]["variant"] + (_shape(plan["baseline"]) if own else "")
+    return baseline, [candidate + _shape(own) for candidate in plan["candidates"]]
+
+
+def arm(result: SweepResult | None, variant: str, seeds: int) -> Arm | None:
+    """`variant`'s runs in `result` at seeds 0 to `seeds` − 1, if it has any."""
+    index = {} if result is None else by_variant(result)
+    if result is None or variant not in index:
+        return None
+    planned = [i for i, r in enumerate(result.runs) if r["seed"] < seeds]
+    kept = [i for i in result.setting_runs(index[variant])[0] if i in planned]
+    curves = result.metrics["average_return"][kept]
+    return Arm(
+        final=statistics.endpoint(curves, "final"),
+        auc=statistics.endpoint(curves, "auc"),
+        runs=sum(result.runs[i]["setting"] == index[variant] for i in planned),
+    )
+
+
+def arms(plan: dict, study: Path, own: Path | None, task: str) -> dict[str, Arm | None]:
+    """Each arm of `plan` on `task`, by name (:func:`arm_names`): the baseline from the seed
+    study's parts in `study`, the candidates from there too, or from the plan's `own` parts."""
+    baseline, candidates = arm_names(plan)
+    variant = plan["baseline"]["variant"]
+    studied = recorded(study, task, {variant, *plan["candidates"]})
+    trained = studied if own is None else recorded(own, task, set(plan["candidates"]))
+    if own is not None and studied is not None:
+        recorded_shape = _shape(studied.config)
+        if recorded_shape != _shape(plan["baseline"]):
+            raise SystemExit(
+                f"{task}: the seed study's recorded runs are{recorded_shape}, and the plan's "
+                f"baseline is{_shape(plan['baseline'])}: not the baseline the plan names"
+            )
+    return {
+        baseline: arm(studied, variant, SEEDS[task]),
+        **{
+            name: arm(trained, candidate, SEEDS[task])
+            for name, candidate in zip(candidates, plan["candidates"], strict=True)
+        },
+    }
+
+
+def missing(every: dict[str, dict[str, Arm | None]]) -> list[str]:
     """What the plan needs and the results do not hold yet, a line per task."""
-    variants = (plan["baseline"]["variant"], *plan["candidates"])
     lines = []
-    for task in plan["tasks"]:
-        counts = run_counts(merged[task], variants)
-        short = [f"{v} {n} of {SEEDS[task]}" for v, n in counts.items() if n < SEEDS[task]]
+    for task, by_name in every.items():
+        counts = {name: 0 if a is None else a.runs for name, a in by_name.items()}
+        short = [f"{name} {n} of {SEEDS[task]}" for name, n in counts.items() if n < SEEDS[task]]
         if short:
             lines.append(f"{task}: {', '.join(short)} seeds")
     return lines
 
 
-def comparisons(plan: dict, merged: dict[str, SweepResult]) -> list[dict]:
+def comparisons(plan: dict, every: dict[str, dict[str, Arm]]) -> list[dict]:
     """A row per (task, candidate): the test's raw and Holm-adjusted p and the effects."""
-    baseline = plan["baseline"]["variant"]
+    baseline, candidates = arm_names(plan)
     rows = []
-    for task in plan["tasks"]:
-        result = merged[task]
-        index, final, area = by_variant(result), result.scores("final"), result.scores("auc")
-        base = final[index[baseline]][: SEEDS[task]]
-        for candidate in plan["candidates"]:
-            runs = final[index[candidate]][: SEEDS[task]]
-            on_final = statistics.compare(runs, base)
+    for task, by_name in every.items():
+        base = by_name[baseline]
+        for candidate in candidates:
+            runs = by_name[candidate]
+            on_final = statistics.compare(runs.final, base.final)
             rows.append(
                 {
                     "task": task,
                     "candidate": candidate,
-                    "p": statistics.improvement_test(runs, base),
+                    "p": statistics.improvement_test(runs.final, base.final),
                     "probability": on_final["probability_of_improvement"],
                     "difference": on_final["iqm_difference"],
-                    "baseline_iqm": float(statistics.iqm(base)),
-                    "candidate_iqm": statistics.interval(runs),
-                    "area": statistics.compare(
-                        area[index[candidate]][: SEEDS[task]], area[index[baseline]][: SEEDS[task]]
-                    )["probability_of_improvement"],
+                    "baseline_iqm": float(statistics.iqm(base.final)),
+                    "candidate_iqm": statistics.interval(runs.final),
+                    "area": statistics.compare(runs.auc, base.auc)["probability_of_improvement"],
                 }
             )
     for row, adjusted in zip(rows, statistics.holm([r["p"] for r in rows]), strict=True):
@@ -107,14 +170,43 @@ def decision(row: dict) -> str:
     return "better" if row["probability"][0] > 0.5 else "worse"
 
 
-def report(plan: dict, name: str, rows: list[dict], merged: dict[str, SweepResult]) -> list[str]:
-    baseline = plan["baseline"]["variant"]
+def high_cluster(plan: dict, every: dict[str, dict[str, Arm]]) -> list[str]:
+    """Each arm's share of runs in the high cluster of the tasks whose returns split, with the
+    difference from the baseline's share and its bootstrap interval (descriptive)."""
+    baseline, candidates = arm_names(plan)
+    lines = []
+    for task, level in HIGH_CLUSTER.items():
+        if task not in every:
+            continue
+        high = {name: (a.final > level).astype(float) for name, a in every[task].items()}
+        lines += [
+            "",
+            f"{task}'s final returns split into two clusters: the share of runs above "
+            f"{level:,.0f} (descriptive, not in the family).",
+            "",
+            f"| arm | runs above {level:,.0f} | share − {baseline}'s [95% CI] |",
+            "|---|---|---|",
+            f"| {baseline} | {int(high[baseline].sum())} of {high[baseline].size} | – |",
+        ]
+        for name in candidates:
+            difference = statistics.bootstrap(
+                [high[name], high[baseline]], lambda x, y, axis=-1: x.mean(axis) - y.mean(axis)
+            )
+            lines.append(
+                f"| {name} | {int(high[name].sum())} of {high[name].size} "
+                f"| {interval_text(difference, '.2f')} |"
+            )
+    return lines
+
+
+def report(plan: dict, name: str, rows: list[dict], every: dict[str, dict[str, Arm]]) -> list[str]:
+    baseline, candidates = arm_names(plan)
     lines = [
         *header(f"{plan['question']} The planned verdict"),
         "",
         f"The plan ([`plans/{name}.json`](../plans/{name}.json), written {plan['written']}): "
-        f"{' and '.join(plan['candidates'])} against {baseline}'s recorded runs on "
-        f"{len(plan['tasks'])} tasks, 50 seeds on the classic tasks and 20 on MuJoCo; "
+        f"{' and '.join(candidates)} against {baseline}'s recorded runs on "
+        f"{len(plan['tasks'])} tasks, seeds 0–49 on the classic tasks and 0–19 on MuJoCo; "
         f"{plan['test']}. Endpoint: {plan['primary_endpoint']}. Intervals are 95% percentile "
         "bootstraps (2,000 resamples, seeded); P(X > Y) counts ties as ½.",
         "",
@@ -132,26 +224,22 @@ def report(plan: dict, name: str, rows: list[dict], merged: dict[str, SweepResul
             f"| {ruled_out(row['difference'], row['baseline_iqm'])} "
             f"| {interval_text(row['area'], '.2f')} |"
         )
-    mujoco = [t for t in plan["tasks"] if t in MUJOCO_TASKS]
-    lines += [
-        "",
-        f"Across the {len(mujoco)} MuJoCo tasks (secondary, not in the family): P(> {baseline}) "
-        "on final returns averaged over tasks, with a bootstrap that resamples each task's runs "
-        "among themselves.",
-        "",
-        f"| candidate | mean P(> {baseline}) [95% CI] | the interval says |",
-        "|---|---|---|",
-    ]
-    for candidate in plan["candidates"]:
-        pairs = []
-        for task in mujoco:
-            index, final = by_variant(merged[task]), merged[task].scores("final")
-            pairs.append(
-                (final[index[candidate]][: SEEDS[task]], final[index[baseline]][: SEEDS[task]])
-            )
-        value = statistics.aggregate_improvement(pairs)
-        lines.append(f"| {candidate} | {interval_text(value, '.2f')} | {outcome(value)} |")
-    return lines
+    mujoco = [t for t in every if t in MUJOCO_TASKS]
+    if len(mujoco) > 1:
+        lines += [
+            "",
+            f"Across the {len(mujoco)} MuJoCo tasks (secondary, not in the family): "
+            f"P(> {baseline}) on final returns averaged over tasks, with a bootstrap that "
+            "resamples each task's runs among themselves.",
+            "",
+            f"| candidate | mean P(> {baseline}) [95% CI] | the interval says |",
+            "|---|---|---|",
+        ]
+        for candidate in candidates:
+            pairs = [(every[t][candidate].final, every[t][baseline].final) for t in mujoco]
+            value = statistics.aggregate_improvement(pairs)
+            lines.append(f"| {candidate} | {interval_text(value, '.2f')} | {outcome(value)} |")
+    return lines + high_cluster(plan, every)
 
 
 def main() -> int:
@@ -165,9 +253,9 @@ def main() -> int:
     plan = json.loads(path.read_text())
     out = args.output or RESULTS / f"{path.stem}.md"
     refuse_to_replace([out], args.force, elsewhere="--output FILE")
-    variants = {plan["baseline"]["variant"], *plan["candidates"]}
-    merged = {task: recorded(args.results, task, variants) for task in plan["tasks"]}
-    short = missing(plan, merged)
+    own = args.results / path.stem.replace("-", "_") if "settings" in plan else None
+    every = {task: arms(plan, args.results / "study", own, task) for task in plan["tasks"]}
+    short = missing(every)
     if short:
         print(
             f"no verdict yet: the plan's test is over every comparison, and {len(short)} "
@@ -175,7 +263,10 @@ def main() -> int:
             file=sys.stderr,
         )
         return 1
-    complete = {task: result for task, result in merged.items() if result is not None}
+    complete = {
+        task: {name: a for name, a in by_name.items() if a is not None}
+        for task, by_name in every.items()
+    }
     rows = comparisons(plan, complete)
     write_result(out, report(plan, path.stem, rows, complete))
     print(f"wrote {out}")

@@ -167,15 +167,19 @@ def task_section(
         "",
         f"Against {BASELINE}: P(variant > {BASELINE}) on final returns and on AUC, the "
         "difference in IQM of final returns, and the difference in the paper's statistic "
-        "beside the paper's own gap (all 95% bootstrap CIs); for the planned comparisons, "
+        "beside the paper's own gap (all 95% bootstrap CIs), also each as a share of its own "
+        "PPO's max average return, since the paper's returns and these are on different "
+        "scales; for the planned comparisons, "
         f"the Holm-adjusted p over the {len(adjusted)} of the {protocol} protocol.",
         "",
         "| variant | P(> ppo), final | outcome | Holm p | P(> ppo), AUC | Δ IQM final "
-        "| Δ max average return | paper's Δ | paper's Δ in the CI |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| Δ max average return | paper's Δ | paper's Δ in the CI "
+        "| Δ max average return, share of PPO's | paper's Δ, share of its PPO's | in the CI |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     paper_base = TABLE1[task][PAPER_VARIANTS.index(BASELINE)]
     curves = {v: result.setting_metrics(i)["average_return"] for v, i in index.items()}
+    scale = abs(max_average_return(curves[BASELINE])[0])
     for variant, i in index.items():
         if i == base:
             continue
@@ -184,6 +188,9 @@ def task_section(
         gap = statistics.max_average_difference(curves[variant], curves[BASELINE])
         paper_gap = TABLE1[task][PAPER_VARIANTS.index(variant)] - paper_base
         inside = "yes" if gap[1] <= paper_gap <= gap[2] else "no"
+        share = tuple(g / scale for g in gap)
+        paper_share = paper_gap / abs(paper_base)
+        inside_share = "yes" if share[1] <= paper_share <= share[2] else "no"
         probability = on_final["probability_of_improvement"]
         holm = adjusted.get((task, variant))
         lines.append(
@@ -191,9 +198,16 @@ def task_section(
             f"| {'–' if holm is None else f'{holm:.2f}'} "
             f"| {interval_text(on_area['probability_of_improvement'], '.2f')} "
             f"| {interval_text(on_final['iqm_difference'])} | {interval_text(gap)} "
-            f"| {paper_gap:+.1f} | {inside} |"
+            f"| {paper_gap:+.1f} | {inside} | {percent(share)} | {paper_share:+.0%} "
+            f"| {inside_share} |"
         )
     return [*lines, ""]
+
+
+def percent(values: tuple[float, ...]) -> str:
+    """A share and its interval in percent: ``-5% [-12%, +3%]``."""
+    point, low, high = values
+    return f"{point:+.0%} [{low:+.0%}, {high:+.0%}]"
 
 
 def aggregate_section(results: dict[str, SweepResult]) -> tuple[list[str], dict, dict]:

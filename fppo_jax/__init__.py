@@ -31,7 +31,12 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
 # Where each public name is defined.
 _MODULES = {
     "fppo_jax.api": ("train",),
-    "fppo_jax.checkpoint": ("CheckpointsUnavailable", "ConfigMismatch", "DamagedCheckpoint"),
+    "fppo_jax.checkpoint": (
+        "CheckpointsUnavailable",
+        "ConfigMismatch",
+        "DamagedCheckpoint",
+        "IncompatibleFormat",
+    ),
     "fppo_jax.config": (
         "Hyperparameters",
         "TrainConfig",
@@ -48,6 +53,7 @@ _MODULES = {
         "NotEnoughMemory",
     ),
     "fppo_jax.evaluation": ("evaluate",),
+    "fppo_jax.files": ("IncompatibleFormat",),
     "fppo_jax.objectives": ("VARIANTS", "Objective", "negative_regions", "objective", "stack"),
     "fppo_jax.options": ("Snapshot",),
     "fppo_jax.policy": ("Policy",),
@@ -71,6 +77,7 @@ __all__ = [
     "Environment",
     "FppoError",
     "Hyperparameters",
+    "IncompatibleFormat",
     "InvalidInput",
     "Metrics",
     "MissingFile",

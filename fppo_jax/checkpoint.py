@@ -10,7 +10,9 @@ where it is (:class:`ResumePoint`: the group, the update, the finished groups). 
 step into a temporary directory and renames it once complete, so a killed process leaves whole
 checkpoints only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
 checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old
-checkpoints are deleted only after a newer one is complete.
+checkpoints are deleted only after a newer one is complete. Every record names the layout it was
+written in (:data:`FORMAT`): a checkpoint of another layout is refused as
+:class:`~fppo_jax.files.IncompatibleFormat`, and left where it is, never taken for damage.
 
 Saved policies, a trained policy on its own, are :mod:`fppo_jax.saved_policy`'s.
 """
@@ -34,6 +36,7 @@ from fppo_jax.errors import FppoError, InvalidInput, MissingFile
 from fppo_jax.files import (
     DirectoryBusy,
     DirectoryLock,
+    check_format,
     first_line,
     json_value,
     tree_digest,
@@ -43,6 +46,11 @@ from fppo_jax.policy import Policy
 
 if TYPE_CHECKING:
     import orbax.checkpoint as ocp
+
+
+# The layout of a checkpoint's items and record (files.check_format). Raise it when a change
+# makes checkpoints that the previous code cannot read, or that this code cannot read from it.
+FORMAT = 1
 
 
 class DamagedCheckpoint(UserWarning):
@@ -130,6 +138,7 @@ def open_checkpoints(
                 "to continue that run, or choose another directory"
             )
         if record is not None:
+            check_format(record, f"the newest checkpoint in {checkpoints.directory}", FORMAT)
             check_same_run(record, kind, run_config, checkpoints.directory)
     except Exception:
         checkpoints.close()
@@ -237,6 +246,11 @@ class Checkpoints:
         for step in reversed(self.steps()):
             try:
                 record = self._read(step, record=ocp.args.JsonRestore()).record
+            except Exception as error:  # an unreadable record is damage
+                self._set_aside(step, error)
+                continue
+            check_format(record, f"checkpoint at step {step} in {self.directory}", FORMAT)
+            try:
                 names = ["state", "curves"] + (["policy"] if record["policy"] else [])
                 restore = {name: ocp.args.StandardRestore() for name in names}
                 restore["state"] = ocp.args.StandardRestore(abstract)
@@ -297,6 +311,7 @@ class Checkpoints:
             arrays["policy"] = jax.device_get(policy.arrays())
         record = {
             **record,
+            "format": FORMAT,
             "policy": policy.describe() if policy is not None else None,
             "digests": {name: tree_digest(value) for name, value in arrays.items()},
         }
@@ -315,16 +330,16 @@ class Checkpoints:
         for step in reversed(self.steps()):
             try:
                 record = self._read(step, record=ocp.args.JsonRestore()).record
+            except Exception as error:  # try the previous one
+                self._warn_unreadable(step, error)
+                continue
+            check_format(record, f"checkpoint at step {step} in {self.directory}", FORMAT)
+            try:
                 if record.get("policy") is not None:
                     arrays = self._read(step, policy=ocp.args.StandardRestore()).policy
                     _verify("policy", arrays, record)
             except Exception as error:  # try the previous one
-                warnings.warn(
-                    f"checkpoint at step {step} in {self.directory} could not be read "
-                    f"({type(error).__name__}: {first_line(error)}); trying the previous one",
-                    DamagedCheckpoint,
-                    stacklevel=2,
-                )
+                self._warn_unreadable(step, error)
                 continue
             if record.get("policy") is None:
                 raise InvalidInput(
@@ -333,6 +348,14 @@ class Checkpoints:
                 )
             return Policy.from_parts(record["policy"], arrays), record
         raise MissingFile(f"no readable checkpoint in {self.directory}")
+
+    def _warn_unreadable(self, step: int, error: Exception) -> None:
+        warnings.warn(
+            f"checkpoint at step {step} in {self.directory} could not be read "
+            f"({type(error).__name__}: {first_line(error)}); trying the previous one",
+            DamagedCheckpoint,
+            stacklevel=3,
+        )
 
     def _read(self, step: int, **items: Any) -> Any:
         _ReadsLeftBehind.quieten()

@@ -352,9 +352,9 @@ class _Chunks:
 
     def train(self) -> Outcome:
         # Without checkpoints a signal's default (the end of the process) loses nothing more
-        # than stopping would. Joined processes would each see a signal at another chunk, and
-        # JAX's preemption notifier holds SIGTERM there, set from C where Python cannot see it
-        # to put it back.
+        # than stopping would. Joined processes would each see a signal at another chunk: there
+        # JAX's preemption service holds SIGTERM (from C, where Python cannot see it to put it
+        # back) and names the chunk at which all stop together (:func:`_preempted`).
         catch = self.options.checkpoint_dir is not None and not jax.distributed.is_initialized()
         with _signals_caught(STOP_SIGNALS if catch else ()) as self.signalled:
             return self._train_groups()
@@ -380,7 +380,7 @@ class _Chunks:
             resumed_from,
         )
         self._report(first_group, resumed_from, None)
-        state, stopped_at = None, None
+        state, stopped_at, chunks = None, None, 0
         groups = -(-self.plan.num_runs // self.size)
         for group in range(first_group, groups):
             keys, hps = _group(self.plan, group, self.size)
@@ -403,10 +403,13 @@ class _Chunks:
                 if stop:
                     stopped_at = update
                     break
+                chunks += 1
+                if self.options.checkpoint_dir is not None and _preempted(chunks):
+                    self.signalled.append(signal.SIGTERM)
                 if self.signalled and (update < self.num_updates or group < groups - 1):
-                    # Signals are caught only in a run with checkpoints, in one process.
-                    assert self.checkpoints is not None and self.options.checkpoint_dir is not None
-                    self.checkpoints.wait()
+                    assert self.options.checkpoint_dir is not None  # else nothing is caught
+                    if self.checkpoints is not None:  # the process that writes them
+                        self.checkpoints.wait()
                     raise StoppedBySignal(self.signalled[0], update, self.options.checkpoint_dir)
             kept = slice(0, min(self.size, self.plan.num_runs - group * self.size))
             metrics = concatenate(rows)
@@ -516,6 +519,18 @@ class _Chunks:
         if self.report:
             returns = None if metrics is None else metrics["average_return"][..., -1]
             self.report(self.counter.progress(group, update, returns))
+
+
+def _preempted(chunk: int) -> bool:
+    """Whether joined processes are at the chunk where all of them stop for a preemption: JAX's
+    preemption service catches SIGTERM in any one of them, and names the next chunk that every
+    process reaches (each calls this after every chunk, counting from 1 since it started)."""
+    service = jax.config.jax_enable_preemption_service  # type: ignore[attr-defined]
+    if not (jax.distributed.is_initialized() and service):
+        return False
+    from jax.experimental import multihost_utils
+
+    return bool(multihost_utils.reached_preemption_sync_point(chunk))
 
 
 @contextlib.contextmanager

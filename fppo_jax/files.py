@@ -44,6 +44,25 @@ class DirectoryLost(InvalidInput):
     """A directory a run writes in vanished, or was replaced, while the run was writing."""
 
 
+class IncompatibleFormat(InvalidInput):
+    """A checkpoint or saved policy was written in another layout than this code reads."""
+
+
+def check_format(record: dict[str, Any], what: str, reads: int) -> None:
+    """Raise :class:`IncompatibleFormat` unless `record` (of `what`, in words: "checkpoint at
+    step 4 in …") is in layout `reads`; a record without a ``format`` is in the first layout,
+    written before layouts were recorded. Such a file is intact, so it is refused and left as it
+    is, never taken for damage."""
+    written = record.get("format", 1)
+    if written != reads:
+        which = "a newer" if isinstance(written, int) and written > reads else "another"
+        raise IncompatibleFormat(
+            f"{what} was written by {which} version of fppo-jax (format {written!r}; this one "
+            f"reads format {reads}). It is intact and was left as it is: read it with the "
+            "fppo-jax that wrote it"
+        )
+
+
 class DirectoryLock:
     """The one writer of `directory` (holding ``.lock`` in it, ``flock``-ed), from before the
     first file is written until :meth:`release`; the operating system drops the lock when its

@@ -28,6 +28,7 @@ from typing import Any, cast
 import numpy as np
 
 POLICY_FILE, ARRAYS_FILE = "policy.json", "policy.npz"
+FORMAT = 1
 _NETWORK = "params/params/MLP_0"
 
 
@@ -78,6 +79,11 @@ class NumpyPolicy:
         """The policy saved in `directory` (``policy.json`` and ``policy.npz``)."""
         directory = Path(directory)
         description = _read(directory / POLICY_FILE, lambda path: json.loads(path.read_text()))
+        if description.get("format", 1) != FORMAT:  # the layout fppo_jax.saved_policy writes
+            raise ValueError(
+                f"{directory / POLICY_FILE} is in format {description['format']!r}; this file "
+                f"reads format {FORMAT}: use the numpy_policy.py of the fppo-jax that saved it"
+            )
         arrays = _read(directory / ARRAYS_FILE, _arrays)
         if digest(arrays) != description["digest"]:
             raise ValueError(

@@ -1,7 +1,8 @@
 """A trained policy saved on its own: ``<directory>/policy.json`` (its description, the run's
 configuration and a SHA-256 digest of its arrays) and ``<directory>/policy.npz`` (the arrays,
-named by their paths), each written to a temporary name and renamed. :func:`load_policy` reads
-a saved policy, or the policy of a run's newest readable checkpoint
+named by their paths), each written to a temporary name and renamed; ``policy.json`` names its
+layout (:data:`FORMAT`), and one of another layout is refused, not taken for damage.
+:func:`load_policy` reads a saved policy, or the policy of a run's newest readable checkpoint
 (:mod:`fppo_jax.checkpoint`).
 """
 
@@ -18,10 +19,12 @@ from flax.traverse_util import flatten_dict, unflatten_dict
 
 from fppo_jax.checkpoint import Checkpoints
 from fppo_jax.errors import InvalidInput, MissingFile
-from fppo_jax.files import first_line, json_value, tree_digest, write_atomically
+from fppo_jax.files import check_format, first_line, json_value, tree_digest, write_atomically
 from fppo_jax.policy import Policy
 
 POLICY_FILE, ARRAYS_FILE = "policy.json", "policy.npz"
+# The layout of policy.json and policy.npz (files.check_format; numpy_policy reads it too).
+FORMAT = 1
 
 
 def save_policy(
@@ -43,6 +46,7 @@ def save_policy(
     saved = {
         **record,
         "kind": "policy",
+        "format": FORMAT,
         "policy": policy.describe(),
         "digest": tree_digest(arrays),
     }
@@ -103,14 +107,21 @@ def read_policy(directory: str | Path) -> tuple[Policy, dict[str, Any]]:
 def _read_saved_policy(directory: Path) -> tuple[Policy, dict[str, Any]]:
     try:
         saved = json.loads((directory / POLICY_FILE).read_text())
+    except Exception as error:
+        raise _damaged(directory, error) from error
+    check_format(saved, f"the saved policy in {directory}", FORMAT)
+    try:
         with np.load(directory / ARRAYS_FILE, allow_pickle=False) as npz:
             arrays = dict(npz)
         if tree_digest(arrays) != saved["digest"]:
             raise InvalidInput("its arrays do not match the digest written with them")
         policy = Policy.from_parts(saved["policy"], unflatten_dict(arrays, sep="/"))
     except Exception as error:  # any failure to read back is damage
-        raise InvalidInput(
-            f"the saved policy in {directory} is damaged ({type(error).__name__}: "
-            f"{first_line(error)})"
-        ) from error
+        raise _damaged(directory, error) from error
     return policy, saved
+
+
+def _damaged(directory: Path, error: Exception) -> InvalidInput:
+    return InvalidInput(
+        f"the saved policy in {directory} is damaged ({type(error).__name__}: {first_line(error)})"
+    )

@@ -166,6 +166,25 @@ def boundaries(alpha: float, fractions: tuple[float, ...]) -> tuple[float, ...]:
     return tuple(critical)
 
 
+def repeated_confidence(design: Design, comparisons: int, seeds: int) -> float:
+    """The confidence level of the repeated confidence interval at the look that holds `seeds`
+    seeds of each setting (Jennison and Turnbull 1989; 2000, ch. 9): 2Φ(c_k) − 1, for the
+    boundary c_k of level α/m, m = `comparisons`. Intervals at these levels hold every
+    comparison's true value at every look at once with probability at least 1 − α (as far as
+    the normal approximation holds), so the one at the look where a comparison stopped stays
+    valid whatever the rule made of it: adjusted for stopping early and for the number of
+    comparisons. Bonferroni's α/m makes them wider than Holm's decisions need, so one may hold
+    ½ where its comparison was decided. 1.0 at a look that spends no error (no interval)."""
+    from scipy import special
+
+    looks = design.looks
+    if seeds not in looks:
+        raise InvalidInput(f"{seeds} seeds is not one of the design's looks {looks}")
+    fractions = tuple(n / design.max_seeds for n in looks)
+    critical = boundaries(design.level / comparisons, fractions)[looks.index(seeds)]
+    return float(2 * special.ndtr(critical) - 1)
+
+
 def mann_whitney_z(candidate: np.ndarray, baseline: np.ndarray) -> float:
     """The standardised Mann–Whitney statistic of `candidate`'s scores over `baseline`'s, with
     the tie correction; 0 when every score is tied (no evidence either way). A score of −inf

@@ -13,7 +13,11 @@ precipice* (NeurIPS), whose library, rliable, these reproduce on ``scipy.stats``
 - a family of comparisons is tested with the Mann–Whitney U test of each probability of
   improvement against ½, its p-values adjusted by Holm's step-down method;
 - across tasks, scores are first normalised per task, and resampling is **stratified**: each
-  task's runs are resampled among themselves (scipy's bootstrap of several independent samples).
+  task's runs are resampled among themselves (scipy's bootstrap of several independent samples);
+- a dose-response (runs at several strengths of one hyperparameter) is summarised by **Spearman's
+  rank correlation** ρ between dose and score over every run, with a bootstrap interval that
+  resamples each dose's runs among themselves, and tested by a **permutation test** of ρ = 0
+  (the doses relabelled at random).
 
 Spreads are sample standard deviations (``ddof=1``). Every interval is seeded, so it repeats.
 """
@@ -374,3 +378,73 @@ def performance_profile(scores: np.ndarray, thresholds: np.ndarray) -> np.ndarra
     return cast(
         np.ndarray, np.mean(scores[None, :] > np.asarray(thresholds, float)[:, None], axis=1)
     )
+
+
+def spearman(doses: np.ndarray, scores: np.ndarray, axis: int = -1) -> np.ndarray:
+    """Spearman's rank correlation between `doses` [run] and `scores` [..., run] along `axis`:
+    the Pearson correlation of their ranks, ties given their mid-rank. NaN where the scores are
+    all tied (no ranking to correlate)."""
+    from scipy import stats
+
+    scores = np.moveaxis(np.asarray(scores, float), axis, -1)
+    dose_ranks = stats.rankdata(np.asarray(doses, float))
+    score_ranks = stats.rankdata(scores, axis=-1)
+    dose_ranks = dose_ranks - dose_ranks.mean()
+    score_ranks = score_ranks - score_ranks.mean(axis=-1, keepdims=True)
+    spread = np.sqrt(np.sum(score_ranks**2, axis=-1) * np.sum(dose_ranks**2))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return cast(np.ndarray, score_ranks @ dose_ranks / spread)
+
+
+def _dose_runs(
+    doses: Sequence[float], groups: Sequence[np.ndarray]
+) -> tuple[list[np.ndarray], np.ndarray]:
+    """Each dose's finite scores, and the dose of every one of them in order."""
+    if len(doses) != len(groups) or len(set(doses)) < 2:
+        raise InvalidInput(
+            f"a dose-response needs one group of scores per dose and two doses or more, got "
+            f"{len(groups)} group(s) for doses {list(doses)}"
+        )
+    kept = [_finite(g) for g in groups]
+    return kept, np.repeat(np.asarray(doses, float), [g.size for g in kept])
+
+
+def dose_trend(
+    doses: Sequence[float],
+    groups: Sequence[np.ndarray],
+    *,
+    confidence: float = CONFIDENCE,
+    resamples: int = RESAMPLES,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """Spearman's ρ between dose and score over the runs of every dose (`groups[i]`: the scores
+    of the runs at `doses[i]`), with a percentile bootstrap interval that resamples each dose's
+    runs among themselves: ``(ρ, low, high)``. ρ > 0: more dose, higher scores."""
+    kept, labels = _dose_runs(doses, groups)
+
+    def rho(*samples: np.ndarray, axis: int = -1) -> np.ndarray:
+        return spearman(labels, np.concatenate(samples, axis=axis), axis)
+
+    return bootstrap(kept, rho, confidence=confidence, resamples=resamples, seed=seed)
+
+
+def trend_test(
+    doses: Sequence[float],
+    groups: Sequence[np.ndarray],
+    *,
+    permutations: int = 10_000,
+    seed: int = 0,
+) -> float:
+    """The two-sided p-value of no monotone trend, ρ = 0 (:func:`dose_trend`), by permutation:
+    the share of `permutations` seeded relabellings of the runs' doses whose |ρ| is at least the
+    observed, the observed labelling counted among them ((1 + count) / (1 + permutations), so
+    never 0). Exact in its error rate whatever the scores' distribution."""
+    kept, labels = _dose_runs(doses, groups)
+    scores = np.concatenate(kept)
+    observed = spearman(labels, scores)
+    if not np.isfinite(observed):  # every score tied: no evidence of a trend
+        return 1.0
+    shuffled = np.random.default_rng(seed).permuted(np.tile(scores, (permutations, 1)), axis=-1)
+    # The same ρ computed in another order may differ in its last bit: compare with a tolerance.
+    extreme = np.abs(spearman(labels, shuffled)) >= abs(observed) - 1e-12
+    return float((1 + np.sum(extreme)) / (1 + permutations))

@@ -1,8 +1,9 @@
 """A study's ``report.md`` (:mod:`fppo_jax.study`): per task each comparison's decision, the
 seeds it used and why it stopped, its probability of improvement and IQM difference with
 bootstrap intervals (:mod:`fppo_jax.statistics`), and the relative effects the interval
-rules out, on the primary endpoint and then on the secondary ones; and how soon each setting's
-runs reach shares of the baseline's final IQM."""
+rules out, on the primary endpoint (with its repeated confidence interval, adjusted for stopping
+early) and then on the secondary ones; and how soon each setting's runs reach shares of the
+baseline's final IQM."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import numpy as np
 
 from fppo_jax import statistics
 from fppo_jax.files import write_atomically
+from fppo_jax.sequential import Design, repeated_confidence
 
 # A task's scores: variant → endpoint (or steps_name(share)) → one per run, in seed order.
 Scores = dict[str, dict[str, np.ndarray]]
@@ -56,8 +58,14 @@ def write_report(
         f"Intervals are {statistics.CONFIDENCE:.0%} percentile bootstrap intervals over the runs "
         "a decision used (the first seeds, the same for both settings). They describe those "
         "runs: unlike the decision, they are not adjusted for stopping early or for the number "
-        "of comparisons. A run that diverged or finished no episode ranks below every other in "
-        "the test and is left out of the intervals.",
+        "of comparisons. The primary endpoint's probability of improvement is also given with "
+        "its repeated confidence interval (Jennison and Turnbull), a percentile bootstrap at "
+        "the level the look's boundary sets, 2Φ(c) − 1 for the boundary c of level α over the "
+        "number of comparisons: together these hold every comparison's true value at every "
+        f"look with probability at least {1 - plan['level']:.0%}, so they are adjusted for "
+        "stopping early and for the comparisons made (and, being Bonferroni's, may hold ½ "
+        "where Holm's procedure decided). A run that diverged or finished no episode ranks "
+        "below every other in the test and is left out of the intervals.",
     ]
     for task in plan["tasks"]:
         lines += ["", f"## {task}"]
@@ -66,19 +74,23 @@ def write_report(
             continue
         task_rows = [row for row in rows if row["task"] == task]
         for endpoint in (plan["primary_endpoint"], *plan["secondary_endpoints"]):
-            primary = endpoint == plan["primary_endpoint"]
-            lines += ["", *_table(scores[task], task_rows, endpoint, primary)]
+            adjusted = plan if endpoint == plan["primary_endpoint"] else None
+            lines += ["", *_table(scores[task], task_rows, endpoint, adjusted)]
         lines += ["", *_speed_table(scores[task], plan)]
     write_atomically(path, ("\n".join(lines) + "\n").encode())
 
 
 def _table(
-    scores: Scores, rows: Sequence[dict[str, Any]], endpoint: str, primary: bool
+    scores: Scores, rows: Sequence[dict[str, Any]], endpoint: str, plan: dict[str, Any] | None
 ) -> list[str]:
+    """A row per comparison on `endpoint`; the primary one's (given its `plan`) with the
+    decision and the repeated confidence interval."""
     baseline = rows[0]["baseline"]
-    if primary:
+    if plan is not None:
         head = f"Primary endpoint, {endpoint}: decided by the test."
         columns = ["candidate", "decision", "seeds", "why it stopped"]
+        columns.append(f"P(candidate > {baseline}), repeated CI")
+        design = Design(plan["group_size"], plan["max_seeds"], plan["level"])
     else:
         head = f"Secondary endpoint, {endpoint}: reported, not tested."
         columns = ["candidate", "seeds"]
@@ -97,8 +109,9 @@ def _table(
         level = statistics.interval(reference)
         probability, difference = compared["probability_of_improvement"], compared["iqm_difference"]
         cells = [row["candidate"]]
-        if primary:
+        if plan is not None:
             cells += [row["decision"], str(seeds), row["reason"]]
+            cells.append(_repeated_interval(candidate, reference, design, plan, seeds))
         else:
             cells += [str(seeds)]
         cells += [
@@ -109,6 +122,24 @@ def _table(
         ]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
+
+
+def _repeated_interval(
+    candidate: np.ndarray,
+    reference: np.ndarray,
+    design: Design,
+    plan: dict[str, Any],
+    seeds: int,
+) -> str:
+    """The probability of improvement with its repeated confidence interval at the look of
+    `seeds` seeds; "–" between looks, or at a look that spends no error."""
+    if seeds not in design.looks:
+        return "–"
+    confidence = repeated_confidence(design, len(plan["comparisons"]), seeds)
+    if confidence >= 1:
+        return "–"
+    repeated = statistics.compare(candidate, reference, confidence=confidence)
+    return _interval(repeated["probability_of_improvement"], ".2f")
 
 
 def _speed_table(scores: Scores, plan: dict[str, Any]) -> list[str]:

@@ -4,6 +4,7 @@ runtime are fixed when JAX starts).
     python tests/distributed_workers.py devices OUT.npz   # with 4 CPU devices
     python tests/distributed_workers.py process OUT.npz   # one of a jax.distributed group
     CHECKPOINTS=DIR [KILL_AT=3] python tests/distributed_workers.py process OUT.npz
+    CHECKPOINTS=DIR TERM_AT=2 python tests/distributed_workers.py process OUT.npz
 """
 
 import os
@@ -62,7 +63,9 @@ def process(out: str) -> None:
     """Join the group described by the JAX_* variables, train, save the parameters.
 
     With CHECKPOINTS set, checkpoint every update there and resume from what is there; with
-    KILL_AT set too, kill this process (SIGKILL) once that update is done."""
+    KILL_AT set too, kill this process (SIGKILL) once that update is done; with TERM_AT, send
+    process 1 SIGTERM once that update is done (as a cluster does to preempt a job), and save
+    the update at which training stopped."""
     from fppo_jax import distributed
 
     distributed.initialize()
@@ -82,6 +85,19 @@ def process(out: str) -> None:
                 os.kill(os.getpid(), signal.SIGKILL)
 
         checkpoints["callback"] = kill
+    if "TERM_AT" in os.environ:
+        term_at = int(os.environ["TERM_AT"])
+
+        def preempt(snapshot):
+            if snapshot.update == term_at and jax.process_index() == 1:
+                os.kill(os.getpid(), signal.SIGTERM)
+
+        checkpoints["callback"] = preempt
+        try:
+            fppo_jax.train("cartpole", "fppo-lp", total_steps=256 * 6, **SMALL, **checkpoints)
+        except fppo_jax.StoppedBySignal as stopped:
+            np.savez(out, stopped_at=stopped.update, signal=int(stopped.signal))
+        return
     run = fppo_jax.train("cartpole", "fppo-lp", total_steps=256 * 6, **SMALL, **checkpoints)
     leaves = flat(run.params)
     np.savez(

@@ -7,8 +7,10 @@ import json
 import numpy as np
 import pytest
 from own_surrogates import frozen
+from scipy import stats
 
 import fppo_jax
+from fppo_jax import statistics
 from fppo_jax.cli import main
 from fppo_jax.results import SweepResult
 from fppo_jax.sequential import Design, decide
@@ -47,6 +49,19 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
     curves = (group_1 / "curves.csv").read_bytes()
     report = (output / "report.md").read_text()
     assert "**Not finished**" in report and "| frozen | worse | 8 | z = -" in report
+    # The repeated CI at the first look, at the level its boundary of α/2 sets, is wider than
+    # the unadjusted interval beside it.
+    level = 2 * stats.norm.cdf(plan["boundaries_if_none_decided"][0]) - 1
+    for variant in ("frozen", "fppo-lp"):
+        row = next(r for r in report.splitlines() if r.startswith(f"| {variant} | "))
+        repeated, unadjusted = row.split(" | ")[4:6]
+        scores = [run_scores(first.results["cartpole"], v, "final")[:8] for v in (variant, "ppo")]
+        repeat = statistics.compare(*scores, confidence=level)["probability_of_improvement"]
+        plain = statistics.compare(*scores)["probability_of_improvement"]
+        assert repeated == "{:.2f} [{:.2f}, {:.2f}]".format(*repeat)
+        assert unadjusted == "{:.2f} [{:.2f}, {:.2f}]".format(*plain)
+        assert repeat[1] <= plain[1] and plain[2] <= repeat[2]
+    assert level > 0.99 and repeat[2] - repeat[1] > plain[2] - plain[1]  # fppo-lp's is wider
 
     with pytest.raises(ValueError, match="planned with max_seeds = 16, not 24"):
         fppo_jax.study("cartpole", candidates, "ppo", **{**settings, "max_seeds": 24})

@@ -1,4 +1,5 @@
 import csv
+import json
 import os
 import shutil
 import signal
@@ -6,6 +7,7 @@ import subprocess
 import sys
 import textwrap
 import time
+import warnings
 from pathlib import Path
 
 import jax
@@ -15,7 +17,15 @@ import pytest
 from helpers import NaNRewardAfter, assert_bitwise_equal
 
 import fppo_jax
-from fppo_jax import ConfigMismatch, DamagedCheckpoint, TrainingDiverged, load_policy, train
+from fppo_jax import (
+    ConfigMismatch,
+    DamagedCheckpoint,
+    IncompatibleFormat,
+    TrainingDiverged,
+    checkpoint,
+    load_policy,
+    train,
+)
 from fppo_jax.checkpoint import Checkpoints
 from fppo_jax.cli import main
 from fppo_jax.trainer import METRICS
@@ -350,3 +360,36 @@ def test_checkpoints_leave_the_process_s_logging_and_hooks_as_they_were(tmp_path
     assert done.returncode == 0, done.stderr
     assert "the user's own absl warning" in done.stderr
     assert "orbax" not in done.stderr.lower(), done.stderr
+
+
+def test_a_checkpoint_of_another_format_is_refused_as_incompatible_and_left_as_it_is(
+    tmp_path, monkeypatch
+):
+    run = {**RUN, "total_steps": 128 * 4}
+    monkeypatch.setattr(checkpoint, "FORMAT", 2)  # as a newer fppo-jax would write it
+    train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
+    monkeypatch.undo()
+    before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    incompatible = r"newer version of fppo-jax \(format 2; this one reads format 1\)"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DamagedCheckpoint)  # not damage: nothing set aside
+        with pytest.raises(IncompatibleFormat, match=rf"newest checkpoint in .*{incompatible}"):
+            train(**run, checkpoint_dir=tmp_path, resume=True, checkpoint_every=2)
+        with pytest.raises(IncompatibleFormat, match=rf"step 4 in .*{incompatible}"):
+            load_policy(tmp_path)
+        like = train(**{**run, "total_steps": 128}).state
+        with pytest.raises(IncompatibleFormat, match=rf"step 4 in .*{incompatible}"):
+            Checkpoints(tmp_path).restore(like)
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == before
+    assert not (tmp_path / "damaged").exists()
+
+
+def test_a_record_written_before_formats_were_recorded_is_the_first_format(tmp_path):
+    run = {**RUN, "total_steps": 128 * 2}
+    first = train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
+    written = tmp_path / "2" / "record" / "metadata"  # orbax's file of the JSON item
+    record = json.loads(written.read_text())
+    assert record.pop("format") == checkpoint.FORMAT == 1
+    written.write_text(json.dumps(record))  # as fppo-jax wrote it before
+    policy = load_policy(tmp_path)
+    np.testing.assert_array_equal(policy(np.zeros(4)), first.policy(np.zeros(4)))

@@ -1,4 +1,5 @@
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -133,6 +134,26 @@ def test_two_processes_killed_resume_from_checkpoints_to_identical_parameters(tm
     np.testing.assert_allclose(first["policy_loss"], alone.metrics["policy_loss"], atol=1e-6)
     for i, leaf in enumerate(flat(alone.params)):
         np.testing.assert_allclose(first[f"arr_{i}"], leaf, rtol=1e-4, atol=1e-6)
+
+
+def test_sigterm_to_one_of_two_processes_stops_both_at_one_checkpoint_to_resume_from(tmp_path):
+    checkpoints = tmp_path / "checkpoints"
+    preempted = train_in_two_processes(
+        tmp_path / "stopped", CHECKPOINTS=str(checkpoints), TERM_AT="2"
+    )
+    stopped = results_of(tmp_path / "stopped", preempted)  # each raised StoppedBySignal
+    assert [int(s["signal"]) for s in stopped] == [signal.SIGTERM] * 2
+    at = int(stopped[0]["stopped_at"])
+    assert int(stopped[1]["stopped_at"]) == at and 2 <= at < 6  # together, before the end
+    steps = sorted(int(p.name) for p in checkpoints.iterdir() if p.name.isdigit())
+    assert steps[-1] == at  # the checkpoint of the update they stopped after, complete
+    first, second = results_of(
+        tmp_path / "resumed",
+        train_in_two_processes(tmp_path / "resumed", CHECKPOINTS=str(checkpoints)),
+    )
+    assert int(first["resumed_from"]) == int(second["resumed_from"]) == at
+    np.testing.assert_array_equal(first["policy_loss"], second["policy_loss"])
+    assert len(first["policy_loss"]) == 6
 
 
 @pytest.mark.slow

@@ -11,11 +11,12 @@ import pytest
 from helpers import assert_bitwise_equal
 from test_policy import gaussian_policy
 
-from fppo_jax import load_policy, train
+from fppo_jax import IncompatibleFormat, load_policy, train
 from fppo_jax.cli import main
 from fppo_jax.files import tree_digest
+from fppo_jax.numpy_policy import NumpyPolicy
 from fppo_jax.policy import Policy
-from fppo_jax.saved_policy import check_no_saved_policy, read_policy, save_policy
+from fppo_jax.saved_policy import FORMAT, check_no_saved_policy, read_policy, save_policy
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 20, **TINY}
@@ -180,3 +181,23 @@ def test_a_missing_directory_or_arrays_file_is_reported(tmp_path):
         ValueError, match=rf"saved policy in {tmp_path} is damaged \(FileNotFoundError: "
     ):
         load_policy(tmp_path)
+
+
+def test_a_saved_policy_of_another_format_is_refused_and_one_without_a_format_is_the_first(
+    tmp_path,
+):
+    policy = save_gaussian_policy(tmp_path)
+    path = tmp_path / "policy.json"
+    saved = json.loads(path.read_text())
+    assert saved.pop("format") == FORMAT == 1
+    path.write_text(json.dumps(saved))  # as fppo-jax wrote it before formats were recorded
+    assert_bitwise_equal(load_policy(tmp_path).arrays(), policy.arrays())
+    assert NumpyPolicy.load(tmp_path).observation_size == policy.observation_size
+
+    path.write_text(json.dumps({**saved, "format": 2}))  # as a newer fppo-jax would write it
+    message = f"the saved policy in {tmp_path} was written by a newer version of fppo-jax"
+    with pytest.raises(IncompatibleFormat, match=re.escape(message) + r" \(format 2; this one"):
+        load_policy(tmp_path)
+    assert json.loads(path.read_text())["format"] == 2  # left as it is
+    with pytest.raises(ValueError, match="is in format 2; this file reads format 1"):
+        NumpyPolicy.load(tmp_path)

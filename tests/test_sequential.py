@@ -11,7 +11,14 @@ import pytest
 from scipy import stats
 
 from fppo_jax import statistics
-from fppo_jax.sequential import Design, boundaries, decide, mann_whitney_z, simulate
+from fppo_jax.sequential import (
+    Design,
+    boundaries,
+    decide,
+    mann_whitney_z,
+    repeated_confidence,
+    simulate,
+)
 
 
 def test_boundaries_are_the_published_obrien_fleming_type_ones():
@@ -23,6 +30,20 @@ def test_boundaries_are_the_published_obrien_fleming_type_ones():
     assert boundaries(0.05, (1.0,)) == pytest.approx((stats.norm.isf(0.025),), abs=1e-6)
     with pytest.raises(ValueError, match="must increase from above 0"):
         boundaries(0.05, (0.5, 0.5))
+
+
+def test_a_repeated_confidence_interval_s_level_is_set_by_the_boundary_of_its_look():
+    # One look: the fixed design's Bonferroni interval, 1 − α/m.
+    assert repeated_confidence(Design(20, 20), 4, 20) == pytest.approx(1 - 0.05 / 4)
+    # Five looks at α = 0.05 over one comparison: 2Φ(c_k) − 1 for the published boundaries,
+    # wide at the first look (c = 4.88) and near the fixed design's 95% at the last (2.03).
+    design = Design(4, 20)
+    levels = [repeated_confidence(design, 1, n) for n in design.looks]
+    expected = [2 * stats.norm.cdf(c) - 1 for c in (4.8769, 3.3570, 2.6803, 2.2898, 2.0310)]
+    np.testing.assert_allclose(levels, expected, atol=1e-5)
+    assert levels[-1] > 0.95 and levels == sorted(levels, reverse=True)
+    with pytest.raises(ValueError, match="6 seeds is not one of the design's looks"):
+        repeated_confidence(design, 1, 6)
 
 
 def test_the_statistic_is_scipys_mann_whitney_z_and_ranks_a_failed_run_last():

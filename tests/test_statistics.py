@@ -1,5 +1,7 @@
 """The statistics against cases with known answers and against direct implementations."""
 
+import itertools
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -203,3 +205,52 @@ def test_the_eval_endpoint_is_each_run_s_last_evaluation():
     nan = np.nan
     curves = np.array([[nan, 3.0, nan, 5.0], [nan, 2.0, nan, nan], [nan, nan, nan, nan]])
     np.testing.assert_array_equal(statistics.endpoint(curves, "eval"), [5.0, 2.0, nan])
+
+
+def test_spearman_is_scipy_s_rank_correlation_with_ties_and_along_an_axis():
+    rng = np.random.default_rng(11)
+    doses = np.repeat([1.0, 1.1, 1.3, 2.0], 5)  # tied doses, as every dose has several runs
+    scores = rng.normal(size=(3, 20)).round(1)  # and some tied scores
+    for row in scores:
+        expected = stats.spearmanr(doses, row).statistic
+        assert statistics.spearman(doses, row) == pytest.approx(expected, abs=1e-12)
+    np.testing.assert_allclose(
+        statistics.spearman(doses, scores.T, axis=0), statistics.spearman(doses, scores)
+    )
+    assert np.isnan(statistics.spearman(doses, np.ones(20)))
+
+
+def test_a_dose_trend_and_its_permutation_test():
+    rng = np.random.default_rng(12)
+    doses = [1.0, 1.5, 2.0, 3.0]
+    rising = [rng.normal(dose, 0.3, 10) for dose in doses]
+    flat = [rng.normal(0.0, 1.0, 10) for _ in doses]
+
+    rho, low, high = statistics.dose_trend(doses, rising)
+    assert rho == pytest.approx(stats.spearmanr(np.repeat(doses, 10), np.concatenate(rising))[0])
+    assert 0 < low < rho < high <= 1
+    assert statistics.trend_test(doses, rising) == 1 / 10_001  # no relabelling is as extreme
+    falling = statistics.dose_trend(doses[::-1], rising)
+    assert falling[0] == pytest.approx(-rho)
+
+    p_flat = statistics.trend_test(doses, flat)
+    assert p_flat > 0.05 and statistics.dose_trend(doses, flat)[1] < 0
+    assert statistics.trend_test(doses, flat) == p_flat  # seeded
+    # Near the exact p: every one of the 8! relabellings of 8 runs counted.
+    scores = rng.normal(size=8) + np.arange(8) * 0.2
+    every = np.array(list(itertools.permutations(scores)))
+    observed = abs(statistics.spearman(np.arange(8), scores))
+    exact = np.mean(np.abs(statistics.spearman(np.arange(8), every)) >= observed - 1e-12)
+    permuted = statistics.trend_test(list(range(8)), [np.array([s]) for s in scores])
+    assert 0.01 < exact < 0.99 and permuted == pytest.approx(exact, abs=0.015)
+
+
+def test_a_dose_trend_leaves_nans_out_and_refuses_a_single_dose():
+    doses = [0.0, 1.0]
+    groups = [np.array([1.0, 2.0, np.nan]), np.array([3.0, 4.0])]
+    assert statistics.dose_trend(doses, groups)[0] == pytest.approx(
+        stats.spearmanr([0, 0, 1, 1], [1, 2, 3, 4])[0]
+    )
+    assert statistics.trend_test(doses, [np.ones(3), np.ones(2)]) == 1.0
+    with pytest.raises(statistics.InvalidInput, match="two doses or more"):
+        statistics.dose_trend([1.0, 1.0], groups)

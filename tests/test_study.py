@@ -2,6 +2,7 @@
 the verdict; all in a temporary directory."""
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -75,8 +76,9 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
     assert (tmp_path / "study" / "improvement.png").stat().st_size > 0
 
 
-def test_a_dose_response_part_is_one_sweep_whose_controls_train_as_ppo(tmp_path):
+def test_a_dose_response_is_one_sweep_whose_controls_train_as_ppo_and_its_report(tmp_path):
     tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
+    report = ["--results", str(tmp_path), "--tasks", "cartpole"]
     done = _run("study.py", *tiny, "--seeds", "0:2", "--plan", "plans/dose-response.json")
     assert done.returncode == 0, done.stdout + done.stderr
     part = tmp_path / "dose_response" / "cartpole" / "paper" / "seeds-0-1_dose-response"
@@ -91,15 +93,85 @@ def test_a_dose_response_part_is_one_sweep_whose_controls_train_as_ppo(tmp_path)
     strongest = result.setting_metrics(index[(("k", 2.0), ("variant", "fppo-qp"))])
     assert not np.array_equal(strongest["average_return"], ppo["average_return"])
 
+    early = _run("dose_response.py", *report)  # the planned test is over 10 seeds of each dose
+    assert early.returncode == 1 and "cartpole: ppo 2, fppo-lp α=1 2," in early.stderr
+    assert not (tmp_path / "dose_response.md").exists()
 
-def test_a_planned_part_trains_the_plan_s_settings(tmp_path):
-    tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
-    done = _run("study.py", *tiny, "--seeds", "0:1", "--plan", "plans/baseline-shape.json")
+    more = _run("study.py", *tiny, "--seeds", "2:10", "--plan", "plans/dose-response.json")
+    assert more.returncode == 0, more.stdout + more.stderr
+    study = tmp_path / "study" / "cartpole" / "paper"
+    study.mkdir(parents=True)  # stands in for the seed study's PPO runs: the sweep's own
+    shutil.copytree(part, study / part.name)
+    done = _run("dose_response.py", *report)
     assert done.returncode == 0, done.stdout + done.stderr
-    part = tmp_path / "baseline_shape" / "cartpole" / "paper" / "seeds-0-0_baseline-shape"
+    text = (tmp_path / "dose_response.md").read_text()
+    assert (
+        "fppo-lp at α = 1: identical to the sweep's PPO run on every recorded metric in 10 of 10"
+        in text
+    )
+    assert "fppo-qp at k = 0: identical" in text and "in 10 of 10 seeds" in text
+    assert "the same learning curve in 2 of 2 seeds" in text  # the seeds the stand-in holds
+    merged = merge([SweepResult.read(d) for d in sorted(part.parent.iterdir())])
+    final = merged.scores("final")
+    doses = {
+        "fppo-lp": ("alpha", [1.0, 1.1, 1.3, 1.5, 2.0, 3.0]),
+        "fppo-qp": ("k", [0, 0.2, 0.4, 1, 2]),
+    }
+    groups = {
+        v: [final[merged.settings.index({"variant": v, name: d})] for d in values]
+        for v, (name, values) in doses.items()
+    }
+    p = [statistics.trend_test(doses[v][1], groups[v]) for v in doses]
+    holm = statistics.holm(p)  # the family here: cartpole's 2 trends
+    for (variant, (_, values)), p_raw, p_holm in zip(doses.items(), p, holm, strict=True):
+        rho = statistics.dose_trend(values, groups[variant])[0]
+        row = next(
+            line for line in text.splitlines() if line.startswith(f"| cartpole | {variant} |")
+        )
+        cells = row.split(" | ")
+        assert cells[3].startswith(f"{rho:.2f} [") and cells[4:6] == [
+            f"{p_raw:.4f}",
+            f"{p_holm:.4f}",
+        ]
+    assert text.count("| fppo-qp k=") == 5 and "| fppo-lp α=3 | 10 |" in text
+    assert (tmp_path / "dose_response" / "dose_response.png").stat().st_size > 0
+    again = _run("dose_response.py", *report)
+    assert again.returncode != 0 and "is already recorded" in again.stderr
+
+
+def test_a_planned_part_trains_the_plan_s_settings_and_is_compared_with_the_study(tmp_path):
+    tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
+    done = _run("study.py", *tiny, "--seeds", "0:50", "--plan", "plans/baseline-shape.json")
+    assert done.returncode == 0, done.stdout + done.stderr
+    part = tmp_path / "baseline_shape" / "cartpole" / "paper" / "seeds-0-49_baseline-shape"
     result = SweepResult.read(part)
     assert [s["variant"] for s in result.settings] == ["ppo"]
     assert (result.config["num_envs"], result.config["num_steps"]) == (1, 2048)
     assert (
         "--plan plans/baseline-shape.json" in json.loads((part / "run.json").read_text())["command"]
     )
+
+    plan = json.loads((EXPERIMENTS / "plans" / "baseline-shape.json").read_text())
+    plan["tasks"] = ["cartpole"]  # 50 seeds planned on a classic task
+    (tmp_path / "baseline-shape.json").write_text(json.dumps(plan))
+    verdict = [str(tmp_path / "baseline-shape.json"), "--results", str(tmp_path)]
+    early = _run("planned_verdict.py", *verdict, "--output", str(tmp_path / "v.md"))
+    assert early.returncode == 1 and "cartpole: ppo 8×256 0 of 50 seeds" in early.stderr
+
+    baseline = _run("study.py", *tiny, "--seeds", "0:50", "--variants", "ppo")
+    assert baseline.returncode == 0, baseline.stdout + baseline.stderr
+    done = _run("planned_verdict.py", *verdict, "--output", str(tmp_path / "v.md"))
+    assert done.returncode == 0, done.stdout + done.stderr
+    row = next(r for r in (tmp_path / "v.md").read_text().splitlines() if r.startswith("| cart"))
+    ours = SweepResult.read(tmp_path / "study" / "cartpole" / "paper" / "seeds-0-49_ppo")
+    wide, long = ours.scores("final")[0], result.scores("final")[0]
+    p = statistics.improvement_test(long, wide)
+    assert row.startswith(f"| cartpole | ppo 1×2048 | {statistics.iqm(long):.1f} [")
+    shown = f"{p:.1e}" if p < 0.001 else f"{p:.3f}"  # one comparison: Holm's p is the p
+    assert f"| {statistics.iqm(wide):.1f} | " in row and f"| {shown} | {shown} |" in row
+
+    plan["baseline"]["num_envs"] = 4  # a baseline the recorded runs are not
+    (tmp_path / "baseline-shape.json").write_text(json.dumps(plan))
+    wrong = _run("planned_verdict.py", *verdict, "--output", str(tmp_path / "w.md"))
+    assert wrong.returncode != 0 and "recorded runs are 8×256" in wrong.stderr
+    assert "baseline is 4×256" in wrong.stderr and not (tmp_path / "w.md").exists()

@@ -1,0 +1,382 @@
+"""FPPO's dose-response, as planned in experiments/plans/dose-response.json: does more pull
+(FPPO-LP's α, FPPO-QP's k) give more return, and is there a dose at which FPPO beats PPO?
+
+    python experiments/dose_response.py     # results/dose_response.md and its figure
+    python experiments/dose_response.py --results /tmp/smoke --tasks cartpole --output /tmp/d.md
+
+Reads the parts ``study.py --plan plans/dose-response.json`` recorded under
+<results>/dose_response/<task>/paper/, merges each task's, and writes the report and
+<results>/dose_response/dose_response.png (IQM final return against the dose, with 95% bootstrap
+bands). Until every setting of every task has the plan's seeds, it names what is missing,
+writes nothing and exits with 1: the planned test is over the whole family.
+
+What the plan fixed before its runs, computed here:
+- the controls: α = 1 and k = 0 are PPO's objective, so each of their runs is checked against
+  the same seed's PPO run of the sweep (identical curves expected), and the seed study's
+  recorded PPO runs are set beside them (another program may round differently);
+- the test, per task and variant: Spearman's ρ between dose and final return over the
+  variant's runs (its control included), two-sided, p from 10,000 seeded permutations of the
+  doses, Holm's adjustment over the family of trends, family-wise error 0.05;
+- per dose, described (not a family): P(dose run > PPO run) and the IQM difference from PPO on
+  the final return, the escape share (negative_fraction_after averaged over updates), the
+  area under the curve, and the env steps to reach 50% and 80% of the sweep's PPO IQM final
+  return; the same trend, with an interval, for the escape share and the steps.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from common import (
+    RESULTS,
+    RUN_RECORD,
+    add_force_flag,
+    argument_parser,
+    header,
+    refuse_to_replace,
+    write_result,
+)
+from verdict import interval_text
+
+from fppo_jax import SweepResult, merge, statistics
+from fppo_jax.config import SYMBOLS
+from fppo_jax.results import labels
+from fppo_jax.study_report import ruled_out
+
+EXPERIMENTS = Path(__file__).resolve().parent
+PLAN = EXPERIMENTS / "plans" / "dose-response.json"
+FOLDER = "dose_response"  # study.py's folder of the plan's parts
+SEEDS = 10
+FAMILY_ERROR = 0.05
+THRESHOLDS = (0.5, 0.8)  # of the sweep's PPO IQM final return
+DPI = 80
+
+
+def doses(plan: dict) -> dict[str, tuple[str, list[float]]]:
+    """Each dosed variant's hyperparameter and its doses: ``{"fppo-lp": ("alpha", [1.0, …])}``."""
+    return {
+        variant: next((k, v) for k, v in spec.items() if isinstance(v, list))
+        for variant, spec in plan["doses"].items()
+        if isinstance(spec, dict)
+    }
+
+
+def recorded(results: Path, task: str) -> SweepResult | None:
+    """Every part of `task` recorded for the plan, merged."""
+    records = sorted((results / FOLDER / task / "paper").glob(f"*/{RUN_RECORD}"))
+    return merge([SweepResult.read(r.parent) for r in records]) if records else None
+
+
+def setting_index(result: SweepResult, variant: str, name: str | None, dose: float | None) -> int:
+    """The index of `variant`'s setting at `dose` of its hyperparameter `name` (PPO: no dose)."""
+    for index, setting in enumerate(result.settings):
+        if setting["variant"] == variant and (name is None or setting.get(name) == dose):
+            return index
+    raise KeyError(f"{variant} {name}={dose}")
+
+
+def missing(plan: dict, merged: dict[str, SweepResult | None]) -> list[str]:
+    """What the plan needs and the parts do not hold yet, a line per task."""
+    lines = []
+    for task, result in merged.items():
+        if result is None:
+            lines.append(f"{task}: not started")
+            continue
+        short = []
+        wanted = [("ppo", None, None)] + [
+            (variant, name, dose)
+            for variant, (name, values) in doses(plan).items()
+            for dose in values
+        ]
+        for variant, name, dose in wanted:
+            try:
+                count = result.setting_run_count(setting_index(result, variant, name, dose))
+            except KeyError:
+                count = 0
+            if count < SEEDS:
+                dosed = "" if name is None else f" {SYMBOLS.get(name, name)}={dose:g}"
+                short.append(f"{variant}{dosed} {count}")
+        if short:
+            lines.append(f"{task}: {', '.join(short)} of {SEEDS} seeds")
+    return lines
+
+
+def by_seed(result: SweepResult, index: int) -> dict[int, int]:
+    """Setting `index`'s runs by seed: ``{seed: run}``."""
+    return {run["seed"]: i for i, run in enumerate(result.runs) if run["setting"] == index}
+
+
+def controls(result: SweepResult, study: SweepResult | None, plan: dict) -> list[str]:
+    """A line per control: in how many seeds it trains as the sweep's PPO run, bit for bit on
+    every recorded metric, and how the seed study's recorded PPO runs compare."""
+    ppo = by_seed(result, setting_index(result, "ppo", None, None))
+    lines = []
+    for variant, (name, values) in doses(plan).items():
+        control = by_seed(result, setting_index(result, variant, name, values[0]))
+        same = [
+            seed
+            for seed, run in control.items()
+            if all(
+                np.array_equal(v[run], v[ppo[seed]], equal_nan=True)
+                for v in result.metrics.values()
+            )
+        ]
+        lines.append(
+            f"- {variant} at {SYMBOLS.get(name, name)} = {values[0]:g}: identical to the sweep's "
+            f"PPO run on every recorded metric in {len(same)} of {len(control)} seeds"
+        )
+    if study is None:
+        lines.append("- the seed study has no recorded PPO runs of this task to set beside them")
+    else:
+        recorded_ppo = by_seed(study, setting_index(study, "ppo", None, None))
+        seeds = sorted(set(ppo) & set(recorded_ppo))
+        same = [
+            s
+            for s in seeds
+            if np.array_equal(
+                study.metrics["average_return"][recorded_ppo[s]],
+                result.metrics["average_return"][ppo[s]],
+                equal_nan=True,
+            )
+        ]
+        lines.append(
+            f"- the sweep's PPO against the seed study's recorded PPO runs (another compiled "
+            f"program): the same learning curve in {len(same)} of {len(seeds)} seeds"
+        )
+    return lines
+
+
+def run_scores(result: SweepResult, index: int) -> dict[str, np.ndarray]:
+    """Setting `index`'s runs that did not diverge, by score: the final return, the area under
+    the curve and the escape share."""
+    metrics = result.setting_metrics(index)
+    return {
+        "final": statistics.endpoint(metrics["average_return"], "final"),
+        "auc": statistics.endpoint(metrics["average_return"], "auc"),
+        "escape": np.nanmean(metrics["negative_fraction_after"], axis=1),
+    }
+
+
+def steps_to(result: SweepResult, index: int, threshold: float) -> np.ndarray:
+    """Each run's env steps to `threshold`; a run that never reaches it counts as slower than
+    any that does (twice the run's length: ranks, not values, enter the trend)."""
+    metrics = result.setting_metrics(index)
+    steps = statistics.steps_to_threshold(
+        metrics["average_return"], metrics["env_steps"], threshold
+    )
+    return np.where(np.isinf(steps), 2 * metrics["env_steps"][:, -1], steps)
+
+
+def analyse(plan: dict, result: SweepResult) -> dict:
+    """One task's trends and per-dose effects."""
+    ppo_index = setting_index(result, "ppo", None, None)
+    ppo = run_scores(result, ppo_index)
+    ppo_iqm = float(statistics.iqm(ppo["final"]))
+    levels = {share: share * ppo_iqm for share in THRESHOLDS}
+    ppo.update({share: steps_to(result, ppo_index, level) for share, level in levels.items()})
+    variants = {}
+    for variant, (name, values) in doses(plan).items():
+        runs = []
+        for dose in values:
+            index = setting_index(result, variant, name, dose)
+            scores = run_scores(result, index)
+            scores.update({share: steps_to(result, index, lv) for share, lv in levels.items()})
+            runs.append(scores)
+        trend = {
+            score: statistics.dose_trend(values, [r[score] for r in runs])
+            for score in ("final", "escape", "auc", *THRESHOLDS)
+        }
+        variants[variant] = {
+            "name": name,
+            "doses": values,
+            "runs": runs,
+            "trend": trend,
+            "p": statistics.trend_test(values, [r["final"] for r in runs]),
+        }
+    return {"ppo": ppo, "ppo_iqm": ppo_iqm, "levels": levels, "variants": variants}
+
+
+def reached(steps: np.ndarray, total: float) -> str:
+    """How many runs reach a threshold, and the median env steps of those that do."""
+    hit = steps[steps <= total]
+    return f"{hit.size}/{steps.size}" + (f", median {np.median(hit):,.0f}" if hit.size else "")
+
+
+def trend_reading(row: dict) -> str:
+    if row["holm"] >= FAMILY_ERROR:
+        return "no trend measurable"
+    return "more pull, more return" if row["trend"]["final"][0] > 0 else "more pull, less return"
+
+
+def report(
+    plan: dict, tasks: dict[str, dict], results: dict[str, SweepResult], checks: dict
+) -> list[str]:
+    lines = [
+        *header(f"{plan['question']} The planned dose-response"),
+        "",
+        f"The plan ([`plans/dose-response.json`](../plans/dose-response.json), written "
+        f"{plan['written']}): {plan['test']}. Endpoint: {plan['primary_endpoint']}. Intervals "
+        "are 95% percentile bootstraps (2,000 resamples, seeded), resampling each dose's runs "
+        "among themselves; P(X > Y) counts ties as ½. Runs that diverged are left out and "
+        "counted below.",
+        "",
+        "## The controls",
+        "",
+    ]
+    for task, lines_of_task in checks.items():
+        lines += [f"{task}:", "", *lines_of_task, ""]
+    lines += [
+        "## The planned test: the trend of final return with the dose",
+        "",
+        "| task | variant | doses | Spearman ρ, final [95% CI] | permutation p | Holm p "
+        "| reading |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    rows = [
+        {"task": task, "variant": variant, **analysis}
+        for task, outcome in tasks.items()
+        for variant, analysis in outcome["variants"].items()
+    ]
+    for row, adjusted in zip(rows, statistics.holm([r["p"] for r in rows]), strict=True):
+        row["holm"] = float(adjusted)
+    for row in rows:
+        lines.append(
+            f"| {row['task']} | {row['variant']} | {SYMBOLS.get(row['name'], row['name'])} ∈ "
+            f"{{{', '.join(f'{d:g}' for d in row['doses'])}}} "
+            f"| {interval_text(row['trend']['final'], '.2f')} | {row['p']:.4f} "
+            f"| {row['holm']:.4f} | {trend_reading(row)} |"
+        )
+    lines += [
+        "",
+        "## The other trends (described, not tested)",
+        "",
+        "Spearman ρ [95% CI] with the dose. The escape share is the share of the batch left in "
+        "R+ ∪ R− after the update, averaged over updates (lower: more escape); steps to a "
+        "threshold are ranked with a run that never reaches it as the slowest.",
+        "",
+        "| task | variant | escape share | area under the curve | steps to 50% of PPO "
+        "| steps to 80% of PPO |",
+        "|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        trend = row["trend"]
+        cells = [interval_text(trend[s], ".2f") for s in ("escape", "auc", *THRESHOLDS)]
+        lines.append(f"| {row['task']} | {row['variant']} | {' | '.join(cells)} |")
+    for task, outcome in tasks.items():
+        result, ppo = results[task], outcome["ppo"]
+        total = float(result.metrics["env_steps"][0, -1])
+        level = ", ".join(f"{s:.0%}: {v:,.1f}" for s, v in outcome["levels"].items())
+        lines += [
+            "",
+            f"## {task}: each dose against PPO",
+            "",
+            f"PPO's IQM final return {interval_text(statistics.interval(ppo['final']))} over "
+            f"{ppo['final'].size} runs; thresholds {level}. Reaching a threshold: runs that do, "
+            "and their median env steps.",
+            "",
+            "| setting | runs | IQM final [95% CI] | P(> PPO), final [95% CI] "
+            "| Δ IQM final [95% CI] | the interval rules out | P(> PPO), AUC [95% CI] "
+            "| IQM escape share [95% CI] | reach 50% | reach 80% |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+            f"| ppo | {ppo['final'].size} | {interval_text(statistics.interval(ppo['final']))} "
+            f"| – | – | – | – | {interval_text(statistics.interval(ppo['escape']), '.3f')} "
+            f"| {reached(ppo[0.5], total)} | {reached(ppo[0.8], total)} |",
+        ]
+        names = dict(zip(map(_key, result.settings), labels(result.settings), strict=True))
+        for variant, analysis in outcome["variants"].items():
+            for dose, runs in zip(analysis["doses"], analysis["runs"], strict=True):
+                on_final = statistics.compare(runs["final"], ppo["final"])
+                on_area = statistics.compare(runs["auc"], ppo["auc"])
+                label = names[_key({"variant": variant, analysis["name"]: dose})]
+                lines.append(
+                    f"| {label} | {runs['final'].size} "
+                    f"| {interval_text(statistics.interval(runs['final']))} "
+                    f"| {interval_text(on_final['probability_of_improvement'], '.2f')} "
+                    f"| {interval_text(on_final['iqm_difference'])} "
+                    f"| {ruled_out(on_final['iqm_difference'], outcome['ppo_iqm'])} "
+                    f"| {interval_text(on_area['probability_of_improvement'], '.2f')} "
+                    f"| {interval_text(statistics.interval(runs['escape']), '.3f')} "
+                    f"| {reached(runs[0.5], total)} | {reached(runs[0.8], total)} |"
+                )
+        diverged = int(np.count_nonzero(result.diverged))
+        lines += ["", f"Runs that diverged and are left out: {diverged}."]
+    return lines
+
+
+def _key(setting: dict) -> tuple:
+    return tuple(sorted(setting.items()))
+
+
+def draw(tasks: dict[str, dict], path: Path) -> None:
+    """IQM final return against the dose, a panel per task and variant, with 95% bootstrap
+    bands; PPO's IQM and band across each panel."""
+    variants = list(next(iter(tasks.values()))["variants"])
+    figure, axes = plt.subplots(
+        len(variants), len(tasks), figsize=(4 * len(tasks), 3 * len(variants)), squeeze=False
+    )
+    for column, (task, outcome) in enumerate(tasks.items()):
+        ppo = statistics.interval(outcome["ppo"]["final"])
+        for row, variant in enumerate(variants):
+            analysis, ax = outcome["variants"][variant], axes[row][column]
+            values = np.array([statistics.interval(r["final"]) for r in analysis["runs"]])
+            ax.axhspan(ppo[1], ppo[2], color="grey", alpha=0.2)
+            ax.axhline(ppo[0], color="grey", label="PPO (IQM, 95% CI)")
+            ax.fill_between(analysis["doses"], values[:, 1], values[:, 2], alpha=0.3)
+            ax.plot(analysis["doses"], values[:, 0], marker="o", label=variant)
+            ax.set_xlabel(SYMBOLS.get(analysis["name"], analysis["name"]))
+            ax.set_ylabel("IQM final return")
+            ax.set_title(f"{task}: {variant}")
+            ax.legend(fontsize="small")
+    figure.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=DPI)
+    plt.close(figure)
+
+
+def main() -> int:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--results", type=Path, default=RESULTS, help="where the parts are")
+    parser.add_argument("--tasks", nargs="+", help="default: the plan's (Hopper and Walker2d)")
+    parser.add_argument(
+        "--output", type=Path, help="the report (default: results/dose_response.md)"
+    )
+    add_force_flag(parser)
+    args = parser.parse_args()
+    plan = json.loads(PLAN.read_text())
+    out = args.output or args.results / f"{FOLDER}.md"
+    figure = args.results / FOLDER / f"{FOLDER}.png"
+    refuse_to_replace([out, figure], args.force, elsewhere="--results DIR or --output FILE")
+    merged = {task: recorded(args.results, task) for task in args.tasks or plan["tasks"]}
+    short = missing(plan, merged)
+    if short:
+        print(
+            f"no report yet: the plan's test is over every trend, and {len(short)} task(s) "
+            "lack runs:\n  " + "\n  ".join(short),
+            file=sys.stderr,
+        )
+        return 1
+    results = {task: result for task, result in merged.items() if result is not None}
+    tasks = {task: analyse(plan, result) for task, result in results.items()}
+    checks = {}
+    for task, result in results.items():
+        study = [
+            p.parent for p in (args.results / "study" / task / "paper").glob(f"*/{RUN_RECORD}")
+        ]
+        parts = [SweepResult.read(d) for d in sorted(study)]
+        parts = [p for p in parts if any(s["variant"] == "ppo" for s in p.settings)]
+        checks[task] = controls(result, merge(parts) if parts else None, plan)
+    write_result(out, report(plan, tasks, results, checks))
+    draw(tasks, figure)
+    print(f"wrote {out} and {figure}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -30,7 +30,7 @@ from fppo_jax.options import Options
 from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, merge
 from fppo_jax.sequential import Decision, Design, boundaries, decide
-from fppo_jax.study_report import SHARES, Scores, steps_name, write_report
+from fppo_jax.study_report import SHARES, Scores, steps_name, write_figures, write_report
 from fppo_jax.surrogates import Surrogate
 from fppo_jax.sweep import expand_grid, sweep
 
@@ -370,6 +370,7 @@ def _run(
     scores = {task: _task_scores(result, plan) for task, result in results.items()}
     finished = all(row["final"] for row in rows)
     write_report(output / REPORT_FILE, plan, rows, scores, finished)
+    write_figures(output, plan, rows, results, scores)
     return StudyResult(plan, rows, results, finished)
 
 

@@ -62,6 +62,8 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
         assert unadjusted == "{:.2f} [{:.2f}, {:.2f}]".format(*plain)
         assert repeat[1] <= plain[1] and plain[2] <= repeat[2]
     assert level > 0.99 and repeat[2] - repeat[1] > plain[2] - plain[1]  # fppo-lp's is wider
+    for figure in ("curves.png", "improvement.png"):  # beside the report, drawn
+        assert (output / figure).read_bytes().startswith(b"\x89PNG")
 
     with pytest.raises(ValueError, match="planned with max_seeds = 16, not 24"):
         fppo_jax.study("cartpole", candidates, "ppo", **{**settings, "max_seeds": 24})

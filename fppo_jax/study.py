@@ -29,6 +29,7 @@ from fppo_jax.objectives import BUILTINS, hyperparameter_names, identities, reso
 from fppo_jax.options import Options
 from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, merge
+from fppo_jax.reuse import Pool, Taken
 from fppo_jax.sequential import Decision, Design, boundaries, decide
 from fppo_jax.study_report import SHARES, Scores, steps_name, write_figures, write_report
 from fppo_jax.surrogates import Surrogate
@@ -74,6 +75,7 @@ def study(
     preset: str = "paper",
     backend: str = "auto",
     chunk: int | None = None,
+    reuse: str | Path | Sequence[str | Path] | None = None,
     **settings: Any,
 ) -> StudyResult:
     """Compare each of `candidates` with `baseline` on each of `tasks`, adding seeds in groups
@@ -94,6 +96,11 @@ def study(
     still undecided, and the baseline while any of them is. `groups` limits the looks this call
     trains (then it stops; calling again goes on; 0 writes the plan alone). Each look's
     decisions go to ``decisions.json``, and ``report.md`` is written when the call ends.
+
+    `reuse` names directories of recorded sweeps (a seed study's parts, say): a group's runs of
+    a setting found there, at every seed of the group, under the same task, protocol and
+    setting (:mod:`fppo_jax.reuse`), are taken instead of trained, and ``decisions.json`` names
+    where each came from. The plan records `reuse`.
     """
     tasks = _names_of_tasks(tasks)
     one = isinstance(candidates, str | Surrogate)
@@ -118,6 +125,8 @@ def study(
         raise InvalidInput(f"a study sets {', '.join(taken)} itself, for each group's sweep")
     everyone = [*candidates, baseline]
     specific = set(hyperparameter_names([*BUILTINS.values(), *everyone]))
+    sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
+    expected: dict[str, tuple[dict[str, Any], dict[str, dict[str, Any]]]] = {}
     for task in tasks:  # every setting checked before the plan is written, as a sweep checks
         run = prepare(
             task,
@@ -128,9 +137,12 @@ def study(
             hyperparameters=sweepable(everyone),
         )
         by_name = {s.name: s for s in everyone}
-        for setting in expand_grid({"variant": everyone, **run.hyperparameters}, task):
+        grid = expand_grid({"variant": everyone, **run.hyperparameters}, task)
+        for setting in grid:
             values = {k: v for k, v in setting.items() if k != "variant"}
             resolve_hyperparameters(by_name[setting["variant"]], None, **values)
+        if sources:  # what a recorded run must match to be taken: the protocol, each setting
+            expected[task] = (json_value(run.record()), {s["variant"]: s for s in grid})
     plan = make_plan(
         tasks,
         candidates,
@@ -143,6 +155,7 @@ def study(
             "backend": backend,
             **{k: v for k, v in settings.items() if k not in Options.names()},
         },
+        sources,
     )
     output = writable_directory(output)
     lock = DirectoryLock(output, "a study")
@@ -169,7 +182,16 @@ def study(
                 **fixed,
             )
 
-        return _run(output, plan, tasks, candidates, baseline, design, groups, train_group)
+        pool = Pool.read(sources) if sources else None
+        identity = identities(everyone).get("surrogates", {})
+
+        def take(task: str, variant: Surrogate, seeds: list[int]) -> Taken | None:
+            if pool is None:
+                return None
+            protocol, setting_of = expected[task]
+            return pool.take(protocol, setting_of[variant.name], identity.get(variant.name), seeds)
+
+        return _run(output, plan, tasks, candidates, baseline, design, groups, train_group, take)
     finally:
         lock.release()
 
@@ -218,6 +240,7 @@ def make_plan(
     design: Design,
     endpoint: str,
     settings: dict[str, Any],
+    reuse: list[str],
 ) -> dict[str, Any]:
     """What ``plan.json`` records: the preregistration, decided before any run."""
     return cast(
@@ -243,6 +266,7 @@ def make_plan(
                     boundaries(design.level / (len(tasks) * len(candidates)), _fractions(design))
                 ),
                 "settings": settings,
+                **({"reuse": reuse} if reuse else {}),
                 **identities([*candidates, baseline]),
                 "commit": commit(),
             }
@@ -334,8 +358,10 @@ def _run(
     design: Design,
     groups: int | None,
     train_group: Callable[[str, list[Surrogate], list[int], Path], SweepResult],
+    take: Callable[[str, Surrogate, list[int]], Taken | None],
 ) -> StudyResult:
-    """The looks: each task's next group while some comparison awaits seeds, then the rule."""
+    """The looks: each task's next group while some comparison awaits seeds, then the rule.
+    A group's runs of a setting that `take` finds recorded elsewhere are taken, not trained."""
     recorded: dict[str, list[SweepResult]] = {task: [] for task in tasks}
     trained: list[dict[str, Any]] = []
     endpoint = plan["primary_endpoint"]
@@ -349,20 +375,28 @@ def _run(
         for task in tasks:
             variants = [c for c in candidates if (task, c.name) in waiting]
             if variants:  # the baseline only while one of its task's candidates waits
-                where = output / _directory_name(task) / f"group-{look + 1}"
                 variants.append(baseline)
-                found[task] = (variants, where, recorded_group(where, variants, group_seeds))
-        to_train = [task for task, (_, _, result) in found.items() if result is None]
-        looks_trained = len({entry["group"] for entry in trained})
+                taken = {v.name: t for v in variants if (t := take(task, v, group_seeds))}
+                variants = [v for v in variants if v.name not in taken]
+                where = output / _directory_name(task) / f"group-{look + 1}"
+                result = recorded_group(where, variants, group_seeds) if variants else None
+                found[task] = (variants, where, result, taken)
+        to_train = [task for task, (v, _, result, _) in found.items() if v and result is None]
+        looks_trained = len({entry["group"] for entry in trained if "commit" in entry})
         if to_train and groups is not None and looks_trained >= groups:
             break
-        for task, (variants, where, result) in found.items():
-            if result is None:
+        for task, (variants, where, result, taken) in found.items():
+            entry: dict[str, Any] = {"task": task, "group": look + 1, "seeds": group_seeds}
+            if variants and result is None:
                 result = train_group(task, variants, group_seeds, where)
-                trained.append(
-                    {"task": task, "group": look + 1, "seeds": group_seeds, "commit": commit()}
-                )
-            recorded[task].append(result)
+                entry["commit"] = commit()
+            if result is not None:
+                recorded[task].append(result)
+            recorded[task] += [t.result for t in taken.values()]
+            if taken:
+                entry["reused"] = {name: [str(s) for s in t.sources] for name, t in taken.items()}
+            if len(entry) > 3:
+                trained.append(entry)
         decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
         _write_decisions(output, decisions, baseline, trained)  # a killed study keeps them
     rows = _write_decisions(output, decisions, baseline, trained)
@@ -449,11 +483,15 @@ def _write_decisions(
     trained: list[dict[str, Any]],
 ) -> list[dict[str, Any]]:
     """``decisions.json``: a row per comparison (returned), and every group trained with the
-    commit it ran at, earlier calls' groups kept."""
+    commit it ran at, or with the recorded sweeps its runs were taken from, earlier calls'
+    groups kept."""
     path = output / DECISIONS_FILE
     earlier = json.loads(path.read_text()).get("groups", []) if path.exists() else []
-    known = {(g["task"], g["group"]) for g in trained}
-    groups = [g for g in earlier if (g["task"], g["group"]) not in known] + trained
+    by_group = {(g["task"], g["group"]): g for g in earlier}
+    for entry in trained:  # a group trained earlier keeps its commit when runs are taken now
+        key = (entry["task"], entry["group"])
+        by_group[key] = {**by_group.get(key, {}), **entry}
+    groups = list(by_group.values())
     rows = _rows(decisions, baseline)
     record = {
         "finished": all(row["final"] for row in rows),

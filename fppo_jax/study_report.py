@@ -45,6 +45,14 @@ def write_report(
         if finished
         else "**Not finished**: some comparisons await seeds; the same command again goes on."
     )
+    reused = (
+        f" Runs recorded under {', '.join(plan['reuse'])} were taken instead of trained where "
+        "they ran the same task, protocol and setting at a group's seeds (decisions.json names "
+        "each group's and its source); the code that trained them is theirs, which the "
+        "regression pins say matches this one or not."
+        if plan.get("reuse")
+        else ""
+    )
     lines = [
         f"# {', '.join(plan['candidates'])} against {plan['baseline']}",
         "",
@@ -52,7 +60,7 @@ def write_report(
         f"{plan['primary_endpoint']} ({statistics.ENDPOINTS[plan['primary_endpoint']]}); "
         f"reported beside it: {', '.join(plan['secondary_endpoints'])}. Test: {plan['test']}; "
         f"family-wise error at most {plan['level']:g} over the {comparisons} comparisons. Seeds "
-        f"per setting at the looks: {looks}.",
+        f"per setting at the looks: {looks}.{reused}",
         "",
         status,
         "",

@@ -152,6 +152,7 @@ def _study(args: argparse.Namespace) -> int:
         groups=args.groups,
         chunk=args.chunk,
         backend=args.backend,
+        reuse=args.reuse,
         progress=not args.quiet,
         **hyperparameters_given(args),
         **config_overrides(args),

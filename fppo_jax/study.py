@@ -33,7 +33,7 @@ from fppo_jax.reuse import Pool, Taken
 from fppo_jax.sequential import Decision, Design, boundaries, decide
 from fppo_jax.study_report import SHARES, Scores, steps_name, write_figures, write_report
 from fppo_jax.surrogates import Surrogate
-from fppo_jax.sweep import expand_grid, sweep
+from fppo_jax.sweep import expand_grid, part_bounds, sweep
 
 # The endpoints a study decides on; the one not chosen is reported beside it, undecided.
 ENDPOINTS = ("final", "auc")
@@ -76,6 +76,7 @@ def study(
     backend: str = "auto",
     chunk: int | None = None,
     reuse: str | Path | Sequence[str | Path] | None = None,
+    part: tuple[int, int] | None = None,
     **settings: Any,
 ) -> StudyResult:
     """Compare each of `candidates` with `baseline` on each of `tasks`, adding seeds in groups
@@ -101,6 +102,12 @@ def study(
     a setting found there, at every seed of the group, under the same task, protocol and
     setting (:mod:`fppo_jax.reuse`), are taken instead of trained, and ``decisions.json`` names
     where each came from. The plan records `reuse`.
+
+    ``part=(K, N)`` splits the next look over N processes (a SLURM job array's tasks): this
+    call trains only the K-th share of that look's groups (``group-<k>/part-<K>/``, the shares
+    of :func:`~fppo_jax.sweep`), and returns, deciding nothing; a call without `part` (a job
+    that waits for the array) then joins the shares, decides, and reports. Shares recorded
+    already are not trained again, so a requeued task goes on.
     """
     tasks = _names_of_tasks(tasks)
     one = isinstance(candidates, str | Surrogate)
@@ -118,6 +125,8 @@ def study(
         raise InvalidInput(f"groups must be a count of groups (0 or more), got {groups!r}")
     if chunk is not None:
         positive_int("chunk", chunk)
+    if part is not None:  # its shape: a group's runs, which it shares, are known at its look
+        part_bounds(part, part[1] if isinstance(part, tuple | list) and len(part) == 2 else 0)
     if "variant" in settings:
         raise InvalidInput("a study's variants are its candidates and its baseline, not variant")
     taken = sorted(set(OWN_SETTINGS) & set(settings))
@@ -161,6 +170,8 @@ def study(
     lock = DirectoryLock(output, "a study")
     try:
         check_plan(output, plan)
+        if part is not None:  # the array's tasks train their shares side by side
+            lock.release()
 
         def train_group(
             task: str, variants: list[Surrogate], seeds: list[int], where: Path
@@ -175,6 +186,7 @@ def study(
                 variants,
                 seeds,
                 where,
+                part=part,
                 total_steps=total_steps,
                 preset=preset,
                 backend=backend,
@@ -191,7 +203,9 @@ def study(
             protocol, setting_of = expected[task]
             return pool.take(protocol, setting_of[variant.name], identity.get(variant.name), seeds)
 
-        return _run(output, plan, tasks, candidates, baseline, design, groups, train_group, take)
+        return _run(
+            output, plan, tasks, candidates, baseline, design, groups, train_group, take, part
+        )
     finally:
         lock.release()
 
@@ -307,30 +321,69 @@ def _shown(value: Any) -> str:
 
 
 def sweep_group(
-    task: str, variants: list[Surrogate], seeds: list[int], where: Path, **settings: Any
+    task: str,
+    variants: list[Surrogate],
+    seeds: list[int],
+    where: Path,
+    part: tuple[int, int] | None = None,
+    **settings: Any,
 ) -> SweepResult:
-    """One group: `variants` × `seeds` on `task` as one sweep that records itself in `where`,
-    read back from there (as a resumed study reads it). One cut short (a killed study) is
-    trained again."""
+    """One group: `variants` × `seeds` on `task` as one sweep that records itself in `where`
+    (or its `part`, in ``where/part-<K>``), read back from there (as a resumed study reads it).
+    One cut short (a killed study) is trained again; a group whose shares array tasks began is
+    not trained whole over them."""
+    shares = sorted(where.glob("part-*/sweep.json"))
+    if part is None and shares:
+        raise InvalidInput(
+            f"{where} holds shares of its runs trained by array tasks (--part), and not all of "
+            f"them: {_missing_shares(shares)}. Run the missing ones with --part K/N, then this "
+            "again"
+        )
+    if part is not None:
+        where = where / f"part-{part[0]}"
     if where.exists():
         shutil.rmtree(where)
-    sweep(task, {"variant": variants}, seeds, log_dir=where, **settings)
+    sweep(task, {"variant": variants}, seeds, log_dir=where, part=part, **settings)
     return SweepResult.read(where)
 
 
-def recorded_group(where: Path, variants: list[Surrogate], seeds: list[int]) -> SweepResult | None:
-    """The group in `where` if it holds every run of `variants` × `seeds`; None if it holds
-    none or part of them. A group of other runs is refused: the plan did not make it."""
-    if not (where / "sweep.json").exists():
+def recorded_group(
+    where: Path, variants: list[Surrogate], seeds: list[int], part: tuple[int, int] | None = None
+) -> SweepResult | None:
+    """The group in `where` if it holds every run of `variants` × `seeds`, whole or joined from
+    the shares that array tasks recorded in ``part-<K>/``; with `part`, that share alone, if it
+    holds all its runs. None if it holds none or some of them. A group of other runs is
+    refused: the plan did not make it."""
+    runs = len(variants) * len(seeds)
+    if part is not None:
+        start, stop = part_bounds(part, runs)
+        where, runs = where / f"part-{part[0]}", stop - start
+    shares = sorted(where.glob("part-*/sweep.json"))
+    if (where / "sweep.json").exists():
+        result = SweepResult.read(where)
+    elif shares:
+        try:
+            result = merge([SweepResult.read(share.parent) for share in shares])
+        except InvalidInput:  # some shares are still to come
+            return None
+    else:
         return None
-    result = SweepResult.read(where)
     names = [s["variant"] for s in result.settings]
     if names != [v.name for v in variants] or result.config["seeds"] != seeds:
         raise InvalidInput(
             f"{where} holds a group of {', '.join(names)} on seeds {result.config['seeds']}, "
             f"where the study's plan needs {', '.join(v.name for v in variants)} on {seeds}"
         )
-    return result if len(result.runs) == len(variants) * len(seeds) else None
+    return result if len(result.runs) == runs else None
+
+
+def _missing_shares(shares: list[Path]) -> str:
+    """What joining a group's `shares` (their ``sweep.json`` paths) says is missing."""
+    try:
+        merge([SweepResult.read(share.parent) for share in shares])
+    except InvalidInput as error:
+        return str(error)
+    return "none"
 
 
 def _runs_of(result: SweepResult, variant: str) -> list[int]:
@@ -359,9 +412,12 @@ def _run(
     groups: int | None,
     train_group: Callable[[str, list[Surrogate], list[int], Path], SweepResult],
     take: Callable[[str, Surrogate, list[int]], Taken | None],
+    part: tuple[int, int] | None = None,
 ) -> StudyResult:
     """The looks: each task's next group while some comparison awaits seeds, then the rule.
-    A group's runs of a setting that `take` finds recorded elsewhere are taken, not trained."""
+    A group's runs of a setting that `take` finds recorded elsewhere are taken, not trained.
+    With `part`, the first look whose groups are not all recorded has this share of them
+    trained, and the call returns there, writing no decision."""
     recorded: dict[str, list[SweepResult]] = {task: [] for task in tasks}
     trained: list[dict[str, Any]] = []
     endpoint = plan["primary_endpoint"]
@@ -382,6 +438,12 @@ def _run(
                 result = recorded_group(where, variants, group_seeds) if variants else None
                 found[task] = (variants, where, result, taken)
         to_train = [task for task, (v, _, result, _) in found.items() if v and result is None]
+        if part is not None and to_train:
+            for task in to_train:
+                variants, where = found[task][:2]
+                if recorded_group(where, variants, group_seeds, part) is None:
+                    train_group(task, variants, group_seeds, where)
+            return StudyResult(plan, _rows(decisions, baseline), {}, False)
         looks_trained = len({entry["group"] for entry in trained if "commit" in entry})
         if to_train and groups is not None and looks_trained >= groups:
             break
@@ -398,9 +460,13 @@ def _run(
             if len(entry) > 3:
                 trained.append(entry)
         decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
-        _write_decisions(output, decisions, baseline, trained)  # a killed study keeps them
-    rows = _write_decisions(output, decisions, baseline, trained)
+        if part is None:  # an array task writes no decision: the job after the array does
+            _write_decisions(output, decisions, baseline, trained)  # a killed study keeps them
     results = {task: merge(parts) for task, parts in recorded.items() if parts}
+    if part is not None:
+        rows = _rows(decisions, baseline)
+        return StudyResult(plan, rows, results, all(row["final"] for row in rows))
+    rows = _write_decisions(output, decisions, baseline, trained)
     scores = {task: _task_scores(result, plan) for task, result in results.items()}
     finished = all(row["final"] for row in rows)
     write_report(output / REPORT_FILE, plan, rows, scores, finished)

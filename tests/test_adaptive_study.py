@@ -200,3 +200,32 @@ def test_a_study_takes_the_baseline_s_recorded_runs_instead_of_training_them(tmp
     assert taken.take(protocol, {**ppo, "learning_rate": 0.001}, None, [0]) is None
     with pytest.raises(FileNotFoundError, match="no directory of recorded sweeps to reuse"):
         Pool.read([tmp_path / "nowhere"])
+
+
+def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tmp_path, tiny):
+    output = tmp_path / "study"
+    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
+    candidates = [frozen, "fppo-lp"]
+
+    first = fppo_jax.study("cartpole", candidates, "ppo", part=(1, 2), **settings)
+    group_1 = output / "cartpole" / "group-1"
+    assert sorted(p.name for p in group_1.iterdir()) == ["part-1"]
+    assert not first.finished and not (output / "decisions.json").exists()  # nothing decided
+    with pytest.raises(ValueError, match=r"holds shares of its runs .* not all of them: .*part"):
+        fppo_jax.study("cartpole", candidates, "ppo", **settings)  # never trained whole over them
+    assert sorted(p.name for p in group_1.iterdir()) == ["part-1"]
+
+    fppo_jax.study("cartpole", candidates, "ppo", part=(2, 2), groups=1, **settings)
+    shares = [SweepResult.read(group_1 / f"part-{k}") for k in (1, 2)]
+    assert [len(s.runs) for s in shares] == [12, 12]  # 3 settings × 8 seeds, halved
+    joined = fppo_jax.study("cartpole", candidates, "ppo", groups=0, **settings)
+    merged = joined.results["cartpole"]
+    assert len(merged.runs) == 24 and merged.seeds == list(range(8))
+    scores = [
+        (run_scores(merged, v, "final"), run_scores(merged, "ppo", "final"))
+        for v in ("frozen", "fppo-lp")
+    ]
+    expected = decide(scores, Design(8, 16))
+    assert [row["decision"] for row in joined.decisions] == ["worse", "undecided"]
+    assert [d.decision for d in expected] == ["worse", None]  # fppo-lp awaits the next look
+    assert json.loads((output / "decisions.json").read_text())["comparisons"] == joined.decisions

@@ -40,6 +40,7 @@ from fppo_jax import SweepResult, merge, statistics
 from fppo_jax.envs import MUJOCO_TASKS
 from fppo_jax.plots import plot_curves, plot_improvement, plot_profiles
 from fppo_jax.results import labels, max_average_return
+from fppo_jax.study_report import ruled_out
 
 BASELINE = "ppo"
 CHALLENGERS = ("fppo-lp", "fppo-qp")
@@ -201,7 +202,39 @@ def task_section(
             f"| {paper_gap:+.1f} | {inside} | {percent(share)} | {paper_share:+.0%} "
             f"| {inside_share} |"
         )
-    return [*lines, ""]
+    return [*lines, "", *effects_and_speed(result, index, names), ""]
+
+
+def effects_and_speed(result: SweepResult, index: dict[str, int], names: list[str]) -> list[str]:
+    """Per variant against PPO: the relative effects on final return its IQM difference's
+    interval rules out, and how soon its runs first reach 50% and 80% of PPO's IQM final
+    return (``statistics.steps_to_threshold``; reported where that IQM is positive)."""
+    final, base = result.scores("final"), index[BASELINE]
+    target = float(statistics.iqm(final[base]))
+    lines = [
+        f"What each interval rules out, and speed: env steps until a run first reaches 50% and "
+        f"80% of {BASELINE}'s IQM final return ({target:.1f}); runs that do, and their median.",
+        "",
+        "| variant | Δ IQM final rules out | reach 50% | reach 80% |",
+        "|---|---|---|---|",
+    ]
+    for i in index.values():
+        difference = statistics.compare(final[i], final[base])["iqm_difference"]
+        excluded = "–" if i == base else ruled_out(difference, target)
+        cells = [names[i], excluded]
+        metrics = result.setting_metrics(i)
+        for share in (0.5, 0.8):
+            if target <= 0:  # a share of a negative return is no lower bar
+                cells.append("–")
+                continue
+            steps = statistics.steps_to_threshold(
+                metrics["average_return"], metrics["env_steps"], share * target
+            )
+            reached = steps[np.isfinite(steps)]
+            median = f", median {np.median(reached):,.0f}" if reached.size else ""
+            cells.append(f"{reached.size}/{steps.size}{median}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
 
 
 def percent(values: tuple[float, ...]) -> str:

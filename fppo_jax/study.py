@@ -29,10 +29,11 @@ from fppo_jax.objectives import BUILTINS, hyperparameter_names, identities, reso
 from fppo_jax.options import Options
 from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, merge
+from fppo_jax.reuse import Pool, Taken
 from fppo_jax.sequential import Decision, Design, boundaries, decide
-from fppo_jax.study_report import SHARES, Scores, steps_name, write_report
+from fppo_jax.study_report import SHARES, Scores, steps_name, write_figures, write_report
 from fppo_jax.surrogates import Surrogate
-from fppo_jax.sweep import expand_grid, sweep
+from fppo_jax.sweep import expand_grid, part_bounds, sweep
 
 # The endpoints a study decides on; the one not chosen is reported beside it, undecided.
 ENDPOINTS = ("final", "auc")
@@ -74,6 +75,8 @@ def study(
     preset: str = "paper",
     backend: str = "auto",
     chunk: int | None = None,
+    reuse: str | Path | Sequence[str | Path] | None = None,
+    part: tuple[int, int] | None = None,
     **settings: Any,
 ) -> StudyResult:
     """Compare each of `candidates` with `baseline` on each of `tasks`, adding seeds in groups
@@ -94,6 +97,17 @@ def study(
     still undecided, and the baseline while any of them is. `groups` limits the looks this call
     trains (then it stops; calling again goes on; 0 writes the plan alone). Each look's
     decisions go to ``decisions.json``, and ``report.md`` is written when the call ends.
+
+    `reuse` names directories of recorded sweeps (a seed study's parts, say): a group's runs of
+    a setting found there, at every seed of the group, under the same task, protocol and
+    setting (:mod:`fppo_jax.reuse`), are taken instead of trained, and ``decisions.json`` names
+    where each came from. The plan records `reuse`.
+
+    ``part=(K, N)`` splits the next look over N processes (a SLURM job array's tasks): this
+    call trains only the K-th share of that look's groups (``group-<k>/part-<K>/``, the shares
+    of :func:`~fppo_jax.sweep`), and returns, deciding nothing; a call without `part` (a job
+    that waits for the array) then joins the shares, decides, and reports. Shares recorded
+    already are not trained again, so a requeued task goes on.
     """
     tasks = _names_of_tasks(tasks)
     one = isinstance(candidates, str | Surrogate)
@@ -111,6 +125,8 @@ def study(
         raise InvalidInput(f"groups must be a count of groups (0 or more), got {groups!r}")
     if chunk is not None:
         positive_int("chunk", chunk)
+    if part is not None:  # its shape: a group's runs, which it shares, are known at its look
+        part_bounds(part, part[1] if isinstance(part, tuple | list) and len(part) == 2 else 0)
     if "variant" in settings:
         raise InvalidInput("a study's variants are its candidates and its baseline, not variant")
     taken = sorted(set(OWN_SETTINGS) & set(settings))
@@ -118,6 +134,8 @@ def study(
         raise InvalidInput(f"a study sets {', '.join(taken)} itself, for each group's sweep")
     everyone = [*candidates, baseline]
     specific = set(hyperparameter_names([*BUILTINS.values(), *everyone]))
+    sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
+    expected: dict[str, tuple[dict[str, Any], dict[str, dict[str, Any]]]] = {}
     for task in tasks:  # every setting checked before the plan is written, as a sweep checks
         run = prepare(
             task,
@@ -128,9 +146,12 @@ def study(
             hyperparameters=sweepable(everyone),
         )
         by_name = {s.name: s for s in everyone}
-        for setting in expand_grid({"variant": everyone, **run.hyperparameters}, task):
+        grid = expand_grid({"variant": everyone, **run.hyperparameters}, task)
+        for setting in grid:
             values = {k: v for k, v in setting.items() if k != "variant"}
             resolve_hyperparameters(by_name[setting["variant"]], None, **values)
+        if sources:  # what a recorded run must match to be taken: the protocol, each setting
+            expected[task] = (json_value(run.record()), {s["variant"]: s for s in grid})
     plan = make_plan(
         tasks,
         candidates,
@@ -143,11 +164,14 @@ def study(
             "backend": backend,
             **{k: v for k, v in settings.items() if k not in Options.names()},
         },
+        sources,
     )
     output = writable_directory(output)
     lock = DirectoryLock(output, "a study")
     try:
         check_plan(output, plan)
+        if part is not None:  # the array's tasks train their shares side by side
+            lock.release()
 
         def train_group(
             task: str, variants: list[Surrogate], seeds: list[int], where: Path
@@ -162,6 +186,7 @@ def study(
                 variants,
                 seeds,
                 where,
+                part=part,
                 total_steps=total_steps,
                 preset=preset,
                 backend=backend,
@@ -169,7 +194,18 @@ def study(
                 **fixed,
             )
 
-        return _run(output, plan, tasks, candidates, baseline, design, groups, train_group)
+        pool = Pool.read(sources) if sources else None
+        identity = identities(everyone).get("surrogates", {})
+
+        def take(task: str, variant: Surrogate, seeds: list[int]) -> Taken | None:
+            if pool is None:
+                return None
+            protocol, setting_of = expected[task]
+            return pool.take(protocol, setting_of[variant.name], identity.get(variant.name), seeds)
+
+        return _run(
+            output, plan, tasks, candidates, baseline, design, groups, train_group, take, part
+        )
     finally:
         lock.release()
 
@@ -218,6 +254,7 @@ def make_plan(
     design: Design,
     endpoint: str,
     settings: dict[str, Any],
+    reuse: list[str],
 ) -> dict[str, Any]:
     """What ``plan.json`` records: the preregistration, decided before any run."""
     return cast(
@@ -243,6 +280,7 @@ def make_plan(
                     boundaries(design.level / (len(tasks) * len(candidates)), _fractions(design))
                 ),
                 "settings": settings,
+                **({"reuse": reuse} if reuse else {}),
                 **identities([*candidates, baseline]),
                 "commit": commit(),
             }
@@ -283,30 +321,69 @@ def _shown(value: Any) -> str:
 
 
 def sweep_group(
-    task: str, variants: list[Surrogate], seeds: list[int], where: Path, **settings: Any
+    task: str,
+    variants: list[Surrogate],
+    seeds: list[int],
+    where: Path,
+    part: tuple[int, int] | None = None,
+    **settings: Any,
 ) -> SweepResult:
-    """One group: `variants` × `seeds` on `task` as one sweep that records itself in `where`,
-    read back from there (as a resumed study reads it). One cut short (a killed study) is
-    trained again."""
+    """One group: `variants` × `seeds` on `task` as one sweep that records itself in `where`
+    (or its `part`, in ``where/part-<K>``), read back from there (as a resumed study reads it).
+    One cut short (a killed study) is trained again; a group whose shares array tasks began is
+    not trained whole over them."""
+    shares = sorted(where.glob("part-*/sweep.json"))
+    if part is None and shares:
+        raise InvalidInput(
+            f"{where} holds shares of its runs trained by array tasks (--part), and not all of "
+            f"them: {_missing_shares(shares)}. Run the missing ones with --part K/N, then this "
+            "again"
+        )
+    if part is not None:
+        where = where / f"part-{part[0]}"
     if where.exists():
         shutil.rmtree(where)
-    sweep(task, {"variant": variants}, seeds, log_dir=where, **settings)
+    sweep(task, {"variant": variants}, seeds, log_dir=where, part=part, **settings)
     return SweepResult.read(where)
 
 
-def recorded_group(where: Path, variants: list[Surrogate], seeds: list[int]) -> SweepResult | None:
-    """The group in `where` if it holds every run of `variants` × `seeds`; None if it holds
-    none or part of them. A group of other runs is refused: the plan did not make it."""
-    if not (where / "sweep.json").exists():
+def recorded_group(
+    where: Path, variants: list[Surrogate], seeds: list[int], part: tuple[int, int] | None = None
+) -> SweepResult | None:
+    """The group in `where` if it holds every run of `variants` × `seeds`, whole or joined from
+    the shares that array tasks recorded in ``part-<K>/``; with `part`, that share alone, if it
+    holds all its runs. None if it holds none or some of them. A group of other runs is
+    refused: the plan did not make it."""
+    runs = len(variants) * len(seeds)
+    if part is not None:
+        start, stop = part_bounds(part, runs)
+        where, runs = where / f"part-{part[0]}", stop - start
+    shares = sorted(where.glob("part-*/sweep.json"))
+    if (where / "sweep.json").exists():
+        result = SweepResult.read(where)
+    elif shares:
+        try:
+            result = merge([SweepResult.read(share.parent) for share in shares])
+        except InvalidInput:  # some shares are still to come
+            return None
+    else:
         return None
-    result = SweepResult.read(where)
     names = [s["variant"] for s in result.settings]
     if names != [v.name for v in variants] or result.config["seeds"] != seeds:
         raise InvalidInput(
             f"{where} holds a group of {', '.join(names)} on seeds {result.config['seeds']}, "
             f"where the study's plan needs {', '.join(v.name for v in variants)} on {seeds}"
         )
-    return result if len(result.runs) == len(variants) * len(seeds) else None
+    return result if len(result.runs) == runs else None
+
+
+def _missing_shares(shares: list[Path]) -> str:
+    """What joining a group's `shares` (their ``sweep.json`` paths) says is missing."""
+    try:
+        merge([SweepResult.read(share.parent) for share in shares])
+    except InvalidInput as error:
+        return str(error)
+    return "none"
 
 
 def _runs_of(result: SweepResult, variant: str) -> list[int]:
@@ -334,8 +411,13 @@ def _run(
     design: Design,
     groups: int | None,
     train_group: Callable[[str, list[Surrogate], list[int], Path], SweepResult],
+    take: Callable[[str, Surrogate, list[int]], Taken | None],
+    part: tuple[int, int] | None = None,
 ) -> StudyResult:
-    """The looks: each task's next group while some comparison awaits seeds, then the rule."""
+    """The looks: each task's next group while some comparison awaits seeds, then the rule.
+    A group's runs of a setting that `take` finds recorded elsewhere are taken, not trained.
+    With `part`, the first look whose groups are not all recorded has this share of them
+    trained, and the call returns there, writing no decision."""
     recorded: dict[str, list[SweepResult]] = {task: [] for task in tasks}
     trained: list[dict[str, Any]] = []
     endpoint = plan["primary_endpoint"]
@@ -349,27 +431,46 @@ def _run(
         for task in tasks:
             variants = [c for c in candidates if (task, c.name) in waiting]
             if variants:  # the baseline only while one of its task's candidates waits
-                where = output / _directory_name(task) / f"group-{look + 1}"
                 variants.append(baseline)
-                found[task] = (variants, where, recorded_group(where, variants, group_seeds))
-        to_train = [task for task, (_, _, result) in found.items() if result is None]
-        looks_trained = len({entry["group"] for entry in trained})
+                taken = {v.name: t for v in variants if (t := take(task, v, group_seeds))}
+                variants = [v for v in variants if v.name not in taken]
+                where = output / _directory_name(task) / f"group-{look + 1}"
+                result = recorded_group(where, variants, group_seeds) if variants else None
+                found[task] = (variants, where, result, taken)
+        to_train = [task for task, (v, _, result, _) in found.items() if v and result is None]
+        if part is not None and to_train:
+            for task in to_train:
+                variants, where = found[task][:2]
+                if recorded_group(where, variants, group_seeds, part) is None:
+                    train_group(task, variants, group_seeds, where)
+            return StudyResult(plan, _rows(decisions, baseline), {}, False)
+        looks_trained = len({entry["group"] for entry in trained if "commit" in entry})
         if to_train and groups is not None and looks_trained >= groups:
             break
-        for task, (variants, where, result) in found.items():
-            if result is None:
+        for task, (variants, where, result, taken) in found.items():
+            entry: dict[str, Any] = {"task": task, "group": look + 1, "seeds": group_seeds}
+            if variants and result is None:
                 result = train_group(task, variants, group_seeds, where)
-                trained.append(
-                    {"task": task, "group": look + 1, "seeds": group_seeds, "commit": commit()}
-                )
-            recorded[task].append(result)
+                entry["commit"] = commit()
+            if result is not None:
+                recorded[task].append(result)
+            recorded[task] += [t.result for t in taken.values()]
+            if taken:
+                entry["reused"] = {name: [str(s) for s in t.sources] for name, t in taken.items()}
+            if len(entry) > 3:
+                trained.append(entry)
         decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
-        _write_decisions(output, decisions, baseline, trained)  # a killed study keeps them
-    rows = _write_decisions(output, decisions, baseline, trained)
+        if part is None:  # an array task writes no decision: the job after the array does
+            _write_decisions(output, decisions, baseline, trained)  # a killed study keeps them
     results = {task: merge(parts) for task, parts in recorded.items() if parts}
+    if part is not None:
+        rows = _rows(decisions, baseline)
+        return StudyResult(plan, rows, results, all(row["final"] for row in rows))
+    rows = _write_decisions(output, decisions, baseline, trained)
     scores = {task: _task_scores(result, plan) for task, result in results.items()}
     finished = all(row["final"] for row in rows)
     write_report(output / REPORT_FILE, plan, rows, scores, finished)
+    write_figures(output, plan, rows, results, scores)
     return StudyResult(plan, rows, results, finished)
 
 
@@ -448,11 +549,15 @@ def _write_decisions(
     trained: list[dict[str, Any]],
 ) -> list[dict[str, Any]]:
     """``decisions.json``: a row per comparison (returned), and every group trained with the
-    commit it ran at, earlier calls' groups kept."""
+    commit it ran at, or with the recorded sweeps its runs were taken from, earlier calls'
+    groups kept."""
     path = output / DECISIONS_FILE
     earlier = json.loads(path.read_text()).get("groups", []) if path.exists() else []
-    known = {(g["task"], g["group"]) for g in trained}
-    groups = [g for g in earlier if (g["task"], g["group"]) not in known] + trained
+    by_group = {(g["task"], g["group"]): g for g in earlier}
+    for entry in trained:  # a group trained earlier keeps its commit when runs are taken now
+        key = (entry["task"], entry["group"])
+        by_group[key] = {**by_group.get(key, {}), **entry}
+    groups = list(by_group.values())
     rows = _rows(decisions, baseline)
     record = {
         "finished": all(row["final"] for row in rows),

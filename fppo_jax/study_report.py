@@ -3,7 +3,7 @@ seeds it used and why it stopped, its probability of improvement and IQM differe
 bootstrap intervals (:mod:`fppo_jax.statistics`), and the relative effects the interval
 rules out, on the primary endpoint (with its repeated confidence interval, adjusted for stopping
 early) and then on the secondary ones; and how soon each setting's runs reach shares of the
-baseline's final IQM."""
+baseline's final IQM. Its figures beside it: learning curves and probabilities of improvement."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ import numpy as np
 
 from fppo_jax import statistics
 from fppo_jax.files import write_atomically
+from fppo_jax.results import SweepResult
 from fppo_jax.sequential import Design, repeated_confidence
 
 # A task's scores: variant → endpoint (or steps_name(share)) → one per run, in seed order.
@@ -44,6 +45,14 @@ def write_report(
         if finished
         else "**Not finished**: some comparisons await seeds; the same command again goes on."
     )
+    reused = (
+        f" Runs recorded under {', '.join(plan['reuse'])} were taken instead of trained where "
+        "they ran the same task, protocol and setting at a group's seeds (decisions.json names "
+        "each group's and its source); the code that trained them is theirs, which the "
+        "regression pins say matches this one or not."
+        if plan.get("reuse")
+        else ""
+    )
     lines = [
         f"# {', '.join(plan['candidates'])} against {plan['baseline']}",
         "",
@@ -51,7 +60,7 @@ def write_report(
         f"{plan['primary_endpoint']} ({statistics.ENDPOINTS[plan['primary_endpoint']]}); "
         f"reported beside it: {', '.join(plan['secondary_endpoints'])}. Test: {plan['test']}; "
         f"family-wise error at most {plan['level']:g} over the {comparisons} comparisons. Seeds "
-        f"per setting at the looks: {looks}.",
+        f"per setting at the looks: {looks}.{reused}",
         "",
         status,
         "",
@@ -78,6 +87,49 @@ def write_report(
             lines += ["", *_table(scores[task], task_rows, endpoint, adjusted)]
         lines += ["", *_speed_table(scores[task], plan)]
     write_atomically(path, ("\n".join(lines) + "\n").encode())
+
+
+def write_figures(
+    output: Path,
+    plan: dict[str, Any],
+    rows: Sequence[dict[str, Any]],
+    results: dict[str, SweepResult],
+    scores: dict[str, Scores],
+) -> list[Path]:
+    """In `output`: ``curves.png``, each task's learning curves (IQM over each setting's runs
+    with a 95% bootstrap band), and ``improvement.png``, each comparison's probability of
+    improvement on the primary endpoint over the runs its decision used, with the report's
+    unadjusted 95% interval. Returns the paths written."""
+    import matplotlib.pyplot as plt  # on first use: a study that writes no figure never waits
+
+    from fppo_jax.plots import plot_curves, plot_improvement
+
+    tasks = [task for task in plan["tasks"] if task in results]
+    if not tasks:
+        return []
+    figure, axes = plt.subplots(
+        1, len(tasks), figsize=(6 * len(tasks), 4), squeeze=False, layout="constrained"
+    )
+    for ax, task in zip(axes[0], tasks, strict=True):
+        plot_curves(results[task], band="iqm", ax=ax)
+    endpoint, improvements = plan["primary_endpoint"], {}
+    for row in rows:
+        if row["task"] in scores:
+            seeds, task = row["seeds"], scores[row["task"]]
+            candidate, reference = task[row["candidate"]][endpoint], task[row["baseline"]][endpoint]
+            compared = statistics.compare(candidate[:seeds], reference[:seeds])
+            name = f"{row['candidate']}, {row['task']} ({seeds} seeds)"
+            improvements[name] = compared["probability_of_improvement"]
+    charts = {
+        "curves.png": figure,
+        "improvement.png": plot_improvement(improvements, plan["baseline"]),
+    }
+    paths = []
+    for name, chart in charts.items():
+        paths.append(output / name)
+        chart.savefig(paths[-1], dpi=90)
+        plt.close(chart)
+    return paths
 
 
 def _table(

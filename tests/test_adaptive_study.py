@@ -12,7 +12,8 @@ from scipy import stats
 import fppo_jax
 from fppo_jax import statistics
 from fppo_jax.cli import main
-from fppo_jax.results import SweepResult
+from fppo_jax.results import PART_FIELDS, SweepResult
+from fppo_jax.reuse import Pool
 from fppo_jax.sequential import Design, decide
 from fppo_jax.study import recorded_group, run_scores
 
@@ -62,6 +63,8 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
         assert unadjusted == "{:.2f} [{:.2f}, {:.2f}]".format(*plain)
         assert repeat[1] <= plain[1] and plain[2] <= repeat[2]
     assert level > 0.99 and repeat[2] - repeat[1] > plain[2] - plain[1]  # fppo-lp's is wider
+    for figure in ("curves.png", "improvement.png"):  # beside the report, drawn
+        assert (output / figure).read_bytes().startswith(b"\x89PNG")
 
     with pytest.raises(ValueError, match="planned with max_seeds = 16, not 24"):
         fppo_jax.study("cartpole", candidates, "ppo", **{**settings, "max_seeds": 24})
@@ -155,3 +158,74 @@ def test_no_group_writes_the_plan_alone_and_a_bad_setting_writes_nothing(tmp_pat
         "report.md",
     ]
     assert "No group recorded yet." in (output / "report.md").read_text()
+
+
+def test_a_study_takes_the_baseline_s_recorded_runs_instead_of_training_them(tmp_path, tiny):
+    pool = tmp_path / "recorded" / "ppo-part"  # as a seed study records PPO's runs
+    fppo_jax.sweep("cartpole", {"variant": ["ppo"]}, seeds=16, log_dir=pool, **tiny, **BUDGET)
+    output = tmp_path / "study"
+    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
+    done = fppo_jax.study("cartpole", [frozen, "fppo-lp"], "ppo", reuse=pool.parent, **settings)
+
+    assert done.finished and json.loads((output / "plan.json").read_text())["reuse"] == [
+        str(pool.parent)
+    ]
+    group_1 = SweepResult.read(output / "cartpole" / "group-1")
+    assert [s["variant"] for s in group_1.settings] == ["frozen", "fppo-lp"]  # no PPO trained
+    groups = json.loads((output / "decisions.json").read_text())["groups"]
+    assert [(g["group"], g["seeds"][0], g["reused"]) for g in groups] == [
+        (1, 0, {"ppo": [str(pool)]}),
+        (2, 8, {"ppo": [str(pool)]}),
+    ]
+    assert all(len(g["commit"]) == 40 for g in groups)  # and the candidates were trained
+    recorded = SweepResult.read(pool)
+    for endpoint in ("final", "auc"):  # the baseline's scores are the recorded runs'
+        np.testing.assert_array_equal(
+            run_scores(done.results["cartpole"], "ppo", endpoint),
+            run_scores(recorded, "ppo", endpoint),
+        )
+    assert "were taken instead of trained" in (output / "report.md").read_text()
+    again = fppo_jax.study("cartpole", [frozen, "fppo-lp"], "ppo", reuse=pool.parent, **settings)
+    assert again.decisions == done.decisions  # resumed: nothing trained, nothing taken anew
+    with pytest.raises(ValueError, match="planned with reuse = "):
+        fppo_jax.study("cartpole", [frozen, "fppo-lp"], "ppo", **settings)
+
+    # Taken only whole, and only under the same protocol and setting.
+    taken = Pool.read([pool.parent])
+    protocol = {k: v for k, v in recorded.config.items() if k not in PART_FIELDS}
+    ppo = recorded.settings[0]
+    assert taken.take(protocol, ppo, None, list(range(8, 16))).sources == [pool]
+    assert taken.take(protocol, ppo, None, list(range(10, 18))) is None  # seeds 16, 17 missing
+    assert taken.take({**protocol, "num_envs": 8}, ppo, None, [0]) is None
+    assert taken.take(protocol, {**ppo, "learning_rate": 0.001}, None, [0]) is None
+    with pytest.raises(FileNotFoundError, match="no directory of recorded sweeps to reuse"):
+        Pool.read([tmp_path / "nowhere"])
+
+
+def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tmp_path, tiny):
+    output = tmp_path / "study"
+    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
+    candidates = [frozen, "fppo-lp"]
+
+    first = fppo_jax.study("cartpole", candidates, "ppo", part=(1, 2), **settings)
+    group_1 = output / "cartpole" / "group-1"
+    assert sorted(p.name for p in group_1.iterdir()) == ["part-1"]
+    assert not first.finished and not (output / "decisions.json").exists()  # nothing decided
+    with pytest.raises(ValueError, match=r"holds shares of its runs .* not all of them: .*part"):
+        fppo_jax.study("cartpole", candidates, "ppo", **settings)  # never trained whole over them
+    assert sorted(p.name for p in group_1.iterdir()) == ["part-1"]
+
+    fppo_jax.study("cartpole", candidates, "ppo", part=(2, 2), groups=1, **settings)
+    shares = [SweepResult.read(group_1 / f"part-{k}") for k in (1, 2)]
+    assert [len(s.runs) for s in shares] == [12, 12]  # 3 settings × 8 seeds, halved
+    joined = fppo_jax.study("cartpole", candidates, "ppo", groups=0, **settings)
+    merged = joined.results["cartpole"]
+    assert len(merged.runs) == 24 and merged.seeds == list(range(8))
+    scores = [
+        (run_scores(merged, v, "final"), run_scores(merged, "ppo", "final"))
+        for v in ("frozen", "fppo-lp")
+    ]
+    expected = decide(scores, Design(8, 16))
+    assert [row["decision"] for row in joined.decisions] == ["worse", "undecided"]
+    assert [d.decision for d in expected] == ["worse", None]  # fppo-lp awaits the next look
+    assert json.loads((output / "decisions.json").read_text())["comparisons"] == joined.decisions

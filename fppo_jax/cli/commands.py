@@ -140,6 +140,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _study(args: argparse.Namespace) -> int:
+    part = array_part() if args.part == "auto" else args.part
     result = study(
         args.tasks,
         args.candidates,
@@ -152,10 +153,19 @@ def _study(args: argparse.Namespace) -> int:
         groups=args.groups,
         chunk=args.chunk,
         backend=args.backend,
+        reuse=args.reuse,
+        part=part,
         progress=not args.quiet,
         **hyperparameters_given(args),
         **config_overrides(args),
     )
+    if part is not None:
+        print(
+            f"part {part[0]} of {part[1]} of the next look recorded in {args.output} (or "
+            "nothing was left to train); once every part is, the same command without --part "
+            "joins them and decides"
+        )
+        return 0
     for row in result.decisions:
         print(
             f"{row['task']}: {row['candidate']} against {row['baseline']}: {row['decision']} "

@@ -179,6 +179,22 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     studied.add_argument(
         "--output", type=path, required=True, metavar="DIR", help="the study's directory"
     )
+    studied.add_argument(
+        "--reuse",
+        type=path,
+        nargs="+",
+        metavar="DIR",
+        help="recorded sweeps under DIR whose runs (same task, protocol and setting, at a "
+        "group's seeds) are taken instead of trained; decisions.json names each",
+    )
+    studied.add_argument(
+        "--part",
+        type=part,
+        metavar="K/N",
+        help="train only the K-th of N shares of the next look's groups and stop, deciding "
+        "nothing (auto: a SLURM job array task's share); the same command without --part, "
+        "once every share is recorded, joins them and decides",
+    )
     add_hyperparameter_flags(studied, surrogates, float_value)
     studied.add_argument(
         "--chunk", type=count, help="runs per compiled call (default: what fits in memory)"

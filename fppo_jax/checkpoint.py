@@ -202,6 +202,8 @@ class Checkpoints:
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
         self._pending: int | None = None  # the step being written, until it is on disk
+        # The process's unraisable hook, while this object's writes have theirs in its place.
+        self._process_hook: Callable[[Any], object] | None = None
         _ORBAX_CHATTER.install()
         if os.path.lexists(self.directory) and not self.directory.is_dir():
             raise InvalidInput(
@@ -326,7 +328,7 @@ class Checkpoints:
         items = {name: ocp.args.StandardSave(value) for name, value in arrays.items()}
         args = _args(**items, record=ocp.args.JsonSave(json_value(record)))
         self.wait()  # the one before, on disk: orbax would wait for it here anyway
-        _ReadsLeftBehind.quieten()
+        self._process_hook = self._process_hook or _ReadsLeftBehind.quieten()
         started = self._written(lambda: self._manager.save(step, args=args))
         if not started:
             raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
@@ -368,6 +370,7 @@ class Checkpoints:
 
     def _read(self, step: int, **items: Any) -> Any:
         _ReadsLeftBehind.quieten()
+        self._process_hook = None  # a read's reports come up to the process's end: kept
         return self._manager.restore(step, args=_args(**items))
 
     def wait(self) -> None:
@@ -426,6 +429,9 @@ class Checkpoints:
             if not quiet:
                 raise
         finally:
+            if self._process_hook is not None and isinstance(sys.unraisablehook, _ReadsLeftBehind):
+                sys.unraisablehook = self._process_hook  # every write is done: the user's again
+            self._process_hook = None
             if self._lock is not None:
                 self._lock.release()
                 self._lock = None
@@ -499,11 +505,16 @@ class _ReadsLeftBehind:
             self.previous(unraisable)
 
     @classmethod
-    def quieten(cls) -> None:
-        """Install the hook, unless it is the one installed: before the process first reads or
-        writes a checkpoint, never in one that has no checkpoints."""
-        if not isinstance(sys.unraisablehook, cls):
-            sys.unraisablehook = cls(sys.unraisablehook)
+    def quieten(cls) -> Callable[[Any], object] | None:
+        """Install the hook, unless it is the one installed, and return the hook it replaced
+        (None if none): before the process first reads a checkpoint, for good, as a read's
+        reports come up to the interpreter's exit; while a :class:`Checkpoints` writes, whose
+        write's reports come before it closes (it puts the process's hook back)."""
+        if isinstance(sys.unraisablehook, cls):
+            return None
+        previous = sys.unraisablehook
+        sys.unraisablehook = cls(previous)
+        return previous
 
 
 def _storage_failure(error: BaseException) -> bool:

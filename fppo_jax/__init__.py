@@ -32,10 +32,10 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
 _MODULES = {
     "fppo_jax.api": ("train",),
     "fppo_jax.checkpoint": (
+        "CheckpointNotWritten",
         "CheckpointsUnavailable",
         "ConfigMismatch",
         "DamagedCheckpoint",
-        "IncompatibleFormat",
     ),
     "fppo_jax.config": (
         "Hyperparameters",
@@ -71,6 +71,7 @@ __all__ = [
     "METRICS",
     "TASKS",
     "VARIANTS",
+    "CheckpointNotWritten",
     "CheckpointsUnavailable",
     "ConfigMismatch",
     "DamagedCheckpoint",

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import re
 import shutil
 import sys
 import warnings
@@ -64,6 +65,11 @@ class CheckpointsUnavailable(FppoError, RuntimeError):
 
 class ConfigMismatch(InvalidInput):
     """A checkpoint belongs to a run with a different configuration."""
+
+
+class CheckpointNotWritten(CheckpointsUnavailable):
+    """A checkpoint could not be written (a full disk, a file size limit, storage gone); the
+    checkpoints before it are intact."""
 
 
 @dataclasses.dataclass
@@ -195,6 +201,9 @@ class Checkpoints:
             raise InvalidInput(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
+        self._pending: int | None = None  # the step being written, until it is on disk
+        # The process's unraisable hook, while this object's writes have theirs in its place.
+        self._process_hook: Callable[[Any], object] | None = None
         _ORBAX_CHATTER.install()
         if os.path.lexists(self.directory) and not self.directory.is_dir():
             raise InvalidInput(
@@ -317,11 +326,13 @@ class Checkpoints:
         }
         # Orbax waits for the previous save to finish before it starts this one.
         items = {name: ocp.args.StandardSave(value) for name, value in arrays.items()}
-        started = self._manager.save(
-            step, args=_args(**items, record=ocp.args.JsonSave(json_value(record)))
-        )
+        args = _args(**items, record=ocp.args.JsonSave(json_value(record)))
+        self.wait()  # the one before, on disk: orbax would wait for it here anyway
+        self._process_hook = self._process_hook or _ReadsLeftBehind.quieten()
+        started = self._written(lambda: self._manager.save(step, args=args))
         if not started:
             raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
+        self._pending = step
 
     def policy(self) -> tuple[Policy, dict[str, Any]]:
         """The policy of the newest readable checkpoint, and its record."""
@@ -359,11 +370,44 @@ class Checkpoints:
 
     def _read(self, step: int, **items: Any) -> Any:
         _ReadsLeftBehind.quieten()
+        self._process_hook = None  # a read's reports come up to the process's end: kept
         return self._manager.restore(step, args=_args(**items))
 
     def wait(self) -> None:
-        """Block until the checkpoint being written is complete."""
-        self._manager.wait_until_finished()
+        """Block until the checkpoint being written is complete; :class:`CheckpointNotWritten`
+        if it could not be."""
+        self._written(self._manager.wait_until_finished)
+        self._check_written()
+
+    def _written(self, write: Callable[[], Any]) -> Any:
+        """`write`'s result, or :class:`CheckpointNotWritten` where it, or the checkpoint written
+        before it in the background, failed to write (orbax raises what storage said, as an
+        ``OSError`` or tensorstore's ``ValueError``); then whether that earlier one is on disk."""
+        try:
+            result = write()
+        except Exception as error:
+            if not _storage_failure(error):
+                raise
+            raise self._not_written(_storage_reason(error)) from error
+        self._check_written()
+        return result
+
+    def _check_written(self) -> None:
+        """Raise :class:`CheckpointNotWritten` if the step last started is not on disk now that
+        orbax says it has finished: a failure in one of its background threads is logged there,
+        not raised, and would otherwise pass for a checkpoint."""
+        if self._pending is not None and not self._manager.is_saving_in_progress():
+            step, self._pending = self._pending, None
+            if step not in self.steps():
+                raise self._not_written(f"step {step} is not on disk after writing it")
+
+    def _not_written(self, why: str) -> CheckpointNotWritten:
+        kept = self.steps()
+        before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
+        return CheckpointNotWritten(
+            f"could not write a checkpoint in {self.directory} ({why}); {before}. Free space, "
+            "or choose another checkpoint directory, and resume (--resume)"
+        )
 
     def lock(self) -> None:
         """Make this the directory's one writer, or raise :class:`CheckpointsUnavailable`
@@ -378,11 +422,16 @@ class Checkpoints:
         failing: a checkpoint still being written that fails too (into a directory that
         vanished, say) is let go rather than raised over the run's own error."""
         try:
+            if not quiet:
+                self.wait()
             self._manager.close()
         except Exception:
             if not quiet:
                 raise
         finally:
+            if self._process_hook is not None and isinstance(sys.unraisablehook, _ReadsLeftBehind):
+                sys.unraisablehook = self._process_hook  # every write is done: the user's again
+            self._process_hook = None
             if self._lock is not None:
                 self._lock.release()
                 self._lock = None
@@ -405,15 +454,20 @@ class Checkpoints:
 
 class _OrbaxChatter(logging.Filter):
     """Drops orbax's own log records (through absl's logger) but for its errors: a line for
-    every save and restore at INFO and WARNING, and a line for each damaged checkpoint's
-    metadata file at every look at the directory, which this module reports once, as damage.
+    every save and restore at INFO and WARNING, a line for each damaged checkpoint's metadata
+    file at every look at the directory, which this module reports once, as damage, and the
+    tracebacks of a background write that failed, which it raises as CheckpointNotWritten.
     Every other record, the user's own through absl included, passes at its own level."""
 
     def filter(self, record: logging.LogRecord) -> bool:
         if f"{os.sep}orbax{os.sep}" not in record.pathname:
             return True
         damaged = str(record.msg).startswith("Failed to json parse Metadata file")
-        return record.levelno >= logging.ERROR and not damaged
+        # A background write's failure, which Checkpoints raises itself (CheckpointNotWritten).
+        failure = record.exc_info[1] if record.exc_info else None
+        unwritten = failure is not None and _storage_failure(failure)
+        unwritten |= "_SignalingThread.run() raised an exception" in str(record.msg)
+        return record.levelno >= logging.ERROR and not damaged and not unwritten
 
     def install(self) -> None:
         logger = logging.getLogger("absl")
@@ -428,11 +482,12 @@ class _ReadsLeftBehind:
     """An unraisable-exception hook that drops the reports of reads that orbax left behind, and
     passes every other report on to the hook it replaced.
 
-    When orbax's read of one array fails (a file cut short), it closes the event loop it reads
-    in while tensorstore is still reading the other arrays. Each of those reads, once done,
-    schedules its result on the closed loop from a tensorstore thread, and the RuntimeError is
-    reported as unraisable: a screen of tracebacks, up to the interpreter's exit, about a
-    failure that was caught and reported as a damaged checkpoint already.
+    When orbax's read or write of one array fails (a file cut short, a full disk), it closes
+    the event loop it works in while tensorstore is still at the other arrays. Each of those,
+    once done, schedules its result on the closed loop from a tensorstore thread, and the
+    RuntimeError is reported as unraisable: a screen of tracebacks, up to the interpreter's
+    exit, about a failure that this module reports already (a damaged checkpoint, or
+    :class:`CheckpointNotWritten`).
     """
 
     def __init__(self, previous: Callable[[Any], object]):
@@ -450,11 +505,30 @@ class _ReadsLeftBehind:
             self.previous(unraisable)
 
     @classmethod
-    def quieten(cls) -> None:
-        """Install the hook, unless it is the one installed: before the process first reads a
-        checkpoint, never in one that only writes them."""
-        if not isinstance(sys.unraisablehook, cls):
-            sys.unraisablehook = cls(sys.unraisablehook)
+    def quieten(cls) -> Callable[[Any], object] | None:
+        """Install the hook, unless it is the one installed, and return the hook it replaced
+        (None if none): before the process first reads a checkpoint, for good, as a read's
+        reports come up to the interpreter's exit; while a :class:`Checkpoints` writes, whose
+        write's reports come before it closes (it puts the process's hook back)."""
+        if isinstance(sys.unraisablehook, cls):
+            return None
+        previous = sys.unraisablehook
+        sys.unraisablehook = cls(previous)
+        return previous
+
+
+def _storage_failure(error: BaseException) -> bool:
+    """Whether `error` is storage refusing a write, as orbax passes it on: an ``OSError``, or
+    tensorstore's ``ValueError`` that carries the operating system's error code."""
+    return isinstance(error, OSError) or "os_error_code" in str(error)
+
+
+def _storage_reason(error: Exception) -> str:
+    """What storage said, in the operating system's words where it gave its error code."""
+    if isinstance(error, OSError) and error.strerror:
+        return error.strerror
+    code = re.search(r"os_error_code='(\d+)'", str(error))
+    return os.strerror(int(code.group(1))) if code else first_line(error)
 
 
 def _args(**items: Any) -> ocp.args.Composite:

@@ -393,3 +393,34 @@ def test_a_record_written_before_formats_were_recorded_is_the_first_format(tmp_p
     written.write_text(json.dumps(record))  # as fppo-jax wrote it before
     policy = load_policy(tmp_path)
     np.testing.assert_array_equal(policy(np.zeros(4)), first.policy(np.zeros(4)))
+
+
+def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(tmp_path):
+    # Storage that refuses writes, as a full disk does: a file size limit set after the first
+    # checkpoint (a write past it fails with EFBIG; the signal it would send is ignored).
+    program = textwrap.dedent(f"""
+        import resource, signal, sys
+        import fppo_jax
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        def refuse(snapshot):
+            if snapshot.update == 4:  # checkpoint 4 is being written in the background
+                resource.setrlimit(resource.RLIMIT_FSIZE, (1000, resource.RLIM_INFINITY))
+        try:
+            fppo_jax.train(**{RUN!r}, checkpoint_dir={str(tmp_path)!r}, checkpoint_every=2,
+                           keep=10, callback=refuse)
+        except fppo_jax.CheckpointNotWritten as error:
+            print(error)
+            sys.exit(3)
+    """)
+    done = subprocess.run(
+        [sys.executable, "-c", program], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 3, done.stderr[-3000:]
+    assert done.stdout == (
+        f"could not write a checkpoint in {tmp_path} (File too large); the newest intact one is "
+        "step 2. Free space, or choose another checkpoint directory, and resume (--resume)\n"
+    )
+    assert "Traceback" not in done.stderr and "Event loop is closed" not in done.stderr
+    assert steps_on_disk(tmp_path) == [2]
+    resumed = train(**RUN, checkpoint_dir=tmp_path, resume=True, checkpoint_every=2, keep=10)
+    assert resumed.resumed_from == 2 and len(resumed.metrics["env_steps"]) == 20

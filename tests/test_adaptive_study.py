@@ -133,6 +133,15 @@ def test_the_command_decides_at_the_first_look_and_refuses_a_changed_plan(tmp_pa
     assert "planned with max_seeds = 16, not 32" in capsys.readouterr().err
     assert main([*common[:2], "ppo", *common[3:], "--max-seeds", "16"]) == 2
     assert "the baseline ppo is also a candidate" in capsys.readouterr().err
+    # --groups 0 trains nothing: it decides on what is recorded, and reports it again.
+    report = (output / "report.md").read_bytes()
+    assert main([*common, "--max-seeds", "16", "--groups", "0"]) == 0
+    assert "frozen against ppo: worse with 8 seeds" in capsys.readouterr().out
+    assert (output / "report.md").read_bytes() == report
+    with pytest.raises(SystemExit) as refused:
+        main([*common, "--max-seeds", "16", "--groups", "-1"])
+    assert refused.value.code == 2
+    assert "expected a count of looks, 0 or more, got '-1'" in capsys.readouterr().err
 
 
 def test_no_group_writes_the_plan_alone_and_a_bad_setting_writes_nothing(tmp_path, tiny):

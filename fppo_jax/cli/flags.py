@@ -51,6 +51,14 @@ def count(text: str) -> int:
     return positive_int("the value", number)
 
 
+@_argument
+def looks(text: str) -> int:
+    """A count of a study's looks to train now, 0 (none: decide and report) or more."""
+    if not (text.isascii() and text.isdigit()):
+        raise InvalidInput(f"expected a count of looks, 0 or more, got {text!r}")
+    return int(text)
+
+
 seeds = _argument(parse_seeds)
 
 

@@ -19,6 +19,7 @@ from fppo_jax.cli.flags import (
     count,
     float_value,
     level,
+    looks,
     names,
     part,
     path,
@@ -172,9 +173,10 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     )
     studied.add_argument(
         "--groups",
-        type=count,
+        type=looks,
         metavar="N",
-        help="train at most N more looks now, then stop (the same command goes on later)",
+        help="train at most N more looks now, then stop (the same command goes on later); "
+        "0 trains none: it decides on what is recorded, and reports",
     )
     studied.add_argument(
         "--output", type=path, required=True, metavar="DIR", help="the study's directory"

@@ -138,22 +138,21 @@ def test_two_processes_killed_resume_from_checkpoints_to_identical_parameters(tm
 
 def test_sigterm_to_one_of_two_processes_stops_both_at_one_checkpoint_to_resume_from(tmp_path):
     checkpoints = tmp_path / "checkpoints"
-    preempted = train_in_two_processes(
-        tmp_path / "stopped", CHECKPOINTS=str(checkpoints), TERM_AT="2"
-    )
+    long = {"CHECKPOINTS": str(checkpoints), "UPDATES": "12"}
+    preempted = train_in_two_processes(tmp_path / "stopped", TERM_AT="2", **long)
     stopped = results_of(tmp_path / "stopped", preempted)  # each raised StoppedBySignal
     assert [int(s["signal"]) for s in stopped] == [signal.SIGTERM] * 2
     at = int(stopped[0]["stopped_at"])
-    assert int(stopped[1]["stopped_at"]) == at and 2 <= at < 6  # together, before the end
+    assert int(stopped[1]["stopped_at"]) == at and 2 <= at < 12  # together, before the end
     steps = sorted(int(p.name) for p in checkpoints.iterdir() if p.name.isdigit())
     assert steps[-1] == at  # the checkpoint of the update they stopped after, complete
     first, second = results_of(
         tmp_path / "resumed",
-        train_in_two_processes(tmp_path / "resumed", CHECKPOINTS=str(checkpoints)),
+        train_in_two_processes(tmp_path / "resumed", **long),
     )
     assert int(first["resumed_from"]) == int(second["resumed_from"]) == at
     np.testing.assert_array_equal(first["policy_loss"], second["policy_loss"])
-    assert len(first["policy_loss"]) == 6
+    assert len(first["policy_loss"]) == 12
 
 
 @pytest.mark.slow

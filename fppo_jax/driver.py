@@ -42,12 +42,12 @@ from fppo_jax.distributed import (
 )
 from fppo_jax.envs import resets_itself
 from fppo_jax.errors import FppoError, InvalidInput
-from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
 from fppo_jax.files import DirectoryLock
 from fppo_jax.hooks import (
     Checkpoint,
     Chunk,
+    Evaluation,
     Finished,
     Hook,
     MetricLogs,
@@ -58,7 +58,7 @@ from fppo_jax.hooks import (
 from fppo_jax.memory import check_host_memory, host_run_bytes, runs_per_call
 from fppo_jax.metric_log import Block, open_logs, prepare_log_dir
 from fppo_jax.options import Options
-from fppo_jax.policy import Policy, make_policy
+from fppo_jax.policy import make_policy
 from fppo_jax.progress import PROGRESS_LINES, Counter, Progress, reporter
 from fppo_jax.trainer import Trainer, TrainState
 
@@ -330,15 +330,12 @@ class _Chunks:
         self.finished = Finished()
         self.chunks_done = 0  # by this process, every group's
         self.checkpoint: Checkpoint | None = None  # the hook, when checkpointing
-        self.evaluate: Callable[[Policy], Any] | None = None
+        self.evaluation = None
         if options.eval_every is not None:
-            evaluator = make_evaluator(plan.trainer.env, options.eval_episodes)
-            self.evaluate = jax.jit(jax.vmap(evaluator) if plan.batched else evaluator)
-        self.logs = None
-        if main:
-            self.logs = open_logs(
-                options.log_dir, options.wandb_project, plan.record, plan.runs, self._restored()
-            )
+            env, episodes, every = plan.trainer.env, options.eval_episodes, options.eval_every
+            self.evaluation = Evaluation(env, episodes, every, self.num_updates, plan.batched)
+        logs = (options.log_dir, options.wandb_project, plan.record, plan.runs)
+        self.logs = open_logs(*logs, _blocks(restored, plan, size)) if main else None
 
     def __enter__(self) -> _Chunks:
         return self
@@ -346,20 +343,6 @@ class _Chunks:
     def __exit__(self, *exc: object) -> None:
         if self.logs:
             self.logs.close()
-
-    def _restored(self) -> list[Block]:
-        """The runs and metrics a resumed run starts from, for the logs to rewrite."""
-        if self.restored is None:
-            return []
-        point = self.restored.point()
-        if not self.plan.batched:
-            return [(range(1), point.current)]
-        blocks = []
-        if point.finished:
-            blocks.append((range(len(point.finished["env_steps"])), point.finished))
-        begin = point.group * self.size
-        runs = range(begin, min(begin + self.size, self.plan.num_runs))
-        return [*blocks, (runs, {k: v[: len(runs)] for k, v in point.current.items()})]
 
     def _hooks(self, counter: Counter, resumed_from: int | None) -> list[Hook]:
         """The work between chunks that the options ask for, in the order it is done."""
@@ -403,7 +386,7 @@ class _Chunks:
             if point.finished:
                 self.finished.add(point.finished, point.finished_diverged)
             first_group, resumed_from = point.group, point.update
-            start = (self._restart_envs(self.restored.state, resumed_from), point.current)
+            start = (_restart_envs(self.plan, self.restored.state, resumed_from), point.current)
         self.counter = Counter(
             self.plan.num_runs,
             self.size,
@@ -442,8 +425,8 @@ class _Chunks:
             if not self.plan.batched:
                 self._check_finite(int(fetch(state.nonfinite_update)))
             policy = make_policy(self.plan.trainer, state)
-            if self.evaluate is not None:
-                self._evaluate(policy, chunk, update)
+            if self.evaluation is not None:
+                self.evaluation.add_column(policy, chunk, update)
             metrics = concatenate([*rows, chunk])
             rows = [metrics]  # joined once per chunk, not every chunk again each time
             done = Chunk(group, runs, update, state, policy, metrics)
@@ -485,20 +468,6 @@ class _Chunks:
                 self.outputs.check()
             self.after_group(self._outcome(state, resumed_from, stopped_at))
 
-    def _restart_envs(self, state: TrainState, update: int) -> TrainState:
-        """A restored state, with new environments if theirs lived outside JAX."""
-        trainer = self.plan.trainer
-        if not resets_itself(trainer.env):
-            return state
-        print(
-            f"resuming at update {update} in fresh environments: the environments' state lives "
-            "outside JAX (native MuJoCo, Gymnasium) and is not checkpointed, so each starts a "
-            "new episode here (not bitwise the run that never stopped)",
-            file=sys.stderr,
-        )
-        restart = jax.vmap(trainer.restart_envs) if self.plan.batched else trainer.restart_envs
-        return cast(TrainState, jax.jit(restart)(state))
-
     def _outcome(self, state: TrainState, resumed_from: int, stopped_at: int | None) -> Outcome:
         """The runs finished so far, ending with the group whose final state is `state`."""
         finished = self.finished
@@ -530,14 +499,35 @@ class _Chunks:
             )
         raise TrainingDiverged(nonfinite + 1, (nonfinite + 1) * self.samples, where)
 
-    def _evaluate(self, policy: Policy, chunk: dict[str, np.ndarray], update: int) -> None:
-        """`eval_return` beside a chunk's training metrics: the deterministic policy's mean
-        return, every `eval_every` updates and at the end, NaN between."""
-        column = np.full(chunk["env_steps"].shape, np.nan, np.float32)
-        assert self.evaluate is not None and self.options.eval_every is not None  # evaluating
-        if update % self.options.eval_every == 0 or update == self.num_updates:
-            column[..., -1] = np.asarray(self.evaluate(policy)).mean(axis=-1)
-        chunk["eval_return"] = column
+
+def _blocks(restored: Restored | None, plan: Plan, size: int) -> list[Block]:
+    """The runs and metrics a resumed run starts from, for the logs to rewrite."""
+    if restored is None:
+        return []
+    point = restored.point()
+    if not plan.batched:
+        return [(range(1), point.current)]
+    blocks = []
+    if point.finished:
+        blocks.append((range(len(point.finished["env_steps"])), point.finished))
+    begin = point.group * size
+    runs = range(begin, min(begin + size, plan.num_runs))
+    return [*blocks, (runs, {k: v[: len(runs)] for k, v in point.current.items()})]
+
+
+def _restart_envs(plan: Plan, state: TrainState, update: int) -> TrainState:
+    """A restored state, with new environments if theirs lived outside JAX."""
+    trainer = plan.trainer
+    if not resets_itself(trainer.env):
+        return state
+    print(
+        f"resuming at update {update} in fresh environments: the environments' state lives "
+        "outside JAX (native MuJoCo, Gymnasium) and is not checkpointed, so each starts a "
+        "new episode here (not bitwise the run that never stopped)",
+        file=sys.stderr,
+    )
+    restart = jax.vmap(trainer.restart_envs) if plan.batched else trainer.restart_envs
+    return cast(TrainState, jax.jit(restart)(state))
 
 
 def _preempted(chunk: int) -> bool:

@@ -12,10 +12,13 @@ import dataclasses
 from collections.abc import Callable
 from typing import Any, Protocol
 
+import jax
 import numpy as np
 
 from fppo_jax.checkpoint import Checkpoints, ResumePoint
 from fppo_jax.distributed import fetch_tree
+from fppo_jax.envs import Environment
+from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import concatenate
 from fppo_jax.files import DirectoryLock
 from fppo_jax.metric_log import Logs
@@ -138,3 +141,22 @@ class ProgressReport:
         returns = chunk.metrics["average_return"][..., -1]
         self.report(self.counter.progress(chunk.group, chunk.update, returns))
         return False
+
+
+class Evaluation:
+    """`eval_return` beside a chunk's training metrics: the deterministic policy's mean return
+    over `episodes` episodes every `every` updates and at the last, NaN between. It runs before
+    the hooks, as it adds a column to the chunk's own metrics before they join the group's."""
+
+    def __init__(
+        self, env: Environment, episodes: int, every: int, num_updates: int, batched: bool
+    ):
+        evaluator = make_evaluator(env, episodes)
+        self.evaluate = jax.jit(jax.vmap(evaluator) if batched else evaluator)
+        self.every, self.num_updates = every, num_updates
+
+    def add_column(self, policy: Policy, chunk: dict[str, np.ndarray], update: int) -> None:
+        column = np.full(chunk["env_steps"].shape, np.nan, np.float32)
+        if update % self.every == 0 or update == self.num_updates:
+            column[..., -1] = np.asarray(self.evaluate(policy)).mean(axis=-1)
+        chunk["eval_return"] = column

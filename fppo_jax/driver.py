@@ -30,6 +30,7 @@ from fppo_jax.checkpoint import (
     CheckpointsUnavailable,
     ConfigMismatch,
     Restored,
+    RunKind,
     check_same_run,
     open_checkpoints,
 )
@@ -107,7 +108,7 @@ class Plan:
     given, is called on the process that writes with the :class:`Outcome` of the runs finished
     so far, after each group (a sweep writes its curves with it)."""
 
-    kind: str  # "train" or "sweep"
+    kind: RunKind
     trainer: Trainer
     keys: jax.Array
     hps: Hyperparameters

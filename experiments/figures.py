@@ -1,6 +1,10 @@
 """The figures README.md shows, drawn from recorded results into results/figures/.
 
-    python experiments/figures.py [--out DIR]
+    python experiments/figures.py [--records DIR] [--out DIR]
+
+Each figure below but the surrogate chart is drawn when its records are found in `--records`
+(default `results/`); `--records results/earlier-protocol --out DIR` draws the 5-seed Table 1
+and Fig. 6 figures again from the earlier protocol's records.
 
 - `objectives.png`: every variant's surrogate and slope against the ratio for A > 0 and A < 0,
   R+ and R- shaded (the paper's Figs. 1 and 3). Computed; it takes seconds.
@@ -44,18 +48,23 @@ DPI = 90
 
 def main() -> None:
     parser = argument_parser(__doc__)
+    parser.add_argument("--records", type=Path, default=RESULTS, help="where the records are")
     parser.add_argument("--out", type=Path, default=RESULTS / "figures")
     args = parser.parse_args()
-    figures = {
-        "objectives.png": plot_objectives(),
-        "table1_classic.png": plot_sweeps([RESULTS / "table1_classic" / t for t in CLASSIC_TASKS]),
-        "escape_speed.png": plot_escape_speed_by_task(read_fractions(RESULTS / ESCAPE_FRACTIONS)),
-    }
-    mujoco = sorted(path.parent for path in RESULTS.glob("table1_mujoco*/*/curves.csv"))
+    records: Path = args.records
+    figures = {"objectives.png": plot_objectives()}
+    classic = [records / "table1_classic" / task for task in CLASSIC_TASKS]
+    if all((directory / "curves.csv").exists() for directory in classic):
+        figures["table1_classic.png"] = plot_sweeps(classic)
+    if (records / ESCAPE_FRACTIONS).exists():
+        figures["escape_speed.png"] = plot_escape_speed_by_task(
+            read_fractions(records / ESCAPE_FRACTIONS)
+        )
+    mujoco = sorted(path.parent for path in records.glob("table1_mujoco*/*/curves.csv"))
     if mujoco:
         figures["table1_mujoco.png"] = plot_sweeps(mujoco)
     ablations = sorted(
-        {path.parent.parent for path in RESULTS.glob(f"ablation_*/*/*/{RUN_RECORD}")}
+        {path.parent.parent for path in records.glob(f"ablation_*/*/*/{RUN_RECORD}")}
     )
     if ablations:
         figures["ablation.png"] = plot_ablations(ablations)

@@ -28,7 +28,7 @@ import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple, cast
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
 
 import jax
 import numpy as np
@@ -48,6 +48,8 @@ from fppo_jax.policy import Policy
 if TYPE_CHECKING:
     import orbax.checkpoint as ocp
 
+# What a checkpoint holds: one run (``train``) or a sweep's runs in groups (``sweep``).
+RunKind = Literal["train", "sweep"]
 
 # The layout of a checkpoint's items and record (files.check_format). Raise it when a change
 # makes checkpoints that the previous code cannot read, or that this code cannot read from it.
@@ -112,7 +114,7 @@ def open_checkpoints(
     directory: str | Path | None,
     resume: bool,
     keep: int,
-    kind: str,
+    kind: RunKind,
     run_config: dict[str, Any],
 ) -> tuple[Checkpoints | None, dict[str, Any] | None]:
     """The checkpoints of a `kind` of run ("train" or "sweep") in `directory`, and the newest
@@ -153,7 +155,7 @@ def open_checkpoints(
 
 
 def check_same_run(
-    record: dict[str, Any], kind: str, current: dict[str, Any], directory: Path
+    record: dict[str, Any], kind: RunKind, current: dict[str, Any], directory: Path
 ) -> None:
     """Raise :class:`ConfigMismatch` unless checkpoint `record` belongs to a `kind` of run
     configured as `current`, naming every field whose value differs.
@@ -280,7 +282,7 @@ class Checkpoints:
         point: ResumePoint,
         state: Any,
         *,
-        kind: str,
+        kind: RunKind,
         config: dict[str, Any],
         runs_per_call: int,
         num_updates: int,

@@ -2,9 +2,11 @@
 
 It runs a batch of runs (one run is a batch of one, unbatched): checks the host-side options,
 opens the checkpoints and compares their record with the run, checks the log directory,
-restores, compiles once, then calls the program in chunks of updates. Between chunks it checks
-for divergence, checkpoints, logs, evaluates, calls the user's callback and reports progress.
-A sweep's runs train in groups of one size, so every group reuses the one compiled program.
+restores, compiles once, then calls the program in chunks of updates. After each chunk it
+stops a single run that diverged, evaluates, then hands the chunk to the hooks the options ask
+for (:mod:`fppo_jax.hooks`: checkpoint, output directory, logs, callback, progress), and stops
+on a signal. A sweep's runs train in groups of one size, so every group reuses the one
+compiled program.
 """
 
 from __future__ import annotations
@@ -28,27 +30,36 @@ from fppo_jax.checkpoint import (
     CheckpointsUnavailable,
     ConfigMismatch,
     Restored,
-    ResumePoint,
+    RunKind,
     check_same_run,
     open_checkpoints,
 )
 from fppo_jax.config import Hyperparameters
 from fppo_jax.distributed import (
     fetch,
-    fetch_tree,
     is_main_process,
     make_mesh,
     on_main_process,
 )
 from fppo_jax.envs import resets_itself
 from fppo_jax.errors import FppoError, InvalidInput
-from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
 from fppo_jax.files import DirectoryLock
+from fppo_jax.hooks import (
+    Checkpoint,
+    Chunk,
+    Evaluation,
+    Finished,
+    Hook,
+    MetricLogs,
+    OutputDirectory,
+    ProgressReport,
+    UserCallback,
+)
 from fppo_jax.memory import check_host_memory, host_run_bytes, runs_per_call
 from fppo_jax.metric_log import Block, open_logs, prepare_log_dir
-from fppo_jax.options import Options, Snapshot, stops
-from fppo_jax.policy import Policy, make_policy
+from fppo_jax.options import Options
+from fppo_jax.policy import make_policy
 from fppo_jax.progress import PROGRESS_LINES, Counter, Progress, reporter
 from fppo_jax.trainer import Trainer, TrainState
 
@@ -97,7 +108,7 @@ class Plan:
     given, is called on the process that writes with the :class:`Outcome` of the runs finished
     so far, after each group (a sweep writes its curves with it)."""
 
-    kind: str  # "train" or "sweep"
+    kind: RunKind
     trainer: Trainer
     keys: jax.Array
     hps: Hyperparameters
@@ -296,7 +307,7 @@ def _group(plan: Plan, group: int, size: int) -> tuple[jax.Array, Hyperparameter
 
 
 class _Chunks:
-    """The groups of a plan, run chunk by chunk, and the host's work between chunks."""
+    """The groups of a plan, run chunk by chunk, with the hooks' work between chunks."""
 
     def __init__(
         self,
@@ -316,18 +327,16 @@ class _Chunks:
         self.after_group = plan.after_group if main else None
         config = plan.trainer.config
         self.num_updates, self.samples = config.num_updates, config.samples_per_update
-        self.finished: list[dict[str, np.ndarray]] = []  # each finished group's metrics
-        self.diverged = np.zeros(0, np.int32)
-        self.saved: list[int] = []  # updates checkpointed, for a diverged run's message
-        self.evaluate: Callable[[Policy], Any] | None = None
+        self.groups = -(-plan.num_runs // size)
+        self.finished = Finished()
+        self.chunks_done = 0  # by this process, every group's
+        self.checkpoint: Checkpoint | None = None  # the hook, when checkpointing
+        self.evaluation = None
         if options.eval_every is not None:
-            evaluator = make_evaluator(plan.trainer.env, options.eval_episodes)
-            self.evaluate = jax.jit(jax.vmap(evaluator) if plan.batched else evaluator)
-        self.logs = None
-        if main:
-            self.logs = open_logs(
-                options.log_dir, options.wandb_project, plan.record, plan.runs, self._restored()
-            )
+            env, episodes, every = plan.trainer.env, options.eval_episodes, options.eval_every
+            self.evaluation = Evaluation(env, episodes, every, self.num_updates, plan.batched)
+        logs = (options.log_dir, options.wandb_project, plan.record, plan.runs)
+        self.logs = open_logs(*logs, _blocks(restored, plan, size)) if main else None
 
     def __enter__(self) -> _Chunks:
         return self
@@ -336,19 +345,31 @@ class _Chunks:
         if self.logs:
             self.logs.close()
 
-    def _restored(self) -> list[Block]:
-        """The runs and metrics a resumed run starts from, for the logs to rewrite."""
-        if self.restored is None:
-            return []
-        point = self.restored.point()
-        if not self.plan.batched:
-            return [(range(1), point.current)]
-        blocks = []
-        if point.finished:
-            blocks.append((range(len(point.finished["env_steps"])), point.finished))
-        begin = point.group * self.size
-        runs = range(begin, min(begin + self.size, self.plan.num_runs))
-        return [*blocks, (runs, {k: v[: len(runs)] for k, v in point.current.items()})]
+    def _hooks(self, counter: Counter, resumed_from: int | None) -> list[Hook]:
+        """The work between chunks that the options ask for, in the order it is done."""
+        hooks: list[Hook] = []
+        if self.options.checkpoint_dir is not None:
+            plan = self.plan
+            record = {
+                "kind": plan.kind,
+                "config": plan.record,
+                "runs_per_call": self.size,
+                "num_updates": self.num_updates,
+            }
+            single_run = None if plan.batched else plan.trainer
+            self.checkpoint = Checkpoint(
+                self.checkpoints, self.finished, record, single_run, resumed_from
+            )
+            hooks.append(self.checkpoint)
+        if self.outputs:
+            hooks.append(OutputDirectory(self.outputs))
+        if self.logs:
+            hooks.append(MetricLogs(self.logs))
+        if self.options.callback is not None:
+            hooks.append(UserCallback(self.options.callback))
+        if self.report:
+            hooks.append(ProgressReport(self.report, counter))
+        return hooks
 
     def train(self) -> Outcome:
         # Without checkpoints a signal's default (the end of the process) loses nothing more
@@ -364,64 +385,26 @@ class _Chunks:
         if self.restored is not None:
             point = self.restored.point()
             if point.finished:
-                self.finished.append(point.finished)
-                self.diverged = point.finished_diverged
+                self.finished.add(point.finished, point.finished_diverged)
             first_group, resumed_from = point.group, point.update
-            start = (self._restart_envs(self.restored.state, resumed_from), point.current)
-            self.saved.append(resumed_from)
-        config = self.plan.trainer.config
+            start = (_restart_envs(self.plan, self.restored.state, resumed_from), point.current)
         self.counter = Counter(
             self.plan.num_runs,
             self.size,
             self.num_updates,
-            config.samples_per_update,
+            self.samples,
             self.program.compile_seconds,
             first_group,
             resumed_from,
         )
-        self._report(first_group, resumed_from, None)
-        state, stopped_at, chunks = None, None, 0
-        groups = -(-self.plan.num_runs // self.size)
-        for group in range(first_group, groups):
-            keys, hps = _group(self.plan, group, self.size)
-            if group == first_group and start is not None:
-                initial, rows = start[0], [start[1]]
-            else:
-                initial, rows = self.program.init(keys, hps), []
-            state = initial  # a resumed group may have no update left to run
-            for state, chunk in run_chunks(self.program, initial, hps):
-                update = int(np.max(fetch(state.update)))
-                if not self.plan.batched:
-                    self._check_finite(int(fetch(state.nonfinite_update)))
-                policy = make_policy(self.plan.trainer, state)
-                if self.evaluate is not None:
-                    self._evaluate(policy, chunk, update)
-                metrics = concatenate([*rows, chunk])
-                rows = [metrics]  # joined once per chunk, not every chunk again each time
-                stop = self._after_chunk(group, state, metrics, update, policy)
-                self._report(group, update, metrics)
-                if stop:
-                    stopped_at = update
-                    break
-                chunks += 1
-                if self.options.checkpoint_dir is not None and _preempted(chunks):
-                    self.signalled.append(signal.SIGTERM)
-                if self.signalled and (update < self.num_updates or group < groups - 1):
-                    assert self.options.checkpoint_dir is not None  # else nothing is caught
-                    if self.checkpoints is not None:  # the process that writes them
-                        self.checkpoints.wait()
-                    raise StoppedBySignal(self.signalled[0], update, self.options.checkpoint_dir)
-            kept = slice(0, min(self.size, self.plan.num_runs - group * self.size))
-            metrics = concatenate(rows)
-            self.finished.append(
-                {k: v[kept] for k, v in metrics.items()} if self.plan.batched else metrics
-            )
-            first_bad = np.atleast_1d(fetch(state.nonfinite_update))[kept] + 1
-            self.diverged = np.concatenate([self.diverged, first_bad])
-            if self.after_group:
-                if self.outputs:
-                    self.outputs.check()
-                self.after_group(self._outcome(state, resumed_from, stopped_at))
+        self.hooks = self._hooks(self.counter, None if start is None else resumed_from)
+        if self.report:
+            self.report(self.counter.progress(first_group, resumed_from))
+        state, stopped_at = None, None
+        for group in range(first_group, self.groups):
+            state, rows, stopped_at = self._train_group(group, start)
+            start = None
+            self._end_group(group, state, rows, resumed_from, stopped_at)
             if stopped_at is not None:
                 break
         outcome = self._outcome(cast(TrainState, state), resumed_from, stopped_at)
@@ -429,26 +412,70 @@ class _Chunks:
             self.checkpoints.wait()
         return outcome
 
-    def _restart_envs(self, state: TrainState, update: int) -> TrainState:
-        """A restored state, with new environments if theirs lived outside JAX."""
-        trainer = self.plan.trainer
-        if not resets_itself(trainer.env):
-            return state
-        print(
-            f"resuming at update {update} in fresh environments: the environments' state lives "
-            "outside JAX (native MuJoCo, Gymnasium) and is not checkpointed, so each starts a "
-            "new episode here (not bitwise the run that never stopped)",
-            file=sys.stderr,
+    def _train_group(
+        self, group: int, start: tuple[TrainState, dict[str, np.ndarray]] | None
+    ) -> tuple[TrainState, list[dict[str, np.ndarray]], int | None]:
+        """Group `group`, chunk by chunk from `start` (a resumed group's state and metrics) or
+        afresh: its final state, its metrics, and the update a hook stopped it at, if one did."""
+        keys, hps = _group(self.plan, group, self.size)
+        initial, rows = (start[0], [start[1]]) if start else (self.program.init(keys, hps), [])
+        state = initial  # a resumed group may have no update left to run
+        runs = range(group * self.size, min((group + 1) * self.size, self.plan.num_runs))
+        for state, chunk in run_chunks(self.program, initial, hps):
+            update = int(np.max(fetch(state.update)))
+            if not self.plan.batched:
+                self._check_finite(int(fetch(state.nonfinite_update)))
+            policy = make_policy(self.plan.trainer, state)
+            if self.evaluation is not None:
+                self.evaluation.add_column(policy, chunk, update)
+            metrics = concatenate([*rows, chunk])
+            rows = [metrics]  # joined once per chunk, not every chunk again each time
+            done = Chunk(group, runs, update, state, policy, metrics)
+            if any([hook.after_chunk(done) for hook in self.hooks]):  # every hook, then stop
+                return state, rows, update
+            self._stop_if_signalled(group, update)
+        return state, rows, None
+
+    def _stop_if_signalled(self, group: int, update: int) -> None:
+        """Stops, checkpointed, on a signal caught (or at the chunk where joined processes stop
+        for a preemption) while updates are left to train."""
+        self.chunks_done += 1
+        if self.options.checkpoint_dir is not None and _preempted(self.chunks_done):
+            self.signalled.append(signal.SIGTERM)
+        if self.signalled and (update < self.num_updates or group < self.groups - 1):
+            assert self.options.checkpoint_dir is not None  # else nothing is caught
+            if self.checkpoints is not None:  # the process that writes them
+                self.checkpoints.wait()
+            raise StoppedBySignal(self.signalled[0], update, self.options.checkpoint_dir)
+
+    def _end_group(
+        self,
+        group: int,
+        state: TrainState,
+        rows: list[dict[str, np.ndarray]],
+        resumed_from: int,
+        stopped_at: int | None,
+    ) -> None:
+        """Keeps the group's runs (not the repeats that pad the last group) with the update
+        each diverged at, and shows them to the plan's `after_group`."""
+        kept = slice(0, min(self.size, self.plan.num_runs - group * self.size))
+        metrics = concatenate(rows)
+        self.finished.add(
+            {k: v[kept] for k, v in metrics.items()} if self.plan.batched else metrics,
+            np.atleast_1d(fetch(state.nonfinite_update))[kept] + 1,
         )
-        restart = jax.vmap(trainer.restart_envs) if self.plan.batched else trainer.restart_envs
-        return cast(TrainState, jax.jit(restart)(state))
+        if self.after_group:
+            if self.outputs:
+                self.outputs.check()
+            self.after_group(self._outcome(state, resumed_from, stopped_at))
 
     def _outcome(self, state: TrainState, resumed_from: int, stopped_at: int | None) -> Outcome:
         """The runs finished so far, ending with the group whose final state is `state`."""
+        finished = self.finished
         return Outcome(
             state=state,
-            metrics=concatenate(self.finished, axis=0) if self.plan.batched else self.finished[-1],
-            diverged=self.diverged if self.plan.batched else self.diverged[0],
+            metrics=finished.joined() if self.plan.batched else finished.metrics[-1],
+            diverged=finished.diverged if self.plan.batched else finished.diverged[0],
             compile_seconds=self.program.compile_seconds,
             train_seconds=self.counter.elapsed(),
             resumed_from=resumed_from,
@@ -456,69 +483,52 @@ class _Chunks:
             stopped_at=stopped_at,
         )
 
-    def _after_chunk(
-        self,
-        group: int,
-        state: TrainState,
-        metrics: dict[str, np.ndarray],
-        update: int,
-        policy: Policy,
-    ) -> bool:
-        """Checkpoint, logs and the callback; True to stop."""
-        if self.options.checkpoint_dir is not None:
-            host = fetch_tree(state)  # every process takes part; process 0 writes
-            if self.checkpoints:
-                finished = concatenate(self.finished, axis=0) if self.finished else {}
-                point = ResumePoint(group, update, metrics, finished, self.diverged)
-                self.checkpoints.save_point(
-                    point,
-                    host,
-                    kind=self.plan.kind,
-                    config=self.plan.record,
-                    runs_per_call=self.size,
-                    num_updates=self.num_updates,
-                    policy=None if self.plan.batched else make_policy(self.plan.trainer, host),
-                )
-            self.saved.append(update)
-        runs = range(group * self.size, min((group + 1) * self.size, self.plan.num_runs))
-        if self.outputs:
-            self.outputs.check()  # after the checkpoint: a lost output directory loses no state
-        if self.logs:
-            self.logs.write(metrics, runs)
-        callback = self.options.callback
-        if callback is None:
-            return False
-        return stops(callback(Snapshot(update, metrics, state, policy, runs)))
-
     def _check_finite(self, nonfinite: int) -> None:
         """A single run stops at its first non-finite update (a sweep's runs go on)."""
         if nonfinite < 0:
             return
         where = None
-        if self.options.checkpoint_dir is not None:
+        if self.checkpoint is not None:
             if self.checkpoints:
                 self.checkpoints.wait()
+            saved = self.checkpoint.saved
             where = (
-                f"The last good checkpoint, at update {self.saved[-1]}, is in "
-                f"{Path(self.options.checkpoint_dir).absolute()}"
-                if self.saved
+                f"The last good checkpoint, at update {saved[-1]}, is in "
+                f"{Path(cast(str | Path, self.options.checkpoint_dir)).absolute()}"
+                if saved
                 else "No checkpoint was written before it"
             )
         raise TrainingDiverged(nonfinite + 1, (nonfinite + 1) * self.samples, where)
 
-    def _evaluate(self, policy: Policy, chunk: dict[str, np.ndarray], update: int) -> None:
-        """`eval_return` beside a chunk's training metrics: the deterministic policy's mean
-        return, every `eval_every` updates and at the end, NaN between."""
-        column = np.full(chunk["env_steps"].shape, np.nan, np.float32)
-        assert self.evaluate is not None and self.options.eval_every is not None  # evaluating
-        if update % self.options.eval_every == 0 or update == self.num_updates:
-            column[..., -1] = np.asarray(self.evaluate(policy)).mean(axis=-1)
-        chunk["eval_return"] = column
 
-    def _report(self, group: int, update: int, metrics: dict[str, np.ndarray] | None) -> None:
-        if self.report:
-            returns = None if metrics is None else metrics["average_return"][..., -1]
-            self.report(self.counter.progress(group, update, returns))
+def _blocks(restored: Restored | None, plan: Plan, size: int) -> list[Block]:
+    """The runs and metrics a resumed run starts from, for the logs to rewrite."""
+    if restored is None:
+        return []
+    point = restored.point()
+    if not plan.batched:
+        return [(range(1), point.current)]
+    blocks = []
+    if point.finished:
+        blocks.append((range(len(point.finished["env_steps"])), point.finished))
+    begin = point.group * size
+    runs = range(begin, min(begin + size, plan.num_runs))
+    return [*blocks, (runs, {k: v[: len(runs)] for k, v in point.current.items()})]
+
+
+def _restart_envs(plan: Plan, state: TrainState, update: int) -> TrainState:
+    """A restored state, with new environments if theirs lived outside JAX."""
+    trainer = plan.trainer
+    if not resets_itself(trainer.env):
+        return state
+    print(
+        f"resuming at update {update} in fresh environments: the environments' state lives "
+        "outside JAX (native MuJoCo, Gymnasium) and is not checkpointed, so each starts a "
+        "new episode here (not bitwise the run that never stopped)",
+        file=sys.stderr,
+    )
+    restart = jax.vmap(trainer.restart_envs) if plan.batched else trainer.restart_envs
+    return cast(TrainState, jax.jit(restart)(state))
 
 
 def _preempted(chunk: int) -> bool:

@@ -206,7 +206,10 @@ def _speed_table(scores: Scores, plan: dict[str, Any]) -> list[str]:
     shares = " and ".join(f"{share:.0%} ({share * target:.1f})" for share in SHARES)
     lines = [
         f"Speed, reported, not tested: env steps until a run's average return first reaches "
-        f"{shares} of {baseline}'s final IQM, over every recorded run of each setting.",
+        f"{shares} of {baseline}'s final IQM, over every recorded run of each setting. The "
+        "median counts a run that never reaches it as slower than every run that does, so it "
+        "is 'not reached' once half of them never do (the median over only the runs that "
+        "reach it would be earlier).",
         "",
         "| setting | runs | "
         + " | ".join(f"reached {s:.0%} | median steps" for s in SHARES)

@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from test_gpu_suite import recorded
 
 SCRIPT = Path(__file__).resolve().parent.parent / "experiments" / "bench_startup.py"
@@ -15,6 +16,8 @@ def bench(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, str(SCRIPT), *args], capture_output=True, text=True)
 
 
+# Every arm in fresh processes, about a minute on 2 cores: with -m slow.
+@pytest.mark.slow
 def test_the_smoke_run_measures_every_arm_into_a_temporary_directory():
     before = recorded()
     done = bench("--smoke")

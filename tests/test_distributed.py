@@ -120,6 +120,9 @@ def killed_then_resumed(tmp_path: Path) -> list[dict[str, np.ndarray]]:
     return results_of(tmp_path / "resumed", resumed)
 
 
+# Over a minute on 2 cores, with -m slow; the SIGTERM test below resumes two processes from
+# their checkpoints in the default run.
+@pytest.mark.slow
 def test_two_processes_killed_resume_from_checkpoints_to_identical_parameters(tmp_path):
     first, second = killed_then_resumed(tmp_path)
     assert (int(first["process"]), int(second["process"])) == (0, 1)

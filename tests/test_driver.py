@@ -465,9 +465,19 @@ def test_a_checkpoint_directory_replaced_by_a_file_mid_run_stops_it_at_once(tmp_
     checkpoints = tmp_path / "ckpt"
 
     def replace(snapshot):
-        if snapshot.update == 3:  # moved away whole, while orbax may still write in it
-            checkpoints.rename(tmp_path / "moved")
-            checkpoints.write_text("not a directory")
+        if snapshot.update != 3:
+            return
+        stand_in = tmp_path / "stand-in"
+        stand_in.write_text("not a directory")
+        for attempt in range(100):  # moved away whole, while orbax may still write in it
+            if checkpoints.is_dir():
+                checkpoints.rename(tmp_path / f"moved-{attempt}")
+            try:
+                stand_in.rename(checkpoints)
+                return
+            except IsADirectoryError:  # orbax's background save made the directory again
+                continue
+        pytest.fail(f"orbax kept making {checkpoints} again")
 
     with pytest.raises(ValueError, match=rf"{checkpoints}, where this run writes checkpoints"):
         train(**RUN, checkpoint_dir=checkpoints, checkpoint_every=3, callback=replace)

@@ -235,9 +235,10 @@ def attempt(kind, directory, log, cache, stop, where) -> dict | None:
 
 @pytest.mark.parametrize(
     "kind",
-    # The sweep's chain (over a minute on a CPU) runs with -m slow; the train chain, and the
-    # sweep resumed after its end (tests/test_driver.py), in the default run.
-    ["train", pytest.param("sweep", marks=pytest.mark.slow)],
+    # Each chain takes over a minute on a CPU: with -m slow. In the default run a run killed
+    # mid-chunk resumes to the same bits (tests/test_checkpoint.py), and a sweep resumed after
+    # its end (tests/test_driver.py).
+    [pytest.param("train", marks=pytest.mark.slow), pytest.param("sweep", marks=pytest.mark.slow)],
 )
 def test_killed_at_every_moment_and_resumed_each_time_ends_as_if_never_stopped(kind, tmp_path):
     cache, directory = tmp_path / "jax-cache", tmp_path / "checkpoints"

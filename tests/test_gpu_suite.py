@@ -81,8 +81,7 @@ def test_smoke_runs_never_write_into_the_record_and_scripts_refuse_to_replace_it
     into = _suite("--smoke", "--results", str(EXPERIMENTS / "results" / "smoke"))
     assert into.returncode != 0 and "never writes into the recorded results" in into.stderr
     for script, *args in [
-        ("table1_mujoco.py", "--backend", "native", "--tasks", "hopper", "--steps", "2048"),
-        ("ablation.py", "--backend", "native", "--tasks", "ant", "--parts", "k", "--seeds", "1"),
+        ("study.py", "--task", "hopper", "--seeds", "0:5"),
         ("escape_speed.py", "--tasks", "cartpole", "--seeds", "1"),
         ("bench_logging.py", "--steps", "4096"),
     ]:

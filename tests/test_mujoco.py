@@ -32,9 +32,7 @@ SHAPES = {  # observation size, action size
 @pytest.mark.parametrize(
     "name",
     [
-        name
-        if name in ("hopper", "reacher", "swimmer")
-        else pytest.param(name, marks=pytest.mark.slow)
+        name if name in ("reacher", "swimmer") else pytest.param(name, marks=pytest.mark.slow)
         for name in MUJOCO_TASKS
     ],
 )
@@ -187,6 +185,9 @@ def test_every_variant_trains_on_a_mujoco_task():
     assert (m["approx_kl"][:, -1] > 0).all()  # every variant moved its policy
 
 
+# Training on MJX to render takes about a minute on a CPU: with -m slow (clipping is also
+# tests/test_policy.py's, and the video writer is tested below).
+@pytest.mark.slow
 def test_policy_actions_are_clipped_and_an_episode_renders(tmp_path, swimmer):
     result = fppo_jax.train(
         swimmer, "ppo", total_steps=64, num_envs=2, num_steps=32, num_minibatches=1, num_epochs=1

@@ -192,8 +192,21 @@ def test_figures_script_draws_from_the_recorded_results(tmp_path, monkeypatch):
     spec = importlib.util.spec_from_file_location("figures", REPO / "experiments" / "figures.py")
     figures = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(figures)
-    monkeypatch.setattr(sys, "argv", ["figures.py", "--out", str(tmp_path)])
+    monkeypatch.setattr(sys, "argv", ["figures.py", "--out", str(tmp_path / "now")])
     figures.main()
-    written = {path.name: path.stat().st_size for path in tmp_path.iterdir()}
-    assert {"objectives.png", "table1_classic.png", "escape_speed.png"} <= set(written)
+    assert {path.name for path in (tmp_path / "now").iterdir()} == {
+        "objectives.png",
+        "escape_speed.png",
+    }
+    earlier = REPO / "experiments" / "results" / "earlier-protocol"
+    argv = ["figures.py", "--records", str(earlier), "--out", str(tmp_path / "earlier")]
+    monkeypatch.setattr(sys, "argv", argv)
+    figures.main()
+    written = {path.name: path.stat().st_size for path in (tmp_path / "earlier").iterdir()}
+    assert set(written) == {
+        "objectives.png",
+        "table1_classic.png",
+        "table1_mujoco.png",
+        "ablation.png",
+    }
     assert all(size < 200_000 for size in written.values())

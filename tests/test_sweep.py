@@ -269,6 +269,9 @@ def test_a_sweep_is_split_over_a_slurm_array_only_when_asked(monkeypatch, capsys
     assert "SLURM_ARRAY_TASK_COUNT='1'" in capsys.readouterr().err and len(asked) == 3
 
 
+# Two processes at once, with -m slow; parts merging into the one-process sweep are
+# tests/test_results.py's in the default run, and --part's shares tests/test_adaptive_study.py's.
+@pytest.mark.slow
 def test_two_parts_in_two_processes_merge_into_the_one_process_sweep(tmp_path, capsys):
     flags = ["--env", "cartpole", "--variant", "ppo,fppo-lp", "--seeds", "3", "--steps", "256"]
     flags += ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]

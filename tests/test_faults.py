@@ -256,6 +256,9 @@ def test_killed_at_every_moment_and_resumed_each_time_ends_as_if_never_stopped(k
     assert writes_in_progress(directory) == []  # the ones left were written over
 
 
+# About a minute on 2 cores, with -m slow; in the default run a resumed native run restarts its
+# environments and keeps its learning (tests/test_native.py).
+@pytest.mark.slow
 def test_a_killed_native_run_resumes_in_fresh_environments_with_its_learning_intact(tmp_path):
     if not native.envpool_installed():
         pytest.skip("the native backend's envpool is Linux-only")

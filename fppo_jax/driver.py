@@ -402,9 +402,9 @@ class _Chunks:
             self.report(self.counter.progress(first_group, resumed_from))
         state, stopped_at = None, None
         for group in range(first_group, self.groups):
-            state, rows, stopped_at = self._train_group(group, start)
+            state, metrics, stopped_at = self._train_group(group, start)
             start = None
-            self._end_group(group, state, rows, resumed_from, stopped_at)
+            self._end_group(group, state, metrics, resumed_from, stopped_at)
             if stopped_at is not None:
                 break
         outcome = self._outcome(cast(TrainState, state), resumed_from, stopped_at)
@@ -414,11 +414,11 @@ class _Chunks:
 
     def _train_group(
         self, group: int, start: tuple[TrainState, dict[str, np.ndarray]] | None
-    ) -> tuple[TrainState, list[dict[str, np.ndarray]], int | None]:
+    ) -> tuple[TrainState, dict[str, np.ndarray], int | None]:
         """Group `group`, chunk by chunk from `start` (a resumed group's state and metrics) or
         afresh: its final state, its metrics, and the update a hook stopped it at, if one did."""
         keys, hps = _group(self.plan, group, self.size)
-        initial, rows = (start[0], [start[1]]) if start else (self.program.init(keys, hps), [])
+        initial, metrics = start if start else (self.program.init(keys, hps), {})
         state = initial  # a resumed group may have no update left to run
         runs = range(group * self.size, min((group + 1) * self.size, self.plan.num_runs))
         for state, chunk in run_chunks(self.program, initial, hps):
@@ -428,13 +428,12 @@ class _Chunks:
             policy = make_policy(self.plan.trainer, state)
             if self.evaluation is not None:
                 self.evaluation.add_column(policy, chunk, update)
-            metrics = concatenate([*rows, chunk])
-            rows = [metrics]  # joined once per chunk, not every chunk again each time
+            metrics = concatenate([metrics, chunk] if metrics else [chunk])
             done = Chunk(group, runs, update, state, policy, metrics)
             if any([hook.after_chunk(done) for hook in self.hooks]):  # every hook, then stop
-                return state, rows, update
+                return state, metrics, update
             self._stop_if_signalled(group, update)
-        return state, rows, None
+        return state, metrics, None
 
     def _stop_if_signalled(self, group: int, update: int) -> None:
         """Stops, checkpointed, on a signal caught (or at the chunk where joined processes stop
@@ -452,14 +451,13 @@ class _Chunks:
         self,
         group: int,
         state: TrainState,
-        rows: list[dict[str, np.ndarray]],
+        metrics: dict[str, np.ndarray],
         resumed_from: int,
         stopped_at: int | None,
     ) -> None:
         """Keeps the group's runs (not the repeats that pad the last group) with the update
         each diverged at, and shows them to the plan's `after_group`."""
         kept = slice(0, min(self.size, self.plan.num_runs - group * self.size))
-        metrics = concatenate(rows)
         self.finished.add(
             {k: v[kept] for k, v in metrics.items()} if self.plan.batched else metrics,
             np.atleast_1d(fetch(state.nonfinite_update))[kept] + 1,

@@ -53,7 +53,10 @@ RunKind = Literal["train", "sweep"]
 
 # The layout of a checkpoint's items and record (files.check_format). Raise it when a change
 # makes checkpoints that the previous code cannot read, or that this code cannot read from it.
-FORMAT = 1
+# 2: a single run's state and metrics carry the run axis (of one), as a sweep's always did.
+FORMAT = 2
+# The formats whose policy item load_policy reads: the policy's layout is the first's still.
+POLICY_FORMATS = (1, 2)
 
 
 class DamagedCheckpoint(UserWarning):
@@ -85,13 +88,11 @@ class Restored:
     record: dict[str, Any]
 
     def point(self) -> ResumePoint:
-        """Where the checkpoint says training stopped (a run's checkpoint of the first format
-        holds its metrics alone, and no group)."""
-        current = self.curves.get("current", self.curves)
+        """Where the checkpoint says training stopped."""
         return ResumePoint(
-            group=self.record.get("group", 0),
+            group=self.record["group"],
             update=self.record["update"],
-            current={name: np.asarray(values) for name, values in current.items()},
+            current={name: np.asarray(values) for name, values in self.curves["current"].items()},
             finished={k: np.asarray(v) for k, v in self.curves.get("finished", {}).items()},
             finished_diverged=np.asarray(self.curves.get("finished_diverged", []), np.int32),
         )
@@ -346,7 +347,7 @@ class Checkpoints:
             except Exception as error:  # try the previous one
                 self._warn_unreadable(step, error)
                 continue
-            check_format(record, f"checkpoint at step {step} in {self.directory}", FORMAT)
+            check_format(record, f"checkpoint at step {step} in {self.directory}", POLICY_FORMATS)
             try:
                 if record.get("policy") is not None:
                     arrays = self._read(step, policy=ocp.args.StandardRestore()).policy

@@ -164,19 +164,7 @@ class Outcome:
 
 def drive(plan: Plan, options: Options) -> Outcome:
     """Train `plan` as `options` say; see the module's docstring."""
-    trainer, config = plan.trainer, plan.trainer.config
-    devices = options.devices
-    if resets_itself(trainer.env):
-        if devices not in (None, 1) or jax.process_count() > 1:
-            raise InvalidInput(
-                "native MuJoCo and Gymnasium step their environments on this host, for one "
-                "device: devices must be 1, in a single process"
-            )
-        devices = 1
-    check_runs = getattr(trainer.env, "check_runs", None)  # a vector environment instance's
-    if check_runs is not None:
-        check_runs(plan.num_runs, options.eval_every is not None)
-    mesh = make_mesh(devices, config.num_envs, plan.data_parallel)
+    mesh = make_mesh(_devices(plan, options), plan.trainer.config.num_envs, plan.data_parallel)
     main = is_main_process()
     checkpoints: Checkpoints | None = None
 
@@ -198,7 +186,6 @@ def drive(plan: Plan, options: Options) -> Outcome:
                 resumed = plan.record if checkpointed is None else checkpointed["config"]
             outputs = prepare_log_dir(options.log_dir, resumed)
         size = _group_size(plan, mesh, checkpointed, options.checkpoint_dir)
-        per_call = _updates_per_call(options, config.num_updates)
         restored = None
         if checkpointed is not None:
             like = jax.eval_shape(_init(plan), *_group(plan, 0, size))
@@ -208,19 +195,8 @@ def drive(plan: Plan, options: Options) -> Outcome:
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
         if plan.runs_per_call is None and checkpointed is None:
             runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
-            size = runs_per_call(trainer, *_first_run(plan), size, runs, data)
-        check_host_memory(trainer, size)
-        host = host_run_bytes(trainer) * size
-        if options.progress is True and main and host >= HOST_BYTES_SHOWN:
-            # Making that many Python environments, at the first reset, takes minutes.
-            print(
-                f"{getattr(trainer.env, 'name', 'the environment')}: "
-                f"{size * config.num_envs:,} environments, made on the host at the first reset, "
-                f"take about {host / 2**30:.1f} GiB there",
-                file=sys.stderr,
-                flush=True,
-            )
-        program = compile_program(trainer, *_group(plan, 0, size), plan.along_runs, per_call, mesh)
+            size = runs_per_call(plan.trainer, *_first_run(plan), size, runs, data)
+        program = _compile(plan, options, mesh, size, main)
         with (
             reporter(options.progress if main else False, plan.description) as report,
             _Chunks(
@@ -235,6 +211,41 @@ def drive(plan: Plan, options: Options) -> Outcome:
             checkpoints.close(quiet=failed)
         if outputs:
             outputs.release()
+
+
+def _devices(plan: Plan, options: Options) -> int | None:
+    """The devices asked for, checked against what the environment allows (host-stepped
+    environments run on one device, in one process, with runs it can make)."""
+    env, devices = plan.trainer.env, options.devices
+    if resets_itself(env):
+        if devices not in (None, 1) or jax.process_count() > 1:
+            raise InvalidInput(
+                "native MuJoCo and Gymnasium step their environments on this host, for one "
+                "device: devices must be 1, in a single process"
+            )
+        devices = 1
+    check_runs = getattr(env, "check_runs", None)  # a vector environment instance's
+    if check_runs is not None:
+        check_runs(plan.num_runs, options.eval_every is not None)
+    return devices
+
+
+def _compile(plan: Plan, options: Options, mesh: Mesh | None, size: int, main: bool) -> Program:
+    """The program of groups of `size` runs, once their memory is checked."""
+    trainer = plan.trainer
+    check_host_memory(trainer, size)
+    host = host_run_bytes(trainer) * size
+    if options.progress is True and main and host >= HOST_BYTES_SHOWN:
+        # Making that many Python environments, at the first reset, takes minutes.
+        print(
+            f"{getattr(trainer.env, 'name', 'the environment')}: "
+            f"{size * trainer.config.num_envs:,} environments, made on the host at the first "
+            f"reset, take about {host / 2**30:.1f} GiB there",
+            file=sys.stderr,
+            flush=True,
+        )
+    per_call = _updates_per_call(options, trainer.config.num_updates)
+    return compile_program(trainer, *_group(plan, 0, size), plan.along_runs, per_call, mesh)
 
 
 def _restore(checkpoints: Checkpoints, like: Any, plan: Plan) -> Restored:

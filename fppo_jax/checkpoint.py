@@ -197,9 +197,6 @@ class Checkpoints:
     """The checkpoints of one run (or one sweep) in `directory`, keeping the newest `keep`."""
 
     def __init__(self, directory: str | Path, keep: int = 3):
-        # Orbax on first use, here and below: a run without checkpoints never waits for it.
-        import orbax.checkpoint as ocp
-
         if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
             raise InvalidInput(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
@@ -213,19 +210,7 @@ class Checkpoints:
                 f"checkpoint directory {self.directory} is not a directory (a file, or a link "
                 "that leads to none)"
             )
-        # Orbax deletes the checkpoints beyond `keep` only after a new one is committed, in the
-        # background thread that finishes the save.
-        options = ocp.CheckpointManagerOptions(
-            max_to_keep=keep, create=True, enable_async_checkpointing=True
-        )
-        if jax.process_count() > 1:  # this process alone writes here (the driver's process 0)
-            alone = {jax.process_index()}
-            options.multiprocessing_options = ocp.options.MultiprocessingOptions(
-                primary_host=jax.process_index(), active_processes=alone
-            )
-            options.create = False  # orbax creates it with every process only
-            self.directory.mkdir(parents=True, exist_ok=True)
-        self._manager = ocp.CheckpointManager(self.directory, options=options)
+        self._manager = _manager(self.directory, keep)
 
     def steps(self) -> list[int]:
         """Steps of the complete checkpoints, oldest first."""
@@ -345,7 +330,7 @@ class Checkpoints:
             try:
                 record = self._read(step, record=ocp.args.JsonRestore()).record
             except Exception as error:  # try the previous one
-                self._warn_unreadable(step, error)
+                _warn(self.directory, step, error, "could not be read")
                 continue
             check_format(record, f"checkpoint at step {step} in {self.directory}", POLICY_FORMATS)
             try:
@@ -353,7 +338,7 @@ class Checkpoints:
                     arrays = self._read(step, policy=ocp.args.StandardRestore()).policy
                     _verify("policy", arrays, record)
             except Exception as error:  # try the previous one
-                self._warn_unreadable(step, error)
+                _warn(self.directory, step, error, "could not be read")
                 continue
             if record.get("policy") is None:
                 raise InvalidInput(
@@ -362,14 +347,6 @@ class Checkpoints:
                 )
             return Policy.from_parts(record["policy"], arrays), record
         raise MissingFile(f"no readable checkpoint in {self.directory}")
-
-    def _warn_unreadable(self, step: int, error: Exception) -> None:
-        warnings.warn(
-            f"checkpoint at step {step} in {self.directory} could not be read "
-            f"({type(error).__name__}: {first_line(error)}); trying the previous one",
-            DamagedCheckpoint,
-            stacklevel=3,
-        )
 
     def _read(self, step: int, **items: Any) -> Any:
         _ReadsLeftBehind.quieten()
@@ -440,19 +417,12 @@ class Checkpoints:
                 self._lock = None
 
     def _set_aside(self, step: int, error: Exception) -> None:
-        damaged = self.directory / "damaged"
-        damaged.mkdir(exist_ok=True)
-        target = damaged / str(step)
+        target = self.directory / "damaged" / str(step)
+        target.parent.mkdir(exist_ok=True)
         shutil.rmtree(target, ignore_errors=True)
         shutil.move(self.directory / str(step), target)
         self._manager.reload()
-        warnings.warn(
-            f"checkpoint at step {step} in {self.directory} is damaged "
-            f"({type(error).__name__}: {first_line(error)}); moved to {target}, trying the "
-            "previous one",
-            DamagedCheckpoint,
-            stacklevel=3,
-        )
+        _warn(self.directory, step, error, "is damaged", f"moved to {target}, ")
 
 
 class _OrbaxChatter(logging.Filter):
@@ -518,6 +488,35 @@ class _ReadsLeftBehind:
         previous = sys.unraisablehook
         sys.unraisablehook = cls(previous)
         return previous
+
+
+def _manager(directory: Path, keep: int) -> ocp.CheckpointManager:
+    """Orbax's manager of `directory`'s checkpoints, writing in the background and keeping the
+    newest `keep` (it deletes older ones only after a new one is committed); in a multi-process
+    run this process alone writes there (the driver's process 0)."""
+    # Orbax on first use, here and in each method: a run without checkpoints never waits for it.
+    import orbax.checkpoint as ocp
+
+    options = ocp.CheckpointManagerOptions(
+        max_to_keep=keep, create=True, enable_async_checkpointing=True
+    )
+    if jax.process_count() > 1:
+        alone = {jax.process_index()}
+        options.multiprocessing_options = ocp.options.MultiprocessingOptions(
+            primary_host=jax.process_index(), active_processes=alone
+        )
+        options.create = False  # orbax creates it with every process only
+        directory.mkdir(parents=True, exist_ok=True)
+    return ocp.CheckpointManager(directory, options=options)
+
+
+def _warn(directory: Path, step: int, error: Exception, what: str, done: str = "") -> None:
+    warnings.warn(
+        f"checkpoint at step {step} in {directory} {what} "
+        f"({type(error).__name__}: {first_line(error)}); {done}trying the previous one",
+        DamagedCheckpoint,
+        stacklevel=4,
+    )
 
 
 def _storage_failure(error: BaseException) -> bool:

@@ -40,8 +40,8 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     `surrogates` (one's own, named by ``--variant module:attribute``)."""
     parser = argparse.ArgumentParser(
         prog="fppo-jax",
-        description="Train PPO and its fast variants (FPPO-LP, FPPO-QP, TR-PPO, PPO-RB, TR-PPO-RB) "
-        "with a fully jitted JAX trainer.",
+        description=f"Train PPO and its variants ({', '.join(v for v in VARIANTS if v != 'ppo')}"
+        ") with a fully jitted JAX trainer, and compare them.",
         epilog="Compiled programs are cached in ~/.cache/fppo-jax (under $XDG_CACHE_HOME if "
         "set): FPPO_JAX_CACHE_DIR=DIR moves the cache, FPPO_JAX_CACHE_DIR=off turns it off.",
     )

@@ -64,7 +64,7 @@ from fppo_jax.hooks import (
     UserCallback,
 )
 from fppo_jax.memory import check_host_memory, host_run_bytes, runs_per_call
-from fppo_jax.metric_log import Block, open_logs, prepare_log_dir
+from fppo_jax.metric_log import LoggedRuns, open_logs, prepare_log_dir
 from fppo_jax.options import Options
 from fppo_jax.policy import make_policy
 from fppo_jax.progress import PROGRESS_LINES, Counter, Progress, reporter
@@ -199,7 +199,7 @@ def drive(plan: Plan, options: Options) -> Outcome:
         program = _compile(plan, options, mesh, size, main)
         with (
             reporter(options.progress if main else False, plan.description) as report,
-            _Chunks(
+            _Training(
                 plan, options, program, size, checkpoints, outputs, restored, report, main
             ) as chunks,
         ):
@@ -324,7 +324,7 @@ def _group(plan: Plan, group: int, size: int) -> tuple[jax.Array, Hyperparameter
     return plan.keys[index], jax.tree.map(lambda x: x[index], plan.hps)
 
 
-class _Chunks:
+class _Training:
     """The groups of a plan, run chunk by chunk, with the hooks' work between chunks."""
 
     def __init__(
@@ -354,9 +354,9 @@ class _Chunks:
             env, episodes, every = plan.trainer.env, options.eval_episodes, options.eval_every
             self.evaluation = Evaluation(env, episodes, every, self.num_updates, plan.along_runs)
         logs = (options.log_dir, options.wandb_project, plan.record, plan.runs)
-        self.logs = open_logs(*logs, _blocks(restored, plan, size)) if main else None
+        self.logs = open_logs(*logs, _logged_runs(restored, plan, size)) if main else None
 
-    def __enter__(self) -> _Chunks:
+    def __enter__(self) -> _Training:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -516,7 +516,7 @@ class _Chunks:
         raise TrainingDiverged(nonfinite + 1, (nonfinite + 1) * self.samples, where)
 
 
-def _blocks(restored: Restored | None, plan: Plan, size: int) -> list[Block]:
+def _logged_runs(restored: Restored | None, plan: Plan, size: int) -> list[LoggedRuns]:
     """The runs and metrics a resumed run starts from, for the logs to rewrite."""
     if restored is None:
         return []

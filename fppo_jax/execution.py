@@ -182,10 +182,10 @@ def run_chunks(
         if call + 1 < calls:
             pending = program.run(state, hps)
         host = jax.device_get(metrics._asdict())  # a dict with its keys sorted
-        yield state, _ran({name: host[name] for name in metrics._fields})
+        yield state, _without_padding({name: host[name] for name in metrics._fields})
 
 
-def _ran(metrics: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+def _without_padding(metrics: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Without the updates past the run's end (the last chunk's padding, env_steps −1)."""
     ran = metrics["env_steps"][0] >= 0
     return {name: values[..., ran] for name, values in metrics.items()}

@@ -22,7 +22,7 @@ from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import concatenate
 from fppo_jax.files import DirectoryLock
 from fppo_jax.metric_log import Logs
-from fppo_jax.options import Callback, Snapshot, stops
+from fppo_jax.options import Callback, Snapshot, callback_stops
 from fppo_jax.policy import Policy, make_policy
 from fppo_jax.progress import Counter, Progress
 from fppo_jax.trainer import Trainer, TrainState
@@ -134,7 +134,7 @@ class UserCallback:
         seen = (chunk.metrics, chunk.state, chunk.policy)
         if self.single_run:
             seen = jax.tree.map(lambda x: x[0], seen)
-        return stops(self.callback(Snapshot(chunk.update, *seen, chunk.runs)))
+        return callback_stops(self.callback(Snapshot(chunk.update, *seen, chunk.runs)))
 
 
 class ProgressReport:

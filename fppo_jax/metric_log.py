@@ -25,7 +25,7 @@ from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
 from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
 from fppo_jax.trainer import METRICS
 
-Block = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
+LoggedRuns = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
 
 # What a run writes in its log directory; a directory holding any of them is another run's.
 OUTPUTS = ("config.json", "metrics.csv", "curves.csv", "sweep.json", "summary.txt")
@@ -114,7 +114,7 @@ class MetricLog:
         directory: str | Path,
         config: dict[str, Any],
         sweep: bool,
-        previous: Sequence[Block] = (),
+        previous: Sequence[LoggedRuns] = (),
     ):
         from tensorboardX import SummaryWriter
 
@@ -281,7 +281,7 @@ def open_logs(
     wandb_project: str | None,
     config: dict[str, Any],
     runs: Sequence[dict[str, Any]] | None,
-    previous: Sequence[Block] = (),
+    previous: Sequence[LoggedRuns] = (),
 ) -> Logs | None:
     """The logs asked for (None if none): `directory` gets ``config.json`` (`config` with the
     versions and devices) at once, then ``metrics.csv`` and TensorBoard files as training goes;

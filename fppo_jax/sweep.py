@@ -40,7 +40,7 @@ from fppo_jax.objectives import (
 )
 from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, labels
-from fppo_jax.surrogates import Surrogate, real
+from fppo_jax.surrogates import Surrogate, real_number
 
 
 def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[str, Any]]:
@@ -71,7 +71,7 @@ def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[s
         setting: dict[str, Any] = {"variant": variant}
         for name, value in zip(values, combo, strict=True):
             if name not in specific or name in surrogate.defaults:
-                setting[name] = real(name, value)
+                setting[name] = real_number(name, value)
         for name, value in table2(task, variant).items():
             setting.setdefault(name, value)
         if setting not in settings:

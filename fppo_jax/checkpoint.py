@@ -201,7 +201,6 @@ class Checkpoints:
             raise InvalidInput(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
-        self._pending: int | None = None  # the step being written, until it is on disk
         # The process's unraisable hook, while this object's writes have theirs in its place.
         self._process_hook: Callable[[Any], object] | None = None
         _ORBAX_CHATTER.install()
@@ -211,11 +210,11 @@ class Checkpoints:
                 "that leads to none)"
             )
         self._manager = _manager(self.directory, keep)
+        self._writes = _Writes(self._manager, self.directory)
 
     def steps(self) -> list[int]:
         """Steps of the complete checkpoints, oldest first."""
-        self._manager.reload()
-        return sorted(self._manager.all_steps())
+        return _steps(self._manager)
 
     def latest_record(self) -> dict[str, Any] | None:
         """The record of the newest checkpoint whose record can be read (no arrays are read:
@@ -317,10 +316,7 @@ class Checkpoints:
         args = _args(**items, record=ocp.args.JsonSave(json_value(record)))
         self.wait()  # the one before, on disk: orbax would wait for it here anyway
         self._process_hook = self._process_hook or _ReadsLeftBehind.quieten()
-        started = self._written(lambda: self._manager.save(step, args=args))
-        if not started:
-            raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
-        self._pending = step
+        self._writes.start(step, args)
 
     def policy(self) -> tuple[Policy, dict[str, Any]]:
         """The policy of the newest readable checkpoint, and its record."""
@@ -356,38 +352,7 @@ class Checkpoints:
     def wait(self) -> None:
         """Block until the checkpoint being written is complete; :class:`CheckpointNotWritten`
         if it could not be."""
-        self._written(self._manager.wait_until_finished)
-        self._check_written()
-
-    def _written(self, write: Callable[[], Any]) -> Any:
-        """`write`'s result, or :class:`CheckpointNotWritten` where it, or the checkpoint written
-        before it in the background, failed to write (orbax raises what storage said, as an
-        ``OSError`` or tensorstore's ``ValueError``); then whether that earlier one is on disk."""
-        try:
-            result = write()
-        except Exception as error:
-            if not _storage_failure(error):
-                raise
-            raise self._not_written(_storage_reason(error)) from error
-        self._check_written()
-        return result
-
-    def _check_written(self) -> None:
-        """Raise :class:`CheckpointNotWritten` if the step last started is not on disk now that
-        orbax says it has finished: a failure in one of its background threads is logged there,
-        not raised, and would otherwise pass for a checkpoint."""
-        if self._pending is not None and not self._manager.is_saving_in_progress():
-            step, self._pending = self._pending, None
-            if step not in self.steps():
-                raise self._not_written(f"step {step} is not on disk after writing it")
-
-    def _not_written(self, why: str) -> CheckpointNotWritten:
-        kept = self.steps()
-        before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
-        return CheckpointNotWritten(
-            f"could not write a checkpoint in {self.directory} ({why}); {before}. Free space, "
-            "or choose another checkpoint directory, and resume (--resume)"
-        )
+        self._writes.wait()
 
     def lock(self) -> None:
         """Make this the directory's one writer, or raise :class:`CheckpointsUnavailable`
@@ -423,6 +388,60 @@ class Checkpoints:
         shutil.move(self.directory / str(step), target)
         self._manager.reload()
         _warn(self.directory, step, error, "is damaged", f"moved to {target}, ")
+
+
+class _Writes:
+    """Orbax's writes of `directory`'s checkpoints, each finished in a background thread: a
+    write that storage refuses, at once or in that thread, is :class:`CheckpointNotWritten`,
+    naming the newest intact checkpoint."""
+
+    def __init__(self, manager: ocp.CheckpointManager, directory: Path):
+        self.manager, self.directory = manager, directory
+        self.pending: int | None = None  # the step being written, until it is on disk
+
+    def start(self, step: int, args: ocp.args.Composite) -> None:
+        if not self._written(lambda: self.manager.save(step, args=args)):
+            raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
+        self.pending = step
+
+    def wait(self) -> None:
+        self._written(self.manager.wait_until_finished)
+        self._check_written()
+
+    def _written(self, write: Callable[[], Any]) -> Any:
+        """`write`'s result, or :class:`CheckpointNotWritten` where it, or the checkpoint written
+        before it in the background, failed to write (orbax raises what storage said, as an
+        ``OSError`` or tensorstore's ``ValueError``); then whether that earlier one is on disk."""
+        try:
+            result = write()
+        except Exception as error:
+            if not _storage_failure(error):
+                raise
+            raise self._not_written(_storage_reason(error)) from error
+        self._check_written()
+        return result
+
+    def _check_written(self) -> None:
+        """Raise :class:`CheckpointNotWritten` if the step last started is not on disk now that
+        orbax says it has finished: a failure in one of its background threads is logged there,
+        not raised, and would otherwise pass for a checkpoint."""
+        if self.pending is not None and not self.manager.is_saving_in_progress():
+            step, self.pending = self.pending, None
+            if step not in _steps(self.manager):
+                raise self._not_written(f"step {step} is not on disk after writing it")
+
+    def _not_written(self, why: str) -> CheckpointNotWritten:
+        kept = _steps(self.manager)
+        before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
+        return CheckpointNotWritten(
+            f"could not write a checkpoint in {self.directory} ({why}); {before}. Free space, "
+            "or choose another checkpoint directory, and resume (--resume)"
+        )
+
+
+def _steps(manager: ocp.CheckpointManager) -> list[int]:
+    manager.reload()
+    return sorted(manager.all_steps())
 
 
 class _OrbaxChatter(logging.Filter):

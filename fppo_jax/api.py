@@ -85,14 +85,16 @@ def train(
     record = {**setting, **run.record(seed=seed, **identities([surrogate]))}
     description = f"{surrogate.name} on {run.name}"
     header = run.header(description)
-    plan = Plan("train", trainer, jax.random.key(seed), hp, record, description, header)
+    keys, hps = jax.tree.map(lambda x: x[None], (jax.random.key(seed), hp))  # a batch of one
+    plan = Plan("train", trainer, keys, hps, record, description, header)
     outcome = drive(plan, options)
+    metrics, state = jax.tree.map(lambda x: x[0], (outcome.metrics, outcome.state))
     result = TrainResult(
-        metrics=outcome.metrics,
-        params=outcome.state.params,
+        metrics=metrics,
+        params=state.params,
         config=record,
-        state=outcome.state,
-        policy=make_policy(trainer, outcome.state),
+        state=state,
+        policy=make_policy(trainer, state),
         compile_seconds=outcome.compile_seconds,
         train_seconds=outcome.train_seconds,
         env=run.environment,

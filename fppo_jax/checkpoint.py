@@ -53,7 +53,10 @@ RunKind = Literal["train", "sweep"]
 
 # The layout of a checkpoint's items and record (files.check_format). Raise it when a change
 # makes checkpoints that the previous code cannot read, or that this code cannot read from it.
-FORMAT = 1
+# 2: a single run's state and metrics carry the run axis (of one), as a sweep's always did.
+FORMAT = 2
+# The formats whose policy item load_policy reads: the policy's layout is the first's still.
+POLICY_FORMATS = (1, 2)
 
 
 class DamagedCheckpoint(UserWarning):
@@ -85,13 +88,11 @@ class Restored:
     record: dict[str, Any]
 
     def point(self) -> ResumePoint:
-        """Where the checkpoint says training stopped (a run's checkpoint of the first format
-        holds its metrics alone, and no group)."""
-        current = self.curves.get("current", self.curves)
+        """Where the checkpoint says training stopped."""
         return ResumePoint(
-            group=self.record.get("group", 0),
+            group=self.record["group"],
             update=self.record["update"],
-            current={name: np.asarray(values) for name, values in current.items()},
+            current={name: np.asarray(values) for name, values in self.curves["current"].items()},
             finished={k: np.asarray(v) for k, v in self.curves.get("finished", {}).items()},
             finished_diverged=np.asarray(self.curves.get("finished_diverged", []), np.int32),
         )
@@ -196,14 +197,10 @@ class Checkpoints:
     """The checkpoints of one run (or one sweep) in `directory`, keeping the newest `keep`."""
 
     def __init__(self, directory: str | Path, keep: int = 3):
-        # Orbax on first use, here and below: a run without checkpoints never waits for it.
-        import orbax.checkpoint as ocp
-
         if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
             raise InvalidInput(f"keep must be a positive number of checkpoints, got {keep!r}")
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
-        self._pending: int | None = None  # the step being written, until it is on disk
         # The process's unraisable hook, while this object's writes have theirs in its place.
         self._process_hook: Callable[[Any], object] | None = None
         _ORBAX_CHATTER.install()
@@ -212,24 +209,12 @@ class Checkpoints:
                 f"checkpoint directory {self.directory} is not a directory (a file, or a link "
                 "that leads to none)"
             )
-        # Orbax deletes the checkpoints beyond `keep` only after a new one is committed, in the
-        # background thread that finishes the save.
-        options = ocp.CheckpointManagerOptions(
-            max_to_keep=keep, create=True, enable_async_checkpointing=True
-        )
-        if jax.process_count() > 1:  # this process alone writes here (the driver's process 0)
-            alone = {jax.process_index()}
-            options.multiprocessing_options = ocp.options.MultiprocessingOptions(
-                primary_host=jax.process_index(), active_processes=alone
-            )
-            options.create = False  # orbax creates it with every process only
-            self.directory.mkdir(parents=True, exist_ok=True)
-        self._manager = ocp.CheckpointManager(self.directory, options=options)
+        self._manager = _manager(self.directory, keep)
+        self._writes = _Writes(self._manager, self.directory)
 
     def steps(self) -> list[int]:
         """Steps of the complete checkpoints, oldest first."""
-        self._manager.reload()
-        return sorted(self._manager.all_steps())
+        return _steps(self._manager)
 
     def latest_record(self) -> dict[str, Any] | None:
         """The record of the newest checkpoint whose record can be read (no arrays are read:
@@ -331,10 +316,7 @@ class Checkpoints:
         args = _args(**items, record=ocp.args.JsonSave(json_value(record)))
         self.wait()  # the one before, on disk: orbax would wait for it here anyway
         self._process_hook = self._process_hook or _ReadsLeftBehind.quieten()
-        started = self._written(lambda: self._manager.save(step, args=args))
-        if not started:
-            raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
-        self._pending = step
+        self._writes.start(step, args)
 
     def policy(self) -> tuple[Policy, dict[str, Any]]:
         """The policy of the newest readable checkpoint, and its record."""
@@ -344,15 +326,15 @@ class Checkpoints:
             try:
                 record = self._read(step, record=ocp.args.JsonRestore()).record
             except Exception as error:  # try the previous one
-                self._warn_unreadable(step, error)
+                _warn(self.directory, step, error, "could not be read")
                 continue
-            check_format(record, f"checkpoint at step {step} in {self.directory}", FORMAT)
+            check_format(record, f"checkpoint at step {step} in {self.directory}", POLICY_FORMATS)
             try:
                 if record.get("policy") is not None:
                     arrays = self._read(step, policy=ocp.args.StandardRestore()).policy
                     _verify("policy", arrays, record)
             except Exception as error:  # try the previous one
-                self._warn_unreadable(step, error)
+                _warn(self.directory, step, error, "could not be read")
                 continue
             if record.get("policy") is None:
                 raise InvalidInput(
@@ -362,14 +344,6 @@ class Checkpoints:
             return Policy.from_parts(record["policy"], arrays), record
         raise MissingFile(f"no readable checkpoint in {self.directory}")
 
-    def _warn_unreadable(self, step: int, error: Exception) -> None:
-        warnings.warn(
-            f"checkpoint at step {step} in {self.directory} could not be read "
-            f"({type(error).__name__}: {first_line(error)}); trying the previous one",
-            DamagedCheckpoint,
-            stacklevel=3,
-        )
-
     def _read(self, step: int, **items: Any) -> Any:
         _ReadsLeftBehind.quieten()
         self._process_hook = None  # a read's reports come up to the process's end: kept
@@ -378,38 +352,7 @@ class Checkpoints:
     def wait(self) -> None:
         """Block until the checkpoint being written is complete; :class:`CheckpointNotWritten`
         if it could not be."""
-        self._written(self._manager.wait_until_finished)
-        self._check_written()
-
-    def _written(self, write: Callable[[], Any]) -> Any:
-        """`write`'s result, or :class:`CheckpointNotWritten` where it, or the checkpoint written
-        before it in the background, failed to write (orbax raises what storage said, as an
-        ``OSError`` or tensorstore's ``ValueError``); then whether that earlier one is on disk."""
-        try:
-            result = write()
-        except Exception as error:
-            if not _storage_failure(error):
-                raise
-            raise self._not_written(_storage_reason(error)) from error
-        self._check_written()
-        return result
-
-    def _check_written(self) -> None:
-        """Raise :class:`CheckpointNotWritten` if the step last started is not on disk now that
-        orbax says it has finished: a failure in one of its background threads is logged there,
-        not raised, and would otherwise pass for a checkpoint."""
-        if self._pending is not None and not self._manager.is_saving_in_progress():
-            step, self._pending = self._pending, None
-            if step not in self.steps():
-                raise self._not_written(f"step {step} is not on disk after writing it")
-
-    def _not_written(self, why: str) -> CheckpointNotWritten:
-        kept = self.steps()
-        before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
-        return CheckpointNotWritten(
-            f"could not write a checkpoint in {self.directory} ({why}); {before}. Free space, "
-            "or choose another checkpoint directory, and resume (--resume)"
-        )
+        self._writes.wait()
 
     def lock(self) -> None:
         """Make this the directory's one writer, or raise :class:`CheckpointsUnavailable`
@@ -439,19 +382,66 @@ class Checkpoints:
                 self._lock = None
 
     def _set_aside(self, step: int, error: Exception) -> None:
-        damaged = self.directory / "damaged"
-        damaged.mkdir(exist_ok=True)
-        target = damaged / str(step)
+        target = self.directory / "damaged" / str(step)
+        target.parent.mkdir(exist_ok=True)
         shutil.rmtree(target, ignore_errors=True)
         shutil.move(self.directory / str(step), target)
         self._manager.reload()
-        warnings.warn(
-            f"checkpoint at step {step} in {self.directory} is damaged "
-            f"({type(error).__name__}: {first_line(error)}); moved to {target}, trying the "
-            "previous one",
-            DamagedCheckpoint,
-            stacklevel=3,
+        _warn(self.directory, step, error, "is damaged", f"moved to {target}, ")
+
+
+class _Writes:
+    """Orbax's writes of `directory`'s checkpoints, each finished in a background thread: a
+    write that storage refuses, at once or in that thread, is :class:`CheckpointNotWritten`,
+    naming the newest intact checkpoint."""
+
+    def __init__(self, manager: ocp.CheckpointManager, directory: Path):
+        self.manager, self.directory = manager, directory
+        self.pending: int | None = None  # the step being written, until it is on disk
+
+    def start(self, step: int, args: ocp.args.Composite) -> None:
+        if not self._written(lambda: self.manager.save(step, args=args)):
+            raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
+        self.pending = step
+
+    def wait(self) -> None:
+        self._written(self.manager.wait_until_finished)
+        self._check_written()
+
+    def _written(self, write: Callable[[], Any]) -> Any:
+        """`write`'s result, or :class:`CheckpointNotWritten` where it, or the checkpoint written
+        before it in the background, failed to write (orbax raises what storage said, as an
+        ``OSError`` or tensorstore's ``ValueError``); then whether that earlier one is on disk."""
+        try:
+            result = write()
+        except Exception as error:
+            if not _storage_failure(error):
+                raise
+            raise self._not_written(_storage_reason(error)) from error
+        self._check_written()
+        return result
+
+    def _check_written(self) -> None:
+        """Raise :class:`CheckpointNotWritten` if the step last started is not on disk now that
+        orbax says it has finished: a failure in one of its background threads is logged there,
+        not raised, and would otherwise pass for a checkpoint."""
+        if self.pending is not None and not self.manager.is_saving_in_progress():
+            step, self.pending = self.pending, None
+            if step not in _steps(self.manager):
+                raise self._not_written(f"step {step} is not on disk after writing it")
+
+    def _not_written(self, why: str) -> CheckpointNotWritten:
+        kept = _steps(self.manager)
+        before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
+        return CheckpointNotWritten(
+            f"could not write a checkpoint in {self.directory} ({why}); {before}. Free space, "
+            "or choose another checkpoint directory, and resume (--resume)"
         )
+
+
+def _steps(manager: ocp.CheckpointManager) -> list[int]:
+    manager.reload()
+    return sorted(manager.all_steps())
 
 
 class _OrbaxChatter(logging.Filter):
@@ -517,6 +507,35 @@ class _ReadsLeftBehind:
         previous = sys.unraisablehook
         sys.unraisablehook = cls(previous)
         return previous
+
+
+def _manager(directory: Path, keep: int) -> ocp.CheckpointManager:
+    """Orbax's manager of `directory`'s checkpoints, writing in the background and keeping the
+    newest `keep` (it deletes older ones only after a new one is committed); in a multi-process
+    run this process alone writes there (the driver's process 0)."""
+    # Orbax on first use, here and in each method: a run without checkpoints never waits for it.
+    import orbax.checkpoint as ocp
+
+    options = ocp.CheckpointManagerOptions(
+        max_to_keep=keep, create=True, enable_async_checkpointing=True
+    )
+    if jax.process_count() > 1:
+        alone = {jax.process_index()}
+        options.multiprocessing_options = ocp.options.MultiprocessingOptions(
+            primary_host=jax.process_index(), active_processes=alone
+        )
+        options.create = False  # orbax creates it with every process only
+        directory.mkdir(parents=True, exist_ok=True)
+    return ocp.CheckpointManager(directory, options=options)
+
+
+def _warn(directory: Path, step: int, error: Exception, what: str, done: str = "") -> None:
+    warnings.warn(
+        f"checkpoint at step {step} in {directory} {what} "
+        f"({type(error).__name__}: {first_line(error)}); {done}trying the previous one",
+        DamagedCheckpoint,
+        stacklevel=4,
+    )
 
 
 def _storage_failure(error: BaseException) -> bool:

@@ -32,7 +32,7 @@ from fppo_jax.objectives import (
     resolve,
     union,
 )
-from fppo_jax.surrogates import Surrogate, real
+from fppo_jax.surrogates import Surrogate, real_number
 
 # The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task.
 TABLE2: dict[str, dict[str, float]] = {
@@ -286,7 +286,7 @@ def hyperparameters(
     settings = {**HYPERPARAMETER_DEFAULTS, **{k: v for k, v in values.items() if v is not None}}
     for name, value in settings.items():
         bound, ok = _RANGES[name]
-        value = real(name, value)
+        value = real_number(name, value)
         if not (math.isfinite(value) and ok(value)):
             raise InvalidInput(f"{name} must be {bound}, got {value}")
     return Hyperparameters(

@@ -55,20 +55,20 @@ def make_mesh(devices: int | None, num_envs: int, data_parallel: int | None = No
     return Mesh(grid, ("runs", "data"))
 
 
-def state_shardings(mesh: Mesh, state: TrainState, batched: bool) -> TrainState:
-    """Where each leaf of a (batched, for a sweep) training state lives on `mesh`: the
-    environments split over the `data` axis, everything else replicated on it."""
-    runs = ("runs",) if batched else ()
-    replicated = NamedSharding(mesh, P(*runs))
-    per_environment = NamedSharding(mesh, P(*runs, "data"))
+def state_shardings(mesh: Mesh, state: TrainState) -> TrainState:
+    """Where each leaf of a training state (along runs) lives on `mesh`: the runs split over
+    the `runs` axis, and each run's environments over the `data` axis, everything else
+    replicated on it."""
+    replicated = NamedSharding(mesh, P("runs"))
+    per_environment = NamedSharding(mesh, P("runs", "data"))
     shardings: TrainState = jax.tree.map(lambda _: replicated, state)
     envs = jax.tree.map(lambda _: per_environment, state.envs)
     return dataclasses.replace(shardings, envs=envs)
 
 
-def input_sharding(mesh: Mesh, batched: bool) -> NamedSharding:
-    """Keys, hyperparameters and metrics: split over runs in a sweep, else replicated."""
-    return NamedSharding(mesh, P("runs") if batched else P())
+def input_sharding(mesh: Mesh) -> NamedSharding:
+    """Keys and hyperparameters: split over runs."""
+    return NamedSharding(mesh, P("runs"))
 
 
 def initialize() -> None:

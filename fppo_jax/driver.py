@@ -1,11 +1,11 @@
 """The host-side driver that ``train`` and ``sweep`` share.
 
-It runs a batch of runs (one run is a batch of one, unbatched): checks the host-side options,
-opens the checkpoints and compares their record with the run, checks the log directory,
-restores, compiles once, then calls the program in chunks of updates. After each chunk it
-stops a single run that diverged, evaluates, then hands the chunk to the hooks the options ask
-for (:mod:`fppo_jax.hooks`: checkpoint, output directory, logs, callback, progress), and stops
-on a signal. A sweep's runs train in groups of one size, so every group reuses the one
+It runs a batch of runs along a leading run axis (a single run is a batch of one): checks the
+host-side options, opens the checkpoints and compares their record with the run, checks the log
+directory, restores, compiles once, then calls the program in chunks of updates. After each
+chunk it stops a single run that diverged, evaluates, then hands the chunk to the hooks the
+options ask for (:mod:`fppo_jax.hooks`: checkpoint, output directory, logs, callback, progress),
+and stops on a signal. A sweep's runs train in groups of one size, so every group reuses the one
 compiled program.
 """
 
@@ -43,7 +43,14 @@ from fppo_jax.distributed import (
 )
 from fppo_jax.envs import resets_itself
 from fppo_jax.errors import FppoError, InvalidInput
-from fppo_jax.execution import Program, compile_program, concatenate, run_chunks, updates_per_call
+from fppo_jax.execution import (
+    Program,
+    compile_program,
+    concatenate,
+    one_run,
+    run_chunks,
+    updates_per_call,
+)
 from fppo_jax.files import DirectoryLock
 from fppo_jax.hooks import (
     Checkpoint,
@@ -57,7 +64,7 @@ from fppo_jax.hooks import (
     UserCallback,
 )
 from fppo_jax.memory import check_host_memory, host_run_bytes, runs_per_call
-from fppo_jax.metric_log import Block, open_logs, prepare_log_dir
+from fppo_jax.metric_log import LoggedRuns, open_logs, prepare_log_dir
 from fppo_jax.options import Options
 from fppo_jax.policy import make_policy
 from fppo_jax.progress import PROGRESS_LINES, Counter, Progress, reporter
@@ -100,9 +107,9 @@ class StoppedBySignal(Exception):
 
 @dataclasses.dataclass(frozen=True)
 class Plan:
-    """What to train: `keys` is one key (one run, unbatched) or a [run] array of them, with
-    `hps` alike; `record` is the configuration that checkpoints and outputs record, and `runs`
-    (a batched plan's only) each run's setting and seed, which its logs name it by.
+    """What to train: `keys`, a [run] array of keys, and `hps` alike (one run's for a "train"
+    plan); `record` is the configuration that checkpoints and outputs record, and `runs` (a
+    sweep's only) each run's setting and seed, which its logs name it by.
     `runs_per_call` fixes a sweep's group size (None: as many as fit in memory), and
     `data_parallel` the devices each run's environments are split over. `after_group`, if
     given, is called on the process that writes with the :class:`Outcome` of the runs finished
@@ -121,22 +128,28 @@ class Plan:
     after_group: Callable[[Outcome], None] | None = None
 
     def __post_init__(self) -> None:
-        if (self.runs is None) == self.batched or (self.runs and len(self.runs) != self.num_runs):
-            raise InvalidInput("a batched plan names each of its runs, and only a batched one")
-
-    @property
-    def batched(self) -> bool:
-        return self.keys.ndim > 0
+        sweep = self.kind == "sweep"
+        if (self.runs is not None) != sweep or (sweep and len(self.runs or ()) != self.num_runs):
+            raise InvalidInput("a sweep's plan names each of its runs, and only a sweep's")
+        if not sweep and self.num_runs != 1:
+            raise InvalidInput(f"a train plan trains one run, not {self.num_runs}")
 
     @property
     def num_runs(self) -> int:
-        return self.keys.shape[0] if self.batched else 1
+        return int(self.keys.shape[0])
+
+    @property
+    def along_runs(self) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+        """How one run's functions take the run axis: a sweep's are vmapped (even over one
+        run); a single run is its own program, so that its bits are those of one run
+        compiled alone."""
+        return jax.vmap if self.kind == "sweep" else one_run
 
 
 @dataclasses.dataclass
 class Outcome:
-    """What the driver hands back: the last group's final state, every run's metrics (per
-    update, [run, update] when batched), the update each run diverged at (from 1) or 0, and
+    """What the driver hands back: the last group's final state, every run's metrics
+    ([run, update]), the update each run diverged at (from 1) or 0, and
     the times. `stopped_at` is the update where a callback stopped training, if it did."""
 
     state: TrainState
@@ -151,19 +164,7 @@ class Outcome:
 
 def drive(plan: Plan, options: Options) -> Outcome:
     """Train `plan` as `options` say; see the module's docstring."""
-    trainer, config = plan.trainer, plan.trainer.config
-    devices = options.devices
-    if resets_itself(trainer.env):
-        if devices not in (None, 1) or jax.process_count() > 1:
-            raise InvalidInput(
-                "native MuJoCo and Gymnasium step their environments on this host, for one "
-                "device: devices must be 1, in a single process"
-            )
-        devices = 1
-    check_runs = getattr(trainer.env, "check_runs", None)  # a vector environment instance's
-    if check_runs is not None:
-        check_runs(plan.num_runs, options.eval_every is not None)
-    mesh = make_mesh(devices, config.num_envs, plan.data_parallel)
+    mesh = make_mesh(_devices(plan, options), plan.trainer.config.num_envs, plan.data_parallel)
     main = is_main_process()
     checkpoints: Checkpoints | None = None
 
@@ -185,7 +186,6 @@ def drive(plan: Plan, options: Options) -> Outcome:
                 resumed = plan.record if checkpointed is None else checkpointed["config"]
             outputs = prepare_log_dir(options.log_dir, resumed)
         size = _group_size(plan, mesh, checkpointed, options.checkpoint_dir)
-        per_call = _updates_per_call(options, config.num_updates)
         restored = None
         if checkpointed is not None:
             like = jax.eval_shape(_init(plan), *_group(plan, 0, size))
@@ -195,22 +195,11 @@ def drive(plan: Plan, options: Options) -> Outcome:
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
         if plan.runs_per_call is None and checkpointed is None:
             runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
-            size = runs_per_call(trainer, *_first_run(plan), size, runs, data)
-        check_host_memory(trainer, size)
-        host = host_run_bytes(trainer) * size
-        if options.progress is True and main and host >= HOST_BYTES_SHOWN:
-            # Making that many Python environments, at the first reset, takes minutes.
-            print(
-                f"{getattr(trainer.env, 'name', 'the environment')}: "
-                f"{size * config.num_envs:,} environments, made on the host at the first reset, "
-                f"take about {host / 2**30:.1f} GiB there",
-                file=sys.stderr,
-                flush=True,
-            )
-        program = compile_program(trainer, *_group(plan, 0, size), per_call, mesh)
+            size = runs_per_call(plan.trainer, *_first_run(plan), size, runs, data)
+        program = _compile(plan, options, mesh, size, main)
         with (
             reporter(options.progress if main else False, plan.description) as report,
-            _Chunks(
+            _Training(
                 plan, options, program, size, checkpoints, outputs, restored, report, main
             ) as chunks,
         ):
@@ -222,6 +211,41 @@ def drive(plan: Plan, options: Options) -> Outcome:
             checkpoints.close(quiet=failed)
         if outputs:
             outputs.release()
+
+
+def _devices(plan: Plan, options: Options) -> int | None:
+    """The devices asked for, checked against what the environment allows (host-stepped
+    environments run on one device, in one process, with runs it can make)."""
+    env, devices = plan.trainer.env, options.devices
+    if resets_itself(env):
+        if devices not in (None, 1) or jax.process_count() > 1:
+            raise InvalidInput(
+                "native MuJoCo and Gymnasium step their environments on this host, for one "
+                "device: devices must be 1, in a single process"
+            )
+        devices = 1
+    check_runs = getattr(env, "check_runs", None)  # a vector environment instance's
+    if check_runs is not None:
+        check_runs(plan.num_runs, options.eval_every is not None)
+    return devices
+
+
+def _compile(plan: Plan, options: Options, mesh: Mesh | None, size: int, main: bool) -> Program:
+    """The program of groups of `size` runs, once their memory is checked."""
+    trainer = plan.trainer
+    check_host_memory(trainer, size)
+    host = host_run_bytes(trainer) * size
+    if options.progress is True and main and host >= HOST_BYTES_SHOWN:
+        # Making that many Python environments, at the first reset, takes minutes.
+        print(
+            f"{getattr(trainer.env, 'name', 'the environment')}: "
+            f"{size * trainer.config.num_envs:,} environments, made on the host at the first "
+            f"reset, take about {host / 2**30:.1f} GiB there",
+            file=sys.stderr,
+            flush=True,
+        )
+    per_call = _updates_per_call(options, trainer.config.num_updates)
+    return compile_program(trainer, *_group(plan, 0, size), plan.along_runs, per_call, mesh)
 
 
 def _restore(checkpoints: Checkpoints, like: Any, plan: Plan) -> Restored:
@@ -239,7 +263,7 @@ def _restore(checkpoints: Checkpoints, like: Any, plan: Plan) -> Restored:
 
 
 def _init(plan: Plan) -> Callable[..., Any]:
-    return jax.vmap(plan.trainer.init) if plan.batched else plan.trainer.init
+    return plan.along_runs(plan.trainer.init)
 
 
 def _group_size(
@@ -250,8 +274,6 @@ def _group_size(
 ) -> int:
     """Runs per compiled call: the sweep's chunk, or its recorded one when resuming, rounded
     up to split evenly over the devices that share the runs."""
-    if not plan.batched:
-        return 1
     chunk = plan.runs_per_call
     directory = None if checkpoint_dir is None else Path(checkpoint_dir).absolute()
     if checkpointed is not None:
@@ -292,21 +314,17 @@ def _updates_per_call(options: Options, num_updates: int) -> int:
 
 
 def _first_run(plan: Plan) -> tuple[jax.Array, Hyperparameters]:
-    if not plan.batched:
-        return plan.keys, plan.hps
     return plan.keys[0], jax.tree.map(lambda x: x[0], plan.hps)
 
 
 def _group(plan: Plan, group: int, size: int) -> tuple[jax.Array, Hyperparameters]:
     """The keys and hyperparameters of group `group`: runs group·size … (group+1)·size − 1,
     the last run repeated past the end, so that every group has one shape."""
-    if not plan.batched:
-        return plan.keys, plan.hps
     index = _padded(group * size, size, plan.num_runs)
     return plan.keys[index], jax.tree.map(lambda x: x[index], plan.hps)
 
 
-class _Chunks:
+class _Training:
     """The groups of a plan, run chunk by chunk, with the hooks' work between chunks."""
 
     def __init__(
@@ -334,11 +352,11 @@ class _Chunks:
         self.evaluation = None
         if options.eval_every is not None:
             env, episodes, every = plan.trainer.env, options.eval_episodes, options.eval_every
-            self.evaluation = Evaluation(env, episodes, every, self.num_updates, plan.batched)
+            self.evaluation = Evaluation(env, episodes, every, self.num_updates, plan.along_runs)
         logs = (options.log_dir, options.wandb_project, plan.record, plan.runs)
-        self.logs = open_logs(*logs, _blocks(restored, plan, size)) if main else None
+        self.logs = open_logs(*logs, _logged_runs(restored, plan, size)) if main else None
 
-    def __enter__(self) -> _Chunks:
+    def __enter__(self) -> _Training:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -356,7 +374,7 @@ class _Chunks:
                 "runs_per_call": self.size,
                 "num_updates": self.num_updates,
             }
-            single_run = None if plan.batched else plan.trainer
+            single_run = plan.trainer if plan.kind == "train" else None
             self.checkpoint = Checkpoint(
                 self.checkpoints, self.finished, record, single_run, resumed_from
             )
@@ -366,7 +384,7 @@ class _Chunks:
         if self.logs:
             hooks.append(MetricLogs(self.logs))
         if self.options.callback is not None:
-            hooks.append(UserCallback(self.options.callback))
+            hooks.append(UserCallback(self.options.callback, self.plan.kind == "train"))
         if self.report:
             hooks.append(ProgressReport(self.report, counter))
         return hooks
@@ -423,8 +441,8 @@ class _Chunks:
         runs = range(group * self.size, min((group + 1) * self.size, self.plan.num_runs))
         for state, chunk in run_chunks(self.program, initial, hps):
             update = int(np.max(fetch(state.update)))
-            if not self.plan.batched:
-                self._check_finite(int(fetch(state.nonfinite_update)))
+            if self.plan.kind == "train":
+                self._check_finite(int(fetch(state.nonfinite_update)[0]))
             policy = make_policy(self.plan.trainer, state)
             if self.evaluation is not None:
                 self.evaluation.add_column(policy, chunk, update)
@@ -459,8 +477,7 @@ class _Chunks:
         each diverged at, and shows them to the plan's `after_group`."""
         kept = slice(0, min(self.size, self.plan.num_runs - group * self.size))
         self.finished.add(
-            {k: v[kept] for k, v in metrics.items()} if self.plan.batched else metrics,
-            np.atleast_1d(fetch(state.nonfinite_update))[kept] + 1,
+            {k: v[kept] for k, v in metrics.items()}, fetch(state.nonfinite_update)[kept] + 1
         )
         if self.after_group:
             if self.outputs:
@@ -472,8 +489,8 @@ class _Chunks:
         finished = self.finished
         return Outcome(
             state=state,
-            metrics=finished.joined() if self.plan.batched else finished.metrics[-1],
-            diverged=finished.diverged if self.plan.batched else finished.diverged[0],
+            metrics=finished.joined(),
+            diverged=finished.diverged,
             compile_seconds=self.program.compile_seconds,
             train_seconds=self.counter.elapsed(),
             resumed_from=resumed_from,
@@ -499,13 +516,11 @@ class _Chunks:
         raise TrainingDiverged(nonfinite + 1, (nonfinite + 1) * self.samples, where)
 
 
-def _blocks(restored: Restored | None, plan: Plan, size: int) -> list[Block]:
+def _logged_runs(restored: Restored | None, plan: Plan, size: int) -> list[LoggedRuns]:
     """The runs and metrics a resumed run starts from, for the logs to rewrite."""
     if restored is None:
         return []
     point = restored.point()
-    if not plan.batched:
-        return [(range(1), point.current)]
     blocks = []
     if point.finished:
         blocks.append((range(len(point.finished["env_steps"])), point.finished))
@@ -525,8 +540,7 @@ def _restart_envs(plan: Plan, state: TrainState, update: int) -> TrainState:
         "new episode here (not bitwise the run that never stopped)",
         file=sys.stderr,
     )
-    restart = jax.vmap(trainer.restart_envs) if plan.batched else trainer.restart_envs
-    return cast(TrainState, jax.jit(restart)(state))
+    return cast(TrainState, jax.jit(plan.along_runs(trainer.restart_envs))(state))
 
 
 def _preempted(chunk: int) -> bool:

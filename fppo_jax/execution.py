@@ -1,10 +1,11 @@
 """Running a training program: compiled once, then called in equal chunks of updates.
 
-One run, or many vmapped along a leading run axis. Every chunk, and every group of runs of the
-same size, reuses the one compiled program, and so does a later run in the same process with
-the same static configuration, environment object and array shapes (hyperparameters are
-traced: their values are not part of the shape). What the host does between chunks is the
-driver's (:mod:`fppo_jax.driver`).
+Its inputs, state and metrics always carry a leading run axis: a sweep's runs are vmapped along
+it, and a single run is its own program with the axis added around it (:func:`one_run`).
+Every chunk, and every group of runs of the same size, reuses the one compiled program, and so
+does a later run in the same process with the same static configuration, environment object and
+array shapes (hyperparameters are traced: their values are not part of the shape). What the
+host does between chunks is the driver's (:mod:`fppo_jax.driver`).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import collections
 import dataclasses
 import time
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import Any, TypeVar
 
 import jax
 import numpy as np
@@ -25,6 +26,20 @@ from fppo_jax.trainer import Trainer, TrainState
 
 PROGRAMS_KEPT = 8  # compiled programs kept for reuse, the most recently used first
 
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def one_run(fn: F) -> F:
+    """`fn` of one run as a function of a batch of one: every argument's run axis taken off
+    before, and put on every result after. It compiles to `fn`'s own program, bit for bit,
+    where ``jax.vmap`` over one run rounds differently in the last bits (measured)."""
+
+    def batch_of_one(*args: Any) -> Any:
+        result = fn(*jax.tree.map(lambda x: x[0], args))
+        return jax.tree.map(lambda x: x[None], result)
+
+    return batch_of_one  # type: ignore[return-value]
+
 
 def updates_per_call(num_updates: int, calls: int) -> int:
     """Updates per compiled call to run `num_updates` in (at most) `calls` equal calls."""
@@ -33,12 +48,12 @@ def updates_per_call(num_updates: int, calls: int) -> int:
 
 @dataclasses.dataclass(frozen=True)
 class Program:
-    """A trainer's compiled init and chunk of updates, for one run or a batch of `runs`."""
+    """A trainer's compiled init and chunk of updates, for a batch of `runs`."""
 
     trainer: Trainer
     init: Callable[[jax.Array, Hyperparameters], TrainState]
     run: Callable[[TrainState, Hyperparameters], tuple[TrainState, Any]]
-    runs: int | None  # None: unbatched
+    runs: int
     updates_per_call: int
     compile_seconds: float  # spent compiling it for this run: 0 when reused
 
@@ -56,11 +71,16 @@ class _Programs:
 
     @staticmethod
     def key(
-        trainer: Trainer, inputs: tuple[Any, ...], updates_per_call: int, mesh: Mesh | None
+        trainer: Trainer,
+        inputs: tuple[Any, ...],
+        along_runs: Callable[..., Any],
+        updates_per_call: int,
+        mesh: Mesh | None,
     ) -> tuple[Any, ...]:
         leaves, treedef = jax.tree.flatten(inputs)
         shapes = tuple((x.shape, str(x.dtype)) for x in leaves)
-        return (trainer.config, id(trainer.env), treedef, shapes, updates_per_call, mesh)
+        static = (trainer.config, id(trainer.env), along_runs, updates_per_call, mesh)
+        return (*static, treedef, shapes)
 
     def get(self, key: tuple[Any, ...]) -> Program | None:
         if key not in self.entries:
@@ -81,25 +101,24 @@ def compile_program(
     trainer: Trainer,
     keys: jax.Array,
     hps: Hyperparameters,
+    along_runs: Callable[[Callable[..., Any]], Callable[..., Any]],
     updates_per_call: int,
     mesh: Mesh | None = None,
 ) -> Program:
-    """Compile `trainer` for these keys and hyperparameters (a leading run axis if `keys` has
-    one), running `updates_per_call` updates per call, on `mesh` if given (see
+    """Compile `trainer` for these keys and hyperparameters (along a leading run axis, as
+    `along_runs` maps one run's functions: ``jax.vmap``, or :func:`one_run` for a single run),
+    running `updates_per_call` updates per call, on `mesh` if given (see
     :mod:`fppo_jax.distributed`) or on the default device; or reuse the program compiled for
     the same (see :class:`_Programs`)."""
-    key = _Programs.key(trainer, (keys, hps), updates_per_call, mesh)
+    key = _Programs.key(trainer, (keys, hps), along_runs, updates_per_call, mesh)
     compiled = _PROGRAMS.get(key)
     if compiled is not None:
         return dataclasses.replace(compiled, trainer=trainer, compile_seconds=0.0)
-    init = trainer.init
 
     def run(state: TrainState, hp: Hyperparameters) -> tuple[TrainState, Any]:
         return trainer.run(state, hp, updates_per_call)
 
-    runs = keys.shape[0] if keys.ndim else None
-    if runs is not None:
-        init, run = jax.vmap(init), jax.vmap(run)
+    init, run = along_runs(trainer.init), along_runs(run)
     # Both programs are compiled here, ahead of time, so that compilation is never counted as
     # training time.
     start = time.perf_counter()
@@ -108,8 +127,8 @@ def compile_program(
         compiled_init: Callable[..., Any] = jax.jit(init).lower(keys, hps).compile()
         compiled_run: Callable[..., Any] = jax.jit(run).lower(state, hps).compile()
     else:
-        inputs = input_sharding(mesh, runs is not None)
-        placed = state_shardings(mesh, state, runs is not None)
+        inputs = input_sharding(mesh)
+        placed = state_shardings(mesh, state)
         compiled_init = _Placed(
             jax.jit(init, in_shardings=(inputs, inputs), out_shardings=placed)
             .lower(keys, hps)
@@ -126,6 +145,7 @@ def compile_program(
             (placed, inputs),
         )
     seconds = time.perf_counter() - start
+    runs = keys.shape[0]
     program = Program(trainer, compiled_init, compiled_run, runs, updates_per_call, seconds)
     _PROGRAMS.add(key, program)
     return program
@@ -150,7 +170,7 @@ def run_chunks(
     program: Program, state: TrainState, hps: Hyperparameters
 ) -> Iterator[tuple[TrainState, dict[str, np.ndarray]]]:
     """Train from `state` to the end of the run, one compiled call at a time: yields the state
-    after each call and that call's metrics (per update; [run, update] when batched). The next
+    after each call and that call's metrics ([run, update]). The next
     call is dispatched before the caller's work on the current one, so the two overlap."""
     config = program.trainer.config
     first = int(np.max(state.update))
@@ -162,13 +182,12 @@ def run_chunks(
         if call + 1 < calls:
             pending = program.run(state, hps)
         host = jax.device_get(metrics._asdict())  # a dict with its keys sorted
-        yield state, _ran({name: host[name] for name in metrics._fields})
+        yield state, _without_padding({name: host[name] for name in metrics._fields})
 
 
-def _ran(metrics: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+def _without_padding(metrics: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Without the updates past the run's end (the last chunk's padding, env_steps −1)."""
-    steps = metrics["env_steps"]
-    ran = steps.reshape(-1, steps.shape[-1])[0] >= 0
+    ran = metrics["env_steps"][0] >= 0
     return {name: values[..., ran] for name, values in metrics.items()}
 
 

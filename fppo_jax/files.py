@@ -48,17 +48,19 @@ class IncompatibleFormat(InvalidInput):
     """A checkpoint or saved policy was written in another layout than this code reads."""
 
 
-def check_format(record: dict[str, Any], what: str, reads: int) -> None:
+def check_format(record: dict[str, Any], what: str, reads: int | tuple[int, ...]) -> None:
     """Raise :class:`IncompatibleFormat` unless `record` (of `what`, in words: "checkpoint at
-    step 4 in …") is in layout `reads`; a record without a ``format`` is in the first layout,
-    written before layouts were recorded. Such a file is intact, so it is refused and left as it
-    is, never taken for damage."""
+    step 4 in …") is in layout `reads` (or one of them); a record without a ``format`` is in the
+    first layout, written before layouts were recorded. Such a file is intact, so it is refused
+    and left as it is, never taken for damage."""
+    readable = reads if isinstance(reads, tuple) else (reads,)
     written = record.get("format", 1)
-    if written != reads:
-        which = "a newer" if isinstance(written, int) and written > reads else "another"
+    if written not in readable:
+        which = "a newer" if isinstance(written, int) and written > max(readable) else "another"
+        formats = " or ".join(str(f) for f in readable)
         raise IncompatibleFormat(
             f"{what} was written by {which} version of fppo-jax (format {written!r}; this one "
-            f"reads format {reads}). It is intact and was left as it is: read it with the "
+            f"reads format {formats}). It is intact and was left as it is: read it with the "
             "fppo-jax that wrote it"
         )
 

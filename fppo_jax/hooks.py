@@ -22,7 +22,7 @@ from fppo_jax.evaluation import make_evaluator
 from fppo_jax.execution import concatenate
 from fppo_jax.files import DirectoryLock
 from fppo_jax.metric_log import Logs
-from fppo_jax.options import Callback, Snapshot, stops
+from fppo_jax.options import Callback, Snapshot, callback_stops
 from fppo_jax.policy import Policy, make_policy
 from fppo_jax.progress import Counter, Progress
 from fppo_jax.trainer import Trainer, TrainState
@@ -31,8 +31,8 @@ from fppo_jax.trainer import Trainer, TrainState
 @dataclasses.dataclass(frozen=True)
 class Chunk:
     """Where a chunk left group `group` (the runs `runs`): `update` updates done, the state and
-    its policy (batched along runs for a group of several), and `metrics`, every update of the
-    group so far (``[run, update]`` for a group)."""
+    its policy (along runs), and `metrics`, every update of the group so far
+    (``[run, update]``)."""
 
     group: int
     runs: range
@@ -69,7 +69,8 @@ class Checkpoint:
     """Saves the point each chunk reached, beside the groups finished before it. Every process
     fetches the state (a collective); the one given `checkpoints` (None on the others) writes.
     `record` is what each checkpoint records with the point (its kind, configuration, runs per
-    call and updates); a single run's checkpoint also carries its policy, for ``load_policy``.
+    call and updates); a single run's (`single_run` is its trainer) also carries its policy,
+    for ``load_policy``.
     `saved` lists the updates checkpointed, from the one a resumed run started at."""
 
     def __init__(
@@ -91,7 +92,9 @@ class Checkpoint:
             point = ResumePoint(
                 chunk.group, chunk.update, chunk.metrics, finished.joined(), finished.diverged
             )
-            policy = None if self.single_run is None else make_policy(self.single_run, host)
+            policy = None
+            if self.single_run is not None:
+                policy = make_policy(self.single_run, jax.tree.map(lambda x: x[0], host))
             self.checkpoints.save_point(point, host, **self.record, policy=policy)
         self.saved.append(chunk.update)
         return False
@@ -121,14 +124,17 @@ class MetricLogs:
 
 
 class UserCallback:
-    """Shows the user's callback a :class:`~fppo_jax.options.Snapshot`; its answer may stop."""
+    """Shows the user's callback a :class:`~fppo_jax.options.Snapshot`, of the one run alone
+    if `single_run` (without the run axis); its answer may stop."""
 
-    def __init__(self, callback: Callback):
-        self.callback = callback
+    def __init__(self, callback: Callback, single_run: bool):
+        self.callback, self.single_run = callback, single_run
 
     def after_chunk(self, chunk: Chunk) -> bool:
-        snapshot = Snapshot(chunk.update, chunk.metrics, chunk.state, chunk.policy, chunk.runs)
-        return stops(self.callback(snapshot))
+        seen = (chunk.metrics, chunk.state, chunk.policy)
+        if self.single_run:
+            seen = jax.tree.map(lambda x: x[0], seen)
+        return callback_stops(self.callback(Snapshot(chunk.update, *seen, chunk.runs)))
 
 
 class ProgressReport:
@@ -149,10 +155,14 @@ class Evaluation:
     the hooks, as it adds a column to the chunk's own metrics before they join the group's."""
 
     def __init__(
-        self, env: Environment, episodes: int, every: int, num_updates: int, batched: bool
+        self,
+        env: Environment,
+        episodes: int,
+        every: int,
+        num_updates: int,
+        along_runs: Callable[[Callable[..., Any]], Callable[..., Any]],
     ):
-        evaluator = make_evaluator(env, episodes)
-        self.evaluate = jax.jit(jax.vmap(evaluator) if batched else evaluator)
+        self.evaluate = jax.jit(along_runs(make_evaluator(env, episodes)))
         self.every, self.num_updates = every, num_updates
 
     def add_column(self, policy: Policy, chunk: dict[str, np.ndarray], update: int) -> None:

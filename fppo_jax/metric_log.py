@@ -25,7 +25,7 @@ from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
 from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
 from fppo_jax.trainer import METRICS
 
-Block = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
+LoggedRuns = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
 
 # What a run writes in its log directory; a directory holding any of them is another run's.
 OUTPUTS = ("config.json", "metrics.csv", "curves.csv", "sweep.json", "summary.txt")
@@ -113,14 +113,14 @@ class MetricLog:
         self,
         directory: str | Path,
         config: dict[str, Any],
-        batched: bool,
-        previous: Sequence[Block] = (),
+        sweep: bool,
+        previous: Sequence[LoggedRuns] = (),
     ):
         from tensorboardX import SummaryWriter
 
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
-        self._batched = batched
+        self._sweep = sweep  # a run column, and a TensorBoard folder per run
         temporary = self.directory / ".metrics.csv.tmp"
         self._csv = open(temporary, "w", newline="")
         self._rows = csv.writer(self._csv)
@@ -132,7 +132,7 @@ class MetricLog:
         for runs, metrics in previous:
             self._write_csv(runs, metrics)
             for index, run in enumerate(runs):
-                steps = _of_run(metrics, index, batched)["env_steps"]
+                steps = _of_run(metrics, index)["env_steps"]
                 if len(steps):
                     self._purge[run] = int(steps[-1]) + 1
         os.fsync(self._csv.fileno())
@@ -145,7 +145,7 @@ class MetricLog:
         logged = {run: self._written.get(run, 0) for run in runs}
         self._write_csv(runs, metrics)
         for index, run in enumerate(runs):
-            values = _of_run(metrics, index, self._batched)
+            values = _of_run(metrics, index)
             writer = self._writer(run)
             for u in range(logged[run], len(values["env_steps"])):
                 step = int(values["env_steps"][u])
@@ -162,7 +162,7 @@ class MetricLog:
     def _writer(self, run: int) -> Any:
         if run not in self._writers:
             where = self.directory / "tensorboard"
-            if self._batched:
+            if self._sweep:
                 where = where / f"run-{run:03d}"
             self._writers[run] = self._make_writer(str(where), purge_step=self._purge.get(run))
         return self._writers[run]
@@ -171,14 +171,14 @@ class MetricLog:
         if self._columns is None:  # METRICS' order, then the host's (eval_return), however
             # the metrics came (a checkpoint restores them in another order)
             self._columns = sorted(metrics, key=lambda m: (m not in METRICS, _rank(m)))
-            self._rows.writerow((["run"] if self._batched else []) + self._columns)
+            self._rows.writerow((["run"] if self._sweep else []) + self._columns)
         for index, run in enumerate(runs):
-            values = _of_run(metrics, index, self._batched)
+            values = _of_run(metrics, index)
             count = len(values["env_steps"])
             nan = np.full(count, np.nan)
             columns = [np.asarray(values.get(name, nan)).tolist() for name in self._columns]
             rows = list(zip(*columns, strict=True))[self._written.get(run, 0) :]
-            self._rows.writerows([run, *row] if self._batched else row for row in rows)
+            self._rows.writerows([run, *row] if self._sweep else row for row in rows)
             self._written[run] = count
         self._csv.flush()
 
@@ -244,7 +244,7 @@ class WandbLog:
         for done in set(self._open) - set(runs):  # an earlier group's runs are complete
             self._open.pop(done).finish()
         for index, run in enumerate(runs):
-            values = _of_run(metrics, index, self._runs is not None)
+            values = _of_run(metrics, index)
             logged = self._run(run)
             for u in range(self._written.get(run, 0), len(values["env_steps"])):
                 row = {
@@ -281,7 +281,7 @@ def open_logs(
     wandb_project: str | None,
     config: dict[str, Any],
     runs: Sequence[dict[str, Any]] | None,
-    previous: Sequence[Block] = (),
+    previous: Sequence[LoggedRuns] = (),
 ) -> Logs | None:
     """The logs asked for (None if none): `directory` gets ``config.json`` (`config` with the
     versions and devices) at once, then ``metrics.csv`` and TensorBoard files as training goes;
@@ -298,5 +298,5 @@ def open_logs(
     return Logs(sinks) if sinks else None
 
 
-def _of_run(metrics: dict[str, np.ndarray], index: int, batched: bool) -> dict[str, np.ndarray]:
-    return {name: np.asarray(v)[index] if batched else np.asarray(v) for name, v in metrics.items()}
+def _of_run(metrics: dict[str, np.ndarray], index: int) -> dict[str, np.ndarray]:
+    return {name: np.asarray(v)[index] for name, v in metrics.items()}

@@ -47,7 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.errors import InvalidInput
-from fppo_jax.surrogates import Range, Surrogate, declare, probe, real
+from fppo_jax.surrogates import Range, Surrogate, declare, probe, real_number
 
 EPSILON = 0.2  # the clip range every variant takes, as the paper and baselines use it
 EPSILON_RANGE = Range("(0, 1)")
@@ -425,7 +425,7 @@ def objective(
     if extra:
         takes = ", ".join(["epsilon", *s.defaults])
         raise InvalidInput(f"{s.name} has no hyperparameter {', '.join(extra)} (it takes: {takes})")
-    eps = real("epsilon", epsilon)
+    eps = real_number("epsilon", epsilon)
     if eps not in EPSILON_RANGE:
         raise InvalidInput(f"epsilon must be {EPSILON_RANGE}, got {eps}")
     values = {key: s.check(key, value) for key, value in {**s.defaults, **given}.items()}

@@ -46,7 +46,7 @@ def _flag(help: str, metavar: str | None = None, flag: str | None = None) -> dic
     return {"help": help, "metavar": metavar, "flag": flag}
 
 
-def stops(answer: object) -> bool:
+def callback_stops(answer: object) -> bool:
     """Whether a callback's answer stops training: ``False`` (Python's or numpy's) stops, ``True``
     and ``None`` go on, anything else is a mistake named at its first return."""
     if answer is None:

@@ -115,55 +115,19 @@ def study(
     baseline = resolve(baseline)
     design = Design(group_size, max_seeds, level)
     _check_variants(candidates, baseline)
-    if endpoint not in ENDPOINTS:
-        raise InvalidInput(
-            f"a study decides on {' or '.join(ENDPOINTS)}, got endpoint {endpoint!r}"
-        )
-    if groups is not None and (
-        isinstance(groups, bool) or not isinstance(groups, int) or groups < 0
-    ):
-        raise InvalidInput(f"groups must be a count of groups (0 or more), got {groups!r}")
-    if chunk is not None:
-        positive_int("chunk", chunk)
-    if part is not None:  # its shape: a group's runs, which it shares, are known at its look
-        part_bounds(part, part[1] if isinstance(part, tuple | list) and len(part) == 2 else 0)
-    if "variant" in settings:
-        raise InvalidInput("a study's variants are its candidates and its baseline, not variant")
-    taken = sorted(set(OWN_SETTINGS) & set(settings))
-    if taken:
-        raise InvalidInput(f"a study sets {', '.join(taken)} itself, for each group's sweep")
+    _check_arguments(endpoint, groups, chunk, part, settings)
     everyone = [*candidates, baseline]
     specific = set(hyperparameter_names([*BUILTINS.values(), *everyone]))
     sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
-    expected: dict[str, tuple[dict[str, Any], dict[str, dict[str, Any]]]] = {}
-    for task in tasks:  # every setting checked before the plan is written, as a sweep checks
-        run = prepare(
-            task,
-            dict(settings),
-            total_steps=total_steps,
-            preset=preset,
-            backend=backend,
-            hyperparameters=sweepable(everyone),
-        )
-        by_name = {s.name: s for s in everyone}
-        grid = expand_grid({"variant": everyone, **run.hyperparameters}, task)
-        for setting in grid:
-            values = {k: v for k, v in setting.items() if k != "variant"}
-            resolve_hyperparameters(by_name[setting["variant"]], None, **values)
-        if sources:  # what a recorded run must match to be taken: the protocol, each setting
-            expected[task] = (json_value(run.record()), {s["variant"]: s for s in grid})
+    shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
+    expected = {task: _checked_settings(task, everyone, settings, shape) for task in tasks}
     plan = make_plan(
         tasks,
         candidates,
         baseline,
         design,
         endpoint,
-        {
-            "total_steps": total_steps,
-            "preset": preset,
-            "backend": backend,
-            **{k: v for k, v in settings.items() if k not in Options.names()},
-        },
+        {**shape, **{k: v for k, v in settings.items() if k not in Options.names()}},
         sources,
     )
     output = writable_directory(output)
@@ -208,6 +172,46 @@ def study(
         )
     finally:
         lock.release()
+
+
+def _check_arguments(
+    endpoint: str,
+    groups: int | None,
+    chunk: int | None,
+    part: tuple[int, int] | None,
+    settings: dict[str, Any],
+) -> None:
+    if endpoint not in ENDPOINTS:
+        raise InvalidInput(
+            f"a study decides on {' or '.join(ENDPOINTS)}, got endpoint {endpoint!r}"
+        )
+    if groups is not None and (
+        isinstance(groups, bool) or not isinstance(groups, int) or groups < 0
+    ):
+        raise InvalidInput(f"groups must be a count of groups (0 or more), got {groups!r}")
+    if chunk is not None:
+        positive_int("chunk", chunk)
+    if part is not None:  # its shape: a group's runs, which it shares, are known at its look
+        part_bounds(part, part[1] if isinstance(part, tuple | list) and len(part) == 2 else 0)
+    if "variant" in settings:
+        raise InvalidInput("a study's variants are its candidates and its baseline, not variant")
+    taken = sorted(set(OWN_SETTINGS) & set(settings))
+    if taken:
+        raise InvalidInput(f"a study sets {', '.join(taken)} itself, for each group's sweep")
+
+
+def _checked_settings(
+    task: str, everyone: list[Surrogate], settings: dict[str, Any], shape: dict[str, Any]
+) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """Every setting of `task` checked before the plan is written, as a sweep checks them; and
+    what a recorded run must match to be reused: the protocol, and each variant's setting."""
+    run = prepare(task, dict(settings), **shape, hyperparameters=sweepable(everyone))
+    by_name = {s.name: s for s in everyone}
+    grid = expand_grid({"variant": everyone, **run.hyperparameters}, task)
+    for setting in grid:
+        values = {k: v for k, v in setting.items() if k != "variant"}
+        resolve_hyperparameters(by_name[setting["variant"]], None, **values)
+    return json_value(run.record()), {s["variant"]: s for s in grid}
 
 
 def _names_of_tasks(tasks: str | Sequence[str]) -> list[str]:

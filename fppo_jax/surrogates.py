@@ -92,7 +92,7 @@ class Range:
         return f"in {self.text.strip()}" if interval else self.text.strip()
 
 
-def real(name: str, value: object) -> float:
+def real_number(name: str, value: object) -> float:
     """`value` as a float if it is a real number (numpy's included); strings and booleans,
     which ``float`` would take, are refused."""
     if isinstance(value, str | bool | np.bool_) or not isinstance(
@@ -140,7 +140,7 @@ class Surrogate:
 
     def check(self, name: str, value: object) -> float:
         """`value` of hyperparameter `name` as a float, if it is a finite number in its range."""
-        value = real(name, value)
+        value = real_number(name, value)
         if math.isinf(value):
             raise InvalidInput(f"{name} must be finite for {self.name}, got {value}")
         valid = self.ranges.get(name)

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.config import (
+    Hyperparameters,
     check_seed,
     positive_int,
     resolve_hyperparameters,
@@ -39,7 +40,7 @@ from fppo_jax.objectives import (
 )
 from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, labels
-from fppo_jax.surrogates import Surrogate, real
+from fppo_jax.surrogates import Surrogate, real_number
 
 
 def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[str, Any]]:
@@ -70,7 +71,7 @@ def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[s
         setting: dict[str, Any] = {"variant": variant}
         for name, value in zip(values, combo, strict=True):
             if name not in specific or name in surrogate.defaults:
-                setting[name] = real(name, value)
+                setting[name] = real_number(name, value)
         for name, value in table2(task, variant).items():
             setting.setdefault(name, value)
         if setting not in settings:
@@ -144,18 +145,7 @@ def sweep(
         hyperparameters=sweepable(surrogates.values()),
     )
     fixed, options = run.hyperparameters, run.options
-    clash = sorted(set(fixed) & set(grid))
-    if clash:
-        raise InvalidInput(f"{', '.join(clash)} given both in the grid and as a fixed value")
-    settings = expand_grid({**grid, **fixed}, run.task)
-    # expand_grid applied Table 2 to each setting: resolved as given, not again per task.
-    hps = stack_hyperparameters(
-        [
-            resolve_hyperparameters(surrogates[setting["variant"]], None, **values)[0]
-            for setting in settings
-            for values in [{k: v for k, v in setting.items() if k != "variant"}]
-        ]
-    )
+    settings, hps = _settings(grid, fixed, surrogates, run.task)
     seeds = _seeds(seeds)
     runs = [{"setting": i, "seed": seed} for i in range(len(settings)) for seed in seeds]
     if part is not None:
@@ -170,7 +160,6 @@ def sweep(
         grid_values["variant"] = list(surrogates)
     shares = {} if part is None else {"part": list(part)}
     record = run.record(grid=grid_values, seeds=seeds, **shares, **identities(surrogates.values()))
-    name = run.name
 
     def result_of(outcome: Outcome) -> SweepResult:
         return SweepResult(
@@ -189,39 +178,60 @@ def sweep(
         assert options.log_dir is not None  # it is the after_group only with a log_dir
         result_of(outcome).write(options.log_dir)
 
-    keys = jnp.stack([jax.random.key(run["seed"]) for run in runs])
-    # Every run in the program of all the sweep's surrogates, so that a part is the whole
-    # sweep's program on fewer runs.
-    setting_of_run = jnp.asarray([run["setting"] for run in runs])
-    stacked = jax.tree.map(lambda x: x[setting_of_run], hps)
+    shape = f"{len(settings)} settings × {len(seeds)} seeds = {len(settings) * len(seeds)} runs"
+    if part is not None:
+        shape += f", part {part[0]} of {part[1]}: {len(runs)} of them"
     plan = Plan(
         "sweep",
         run.trainer,
-        keys,
-        stacked,
+        jnp.stack([jax.random.key(run["seed"]) for run in runs]),
+        # Every run in the program of all the sweep's surrogates, so that a part is the whole
+        # sweep's program on fewer runs.
+        jax.tree.map(lambda x: x[jnp.asarray([run["setting"] for run in runs])], hps),
         record,
-        f"sweep on {name}",
-        run.header(
-            f"sweep on {name}",
-            f"{len(settings)} settings × {len(seeds)} seeds = {len(settings) * len(seeds)} runs"
-            + ("" if part is None else f", part {part[0]} of {part[1]}: {len(runs)} of them")
-            + "; each ",
-        ),
+        f"sweep on {run.name}",
+        run.header(f"sweep on {run.name}", f"{shape}; each "),
         runs=tuple({**settings[run["setting"]], "seed": run["seed"]} for run in runs),
         runs_per_call=chunk,
         data_parallel=1 if data_parallel is None else data_parallel,
         after_group=None if options.log_dir is None else write_finished,
     )
     result = result_of(drive(plan, options))
-    names = labels(settings)
+    _warn_diverged(result)
+    return result
+
+
+def _settings(
+    grid: Mapping[str, Any],
+    fixed: dict[str, Any],
+    surrogates: dict[str, Surrogate],
+    task: str | None,
+) -> tuple[list[dict[str, Any]], Hyperparameters]:
+    """The grid's settings with the `fixed` values, and their hyperparameters stacked."""
+    clash = sorted(set(fixed) & set(grid))
+    if clash:
+        raise InvalidInput(f"{', '.join(clash)} given both in the grid and as a fixed value")
+    settings = expand_grid({**grid, **fixed}, task)
+    # expand_grid applied Table 2 to each setting: resolved as given, not again per task.
+    hps = stack_hyperparameters(
+        [
+            resolve_hyperparameters(surrogates[setting["variant"]], None, **values)[0]
+            for setting in settings
+            for values in [{k: v for k, v in setting.items() if k != "variant"}]
+        ]
+    )
+    return settings, hps
+
+
+def _warn_diverged(result: SweepResult) -> None:
+    names = labels(result.settings)
     for i in np.flatnonzero(result.diverged):
-        run = runs[i]
+        run = result.runs[i]
         print(
             f"warning: run {i} ({names[run['setting']]}, seed {run['seed']}) diverged at update "
             f"{result.diverged[i]}; its state before that update was kept",
             file=sys.stderr,
         )
-    return result
 
 
 def part_bounds(part: object, num_runs: int) -> tuple[int, int]:

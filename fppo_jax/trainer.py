@@ -14,7 +14,7 @@ Each part of an update runs under a ``jax.named_scope`` (``rollout``, ``advantag
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple, cast
+from typing import Any, NamedTuple, Protocol, cast
 
 import jax
 import jax.numpy as jnp
@@ -25,6 +25,7 @@ from fppo_jax.distributions import Distribution
 from fppo_jax.envs import (
     Box,
     Environment,
+    Step,
     check_environment,
     draw_resets,
     resets_itself,
@@ -188,6 +189,59 @@ def _average_return(recent: jax.Array, num_episodes: jax.Array) -> jax.Array:
     filled = jnp.minimum(num_episodes, RETURN_WINDOW)
     total = jnp.sum(jnp.where(jnp.arange(RETURN_WINDOW) < filled, recent, 0.0))
     return jnp.where(filled > 0, total / jnp.maximum(filled, 1), jnp.nan)
+
+
+class Resets(Protocol):
+    """Where an episode ends in the rollout, what the environment goes on from."""
+
+    def after_step(
+        self, t: jax.Array, ended: jax.Array, done: jax.Array, stepped: Any, out: Step
+    ) -> tuple[Any, jax.Array]:
+        """The environments' state and observation after rollout step `t`, given each one's
+        episodes `ended` before it, where `done`, the state `stepped` to, and the step `out`."""
+        ...
+
+
+class OwnResets:
+    """The environment resets itself (a host-stepped one): its next observation is the new
+    episode's first."""
+
+    def after_step(
+        self, t: jax.Array, ended: jax.Array, done: jax.Array, stepped: Any, out: Step
+    ) -> tuple[Any, jax.Array]:
+        return stepped, cast(jax.Array, out.next_obs)
+
+
+@dataclasses.dataclass(frozen=True)
+class DrawnResets:
+    """Reset states and observations drawn up front, ``[row, env]``. Without a `pool`, an
+    environment ending at step t takes row t, so every reset is fresh; with one, its episodes
+    take the pool's rows in turn."""
+
+    states: Any
+    obs: jax.Array
+    pool: int | None
+
+    def after_step(
+        self, t: jax.Array, ended: jax.Array, done: jax.Array, stepped: Any, out: Step
+    ) -> tuple[Any, jax.Array]:
+        if self.pool is None:
+            take = lambda x: x[t]  # noqa: E731
+        else:
+            pool, envs = self.pool, jnp.arange(done.shape[0])
+            take = lambda x: x[ended % pool, envs]  # noqa: E731
+        reset_state, first_obs = jax.tree.map(take, (self.states, self.obs))
+        return where_done(done, reset_state, stepped), where_done(done, first_obs, out.obs)
+
+
+def make_resets(env: Environment, config: TrainConfig, key: jax.Array) -> Resets:
+    """The rollout's resets: the environment's own, or drawn from `key`, one row per step or
+    `config.resets_per_rollout` rows."""
+    if resets_itself(env):
+        return OwnResets()
+    rows = config.resets_per_rollout or config.num_steps
+    states, obs = draw_resets(env, key, (rows, config.num_envs))
+    return DrawnResets(states, obs, config.resets_per_rollout)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -378,11 +432,7 @@ class Trainer:
         shape = (config.num_steps, config.num_envs)
         action_noise = networks.action_noise(noise_key, shape)
         step_keys = jax.random.split(step_key, shape)
-        own_resets = resets_itself(env)
-        pool = config.resets_per_rollout or config.num_steps
-        if not own_resets:
-            reset_states, reset_obs = draw_resets(env, reset_key, (pool, config.num_envs))
-        env_index = jnp.arange(config.num_envs)
+        resets = make_resets(env, config, reset_key)
         step_env = jax.vmap(env.step)
 
         def step(
@@ -416,18 +466,7 @@ class Trainer:
                 discounted_return=discounted_return,
                 episode_return=episode_return,
             )
-            if own_resets:
-                next_state, next_obs = env_state, cast(jax.Array, out.next_obs)
-            else:
-                # Without a pool, an environment ending at step t takes row t, so every reset
-                # is fresh; with one, its episodes take the pool's rows in turn.
-                if config.resets_per_rollout is None:
-                    take = lambda x: x[t]  # noqa: E731
-                else:
-                    take = lambda x: x[episodes_ended % pool, env_index]  # noqa: E731
-                reset_state, first_obs = jax.tree.map(take, (reset_states, reset_obs))
-                next_state = where_done(done, reset_state, env_state)
-                next_obs = where_done(done, first_obs, out.obs)
+            next_state, next_obs = resets.after_step(t, episodes_ended, done, env_state, out)
             envs = Envs(
                 state=next_state,
                 obs=next_obs,

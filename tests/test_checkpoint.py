@@ -366,11 +366,12 @@ def test_a_checkpoint_of_another_format_is_refused_as_incompatible_and_left_as_i
     tmp_path, monkeypatch
 ):
     run = {**RUN, "total_steps": 128 * 4}
-    monkeypatch.setattr(checkpoint, "FORMAT", 2)  # as a newer fppo-jax would write it
+    newer = checkpoint.FORMAT + 1
+    monkeypatch.setattr(checkpoint, "FORMAT", newer)  # as a newer fppo-jax would write it
     train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
     monkeypatch.undo()
     before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
-    incompatible = r"newer version of fppo-jax \(format 2; this one reads format 1\)"
+    incompatible = rf"newer version of fppo-jax \(format {newer}; this one reads format"
     with warnings.catch_warnings():
         warnings.simplefilter("error", DamagedCheckpoint)  # not damage: nothing set aside
         with pytest.raises(IncompatibleFormat, match=rf"newest checkpoint in .*{incompatible}"):
@@ -384,15 +385,20 @@ def test_a_checkpoint_of_another_format_is_refused_as_incompatible_and_left_as_i
     assert not (tmp_path / "damaged").exists()
 
 
-def test_a_record_written_before_formats_were_recorded_is_the_first_format(tmp_path):
+def test_a_checkpoint_of_the_first_format_gives_its_policy_but_does_not_resume(tmp_path):
+    # The first format held a single run's state without the run axis; its policy is laid out
+    # as now. A record without a format is of the first, written before formats were recorded.
     run = {**RUN, "total_steps": 128 * 2}
     first = train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
     written = tmp_path / "2" / "record" / "metadata"  # orbax's file of the JSON item
     record = json.loads(written.read_text())
-    assert record.pop("format") == checkpoint.FORMAT == 1
+    assert record.pop("format") == checkpoint.FORMAT == 2
     written.write_text(json.dumps(record))  # as fppo-jax wrote it before
     policy = load_policy(tmp_path)
     np.testing.assert_array_equal(policy(np.zeros(4)), first.policy(np.zeros(4)))
+    with pytest.raises(IncompatibleFormat, match=r"\(format 1; this one reads format 2\)"):
+        train(**{**run, "total_steps": 128 * 4}, checkpoint_dir=tmp_path, resume=True)
+    assert not (tmp_path / "damaged").exists()
 
 
 def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(tmp_path):

@@ -94,9 +94,9 @@ def scalars(directory: Path) -> dict[str, dict[int, float]]:
 
 
 def test_the_csv_takes_metrics_order_then_the_hosts_and_each_update_once(tmp_path):
-    log = MetricLog(tmp_path, {"env": "test"}, batched=False)
-    log.write(metrics(2), range(1))
-    log.write(metrics(5), range(1))  # every update so far: the first two are not repeated
+    log = MetricLog(tmp_path, {"env": "test"}, sweep=False)
+    log.write(metrics(2, runs=1), range(1))
+    log.write(metrics(5, runs=1), range(1))  # every update so far: the first two not repeated
     log.close()
     rows = list(csv.reader(open(tmp_path / "metrics.csv")))
     assert rows[0] == ["env_steps", "average_return", "policy_loss", "eval_return"]
@@ -114,7 +114,7 @@ def test_the_csv_takes_metrics_order_then_the_hosts_and_each_update_once(tmp_pat
 
 
 def test_a_sweeps_runs_are_logged_side_by_side(tmp_path):
-    log = MetricLog(tmp_path, {"env": "test"}, batched=True)
+    log = MetricLog(tmp_path, {"env": "test"}, sweep=True)
     log.write(metrics(1, runs=2), range(0, 2))  # the first group of runs, update by update
     log.write(metrics(2, runs=2), range(0, 2))
     log.write(metrics(2, runs=2), range(2, 4))  # the second group, both updates at once
@@ -134,14 +134,14 @@ def test_a_sweeps_runs_are_logged_side_by_side(tmp_path):
 
 def test_a_resumed_log_rewrites_the_csv_from_the_restored_metrics_and_purges_the_rest(tmp_path):
     # An interrupted run had logged 5 updates; its checkpoint holds 2.
-    interrupted = MetricLog(tmp_path, {"env": "test"}, batched=False)
-    interrupted.write(metrics(5), range(1))
+    interrupted = MetricLog(tmp_path, {"env": "test"}, sweep=False)
+    interrupted.write(metrics(5, runs=1), range(1))
     interrupted.close()
-    restored = {name: values[:2] for name, values in metrics(5).items()}
-    log = MetricLog(tmp_path, {"env": "test"}, batched=False, previous=[(range(1), restored)])
+    restored = {name: values[:, :2] for name, values in metrics(5, runs=1).items()}
+    log = MetricLog(tmp_path, {"env": "test"}, sweep=False, previous=[(range(1), restored)])
     rows = list(csv.reader(open(tmp_path / "metrics.csv")))
     assert [r[0] for r in rows] == ["env_steps", "128", "256"]
-    log.write(metrics(3), range(1))  # the run goes on from update 3
+    log.write(metrics(3, runs=1), range(1))  # the run goes on from update 3
     log.close()
     rows = list(csv.reader(open(tmp_path / "metrics.csv")))
     assert [r[0] for r in rows] == ["env_steps", "128", "256", "384"]

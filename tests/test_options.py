@@ -9,7 +9,7 @@ import pytest
 
 from fppo_jax.cli import build_parser
 from fppo_jax.cli.flags import _type_of, options
-from fppo_jax.options import Options, stops
+from fppo_jax.options import Options, callback_stops
 
 
 @pytest.mark.parametrize(
@@ -89,8 +89,10 @@ def test_a_field_of_a_type_without_a_flag_type_is_named():
 
 
 def test_a_callbacks_answer_stops_on_false_alone():
-    assert stops(False) and stops(np.bool_(False))
-    assert not stops(True) and not stops(None) and not stops(np.bool_(True))
+    assert callback_stops(False) and callback_stops(np.bool_(False))
+    assert (
+        not callback_stops(True) and not callback_stops(None) and not callback_stops(np.bool_(True))
+    )
     for answer in (0, "stop", np.array([True])):
         with pytest.raises(TypeError, match="the callback returned"):
-            stops(answer)
+            callback_stops(answer)

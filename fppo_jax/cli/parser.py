@@ -40,16 +40,29 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     `surrogates` (one's own, named by ``--variant module:attribute``)."""
     parser = argparse.ArgumentParser(
         prog="fppo-jax",
-        description="Train PPO and its fast variants (FPPO-LP, FPPO-QP, TR-PPO, PPO-RB, TR-PPO-RB) "
-        "with a fully jitted JAX trainer.",
+        description=f"Train PPO and its variants ({', '.join(v for v in VARIANTS if v != 'ppo')}"
+        ") with a fully jitted JAX trainer, and compare them.",
         epilog="Compiled programs are cached in ~/.cache/fppo-jax (under $XDG_CACHE_HOME if "
         "set): FPPO_JAX_CACHE_DIR=DIR moves the cache, FPPO_JAX_CACHE_DIR=off turns it off.",
     )
     parser.add_argument("--version", action="version", version=f"fppo-jax {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     parser.set_defaults(commands=commands.choices)
-    formatter = Defaults
+    _add_train(commands, surrogates)
+    _add_sweep(commands, surrogates)
+    _add_study(commands, surrogates)
+    _add_reading(commands)
+    _add_policy_commands(commands)
 
+    commands.add_parser("list", help="list the tasks and the variants")
+    return parser
+
+
+def _add_train(
+    commands: argparse._SubParsersAction[Parser], surrogates: Sequence[Surrogate]
+) -> None:
+    """``train``: one policy."""
+    formatter = Defaults
     run = commands.add_parser(
         "train",
         help="train one policy",
@@ -81,6 +94,12 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     )
     add_run_flags(run)
 
+
+def _add_sweep(
+    commands: argparse._SubParsersAction[Parser], surrogates: Sequence[Surrogate]
+) -> None:
+    """``sweep``: a grid of settings × seeds as one program."""
+    formatter = Defaults
     grid = commands.add_parser(
         "sweep",
         help="train a grid of settings × seeds as one compiled program",
@@ -124,6 +143,12 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     )
     add_run_flags(grid)
 
+
+def _add_study(
+    commands: argparse._SubParsersAction[Parser], surrogates: Sequence[Surrogate]
+) -> None:
+    """``study``: candidates against a baseline, seeds added until decided."""
+    formatter = Defaults
     studied = commands.add_parser(
         "study",
         help="candidates against a baseline, adding seeds until a preregistered test decides",
@@ -204,6 +229,10 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     add_shape_flags(studied)
     studied.add_argument("--quiet", action="store_true", help="no progress bar or lines")
 
+
+def _add_reading(commands: argparse._SubParsersAction[Parser]) -> None:
+    """``table``, ``compare``, ``merge`` and ``plot``: what reads a sweep's output."""
+    formatter = Defaults
     table = commands.add_parser(
         "table",
         help="print a sweep's summary per setting (Markdown)",
@@ -248,6 +277,10 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     )
     plot.add_argument("directory", type=path, help="a sweep's --output directory")
 
+
+def _add_policy_commands(commands: argparse._SubParsersAction[Parser]) -> None:
+    """``eval`` and ``export``: what reads a trained policy."""
+    formatter = Defaults
     evaluation = commands.add_parser(
         "eval",
         help="report a trained policy's return, or render it",
@@ -281,6 +314,3 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     export.add_argument(
         "--onnx", type=path, required=True, metavar="FILE", help="the model file to write"
     )
-
-    commands.add_parser("list", help="list the tasks and the variants")
-    return parser

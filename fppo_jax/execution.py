@@ -122,33 +122,41 @@ def compile_program(
     # Both programs are compiled here, ahead of time, so that compilation is never counted as
     # training time.
     start = time.perf_counter()
-    state = jax.eval_shape(init, keys, hps)
     if mesh is None:
+        state = jax.eval_shape(init, keys, hps)
         compiled_init: Callable[..., Any] = jax.jit(init).lower(keys, hps).compile()
         compiled_run: Callable[..., Any] = jax.jit(run).lower(state, hps).compile()
     else:
-        inputs = input_sharding(mesh)
-        placed = state_shardings(mesh, state)
-        compiled_init = _Placed(
-            jax.jit(init, in_shardings=(inputs, inputs), out_shardings=placed)
-            .lower(keys, hps)
-            .compile(),
-            (inputs, inputs),
-        )
-        # Metrics are small: replicated, so that every process of a multi-process run can read
-        # them all.
-        metrics = NamedSharding(mesh, PartitionSpec())
-        compiled_run = _Placed(
-            jax.jit(run, in_shardings=(placed, inputs), out_shardings=(placed, metrics))
-            .lower(state, hps)
-            .compile(),
-            (placed, inputs),
-        )
+        compiled_init, compiled_run = _compile_on_mesh(init, run, keys, hps, mesh)
     seconds = time.perf_counter() - start
     runs = keys.shape[0]
     program = Program(trainer, compiled_init, compiled_run, runs, updates_per_call, seconds)
     _PROGRAMS.add(key, program)
     return program
+
+
+def _compile_on_mesh(
+    init: Callable[..., Any], run: Callable[..., Any], keys: jax.Array, hps: Any, mesh: Mesh
+) -> tuple[_Placed, _Placed]:
+    """`init` and `run` compiled with their inputs and state laid out on `mesh`."""
+    inputs, state = input_sharding(mesh), jax.eval_shape(init, keys, hps)
+    placed = state_shardings(mesh, state)
+    compiled_init = _Placed(
+        jax.jit(init, in_shardings=(inputs, inputs), out_shardings=placed)
+        .lower(keys, hps)
+        .compile(),
+        (inputs, inputs),
+    )
+    # Metrics are small: replicated, so that every process of a multi-process run can read
+    # them all.
+    metrics = NamedSharding(mesh, PartitionSpec())
+    compiled_run = _Placed(
+        jax.jit(run, in_shardings=(placed, inputs), out_shardings=(placed, metrics))
+        .lower(state, hps)
+        .compile(),
+        (placed, inputs),
+    )
+    return compiled_init, compiled_run
 
 
 @dataclasses.dataclass(frozen=True)

@@ -338,16 +338,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
     if not parts:
         raise InvalidInput("merge needs at least one sweep")
     first = parts[0]
-    common = {k: v for k, v in first.config.items() if k not in PART_FIELDS}
-    for number, part in enumerate(parts[1:], start=2):
-        other = {k: v for k, v in part.config.items() if k not in PART_FIELDS}
-        differ = sorted(k for k in common.keys() | other.keys() if common.get(k) != other.get(k))
-        if differ:
-            field = differ[0]
-            raise InvalidInput(
-                f"sweep {number} is not a part of the same sweep as sweep 1: its {field} is "
-                f"{other.get(field)!r}, sweep 1's {common.get(field)!r}"
-            )
+    _check_same_sweep(parts)
     own = _own_surrogates(parts)
     if all(part.config.get("part") for part in parts):
         # The shares of one split in their sweep's run order, whatever order they were named in:
@@ -363,14 +354,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         for run in part.runs:
             setting = settings.index(part.settings[run["setting"]])
             runs.append({"setting": setting, "seed": run["seed"]})
-    seen: dict[tuple[int, int], int] = {}
-    names = labels(settings)
-    for run in runs:
-        key = (run["setting"], run["seed"])
-        seen[key] = seen.get(key, 0) + 1
-    repeated = [f"{names[s]} seed {seed}" for (s, seed), count in seen.items() if count > 1]
-    if repeated:
-        raise InvalidInput(f"more than one part holds the run {', '.join(repeated[:5])}")
+    _check_each_run_once(settings, runs)
     _check_shares(parts, settings, runs)
     metrics = [name for name in first.metrics if all(name in p.metrics for p in parts)]
     seeds = list(dict.fromkeys(seed for part in parts for seed in part.seeds))
@@ -394,6 +378,31 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         compile_seconds=sum(p.compile_seconds for p in parts),
         train_seconds=sum(p.train_seconds for p in parts),
     )
+
+
+def _check_same_sweep(parts: Sequence[SweepResult]) -> None:
+    """Parts of one sweep differ in their seeds, settings and share alone."""
+    common = {k: v for k, v in parts[0].config.items() if k not in PART_FIELDS}
+    for number, part in enumerate(parts[1:], start=2):
+        other = {k: v for k, v in part.config.items() if k not in PART_FIELDS}
+        differ = sorted(k for k in common.keys() | other.keys() if common.get(k) != other.get(k))
+        if differ:
+            field = differ[0]
+            raise InvalidInput(
+                f"sweep {number} is not a part of the same sweep as sweep 1: its {field} is "
+                f"{other.get(field)!r}, sweep 1's {common.get(field)!r}"
+            )
+
+
+def _check_each_run_once(settings: list[dict[str, Any]], runs: list[dict[str, Any]]) -> None:
+    seen: dict[tuple[int, int], int] = {}
+    for run in runs:
+        key = (run["setting"], run["seed"])
+        seen[key] = seen.get(key, 0) + 1
+    names = labels(settings)
+    repeated = [f"{names[s]} seed {seed}" for (s, seed), count in seen.items() if count > 1]
+    if repeated:
+        raise InvalidInput(f"more than one part holds the run {', '.join(repeated[:5])}")
 
 
 def _own_surrogates(parts: Sequence[SweepResult]) -> dict[str, Any]:

@@ -38,7 +38,22 @@ def write_report(
 ) -> None:
     """``report.md`` at `path`: the plan in a paragraph, then a section per task, from each
     comparison's row of ``decisions.json`` and each task's `scores` so far."""
-    comparisons = len(rows)
+    lines = _preamble(plan, len(rows), finished)
+    for task in plan["tasks"]:
+        lines += ["", f"## {task}"]
+        if task not in scores:
+            lines += ["", "No group recorded yet."]
+            continue
+        task_rows = [row for row in rows if row["task"] == task]
+        for endpoint in (plan["primary_endpoint"], *plan["secondary_endpoints"]):
+            adjusted = plan if endpoint == plan["primary_endpoint"] else None
+            lines += ["", *_table(scores[task], task_rows, endpoint, adjusted)]
+        lines += ["", *_speed_table(scores[task], plan)]
+    write_atomically(path, ("\n".join(lines) + "\n").encode())
+
+
+def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[str]:
+    """The report's title and its plan, status and intervals in words."""
     looks = ", ".join(map(str, plan["looks"]))
     status = (
         "Every comparison is decided or reached the maximum of seeds."
@@ -53,7 +68,7 @@ def write_report(
         if plan.get("reuse")
         else ""
     )
-    lines = [
+    return [
         f"# {', '.join(plan['candidates'])} against {plan['baseline']}",
         "",
         f"Planned in plan.json before any run (commit {plan['commit']}). Primary endpoint: "
@@ -76,17 +91,6 @@ def write_report(
         "where Holm's procedure decided). A run that diverged or finished no episode ranks "
         "below every other in the test and is left out of the intervals.",
     ]
-    for task in plan["tasks"]:
-        lines += ["", f"## {task}"]
-        if task not in scores:
-            lines += ["", "No group recorded yet."]
-            continue
-        task_rows = [row for row in rows if row["task"] == task]
-        for endpoint in (plan["primary_endpoint"], *plan["secondary_endpoints"]):
-            adjusted = plan if endpoint == plan["primary_endpoint"] else None
-            lines += ["", *_table(scores[task], task_rows, endpoint, adjusted)]
-        lines += ["", *_speed_table(scores[task], plan)]
-    write_atomically(path, ("\n".join(lines) + "\n").encode())
 
 
 def write_figures(

@@ -238,26 +238,7 @@ def _read_curves(
                         f"{where}: run {run} has seed {seed}, sweep.json {runs[run]['seed']}"
                     )
             cells[run, update] = [_cell(row, name, where, float) for name in names]
-    if not cells:
-        raise InvalidInput(f"{path} has no rows")
-    found, expected = {run for run, _ in cells}, set(range(len(runs)))
-    if found - expected:
-        raise InvalidInput(
-            f"{path} has rows for run {_few(found - expected)}; sweep.json has {len(runs)} runs"
-        )
-    if every_run and expected - found:
-        raise InvalidInput(
-            f"{path} has no rows for run {_few(expected - found)} of sweep.json's {len(runs)}"
-        )
-    present = sorted(found)
-    num_updates = max(update for _, update in cells)
-    for run in present:
-        lacking = [u for u in range(1, num_updates + 1) if (run, u) not in cells]
-        if lacking:
-            raise InvalidInput(
-                f"{path}: run {run} has no update {_few(lacking)} (the file goes to update "
-                f"{num_updates})"
-            )
+    present, num_updates = _check_cells(path, cells, len(runs), every_run)
     row_of = {run: i for i, run in enumerate(present)}
     at = tuple(np.array([(row_of[run], update - 1) for run, update in cells]).T)
     values = np.array(list(cells.values()))
@@ -266,6 +247,33 @@ def _read_curves(
         metrics[name][at] = column
     metrics["env_steps"] = metrics["env_steps"].astype(np.int64)
     return metrics, present
+
+
+def _check_cells(
+    path: Path, cells: dict[tuple[int, int], list[float]], num_runs: int, every_run: bool
+) -> tuple[list[int], int]:
+    """The runs that `cells` (by run and update) hold, and their updates, once checked: runs of
+    the sweep only (every one if `every_run`), each with every update up to the last."""
+    if not cells:
+        raise InvalidInput(f"{path} has no rows")
+    found, expected = {run for run, _ in cells}, set(range(num_runs))
+    if found - expected:
+        raise InvalidInput(
+            f"{path} has rows for run {_few(found - expected)}; sweep.json has {num_runs} runs"
+        )
+    if every_run and expected - found:
+        raise InvalidInput(
+            f"{path} has no rows for run {_few(expected - found)} of sweep.json's {num_runs}"
+        )
+    num_updates = max(update for _, update in cells)
+    for run in sorted(found):
+        lacking = [u for u in range(1, num_updates + 1) if (run, u) not in cells]
+        if lacking:
+            raise InvalidInput(
+                f"{path}: run {run} has no update {_few(lacking)} (the file goes to update "
+                f"{num_updates})"
+            )
+    return sorted(found), num_updates
 
 
 def _run_digest(values: np.ndarray) -> str:

@@ -1,6 +1,6 @@
-"""The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``eval`` (and render)
-or ``export`` a trained policy, ``table``, ``compare``, ``merge`` and ``plot`` sweeps' results,
-``list`` the tasks and variants.
+"""The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``study`` candidates
+against a baseline, ``eval`` (and render) or ``export`` a trained policy, ``table``,
+``compare``, ``merge`` and ``plot`` sweeps' results, ``list`` the tasks and variants.
 
 :mod:`.flags` turns text into checked values and makes the flags of the fields that declare
 them; :mod:`.parser` assembles the commands; :mod:`.settings` reads ``--config FILE``;
@@ -21,6 +21,7 @@ from fppo_jax.cli.flags import own_surrogates, surrogates_named
 from fppo_jax.cli.parser import build_parser
 from fppo_jax.cli.settings import check_preset, check_settings, settings_file
 from fppo_jax.errors import FppoError
+from fppo_jax.surrogates import Surrogate
 
 __all__ = ["build_parser", "main"]
 
@@ -36,18 +37,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if getattr(args, "config", None) is not None:
         try:
-            settings = settings_file(args.config)
-            named = own_surrogates(_variants(settings.get("variant")))
-            if named:
-                parser = build_parser([*surrogates, *named])
-            command = parser.parse_args(argv).commands[args.command]
-            check_settings(args.config, settings, command)
-            check_preset(args.config, settings, _given(parser, argv, command, "preset"))
-            command.set_defaults(**settings)
+            args = _with_settings_file(parser, argv, args, surrogates)
         except (FppoError, FileNotFoundError) as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
-        args = parser.parse_args(argv)
     # What the commands need (the trainer, checkpoints, JAX's devices) only now: --help and a
     # mistyped flag answer without waiting for it.
     from fppo_jax import compile_cache
@@ -80,6 +73,25 @@ def main(argv: Sequence[str] | None = None) -> int:
             # What a shell reports for a program the signal ended: a job script tells a time
             # limit's warning (SIGUSR1, 138) from a preemption or scancel (SIGTERM, 143).
             return 128 + stopped.signal
+
+
+def _with_settings_file(
+    parser: argparse.ArgumentParser,
+    argv: list[str],
+    args: argparse.Namespace,
+    surrogates: Sequence[Surrogate],
+) -> argparse.Namespace:
+    """`argv` parsed with the settings of ``--config FILE`` as the command's defaults (a flag
+    given wins), its own surrogates' flags included, once the file's names are checked."""
+    settings = settings_file(args.config)
+    named = own_surrogates(_variants(settings.get("variant")))
+    if named:
+        parser = build_parser([*surrogates, *named])
+    command = parser.parse_args(argv).commands[args.command]
+    check_settings(args.config, settings, command)
+    check_preset(args.config, settings, _given(parser, argv, command, "preset"))
+    command.set_defaults(**settings)
+    return parser.parse_args(argv)
 
 
 class _UnretrievedTasks(logging.Filter):

@@ -35,8 +35,7 @@ from fppo_jax.study_report import SHARES, Scores, steps_name, write_figures, wri
 from fppo_jax.surrogates import Surrogate
 from fppo_jax.sweep import expand_grid, part_bounds, sweep
 
-# The endpoints a study decides on; the one not chosen is reported beside it, undecided.
-ENDPOINTS = ("final", "auc")
+ENDPOINTS = statistics.STUDY_ENDPOINTS  # decided on; the one not chosen is reported beside it
 
 # What the study sets itself for every group's sweep.
 OWN_SETTINGS = ("log_dir", "checkpoint_dir", "resume", "checkpoint_every", "keep", "callback")

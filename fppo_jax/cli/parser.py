@@ -31,7 +31,7 @@ from fppo_jax.cli.flags import (
 from fppo_jax.errors import install_hint
 from fppo_jax.objectives import DEFAULT_VARIANT, VARIANTS
 from fppo_jax.options import Options
-from fppo_jax.statistics import ENDPOINTS, STATISTICS
+from fppo_jax.statistics import ENDPOINTS, STATISTICS, STUDY_ENDPOINTS
 from fppo_jax.surrogates import Surrogate
 
 
@@ -192,9 +192,9 @@ def _add_study(
     studied.add_argument(
         "--endpoint",
         default="final",
-        choices=["final", "auc"],
-        help="the score decided on (the other is reported): final: "
-        f"{ENDPOINTS['final']}; auc: {ENDPOINTS['auc']}",
+        choices=STUDY_ENDPOINTS,
+        help="the score decided on (the other is reported): "
+        + "; ".join(f"{name}: {ENDPOINTS[name]}" for name in STUDY_ENDPOINTS),
     )
     studied.add_argument(
         "--groups",

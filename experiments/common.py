@@ -270,6 +270,25 @@ def record_sweep(
     return result
 
 
+def by_variant(result: SweepResult) -> dict[str, int]:
+    return {setting["variant"]: index for index, setting in enumerate(result.settings)}
+
+
+def interval_text(values: tuple[float, float, float], form: str = ".1f") -> str:
+    point, low, high = values
+    return "–" if np.isnan(point) else f"{point:{form}} [{low:{form}}, {high:{form}}]"
+
+
+def outcome(probability: tuple[float, float, float]) -> str:
+    """What the interval of a probability of improvement says, in words."""
+    _, low, high = probability
+    if low > 0.5:
+        return "better"
+    if high < 0.5:
+        return "worse"
+    return "not resolved"
+
+
 def read_fractions(path: Path) -> dict[str, np.ndarray]:
     """What ``escape_speed.py`` wrote to `path` (:data:`ESCAPE_FRACTIONS` under its results):
     each task's fractions, [seed, update point, variant (:data:`ESCAPE_VARIANTS`), epoch]."""

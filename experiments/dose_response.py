@@ -40,10 +40,10 @@ from common import (
     add_force_flag,
     argument_parser,
     header,
+    interval_text,
     refuse_to_replace,
     write_result,
 )
-from verdict import interval_text
 
 from fppo_jax import SweepResult, merge, statistics
 from fppo_jax.config import SYMBOLS

@@ -35,11 +35,13 @@ from common import (
     RUN_RECORD,
     add_force_flag,
     argument_parser,
+    by_variant,
     header,
+    interval_text,
+    outcome,
     refuse_to_replace,
     write_result,
 )
-from verdict import by_variant, interval_text, outcome
 
 from fppo_jax import SweepResult, merge, statistics
 from fppo_jax.envs import MUJOCO_TASKS

@@ -31,6 +31,9 @@ from common import (
     RUN_RECORD,
     TABLE1,
     argument_parser,
+    by_variant,
+    interval_text,
+    outcome,
     read_fractions,
     read_run_record,
     write_result,
@@ -71,29 +74,10 @@ def recorded(results: Path, task: str, protocol: str) -> tuple[SweepResult | Non
     return merge(list(parts.values())), records
 
 
-def by_variant(result: SweepResult) -> dict[str, int]:
-    return {setting["variant"]: index for index, setting in enumerate(result.settings)}
-
-
 def run_counts(result: SweepResult | None, variants: tuple[str, ...]) -> dict[str, int]:
     """How many runs of each of `variants` the merged parts hold, diverged ones included."""
     index = {} if result is None else by_variant(result)
     return {v: result.setting_run_count(index[v]) if v in index else 0 for v in variants}
-
-
-def interval_text(values: tuple[float, float, float], form: str = ".1f") -> str:
-    point, low, high = values
-    return "–" if np.isnan(point) else f"{point:{form}} [{low:{form}}, {high:{form}}]"
-
-
-def outcome(probability: tuple[float, float, float]) -> str:
-    """What the interval of a probability of improvement says, in words."""
-    _, low, high = probability
-    if low > 0.5:
-        return "better"
-    if high < 0.5:
-        return "worse"
-    return "not resolved"
 
 
 def planned_comparisons(protocol: str) -> list[tuple[str, str]]:

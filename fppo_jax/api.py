@@ -12,8 +12,9 @@ from fppo_jax.config import (
     resolve_hyperparameters,
 )
 from fppo_jax.distributed import is_main_process
-from fppo_jax.driver import Plan, drive
+from fppo_jax.driver import Outcome, Plan, drive
 from fppo_jax.envs import Environment
+from fppo_jax.execution import batch_of_one, first_run
 from fppo_jax.objectives import (
     BUILTINS,
     DEFAULT_VARIANT,
@@ -23,7 +24,7 @@ from fppo_jax.objectives import (
     resolve,
 )
 from fppo_jax.policy import make_policy
-from fppo_jax.prepare import prepare
+from fppo_jax.prepare import Prepared, prepare
 from fppo_jax.results import TrainResult
 from fppo_jax.surrogates import Surrogate
 
@@ -42,65 +43,51 @@ def train(
     backend: str = "auto",
     **settings: Any,
 ) -> TrainResult:
-    """Train one policy with `variant` on `env` and return its metrics, parameters and policy.
+    """Train one policy with `variant` on `env`; return its metrics, parameters and policy.
 
     `env` is a registered or namespaced name (:data:`fppo_jax.envs.TASKS`, ``gymnax/…``,
-    ``gymnasium/…``), a gymnax or Brax environment, a ``gymnasium.Env`` or vector environment
-    subclass, a vector environment, or an :class:`~fppo_jax.envs.Environment` (see
-    :func:`~fppo_jax.envs.as_environment`). For a registered task, FPPO-LP's α and FPPO-QP's k
-    default to the paper's Table 2 and `total_steps` to the paper's budget. `preset` names the
-    run's shape (:data:`fppo_jax.config.PRESETS`): ``"paper"`` (the paper's protocol: 8
-    environments × 256 steps) or ``"massive"`` (2048 environments × 16 steps, for a GPU).
-    `backend` runs a MuJoCo task on ``"mjx"`` or in ``"native"`` MuJoCo (envpool, gym's own
-    version of the task), or ``"auto"``: MJX with a GPU or TPU, native on a CPU
-    (:data:`fppo_jax.envs.BACKENDS`). `settings` are :class:`TrainConfig` fields (``num_envs``,
-    ``num_steps``, ``num_minibatches``, …), optimisation settings (``learning_rate``, ``gamma``,
-    ``gae_lambda``, ``entropy_coef``, ``value_coef``, ``max_grad_norm``) and how the run is
-    driven (:class:`~fppo_jax.options.Options`: ``progress``, ``checkpoint_dir``, ``resume``,
-    ``checkpoint_every``, ``keep``, ``log_dir``, ``devices``, ``callback``, ``eval_every``,
-    ``eval_episodes``, ``wandb_project``). Everything is checked before compiling. With
-    ``log_dir``, the run's ``summary.txt`` is written there at the end, beside the
-    ``config.json``, ``metrics.csv`` and TensorBoard files written as it trains.
+    ``gymnasium/…``) or an environment object (the kinds :func:`~fppo_jax.envs.as_environment`
+    takes). On a registered task, α and k default to the paper's Table 2 and `total_steps` to
+    its budget. `preset` is the run's shape (:data:`fppo_jax.config.PRESETS`: ``"paper"``, 8
+    environments × 256 steps; ``"massive"``, 2048 × 16, for a GPU). `backend` runs a MuJoCo task
+    on ``"mjx"``, in ``"native"`` MuJoCo (envpool), or ``"auto"``: MJX on a GPU or TPU, else
+    native. `settings` are :class:`TrainConfig` fields, optimisation settings
+    (``learning_rate``, ``gamma``, …) and :class:`~fppo_jax.options.Options` (progress,
+    checkpoints, logs, devices, callback, evaluation), all checked before compiling. With
+    ``log_dir``, the run's ``summary.txt`` is written there at the end.
 
     Raises :class:`TrainingDiverged` if the loss or the parameters stop being finite (the last
     good checkpoint stays on disk).
     """
     surrogate = resolve(variant)
-    run = prepare(
-        env,
-        settings,
-        total_steps=total_steps,
-        preset=preset,
-        backend=backend,
-        hyperparameters=(
-            *hyperparameter_names([*BUILTINS.values(), surrogate]),
-            *HYPERPARAMETER_DEFAULTS,
-        ),
-    )
+    names = (*hyperparameter_names([*BUILTINS.values(), surrogate]), *HYPERPARAMETER_DEFAULTS)
+    run = prepare(env, settings, names, total_steps=total_steps, preset=preset, backend=backend)
     hp, setting = resolve_hyperparameters(
         surrogate, run.task, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **run.hyperparameters
     )
     seed = check_seed(seed)
-    trainer, options = run.trainer, run.options
     record = {**setting, **run.record(seed=seed, **identities([surrogate]))}
     description = f"{surrogate.name} on {run.name}"
-    header = run.header(description)
-    keys, hps = jax.tree.map(lambda x: x[None], (jax.random.key(seed), hp))  # a batch of one
-    plan = Plan("train", trainer, keys, hps, record, description, header)
-    outcome = drive(plan, options)
-    metrics, state = jax.tree.map(lambda x: x[0], (outcome.metrics, outcome.state))
+    keys, hps = batch_of_one((jax.random.key(seed), hp))
+    plan = Plan("train", run.trainer, keys, hps, record, description, run.header(description))
+    return _result(run, record, drive(plan, run.options))
+
+
+def _result(run: Prepared, record: dict[str, Any], outcome: Outcome) -> TrainResult:
+    """The run's result, its ``summary.txt`` written beside what the driver wrote in ``log_dir``."""
+    metrics, state = first_run((outcome.metrics, outcome.state))
     result = TrainResult(
         metrics=metrics,
         params=state.params,
         config=record,
         state=state,
-        policy=make_policy(trainer, state),
+        policy=make_policy(run.trainer, state),
         compile_seconds=outcome.compile_seconds,
         train_seconds=outcome.train_seconds,
         env=run.environment,
         resumed_from=outcome.resumed_from,
         stopped_at=outcome.stopped_at,
     )
-    if options.log_dir is not None and is_main_process():
-        result.write(options.log_dir)  # summary.txt, beside what the driver wrote
+    if run.options.log_dir is not None and is_main_process():
+        result.write(run.options.log_dir)
     return result

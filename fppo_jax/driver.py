@@ -47,6 +47,7 @@ from fppo_jax.execution import (
     Program,
     compile_program,
     concatenate,
+    first_run,
     one_run,
     run_chunks,
     updates_per_call,
@@ -195,7 +196,7 @@ def drive(plan: Plan, options: Options) -> Outcome:
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
         if plan.runs_per_call is None and checkpointed is None:
             runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
-            size = runs_per_call(plan.trainer, *_first_run(plan), size, runs, data)
+            size = runs_per_call(plan.trainer, *first_run((plan.keys, plan.hps)), size, runs, data)
         program = _compile(plan, options, mesh, size, main)
         with (
             reporter(options.progress if main else False, plan.description) as report,
@@ -311,10 +312,6 @@ def _updates_per_call(options: Options, num_updates: int) -> int:
     if options.eval_every is not None:
         per_call = math.gcd(per_call, min(options.eval_every, num_updates))
     return per_call
-
-
-def _first_run(plan: Plan) -> tuple[jax.Array, Hyperparameters]:
-    return plan.keys[0], jax.tree.map(lambda x: x[0], plan.hps)
 
 
 def _group(plan: Plan, group: int, size: int) -> tuple[jax.Array, Hyperparameters]:

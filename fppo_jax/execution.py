@@ -14,7 +14,7 @@ import collections
 import dataclasses
 import time
 from collections.abc import Callable, Iterator
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import jax
 import numpy as np
@@ -27,6 +27,17 @@ from fppo_jax.trainer import Trainer, TrainState
 PROGRAMS_KEPT = 8  # compiled programs kept for reuse, the most recently used first
 
 F = TypeVar("F", bound=Callable[..., Any])
+T = TypeVar("T")
+
+
+def first_run(tree: T) -> T:
+    """`tree` without its leading run axis: the first run's part of every leaf."""
+    return cast(T, jax.tree.map(lambda x: x[0], tree))
+
+
+def batch_of_one(tree: T) -> T:
+    """`tree` with a leading run axis of length one on every leaf."""
+    return cast(T, jax.tree.map(lambda x: x[None], tree))
 
 
 def one_run(fn: F) -> F:
@@ -34,11 +45,10 @@ def one_run(fn: F) -> F:
     before, and put on every result after. It compiles to `fn`'s own program, bit for bit,
     where ``jax.vmap`` over one run rounds differently in the last bits (measured)."""
 
-    def batch_of_one(*args: Any) -> Any:
-        result = fn(*jax.tree.map(lambda x: x[0], args))
-        return jax.tree.map(lambda x: x[None], result)
+    def of_batch_of_one(*args: Any) -> Any:
+        return batch_of_one(fn(*first_run(args)))
 
-    return batch_of_one  # type: ignore[return-value]
+    return of_batch_of_one  # type: ignore[return-value]
 
 
 def updates_per_call(num_updates: int, calls: int) -> int:

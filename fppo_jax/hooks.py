@@ -19,7 +19,7 @@ from fppo_jax.checkpoint import Checkpoints, ResumePoint
 from fppo_jax.distributed import fetch_tree
 from fppo_jax.envs import Environment
 from fppo_jax.evaluation import make_evaluator
-from fppo_jax.execution import concatenate
+from fppo_jax.execution import concatenate, first_run
 from fppo_jax.files import DirectoryLock
 from fppo_jax.metric_log import Logs
 from fppo_jax.options import Callback, Snapshot, callback_stops
@@ -94,7 +94,7 @@ class Checkpoint:
             )
             policy = None
             if self.single_run is not None:
-                policy = make_policy(self.single_run, jax.tree.map(lambda x: x[0], host))
+                policy = make_policy(self.single_run, first_run(host))
             self.checkpoints.save_point(point, host, **self.record, policy=policy)
         self.saved.append(chunk.update)
         return False
@@ -133,7 +133,7 @@ class UserCallback:
     def after_chunk(self, chunk: Chunk) -> bool:
         seen = (chunk.metrics, chunk.state, chunk.policy)
         if self.single_run:
-            seen = jax.tree.map(lambda x: x[0], seen)
+            seen = first_run(seen)
         return callback_stops(self.callback(Snapshot(chunk.update, *seen, chunk.runs)))
 
 

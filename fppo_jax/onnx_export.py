@@ -26,54 +26,78 @@ def export_onnx(policy: Policy, path: str | Path) -> Path:
     """Write `policy`'s deterministic action as an ONNX model to `path`; returns the path."""
     try:
         import onnx
-        from onnx import TensorProto, helper, numpy_helper
+        from onnx import TensorProto, helper
     except ImportError:
         raise MissingPackage(
             f"exporting to ONNX needs the onnx package: {install_hint('onnx')}"
         ) from None
-    constants: list[Any] = []
-    nodes: list[Any] = []
-
-    def constant(name: str, value: Any) -> str:
-        constants.append(numpy_helper.from_array(np.asarray(value, np.float32), name))
-        return name
-
-    def node(op: str, inputs: list[str], output: str, **attributes: Any) -> str:
-        nodes.append(helper.make_node(op, inputs, [output], **attributes))
-        return output
-
-    x = "observation"
-    if policy.obs_stats is not None:
-        stats = policy.obs_stats
-        scale = np.sqrt(np.asarray(stats.var, np.float32) + np.float32(1e-8))
-        x = node("Sub", [x, constant("obs_mean", stats.mean)], "centred")
-        x = node("Div", [x, constant("obs_scale", scale)], "scaled")
-        bounds = [constant("clip_low", -10.0), constant("clip_high", 10.0)]
-        x = node("Clip", [x, *bounds], "normalised")
-    layers = policy.params["params"]["MLP_0"]
-    for i in range(len(policy.hidden_sizes) + 1):
-        dense = layers[f"Dense_{i}"]
-        x = node("MatMul", [x, constant(f"kernel_{i}", dense["kernel"])], f"product_{i}")
-        x = node("Add", [x, constant(f"bias_{i}", dense["bias"])], f"layer_{i}")
-        if i < len(policy.hidden_sizes):
-            x = node("Tanh", [x], f"hidden_{i}")
+    graph = _Graph()
+    x = _network(graph, policy, _normalised(graph, policy, "observation"))
     space = policy.action_space
     if isinstance(space, Discrete):
-        node("ArgMax", [x], "action", axis=-1, keepdims=0)
+        graph.node("ArgMax", [x], "action", axis=-1, keepdims=0)
         action = helper.make_tensor_value_info("action", TensorProto.INT64, ["batch"])
     else:
-        x = node("Max", [x, constant("action_low", space.low)], "above_low")
-        node("Min", [x, constant("action_high", space.high)], "action")
+        x = graph.node("Max", [x, graph.constant("action_low", space.low)], "above_low")
+        graph.node("Min", [x, graph.constant("action_high", space.high)], "action")
         action = helper.make_tensor_value_info(
             "action", TensorProto.FLOAT, ["batch", len(space.low)]
         )
     observation = helper.make_tensor_value_info(
         "observation", TensorProto.FLOAT, ["batch", policy.observation_size]
     )
-    graph = helper.make_graph(nodes, "fppo_jax_policy", [observation], [action], constants)
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)])
+    model = helper.make_model(
+        helper.make_graph(graph.nodes, "fppo_jax_policy", [observation], [action], graph.constants),
+        opset_imports=[helper.make_opsetid("", OPSET)],
+    )
     model.producer_name = "fppo-jax"
     onnx.checker.check_model(model)
     path = Path(path)
     onnx.save(model, path)
     return path
+
+
+class _Graph:
+    """An ONNX graph's nodes and constants, added one by one, each named by its output."""
+
+    def __init__(self) -> None:
+        self.constants: list[Any] = []
+        self.nodes: list[Any] = []
+
+    def constant(self, name: str, value: Any) -> str:
+        from onnx import numpy_helper
+
+        self.constants.append(numpy_helper.from_array(np.asarray(value, np.float32), name))
+        return name
+
+    def node(self, op: str, inputs: list[str], output: str, **attributes: Any) -> str:
+        from onnx import helper
+
+        self.nodes.append(helper.make_node(op, inputs, [output], **attributes))
+        return output
+
+
+def _normalised(graph: _Graph, policy: Policy, x: str) -> str:
+    """`x` normalised with the statistics training ended with, if it normalised them."""
+    if policy.obs_stats is None:
+        return x
+    stats = policy.obs_stats
+    scale = np.sqrt(np.asarray(stats.var, np.float32) + np.float32(1e-8))
+    x = graph.node("Sub", [x, graph.constant("obs_mean", stats.mean)], "centred")
+    x = graph.node("Div", [x, graph.constant("obs_scale", scale)], "scaled")
+    bounds = [graph.constant("clip_low", -10.0), graph.constant("clip_high", 10.0)]
+    return graph.node("Clip", [x, *bounds], "normalised")
+
+
+def _network(graph: _Graph, policy: Policy, x: str) -> str:
+    """The policy network's output at `x`: tanh hidden layers, then a linear head."""
+    layers = policy.params["params"]["MLP_0"]
+    for i in range(len(policy.hidden_sizes) + 1):
+        dense = layers[f"Dense_{i}"]
+        x = graph.node(
+            "MatMul", [x, graph.constant(f"kernel_{i}", dense["kernel"])], f"product_{i}"
+        )
+        x = graph.node("Add", [x, graph.constant(f"bias_{i}", dense["bias"])], f"layer_{i}")
+        if i < len(policy.hidden_sizes):
+            x = graph.node("Tanh", [x], f"hidden_{i}")
+    return x

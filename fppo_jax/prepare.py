@@ -69,11 +69,11 @@ class Prepared:
 def prepare(
     env: str | Environment | Any,
     settings: dict[str, Any],
+    hyperparameters: tuple[str, ...],
     *,
     total_steps: int | None,
     preset: str,
     backend: str,
-    hyperparameters: tuple[str, ...],
 ) -> Prepared:
     """`settings` (``train``'s or ``sweep``'s keyword arguments) split and checked: the names
     in `hyperparameters` are kept for the caller to resolve per variant, the options and the

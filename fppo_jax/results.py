@@ -358,11 +358,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
     _check_shares(parts, settings, runs)
     metrics = [name for name in first.metrics if all(name in p.metrics for p in parts)]
     seeds = list(dict.fromkeys(seed for part in parts for seed in part.seeds))
-    grid: dict[str, list[Any]] = {}
-    for part in parts:
-        for axis, values in (part.config.get("grid") or {}).items():
-            known = grid.setdefault(axis, [])
-            known += [v for v in values if v not in known]
+    grid = _merged_grid(parts)
     return SweepResult(
         settings=settings,
         seeds=seeds,
@@ -378,6 +374,16 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         compile_seconds=sum(p.compile_seconds for p in parts),
         train_seconds=sum(p.train_seconds for p in parts),
     )
+
+
+def _merged_grid(parts: Sequence[SweepResult]) -> dict[str, list[Any]]:
+    """Each axis's values from every part's grid, in the order they first appear."""
+    grid: dict[str, list[Any]] = {}
+    for part in parts:
+        for axis, values in (part.config.get("grid") or {}).items():
+            known = grid.setdefault(axis, [])
+            known += [v for v in values if v not in known]
+    return grid
 
 
 def _check_same_sweep(parts: Sequence[SweepResult]) -> None:

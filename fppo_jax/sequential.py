@@ -210,6 +210,24 @@ def decide(scores: Sequence[tuple[np.ndarray, np.ndarray]], design: Design) -> l
     and resumed decides as one that never stopped. A score of −inf stands for a failed run
     (diverged, or no episode finished), ranked below every other; NaN or +inf is refused.
     """
+    pairs = _checked(scores)
+    fractions = tuple(n / design.max_seeds for n in design.looks)
+    # z[i][k]: comparison i's statistic at look k, for the looks its scores reach.
+    z = [
+        [mann_whitney_z(c[:n], b[:n]) for n in design.looks if n <= min(c.size, b.size)]
+        for c, b in pairs
+    ]
+    decided = _replayed(z, design, fractions)
+    critical = boundaries(design.level / max(1, len(pairs) - len(decided)), fractions)
+    return [
+        decided[i] if i in decided else _not_decided(z[i], min(c.size, b.size), design, critical)
+        for i, (c, b) in enumerate(pairs)
+    ]
+
+
+def _checked(
+    scores: Sequence[tuple[np.ndarray, np.ndarray]],
+) -> list[tuple[np.ndarray, np.ndarray]]:
     pairs = []
     for index, (candidate, baseline) in enumerate(scores):
         pair = np.asarray(candidate, float), np.asarray(baseline, float)
@@ -219,19 +237,21 @@ def decide(scores: Sequence[tuple[np.ndarray, np.ndarray]], design: Design) -> l
                 "−inf for a failed run"
             )
         pairs.append(pair)
+    return pairs
+
+
+def _replayed(
+    z: list[list[float]], design: Design, fractions: tuple[float, ...]
+) -> dict[int, Decision]:
+    """The comparisons decided, by index, replaying the looks in order with Holm's levels."""
     looks = design.looks
-    fractions = tuple(n / design.max_seeds for n in looks)
-    # z[i][k]: comparison i's statistic at look k, for the looks its scores reach.
-    z = [
-        [mann_whitney_z(c[:n], b[:n]) for n in looks if n <= min(c.size, b.size)] for c, b in pairs
-    ]
     decided: dict[int, Decision] = {}
     for look in range(len(looks)):
         while True:
-            open_ = [i for i in range(len(pairs)) if i not in decided and len(z[i]) > look]
+            open_ = [i for i in range(len(z)) if i not in decided and len(z[i]) > look]
             if not open_:
                 break
-            level = design.level / (len(pairs) - len(decided))
+            level = design.level / (len(z) - len(decided))
             critical = boundaries(level, fractions)
             crossed = [
                 (i, k) for i in open_ for k in range(look + 1) if abs(z[i][k]) >= critical[k]
@@ -249,32 +269,28 @@ def decide(scores: Sequence[tuple[np.ndarray, np.ndarray]], design: Design) -> l
                         f"z = {z[i][k]:.2f} crossed ±{critical[k]:.2f} at look {k + 1} "
                         f"({looks[k]} seeds, level {level:.3g})",
                     )
-    level = design.level / max(1, len(pairs) - len(decided))
-    critical = boundaries(level, fractions)
-    decisions = []
-    for i, (candidate, baseline) in enumerate(pairs):
-        if i in decided:
-            decisions.append(decided[i])
-            continue
-        done = len(z[i])
-        latest = z[i][-1] if done else float("nan")
-        boundary = critical[done - 1] if done else float("nan")
-        if done == len(looks):
-            decisions.append(
-                Decision(
-                    "undecided",
-                    looks[-1],
-                    latest,
-                    boundary,
-                    f"reached the maximum of {looks[-1]} seeds: z = {latest:.2f} stayed "
-                    f"within ±{boundary:.2f}",
-                )
-            )
-        else:
-            seeds = min(candidate.size, baseline.size)
-            wanted = f"look {done + 1} needs {looks[done]} seeds"
-            decisions.append(Decision(None, seeds, latest, boundary, f"awaits seeds: {wanted}"))
-    return decisions
+    return decided
+
+
+def _not_decided(
+    z: list[float], seeds: int, design: Design, critical: tuple[float, ...]
+) -> Decision:
+    """A comparison the rule has not decided, with `seeds` of scores: undecided at the maximum
+    of seeds, else awaiting the next look's."""
+    looks, done = design.looks, len(z)
+    latest = z[-1] if done else float("nan")
+    boundary = critical[done - 1] if done else float("nan")
+    if done == len(looks):
+        return Decision(
+            "undecided",
+            looks[-1],
+            latest,
+            boundary,
+            f"reached the maximum of {looks[-1]} seeds: z = {latest:.2f} stayed "
+            f"within ±{boundary:.2f}",
+        )
+    wanted = f"look {done + 1} needs {looks[done]} seeds"
+    return Decision(None, seeds, latest, boundary, f"awaits seeds: {wanted}")
 
 
 def simulate(

@@ -2,11 +2,21 @@
 baseline on a list of tasks, trained in groups of seeds until :mod:`fppo_jax.sequential`'s
 rule decides each comparison or the seeds run out.
 
-The study's directory holds ``plan.json`` (written before any run: the preregistration),
-each group of each task as one sweep (``<task>/group-<k>/``, recorded by the sweep itself
-when it ends), ``decisions.json`` after every look and ``report.md``
-(:mod:`fppo_jax.study_report`). The same call again goes on from the groups recorded, and a
-changed plan is refused.
+The study's directory holds ``plan.json`` (written before any run: the preregistration of the
+comparisons, the endpoints, the test and its level, the seed schedule, the settings and the
+code's commit), each group of each task as one sweep (``<task>/group-<k>/``, recorded by the
+sweep itself when it ends), ``decisions.json`` after every look and ``report.md``
+(:mod:`fppo_jax.study_report`). The same call again goes on from the groups recorded; a study
+whose plan differs is refused, naming the field.
+
+Each look trains, per task, one sweep of the next group's seeds for the candidates still
+undecided, and the baseline while any of them is. Runs reused from recorded sweeps (a seed
+study's parts, say) are taken instead of trained where they match the task, protocol and
+setting, at every seed of the group (:mod:`fppo_jax.reuse`); ``decisions.json`` names where
+each came from. A SLURM job array's tasks each train a share of the next look's groups
+(``group-<k>/part-<K>/``, the shares of :func:`~fppo_jax.sweep`) and decide nothing; a call
+without a part, after the array, joins the shares, decides and reports. A requeued task does
+not train again the shares recorded already.
 """
 
 from __future__ import annotations
@@ -15,7 +25,7 @@ import dataclasses
 import json
 import shutil
 import subprocess
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, cast
 
@@ -80,97 +90,88 @@ def study(
 ) -> StudyResult:
     """Compare each of `candidates` with `baseline` on each of `tasks`, adding seeds in groups
     of `group_size` (per setting) until the rule of :mod:`fppo_jax.sequential` decides each
-    comparison, at family-wise error `level`, or `max_seeds` is reached.
+    comparison, at family-wise error `level`, or `max_seeds` is reached (see the module).
 
-    `level` is the test's α, named apart from the hyperparameter ``alpha`` that `settings` may
-    fix. Variants are as :func:`~fppo_jax.sweep` takes them: built-ins' names, surrogates of one's
-    own or ``"module:attribute"``. `endpoint` (``final`` or ``auc``, see
-    :data:`fppo_jax.statistics.ENDPOINTS`) is the primary endpoint, the one decided on; the
-    other is reported beside it. `total_steps`, `preset`, `backend`, `chunk` and `settings`
-    (run-shape fields, fixed hyperparameters, ``progress``, ``devices`` …) are the sweeps'.
-
-    Before any run, ``plan.json`` in `output` records the comparisons, the endpoints, the test
-    and its level, the seed schedule, the settings and the code's commit; a study already
-    there goes on where it stopped, and one whose plan differs is refused, naming the field.
-    Each look trains, per task, one sweep of the seeds of the next group for the candidates
-    still undecided, and the baseline while any of them is. `groups` limits the looks this call
-    trains (then it stops; calling again goes on; 0 writes the plan alone). Each look's
-    decisions go to ``decisions.json``, and ``report.md`` is written when the call ends.
-
-    `reuse` names directories of recorded sweeps (a seed study's parts, say): a group's runs of
-    a setting found there, at every seed of the group, under the same task, protocol and
-    setting (:mod:`fppo_jax.reuse`), are taken instead of trained, and ``decisions.json`` names
-    where each came from. The plan records `reuse`.
-
-    ``part=(K, N)`` splits the next look over N processes (a SLURM job array's tasks): this
-    call trains only the K-th share of that look's groups (``group-<k>/part-<K>/``, the shares
-    of :func:`~fppo_jax.sweep`), and returns, deciding nothing; a call without `part` (a job
-    that waits for the array) then joins the shares, decides, and reports. Shares recorded
-    already are not trained again, so a requeued task goes on.
+    `level` is the test's α (not the hyperparameter ``alpha``, which `settings` may fix).
+    Variants are as :func:`~fppo_jax.sweep` takes them. `endpoint` (``final`` or ``auc``) is
+    decided on; the other is reported beside it. `groups` limits the looks this call trains
+    (0 writes the plan alone). `reuse` names directories of recorded sweeps to take runs from.
+    ``part=(K, N)`` trains the K-th of N shares of the next look's groups and returns.
+    `total_steps`, `preset`, `backend`, `chunk` and `settings` are the sweeps'.
     """
     tasks = _names_of_tasks(tasks)
-    one = isinstance(candidates, str | Surrogate)
-    candidates = [resolve(c) for c in ([candidates] if one else candidates)]
-    baseline = resolve(baseline)
+    candidates, baseline = _variants(candidates, baseline)
     design = Design(group_size, max_seeds, level)
-    _check_variants(candidates, baseline)
     _check_arguments(endpoint, groups, chunk, part, settings)
-    everyone = [*candidates, baseline]
-    specific = set(hyperparameter_names([*BUILTINS.values(), *everyone]))
     sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
     shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
-    expected = {task: _checked_settings(task, everyone, settings, shape) for task in tasks}
-    plan = make_plan(
-        tasks,
-        candidates,
-        baseline,
-        design,
-        endpoint,
-        {**shape, **{k: v for k, v in settings.items() if k not in Options.names()}},
-        sources,
-    )
+    source = _Source.of(tasks, [*candidates, baseline], settings, shape, chunk, part)
+    fixed = {k: v for k, v in settings.items() if k not in Options.names()}
+    plan = make_plan(tasks, candidates, baseline, design, endpoint, {**shape, **fixed}, sources)
     output = writable_directory(output)
     lock = DirectoryLock(output, "a study")
     try:
         check_plan(output, plan)
         if part is not None:  # the array's tasks train their shares side by side
             lock.release()
-
-        def train_group(
-            task: str, variants: list[Surrogate], seeds: list[int], where: Path
-        ) -> SweepResult:
-            fixed = {
-                name: value
-                for name, value in settings.items()
-                if name not in specific or takers(name, {s.name: s for s in variants})
-            }
-            return sweep_group(
-                task,
-                variants,
-                seeds,
-                where,
-                part=part,
-                total_steps=total_steps,
-                preset=preset,
-                backend=backend,
-                chunk=chunk,
-                **fixed,
-            )
-
-        pool = Pool.read(sources) if sources else None
-        identity = identities(everyone).get("surrogates", {})
-
-        def take(task: str, variant: Surrogate, seeds: list[int]) -> Taken | None:
-            if pool is None:
-                return None
-            protocol, setting_of = expected[task]
-            return pool.take(protocol, setting_of[variant.name], identity.get(variant.name), seeds)
-
-        return _run(
-            output, plan, tasks, candidates, baseline, design, groups, train_group, take, part
-        )
+        source = dataclasses.replace(source, pool=Pool.read(sources) if sources else None)
+        return _run(output, plan, tasks, candidates, baseline, design, groups, source)
     finally:
         lock.release()
+
+
+@dataclasses.dataclass(frozen=True)
+class _Source:
+    """Where a study's groups of runs come from: recorded sweeps in the `pool` of reused
+    directories, where they match the `expected` protocol and setting, else trained (with the
+    study's `settings` and `shape`; by this call, only its `part` of each group)."""
+
+    settings: dict[str, Any]
+    shape: dict[str, Any]
+    specific: set[str]  # the hyperparameters that only some variants take
+    part: tuple[int, int] | None
+    expected: dict[str, tuple[dict[str, Any], dict[str, dict[str, Any]]]]
+    identity: dict[str, Any]
+    pool: Pool | None = None
+
+    @classmethod
+    def of(
+        cls,
+        tasks: list[str],
+        everyone: list[Surrogate],
+        settings: dict[str, Any],
+        shape: dict[str, Any],
+        chunk: int | None,
+        part: tuple[int, int] | None,
+    ) -> _Source:
+        """The study's source of runs, every setting of every task checked (before the plan
+        is written)."""
+        return cls(
+            settings,
+            {**shape, "chunk": chunk},
+            set(hyperparameter_names([*BUILTINS.values(), *everyone])),
+            part,
+            {task: _checked_settings(task, everyone, settings, shape) for task in tasks},
+            identities(everyone).get("surrogates", {}),
+        )
+
+    def train(
+        self, task: str, variants: list[Surrogate], seeds: list[int], where: Path
+    ) -> SweepResult:
+        by_name = {s.name: s for s in variants}
+        fixed = {
+            name: value
+            for name, value in self.settings.items()
+            if name not in self.specific or takers(name, by_name)
+        }
+        return sweep_group(task, variants, seeds, where, part=self.part, **self.shape, **fixed)
+
+    def take(self, task: str, variant: Surrogate, seeds: list[int]) -> Taken | None:
+        if self.pool is None:
+            return None
+        protocol, setting_of = self.expected[task]
+        name = variant.name
+        return self.pool.take(protocol, setting_of[name], self.identity.get(name), seeds)
 
 
 def _check_arguments(
@@ -204,7 +205,7 @@ def _checked_settings(
 ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
     """Every setting of `task` checked before the plan is written, as a sweep checks them; and
     what a recorded run must match to be reused: the protocol, and each variant's setting."""
-    run = prepare(task, dict(settings), **shape, hyperparameters=sweepable(everyone))
+    run = prepare(task, dict(settings), sweepable(everyone), **shape)
     by_name = {s.name: s for s in everyone}
     grid = expand_grid({"variant": everyone, **run.hyperparameters}, task)
     for setting in grid:
@@ -222,7 +223,11 @@ def _names_of_tasks(tasks: str | Sequence[str]) -> list[str]:
     return tasks
 
 
-def _check_variants(candidates: list[Surrogate], baseline: Surrogate) -> None:
+def _variants(candidates: Any, baseline: str | Surrogate) -> tuple[list[Surrogate], Surrogate]:
+    """The candidates and the baseline resolved (a name or a surrogate each), checked."""
+    one = isinstance(candidates, str | Surrogate)
+    candidates = [resolve(c) for c in ([candidates] if one else candidates)]
+    baseline = resolve(baseline)
     if not candidates:
         raise InvalidInput("a study needs at least one candidate")
     union([*candidates, baseline])  # two different surrogates under one name are refused
@@ -231,6 +236,7 @@ def _check_variants(candidates: list[Surrogate], baseline: Surrogate) -> None:
         raise InvalidInput(f"the baseline {baseline.name} is also a candidate")
     if len(set(names)) < len(names):
         raise InvalidInput(f"a candidate is named twice among {', '.join(names)}")
+    return candidates, baseline
 
 
 def commit() -> str:
@@ -405,6 +411,24 @@ def run_scores(result: SweepResult, variant: str, endpoint: str) -> np.ndarray:
     return np.where(failed, -np.inf, scores)
 
 
+@dataclasses.dataclass(frozen=True)
+class _Group:
+    """A task's group of seeds at one look: the `variants` still to train in `where` (`result`:
+    the group recorded there already, whole) and the runs `taken` from recorded sweeps."""
+
+    task: str
+    look: int
+    seeds: list[int]
+    variants: list[Surrogate]
+    where: Path
+    result: SweepResult | None
+    taken: dict[str, Taken]
+
+    @property
+    def to_train(self) -> bool:
+        return bool(self.variants) and self.result is None
+
+
 def _run(
     output: Path,
     plan: dict[str, Any],
@@ -413,14 +437,11 @@ def _run(
     baseline: Surrogate,
     design: Design,
     groups: int | None,
-    train_group: Callable[[str, list[Surrogate], list[int], Path], SweepResult],
-    take: Callable[[str, Surrogate, list[int]], Taken | None],
-    part: tuple[int, int] | None = None,
+    source: _Source,
 ) -> StudyResult:
     """The looks: each task's next group while some comparison awaits seeds, then the rule.
-    A group's runs of a setting that `take` finds recorded elsewhere are taken, not trained.
-    With `part`, the first look whose groups are not all recorded has this share of them
-    trained, and the call returns there, writing no decision."""
+    With ``source.part``, the first look whose groups are not all recorded has this share of
+    them trained, and the call returns there, writing no decision."""
     recorded: dict[str, list[SweepResult]] = {task: [] for task in tasks}
     trained: list[dict[str, Any]] = []
     endpoint = plan["primary_endpoint"]
@@ -430,41 +451,69 @@ def _run(
         if not waiting:
             break
         group_seeds = list(range(design.looks[look - 1] if look else 0, seeds))
-        found = {}
-        for task in tasks:
-            variants = [c for c in candidates if (task, c.name) in waiting]
-            if variants:  # the baseline only while one of its task's candidates waits
-                variants.append(baseline)
-                taken = {v.name: t for v in variants if (t := take(task, v, group_seeds))}
-                variants = [v for v in variants if v.name not in taken]
-                where = output / _directory_name(task) / f"group-{look + 1}"
-                result = recorded_group(where, variants, group_seeds) if variants else None
-                found[task] = (variants, where, result, taken)
-        to_train = [task for task, (v, _, result, _) in found.items() if v and result is None]
-        if part is not None and to_train:
-            for task in to_train:
-                variants, where = found[task][:2]
-                if recorded_group(where, variants, group_seeds, part) is None:
-                    train_group(task, variants, group_seeds, where)
+        found = [
+            _group(output, source, task, look, group_seeds, [*variants, baseline])
+            for task in tasks
+            # the baseline only while one of its task's candidates waits
+            if (variants := [c for c in candidates if (task, c.name) in waiting])
+        ]
+        to_train = [group for group in found if group.to_train]
+        if source.part is not None and to_train:
+            for group in to_train:
+                if recorded_group(group.where, group.variants, group.seeds, source.part) is None:
+                    source.train(group.task, group.variants, group.seeds, group.where)
             return StudyResult(plan, _rows(decisions, baseline), {}, False)
         looks_trained = len({entry["group"] for entry in trained if "commit" in entry})
         if to_train and groups is not None and looks_trained >= groups:
             break
-        for task, (variants, where, result, taken) in found.items():
-            entry: dict[str, Any] = {"task": task, "group": look + 1, "seeds": group_seeds}
-            if variants and result is None:
-                result = train_group(task, variants, group_seeds, where)
-                entry["commit"] = commit()
-            if result is not None:
-                recorded[task].append(result)
-            recorded[task] += [t.result for t in taken.values()]
-            if taken:
-                entry["reused"] = {name: [str(s) for s in t.sources] for name, t in taken.items()}
-            if len(entry) > 3:
-                trained.append(entry)
+        trained += [entry for group in found if (entry := _gather(group, source, recorded))]
         decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
-        if part is None:  # an array task writes no decision: the job after the array does
+        if source.part is None:  # an array task writes no decision: the job after the array does
             _write_decisions(output, decisions, baseline, trained)  # a killed study keeps them
+    return _finish(output, plan, recorded, decisions, baseline, trained, source.part)
+
+
+def _group(
+    output: Path, source: _Source, task: str, look: int, seeds: list[int], variants: list[Surrogate]
+) -> _Group:
+    """`task`'s group at `look`: of `variants`, those whose runs `source` takes from recorded
+    sweeps, and the others, to train in the study's own directory unless recorded there."""
+    taken = {v.name: t for v in variants if (t := source.take(task, v, seeds))}
+    variants = [v for v in variants if v.name not in taken]
+    where = output / _directory_name(task) / f"group-{look + 1}"
+    result = recorded_group(where, variants, seeds) if variants else None
+    return _Group(task, look, seeds, variants, where, result, taken)
+
+
+def _gather(
+    group: _Group, source: _Source, recorded: dict[str, list[SweepResult]]
+) -> dict[str, Any] | None:
+    """`group`'s runs added to `recorded`, trained first where they are not recorded; what
+    ``decisions.json`` says of the group (None when it was recorded by an earlier call)."""
+    entry: dict[str, Any] = {"task": group.task, "group": group.look + 1, "seeds": group.seeds}
+    result = group.result
+    if group.to_train:
+        result = source.train(group.task, group.variants, group.seeds, group.where)
+        entry["commit"] = commit()
+    if result is not None:
+        recorded[group.task].append(result)
+    recorded[group.task] += [t.result for t in group.taken.values()]
+    if group.taken:
+        entry["reused"] = {name: [str(s) for s in t.sources] for name, t in group.taken.items()}
+    return entry if len(entry) > 3 else None
+
+
+def _finish(
+    output: Path,
+    plan: dict[str, Any],
+    recorded: dict[str, list[SweepResult]],
+    decisions: dict[tuple[str, str], Decision],
+    baseline: Surrogate,
+    trained: list[dict[str, Any]],
+    part: tuple[int, int] | None,
+) -> StudyResult:
+    """The study as it stands; unless this call trained a `part`, its decisions, report and
+    figures written."""
     results = {task: merge(parts) for task, parts in recorded.items() if parts}
     if part is not None:
         rows = _rows(decisions, baseline)

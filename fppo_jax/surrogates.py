@@ -235,21 +235,7 @@ def declare(
             "hyperparameter of its own"
         )
     _check_signature(name, function, defaults)
-    checked_ranges = {
-        key: r if isinstance(r, Range) else Range(r) for key, r in (ranges or {}).items()
-    }
-    stray = sorted(set(checked_ranges) - set(defaults))
-    if clip_range is not None:
-        if not (isinstance(clip_range, tuple | list) and len(clip_range) == 2):
-            raise InvalidInput(
-                f"surrogate {name!r}: clip_range must name two hyperparameters, got {clip_range!r}"
-            )
-        stray += [key for key in clip_range if key not in defaults]
-    if stray:
-        raise InvalidInput(
-            f"surrogate {name!r} has no hyperparameter {', '.join(map(repr, stray))} "
-            f"(it takes: {', '.join(defaults) or 'none'})"
-        )
+    checked_ranges = _checked_ranges(name, ranges, clip_range, defaults)
     if not isinstance(needs_kl, bool):
         raise InvalidInput(f"surrogate {name!r}: needs_kl must be True or False, got {needs_kl!r}")
     declared = Surrogate(
@@ -264,6 +250,30 @@ def declare(
     for key, value in defaults.items():
         declared.check(key, value)
     return declared
+
+
+def _checked_ranges(
+    name: str,
+    ranges: Mapping[str, str | Range] | None,
+    clip_range: tuple[str, str] | None,
+    defaults: Mapping[str, float],
+) -> dict[str, Range]:
+    """`ranges`, each a :class:`Range`, once it and `clip_range` are found to name only
+    hyperparameters that the surrogate takes."""
+    checked = {key: r if isinstance(r, Range) else Range(r) for key, r in (ranges or {}).items()}
+    stray = sorted(set(checked) - set(defaults))
+    if clip_range is not None:
+        if not (isinstance(clip_range, tuple | list) and len(clip_range) == 2):
+            raise InvalidInput(
+                f"surrogate {name!r}: clip_range must name two hyperparameters, got {clip_range!r}"
+            )
+        stray += [key for key in clip_range if key not in defaults]
+    if stray:
+        raise InvalidInput(
+            f"surrogate {name!r} has no hyperparameter {', '.join(map(repr, stray))} "
+            f"(it takes: {', '.join(defaults) or 'none'})"
+        )
+    return checked
 
 
 def _parameters(function: Callable[..., Any]) -> tuple[str, ...]:

@@ -8,6 +8,7 @@ called on more runs. Runs are split into equal groups only when they do not fit 
 
 from __future__ import annotations
 
+import functools
 import itertools
 import sys
 from collections.abc import Iterable, Mapping, Sequence
@@ -38,7 +39,7 @@ from fppo_jax.objectives import (
     takers,
     union,
 )
-from fppo_jax.prepare import prepare
+from fppo_jax.prepare import Prepared, prepare
 from fppo_jax.results import SweepResult, labels
 from fppo_jax.surrogates import Surrogate, real_number
 
@@ -112,76 +113,89 @@ def sweep(
     `seeds` is a count (0 … n−1) or a list; run (setting, seed) starts from
     ``jax.random.key(seed)``, as ``train(..., seed=seed)`` does, and matches that run to float
     tolerance over its first updates, then drifts from it (vmapped kernels round differently).
-    `preset`, `backend` and `settings` are as in :func:`~fppo_jax.train`: a preset's
-    :class:`~fppo_jax.config.TrainConfig`, its fields, fixed values of sweepable
-    hyperparameters, and how the runs are driven (:class:`~fppo_jax.options.Options`). `chunk`
-    is the number of runs per compiled call (default: as many as fit in half the free memory).
-    A run that diverges is reported and recorded in ``SweepResult.diverged``; the others go on.
+    `preset`, `backend` and `settings` are as in :func:`~fppo_jax.train`. `chunk` is the number
+    of runs per compiled call (default: as many as fit in half the free memory). A run that
+    diverges is recorded in ``SweepResult.diverged``; the others go on.
 
-    Options apply to every run. A checkpoint holds the state of the group of runs in training
-    with the metrics of the groups already done, and a resumed sweep goes on from the group and
-    update where it stopped (with the same runs per call). ``metrics.csv`` in `log_dir` has a
-    ``run`` column and TensorBoard a directory per run, and each group of runs, once finished,
-    adds its runs to ``curves.csv`` and ``sweep.json`` there (:meth:`SweepResult.write`); a
-    callback sees one group of runs at a time (``snapshot.runs``, metrics as [run, update]),
-    and returning ``False`` stops the sweep.
+    Options apply to every run. A checkpoint holds the group of runs in training and the
+    metrics of the groups done; a resumed sweep goes on from that group and update. With
+    ``log_dir``, each finished group adds its runs to ``curves.csv`` and ``sweep.json`` there
+    (:meth:`SweepResult.write`); ``metrics.csv`` has a ``run`` column. A callback sees one
+    group at a time (metrics as [run, update]); returning ``False`` stops the sweep.
 
-    `devices` (default: all JAX sees) share the runs of each group, `data_parallel` of them
-    (default 1) per run, splitting its environments (see :mod:`fppo_jax.distributed`); runs
-    per call are rounded up to a multiple of ``devices / data_parallel``.
-
-    ``part=(K, N)`` trains only the K-th (from 1) of N equal shares of the sweep's runs, taken
-    in its run order (settings × seeds), as one program: the way to split a sweep over a
-    cluster's nodes. Its result and ``sweep.json`` name the part, and :func:`~fppo_jax.merge`
-    joins the N parts into the whole sweep, naming any run still missing.
+    `devices` (default: all JAX sees) share each group's runs, `data_parallel` (default 1) per
+    run, splitting its environments (:mod:`fppo_jax.distributed`). ``part=(K, N)`` trains the
+    K-th (from 1) of N equal shares of the runs in run order (settings × seeds), to split a
+    sweep over a cluster's nodes; :func:`~fppo_jax.merge` joins the parts, naming any missing run.
     """
     surrogates = grid_surrogates(grid)
-    run = prepare(
-        env,
-        settings,
-        total_steps=total_steps,
-        preset=preset,
-        backend=backend,
-        hyperparameters=sweepable(surrogates.values()),
-    )
-    fixed, options = run.hyperparameters, run.options
-    settings, hps = _settings(grid, fixed, surrogates, run.task)
+    names = sweepable(surrogates.values())
+    run = prepare(env, settings, names, total_steps=total_steps, preset=preset, backend=backend)
+    settings, hps = _settings(grid, run.hyperparameters, surrogates, run.task)
     seeds = _seeds(seeds)
-    runs = [{"setting": i, "seed": seed} for i in range(len(settings)) for seed in seeds]
-    if part is not None:
-        runs = runs[slice(*part_bounds(part, len(runs)))]
-    if chunk is not None:
-        positive_int("chunk", chunk)
-    if data_parallel is not None:
-        positive_int("data_parallel", data_parallel)
+    runs = _runs(len(settings), seeds, part)
+    for name, value in {"chunk": chunk, "data_parallel": data_parallel}.items():
+        if value is not None:
+            positive_int(name, value)
+    record = _record(run, grid, surrogates, seeds, part)
+    result_of = functools.partial(_result, settings, runs, record)
+    log_dir = run.options.log_dir  # a finished group is written at once, lost by no later crash
+    after_group = None if log_dir is None else lambda done: result_of(done).write(log_dir)
+    how = {"runs_per_call": chunk, "data_parallel": data_parallel or 1, "after_group": after_group}
+    result = result_of(drive(_plan(run, settings, runs, hps, record, **how), run.options))
+    _warn_diverged(result)
+    return result
 
-    grid_values = {key: _as_list(key, v) for key, v in {**grid, **fixed}.items()}
-    if "variant" in grid_values:
-        grid_values["variant"] = list(surrogates)
+
+def _record(
+    run: Prepared,
+    grid: Mapping[str, Any],
+    surrogates: dict[str, Surrogate],
+    seeds: list[int],
+    part: tuple[int, int] | None,
+) -> dict[str, Any]:
+    """What the sweep's outputs and checkpoints record of it."""
+    values = {key: _as_list(key, v) for key, v in {**grid, **run.hyperparameters}.items()}
+    if "variant" in values:
+        values["variant"] = list(surrogates)
     shares = {} if part is None else {"part": list(part)}
-    record = run.record(grid=grid_values, seeds=seeds, **shares, **identities(surrogates.values()))
+    return run.record(grid=values, seeds=seeds, **shares, **identities(surrogates.values()))
 
-    def result_of(outcome: Outcome) -> SweepResult:
-        return SweepResult(
-            settings=settings,
-            seeds=list(dict.fromkeys(run["seed"] for run in runs)),
-            runs=runs[: len(outcome.diverged)],
-            metrics=outcome.metrics,
-            diverged=outcome.diverged,
-            config={**record, "runs_per_call": outcome.runs_per_call},
-            compile_seconds=outcome.compile_seconds,
-            train_seconds=outcome.train_seconds,
-        )
 
-    # Written after each group, so that a crash or a stop later loses no finished run.
-    def write_finished(outcome: Outcome) -> None:
-        assert options.log_dir is not None  # it is the after_group only with a log_dir
-        result_of(outcome).write(options.log_dir)
+def _result(
+    settings: list[dict[str, Any]],
+    runs: list[dict[str, int]],
+    record: dict[str, Any],
+    outcome: Outcome,
+) -> SweepResult:
+    """The sweep's result: its runs done so far, from the driver's `outcome`."""
+    return SweepResult(
+        settings=settings,
+        seeds=list(dict.fromkeys(run["seed"] for run in runs)),
+        runs=runs[: len(outcome.diverged)],
+        metrics=outcome.metrics,
+        diverged=outcome.diverged,
+        config={**record, "runs_per_call": outcome.runs_per_call},
+        compile_seconds=outcome.compile_seconds,
+        train_seconds=outcome.train_seconds,
+    )
 
-    shape = f"{len(settings)} settings × {len(seeds)} seeds = {len(settings) * len(seeds)} runs"
-    if part is not None:
-        shape += f", part {part[0]} of {part[1]}: {len(runs)} of them"
-    plan = Plan(
+
+def _plan(
+    run: Prepared,
+    settings: list[dict[str, Any]],
+    runs: list[dict[str, int]],
+    hps: Hyperparameters,
+    record: dict[str, Any],
+    **how: Any,
+) -> Plan:
+    """The sweep's runs as the driver's plan, `how` it drives them (the :class:`Plan`'s
+    fields)."""
+    seeds = len(record["seeds"])
+    shape = f"{len(settings)} settings × {seeds} seeds = {len(settings) * seeds} runs"
+    if "part" in record:
+        shape += f", part {record['part'][0]} of {record['part'][1]}: {len(runs)} of them"
+    return Plan(
         "sweep",
         run.trainer,
         jnp.stack([jax.random.key(run["seed"]) for run in runs]),
@@ -192,13 +206,16 @@ def sweep(
         f"sweep on {run.name}",
         run.header(f"sweep on {run.name}", f"{shape}; each "),
         runs=tuple({**settings[run["setting"]], "seed": run["seed"]} for run in runs),
-        runs_per_call=chunk,
-        data_parallel=1 if data_parallel is None else data_parallel,
-        after_group=None if options.log_dir is None else write_finished,
+        **how,
     )
-    result = result_of(drive(plan, options))
-    _warn_diverged(result)
-    return result
+
+
+def _runs(
+    num_settings: int, seeds: list[int], part: tuple[int, int] | None
+) -> list[dict[str, int]]:
+    """The sweep's runs (settings × seeds, in that order), or those of its `part`."""
+    runs = [{"setting": i, "seed": seed} for i in range(num_settings) for seed in seeds]
+    return runs if part is None else runs[slice(*part_bounds(part, len(runs)))]
 
 
 def _settings(

@@ -178,6 +178,14 @@ def _add_study(
     studied.add_argument(
         "--tasks", type=names, required=True, help="tasks, e.g. hopper,walker2d (fppo-jax list)"
     )
+    add_hyperparameter_flags(studied, surrogates, float_value)
+    add_shape_flags(studied)
+    _add_study_design(studied)
+    _add_study_running(studied)
+
+
+def _add_study_design(studied: Parser) -> None:
+    """The study's test: its seed schedule, error level and endpoint, as the plan records them."""
     studied.add_argument("--max-seeds", type=count, default=30, help="seeds per setting at most")
     studied.add_argument(
         "--group-size", type=count, default=5, help="seeds per setting added at each look"
@@ -196,6 +204,11 @@ def _add_study(
         help="the score decided on (the other is reported): "
         + "; ".join(f"{name}: {ENDPOINTS[name]}" for name in STUDY_ENDPOINTS),
     )
+
+
+def _add_study_running(studied: Parser) -> None:
+    """The study's flags for where and how far it runs: its directory, its looks, the runs it
+    reuses, an array task's part."""
     studied.add_argument(
         "--groups",
         type=looks,
@@ -222,11 +235,9 @@ def _add_study(
         "nothing (auto: a SLURM job array task's share); the same command without --part, "
         "once every share is recorded, joins them and decides",
     )
-    add_hyperparameter_flags(studied, surrogates, float_value)
     studied.add_argument(
         "--chunk", type=count, help="runs per compiled call (default: what fits in memory)"
     )
-    add_shape_flags(studied)
     studied.add_argument("--quiet", action="store_true", help="no progress bar or lines")
 
 

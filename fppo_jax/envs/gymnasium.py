@@ -60,9 +60,7 @@ import collections
 import dataclasses
 import importlib
 import importlib.util
-import math
 import threading
-import traceback
 import tracemalloc
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, cast
@@ -70,6 +68,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from fppo_jax.envs.core import Box, Discrete, HostState, OnHost, Step, seeds_of
+from fppo_jax.envs.gymnasium_api import CheckedApi
 from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
 from fppo_jax.files import first_line
 
@@ -77,9 +76,6 @@ if TYPE_CHECKING:
     import jax
 
 MAX_POOLS = 16  # pools kept alive at once: training's, and a few evaluations' beside it
-# What one environment's step gives as its reward, and as terminated and truncated, mostly.
-SCALARS = (float, int, np.float32, np.float64, np.int64)
-FLAGS = (bool, np.bool_)
 
 
 def import_gymnasium() -> Any:
@@ -147,141 +143,26 @@ _POOLS = _Pools()
 class GymnasiumEnvironment(OnHost):
     """The Gymnasium environments that `make()` gives, one ``gymnasium.Env`` or one
     ``gymnasium.vector.VectorEnv`` per call, as an :class:`~fppo_jax.envs.core.Environment`
-    that resets itself; `name` names them in errors and records. `instance`: `make` gives the
-    same vector environment every time, a user's own (see the module's docstring)."""
+    that resets itself, called through `api`; `name` names them in errors and records.
+    `instance`: `make` gives the same vector environment every time, a user's own (see the
+    module's docstring). Made by :func:`_probed`, which checks them first."""
 
     make: Callable[[], Any]
     name: str
+    api: CheckedApi
     instance: bool = False
+    vector_size: int = 0  # sub-environments per vector environment; 0: one gymnasium.Env each
+    same_step: bool = False  # a vector environment's autoreset mode is SAME_STEP
+    host_bytes: int = 0  # what each gymnasium.Env of a run holds on the host (0: not measured)
     backend = "gymnasium"
-    action_start = 0  # a Discrete space's first action
-    vector_size = 0  # sub-environments per vector environment; 0: one gymnasium.Env each
-    same_step = False  # a vector environment's autoreset mode is SAME_STEP
-    host_bytes = 0  # what each gymnasium.Env of a run holds on the host (0: not measured)
 
-    def __post_init__(self) -> None:
-        gymnasium = import_gymnasium()
-        try:
-            probe = self.make()
-        except gymnasium.error.DependencyNotInstalled as error:
-            raise MissingPackage(f"{self.name} cannot be made: {first_line(error)}") from None
-        vector = isinstance(probe, gymnasium.vector.VectorEnv)
-        if not vector and not isinstance(probe, gymnasium.Env):
-            raise TypeError(
-                f"{self.name}: expected a gymnasium.Env or a gymnasium.vector.VectorEnv, got "
-                f"{type(probe).__name__}"
-            )
-        try:
-            if vector:
-                observations, actions = probe.single_observation_space, probe.single_action_space
-                wrappers = "gymnasium.wrappers.vector.", "gymnasium.vector.VectorActionWrapper"
-            else:
-                observations, actions = probe.observation_space, probe.action_space
-                wrappers = "gymnasium.wrappers.", "gymnasium.ActionWrapper"
-            spaces = gymnasium.spaces
-            if not isinstance(observations, spaces.Box) or len(observations.shape) != 1:
-                raise InvalidInput(
-                    f"{self.name}: observations must be a 1-D Box, got {observations}; wrap the "
-                    f"environment in {wrappers[0]}FlattenObservation"
-                )
-            if observations.shape[0] == 0:
-                raise InvalidInput(
-                    f"{self.name}: its observation space {observations} is empty, and a policy "
-                    "needs at least one number to act on"
-                )
-            if isinstance(actions, spaces.Discrete):
-                space: Discrete | Box = Discrete(int(actions.n))
-                object.__setattr__(self, "action_start", int(actions.start))
-            elif isinstance(actions, spaces.Box) and len(actions.shape) == 1:
-                space = Box(tuple(map(float, actions.low)), tuple(map(float, actions.high)))
-            else:
-                raise InvalidInput(
-                    f"{self.name}: actions must be Discrete or a 1-D Box, got {actions}; wrap "
-                    f"the environment in a {wrappers[1]} that maps one of those onto it"
-                )
-            object.__setattr__(self, "observation_size", int(observations.shape[0]))
-            object.__setattr__(self, "action_space", space)
-            if vector:
-                self._check_autoreset(probe)
-            else:
-                self._check_first_step(probe)
-        finally:
-            if not self.instance:
-                probe.close()
-        if not vector:
-            object.__setattr__(self, "host_bytes", self._bytes_per_environment())
+    @property
+    def observation_size(self) -> int:  # type: ignore[override]
+        return self.api.observation_size
 
-    def _bytes_per_environment(self) -> int:
-        """The Python memory one more environment takes, made and reset, as tracemalloc counts
-        it (what a C library allocates itself, such as a simulator's state, is not counted):
-        a run's pool holds num_envs of them, which :mod:`fppo_jax.memory` checks. Measured on a
-        second one, since the first also imported the environment's modules."""
-        tracing = tracemalloc.is_tracing()
-        if not tracing:
-            tracemalloc.start()
-        before = tracemalloc.get_traced_memory()[0]
-        env = self.make()
-        try:
-            self._reset(env, seed=0)
-            return max(0, tracemalloc.get_traced_memory()[0] - before)
-        finally:
-            env.close()
-            if not tracing:
-                tracemalloc.stop()
-
-    def _check_first_step(self, env: Any) -> None:
-        """Reset `env` and step it once, on the host, with the checks every step has: an
-        environment that breaks the API is named before a program is compiled around it."""
-        self._observation(self._reset(env, seed=0), "reset")
-        self._check_step(self._step(env, self._still_actions(1)[0]))
-
-    def _check_step(self, out: tuple[Any, ...], count: int | None = None) -> None:
-        """A step's outcome (`count` of them from a vector environment) checked."""
-        obs, reward, terminated, truncated, _ = out
-        self._observation(obs, "step", count)
-        self._reward(reward, count)
-        self._flags(terminated, "terminated", count)
-        self._flags(truncated, "truncated", count)
-
-    def _check_autoreset(self, vector: Any) -> None:
-        """Take `vector`'s size and autoreset mode, and refuse it where an ended episode cannot
-        restart at once: in NEXT_STEP or DISABLED mode, a reset of one sub-environment alone
-        must leave the others as they were."""
-        from gymnasium.vector import AsyncVectorEnv, AutoresetMode
-
-        mode = AutoresetMode(vector.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP))
-        object.__setattr__(self, "vector_size", int(vector.num_envs))
-        object.__setattr__(self, "same_step", mode == AutoresetMode.SAME_STEP)
-        unwrapped = vector.unwrapped
-        if (
-            mode == AutoresetMode.NEXT_STEP
-            and isinstance(unwrapped, AsyncVectorEnv)
-            and not unwrapped.shared_memory
-        ):
-            # Gymnasium 1.x: its workers clear their pending autoreset on a reset only when
-            # they share memory, so without it each masked reset is followed by another.
-            raise InvalidInput(
-                f"{self.name}: an AsyncVectorEnv without shared memory, in NEXT_STEP autoreset "
-                "mode, resets an ended sub-environment again on the step after its masked "
-                "reset, ignoring its action; make it with shared_memory=True (the default) or "
-                'autoreset_mode="SameStep"'
-            )
-        size = self.vector_size
-        self._observation(self._reset(vector, seed=0), "reset", size)
-        stepped = self._step(vector, self._still_actions(size))
-        self._check_step(stepped, size)
-        if self.same_step or size == 1:
-            return
-        first_alone = np.arange(size) == 0
-        kept = self._reset(vector, options={"reset_mask": first_alone})
-        if not np.array_equal(np.array(kept)[1:], np.array(stepped[0])[1:]):
-            raise InvalidInput(
-                f"{self.name}: reset(options={{'reset_mask': mask}}) restarts sub-environments "
-                f"outside the mask, so in its {mode.name} autoreset mode an episode that ends "
-                "cannot restart alone without an action ignored on the next step; use a vector "
-                "environment that resets the masked ones alone (gymnasium.vector.SyncVectorEnv "
-                'or AsyncVectorEnv: gymnasium.make_vec(..., vectorization_mode="sync"))'
-            )
+    @property
+    def action_space(self) -> Discrete | Box:  # type: ignore[override]
+        return self.api.action_space
 
     def check_runs(self, runs: int, evaluates: bool) -> None:
         """Refuse, before compiling, what a vector environment instance cannot serve: the one
@@ -316,7 +197,7 @@ class GymnasiumEnvironment(OnHost):
             envs = [self.make() for _ in seeds]
             first = np.stack(
                 [
-                    self._observation(self._reset(env, seed=seed), "reset")
+                    self.api.observation(self.api.reset(env, seed=seed), "reset")
                     for env, seed in zip(envs, seeds, strict=True)
                 ]
             )
@@ -349,8 +230,10 @@ class GymnasiumEnvironment(OnHost):
             )
         vectors = [self.make() for _ in range(count)]
         first = [
-            self._observation(
-                self._reset(vector, seed=_vector_seeds(vector, seeds[i * size : (i + 1) * size])),
+            self.api.observation(
+                self.api.reset(
+                    vector, seed=_vector_seeds(vector, seeds[i * size : (i + 1) * size])
+                ),
                 "reset",
                 size,
             )
@@ -363,7 +246,7 @@ class GymnasiumEnvironment(OnHost):
     ) -> Step:
         batch = np.shape(pool)
         pools, slots = np.asarray(pool).reshape(-1), np.asarray(slot).reshape(-1)
-        actions = self._actions(np.asarray(action).reshape(len(slots), -1))
+        actions = self.api.actions(np.asarray(action).reshape(len(slots), -1))
         count = len(slots)
         # numpy arrays in the fields typed as the jax.Arrays that pure_callback makes of them
         out = Step(
@@ -386,16 +269,16 @@ class GymnasiumEnvironment(OnHost):
         assert out.next_obs is not None  # given, as by every environment that resets itself
         for env_slot, action, row in zip(slots, actions, rows, strict=True):
             env = envs[env_slot]
-            obs, reward, terminated, truncated, _ = self._step(env, action)
-            out.obs[row] = self._observation(obs, "step")
-            out.reward[row] = self._reward(reward)
-            terminated = self._flags(terminated, "terminated")
-            truncated = self._flags(truncated, "truncated")
+            obs, reward, terminated, truncated, _ = self.api.step(env, action)
+            out.obs[row] = self.api.observation(obs, "step")
+            out.reward[row] = self.api.reward(reward)
+            terminated = self.api.flags(terminated, "terminated")
+            truncated = self.api.flags(truncated, "truncated")
             out.terminated[row] = terminated
             out.truncated[row] = truncated and not terminated
             out.next_obs[row] = out.obs[row]
             if terminated or truncated:
-                out.next_obs[row] = self._observation(self._reset(env), "reset")
+                out.next_obs[row] = self.api.observation(self.api.reset(env), "reset")
 
     def _step_vectors(
         self,
@@ -419,151 +302,117 @@ class GymnasiumEnvironment(OnHost):
 
     def _step_vector(self, vector: Any, actions: np.ndarray, rows: np.ndarray, out: Step) -> None:
         assert out.next_obs is not None  # given, as by every environment that resets itself
-        obs, reward, terminated, truncated, info = self._step(vector, actions)
+        obs, reward, terminated, truncated, info = self.api.step(vector, actions)
         size = self.vector_size
-        obs = self._observation(obs, "step", size)
-        reward = self._reward(reward, size)
+        obs = self.api.observation(obs, "step", size)
+        reward = self.api.reward(reward, size)
         # casts: with a count, _flags gives an array
-        terminated = cast(np.ndarray, self._flags(terminated, "terminated", size))
-        truncated = cast(np.ndarray, self._flags(truncated, "truncated", size))
+        terminated = cast(np.ndarray, self.api.flags(terminated, "terminated", size))
+        truncated = cast(np.ndarray, self.api.flags(truncated, "truncated", size))
         ended = terminated | truncated
         final = first = obs
         if ended.any() and self.same_step:
             final = obs.copy()
-            final[ended] = self._final_observations(info, ended)
+            final[ended] = self.api.final_observations(info, ended)
         elif ended.any():
             first = obs.copy()
-            reset = self._reset(vector, options={"reset_mask": ended})
-            first[ended] = self._observation(reset, "reset", size)[ended]
+            reset = self.api.reset(vector, options={"reset_mask": ended})
+            first[ended] = self.api.observation(reset, "reset", size)[ended]
         out.obs[rows] = final
         out.reward[rows] = reward
         out.terminated[rows] = terminated
         out.truncated[rows] = truncated & ~terminated
         out.next_obs[rows] = first
 
-    def _final_observations(self, info: dict[str, Any], ended: np.ndarray) -> np.ndarray:
-        """The final observations of the episodes that `ended`, from a SAME_STEP step's info."""
-        if "final_obs" not in info:
-            raise InvalidInput(
-                f"{self.name}: its autoreset mode is SAME_STEP, but step gave no "
-                "info['final_obs'] for the episodes that ended"
-            )
-        final = np.stack([info["final_obs"][i] for i in np.flatnonzero(ended)])
-        return self._observation(final, "step's info['final_obs']", int(ended.sum()))
 
-    def _reset(self, env: Any, **arguments: Any) -> Any:
-        """`env`'s first observation(s) from ``reset(**arguments)``, which must give
-        (observation, info)."""
-        try:
-            out = env.reset(**arguments)
-        except Exception as error:
-            raise InvalidInput(f"{self.name}: reset {_raised(error)}") from error
-        if not (isinstance(out, tuple) and len(out) == 2):
-            raise InvalidInput(
-                f"{self.name}: reset returned {_described(out)}, not the pair (observation, "
-                "info) of Gymnasium's API"
-            )
-        return out[0]
-
-    def _step(self, env: Any, action: Any) -> tuple[Any, ...]:
-        """``env.step(action)``, which must give Gymnasium's five values."""
-        try:
-            out = env.step(action)
-        except Exception as error:
-            raise InvalidInput(f"{self.name}: step {_raised(error)}") from error
-        if not (isinstance(out, tuple) and len(out) == 5):
-            raise InvalidInput(
-                f"{self.name}: step returned {_described(out)}, not the five values (observation, "
-                "reward, terminated, truncated, info) of Gymnasium's API (four are the old Gym "
-                "API's, with one done for both terminated and truncated)"
-            )
-        return out
-
-    def _still_actions(self, count: int) -> np.ndarray:
-        """`count` actions for a check, as Gymnasium takes them: a Discrete space's first, or
-        the Box's point nearest zero."""
-        width = 1 if isinstance(self.action_space, Discrete) else self.action_space.size
-        return self._actions(np.zeros((count, width), np.float32))
-
-    def _actions(self, actions: np.ndarray) -> np.ndarray:
-        """The actions [count, …] as Gymnasium takes them: a Discrete space's from its first
-        action (integers, as its ``sample`` gives), a Box's clipped to its bounds."""
-        if isinstance(self.action_space, Discrete):
-            return cast(np.ndarray, actions[:, 0].astype(np.int64) + self.action_start)
-        space = self.action_space
-        return cast(np.ndarray, np.clip(actions, space.low, space.high).astype(np.float32))
-
-    def _reward(self, reward: Any, count: int | None = None) -> Any:
-        """`reward` checked: one finite number, or `count` of them from a vector environment."""
-        if count is None and type(reward) in SCALARS and math.isfinite(reward):
-            return reward  # the usual case, at every step of every environment
-        shape = () if count is None else (count,)
-        values = _numbers(reward)
-        if values is None or values.shape != shape or not np.isfinite(values).all():
-            expected = "a finite number" if count is None else f"{count} finite numbers"
-            raise InvalidInput(
-                f"{self.name}: step returned the reward {_described(reward)}, not {expected}"
-            )
-        return values
-
-    def _flags(self, flags: Any, which: str, count: int | None = None) -> np.ndarray | bool:
-        """`terminated` or `truncated` checked: one flag, or `count` of them."""
-        if count is None and type(flags) in FLAGS:
-            return bool(flags)  # the usual case, at every step of every environment
-        shape = () if count is None else (count,)
-        values = np.asarray(flags)
-        if values.shape != shape or values.dtype.kind not in "biu":
-            raise InvalidInput(
-                f"{self.name}: step returned {which}={_described(flags)}, not "
-                + ("a bool" if count is None else f"{count} bools")
-            )
-        return values.astype(bool)
-
-    def _observation(self, obs: Any, where: str, count: int | None = None) -> np.ndarray:
-        """`obs` checked: one observation, or `count` of them from a vector environment. A copy,
-        since a vector environment may hand back a buffer of its own that its reset rewrites."""
-        checked = _numbers(obs)
-        if checked is None:
-            raise InvalidInput(
-                f"{self.name}: {where} returned the observation {_described(obs)}, not numbers"
-            )
-        obs = checked.astype(np.float32)
-        shape = (self.observation_size,) if count is None else (count, self.observation_size)
-        if obs.shape != shape:
-            raise InvalidInput(
-                f"{self.name}: {where} returned observations of shape {obs.shape}, not {shape} "
-                "as its observation space says"
-            )
-        if not np.isfinite(obs).all():
-            raise InvalidInput(f"{self.name}: {where} returned a non-finite observation {obs}")
-        return cast(np.ndarray, obs)  # `obs`, the parameter, is Any; it is `checked` now
-
-
-def _numbers(value: Any) -> np.ndarray | None:
-    """`value` as an array of numbers (a copy), or None where it holds something else (None, a
-    string, a ragged list)."""
+def _probed(make: Callable[[], Any], name: str, instance: bool = False) -> GymnasiumEnvironment:
+    """The environments that `make` gives, checked on one made for the purpose (closed after,
+    unless it is the `instance`): its spaces, and a reset and a step with the checks every later
+    step has, or a vector environment's autoreset; an environment that breaks the API is named
+    before a program is compiled around it."""
+    gymnasium = import_gymnasium()
     try:
-        array = np.array(value)
-    except (TypeError, ValueError):
-        return None
-    return array if array.dtype.kind in "biuf" else None
+        probe = make()
+    except gymnasium.error.DependencyNotInstalled as error:
+        raise MissingPackage(f"{name} cannot be made: {first_line(error)}") from None
+    vector = isinstance(probe, gymnasium.vector.VectorEnv)
+    if not vector and not isinstance(probe, gymnasium.Env):
+        raise TypeError(
+            f"{name}: expected a gymnasium.Env or a gymnasium.vector.VectorEnv, got "
+            f"{type(probe).__name__}"
+        )
+    try:
+        api = CheckedApi.of(gymnasium, probe, name)
+        if vector:
+            size, same_step = _checked_autoreset(api, probe)
+        else:
+            api.observation(api.reset(probe, seed=0), "reset")
+            api.check_step(api.step(probe, api.still_actions(1)[0]))
+    finally:
+        if not instance:
+            probe.close()
+    if vector:
+        return GymnasiumEnvironment(make, name, api, instance, size, same_step)
+    return GymnasiumEnvironment(make, name, api, host_bytes=_bytes_per_environment(api, make))
 
 
-def _described(value: Any) -> str:
-    """`value` in a few words, for an error: its type, and its shape or text."""
-    if isinstance(value, tuple):
-        return f"a {len(value)}-tuple"
-    if isinstance(value, np.ndarray):
-        return f"an array of shape {value.shape} ({value.dtype})"
-    text = repr(value)
-    return f"{text[:60]}…" if len(text) > 60 else f"{text} ({type(value).__name__})"
+def _bytes_per_environment(api: CheckedApi, make: Callable[[], Any]) -> int:
+    """The Python memory one more environment takes, made and reset, as tracemalloc counts it
+    (what a C library allocates itself, such as a simulator's state, is not counted): a run's
+    pool holds num_envs of them, which :mod:`fppo_jax.memory` checks. Measured on a second one,
+    since the first also imported the environment's modules."""
+    tracing = tracemalloc.is_tracing()
+    if not tracing:
+        tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    env = make()
+    try:
+        api.reset(env, seed=0)
+        return max(0, tracemalloc.get_traced_memory()[0] - before)
+    finally:
+        env.close()
+        if not tracing:
+            tracemalloc.stop()
 
 
-def _raised(error: Exception) -> str:
-    """What an environment's own exception says, and where in its code it was raised."""
-    frame = traceback.extract_tb(error.__traceback__)[-1]
-    where = f"{frame.filename}:{frame.lineno}"
-    return f"raised {type(error).__name__}: {first_line(error)} (at {where})"
+def _checked_autoreset(api: CheckedApi, vector: Any) -> tuple[int, bool]:
+    """`vector`'s size and whether its autoreset mode is SAME_STEP, once checked: refused where
+    an ended episode cannot restart at once (in NEXT_STEP or DISABLED mode, a reset of one
+    sub-environment alone must leave the others as they were)."""
+    from gymnasium.vector import AsyncVectorEnv, AutoresetMode
+
+    mode = AutoresetMode(vector.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP))
+    unwrapped = vector.unwrapped
+    if (
+        mode == AutoresetMode.NEXT_STEP
+        and isinstance(unwrapped, AsyncVectorEnv)
+        and not unwrapped.shared_memory
+    ):
+        # Gymnasium 1.x: its workers clear their pending autoreset on a reset only when
+        # they share memory, so without it each masked reset is followed by another.
+        raise InvalidInput(
+            f"{api.name}: an AsyncVectorEnv without shared memory, in NEXT_STEP autoreset "
+            "mode, resets an ended sub-environment again on the step after its masked "
+            "reset, ignoring its action; make it with shared_memory=True (the default) or "
+            'autoreset_mode="SameStep"'
+        )
+    size, same_step = int(vector.num_envs), mode == AutoresetMode.SAME_STEP
+    api.observation(api.reset(vector, seed=0), "reset", size)
+    stepped = api.step(vector, api.still_actions(size))
+    api.check_step(stepped, size)
+    if same_step or size == 1:
+        return size, same_step
+    first_alone = np.arange(size) == 0
+    kept = api.reset(vector, options={"reset_mask": first_alone})
+    if not np.array_equal(np.array(kept)[1:], np.array(stepped[0])[1:]):
+        raise InvalidInput(
+            f"{api.name}: reset(options={{'reset_mask': mask}}) restarts sub-environments "
+            f"outside the mask, so in its {mode.name} autoreset mode an episode that ends "
+            "cannot restart alone without an action ignored on the next step; use a vector "
+            "environment that resets the masked ones alone (gymnasium.vector.SyncVectorEnv "
+            'or AsyncVectorEnv: gymnasium.make_vec(..., vectorization_mode="sync"))'
+        )
+    return size, same_step
 
 
 def _vector_seeds(vector: Any, seeds: list[int]) -> list[int] | int:
@@ -588,11 +437,11 @@ def gymnasium_environment(
     if isinstance(env, import_gymnasium().vector.VectorEnv):
         if kwargs:
             raise TypeError(f"{env} is made already: keyword arguments are for an id or a function")
-        return GymnasiumEnvironment(lambda: env, str(env), instance=True)
+        return _probed(lambda: env, str(env), instance=True)
     name = getattr(env, "__name__", repr(env))
     if kwargs:
-        return GymnasiumEnvironment(lambda: env(**kwargs), name)
-    return GymnasiumEnvironment(env, name)
+        return _probed(lambda: env(**kwargs), name)
+    return _probed(env, name)
 
 
 _MADE: dict[tuple[str, tuple[tuple[str, Any], ...]], GymnasiumEnvironment] = {}
@@ -621,7 +470,7 @@ def _registered(env_id: str, kwargs: tuple[tuple[str, Any], ...]) -> GymnasiumEn
                 "registered by its module, named as gymnasium/module:id)"
             )
         arguments = ", ".join(f"{name}={value!r}" for name, value in kwargs)
-        _MADE[key] = GymnasiumEnvironment(
+        _MADE[key] = _probed(
             lambda: gymnasium.make(env_id, **dict(kwargs)),
             f"gymnasium/{env_id}" + (f"({arguments})" if arguments else ""),
         )

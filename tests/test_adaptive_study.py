@@ -72,8 +72,11 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
     with pytest.raises(ValueError, match=r"settings\.learning_rate = 0\.003, not 0\.001"):
         fppo_jax.study("cartpole", candidates, "ppo", **{**settings, "learning_rate": 0.001})
 
+    planned_at = "0" * 40  # as if the plan had been made by an earlier commit
+    (output / "plan.json").write_text(json.dumps({**plan, "commit": planned_at}))
     resumed = fppo_jax.study("cartpole", candidates, "ppo", **settings)
     assert resumed.finished
+    assert f"before any run (commit {planned_at})" in (output / "report.md").read_text()
     assert (group_1 / "curves.csv").read_bytes() == curves  # the first group was not trained again
     group_2 = SweepResult.read(output / "cartpole" / "group-2")
     # The decided candidate stopped: the second group is fppo-lp and its baseline only.

@@ -111,7 +111,7 @@ def study(
     output = writable_directory(output)
     lock = DirectoryLock(output, "a study")
     try:
-        check_plan(output, plan)
+        plan = check_plan(output, plan)
         if part is not None:  # the array's tasks train their shares side by side
             lock.release()
         source = dataclasses.replace(source, pool=Pool.read(sources) if sources else None)
@@ -301,13 +301,14 @@ def _fractions(design: Design) -> tuple[float, ...]:
     return tuple(n / design.max_seeds for n in design.looks)
 
 
-def check_plan(output: Path, plan: dict[str, Any]) -> None:
+def check_plan(output: Path, plan: dict[str, Any]) -> dict[str, Any]:
     """Write `plan` as ``plan.json`` in `output`, or check it against the one there: a study
-    goes on only under the plan it started with (the commit aside: a group records its own)."""
+    goes on only under the plan it started with (the commit aside: a group records its own).
+    Returns the plan as recorded, with the commit it was made at."""
     path = output / PLAN_FILE
     if not path.exists():
         write_json(path, plan)
-        return
+        return plan
     try:
         recorded = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as error:
@@ -323,6 +324,7 @@ def check_plan(output: Path, plan: dict[str, Any]) -> None:
             f"{output} holds a study planned with {field} = {_shown(was)}, not {_shown(now)}: "
             "a study goes on only under its plan (start another in a new directory)"
         )
+    return cast(dict[str, Any], recorded)
 
 
 def _shown(value: Any) -> str:

@@ -64,14 +64,17 @@ def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[st
         f" Runs recorded under {', '.join(plan['reuse'])} were taken instead of trained where "
         "they ran the same task, protocol and setting at a group's seeds (decisions.json names "
         "each group's and its source); the code that trained them is theirs, which the "
-        "regression pins say matches this one or not."
+        "regression pins say matches this one or not. Those runs were recorded before the plan "
+        "was written, so for them the plan is no preregistration: its test is one chosen after "
+        "their scores could be seen."
         if plan.get("reuse")
         else ""
     )
+    planned = "before any run it trained" if plan.get("reuse") else "before any run"
     return [
         f"# {', '.join(plan['candidates'])} against {plan['baseline']}",
         "",
-        f"Planned in plan.json before any run (commit {plan['commit']}). Primary endpoint: "
+        f"Planned in plan.json {planned} (commit {plan['commit']}). Primary endpoint: "
         f"{plan['primary_endpoint']} ({statistics.ENDPOINTS[plan['primary_endpoint']]}); "
         f"reported beside it: {', '.join(plan['secondary_endpoints'])}. Test: {plan['test']}; "
         f"family-wise error at most {plan['level']:g} over the {comparisons} comparisons. Seeds "

@@ -2,7 +2,8 @@
 ``sweep.json`` (the settings, seeds, runs, configuration and times, with the SHA-256 digest of
 that ``curves.csv`` and one of each run's values, by which a re-sorted or filtered
 ``curves.csv`` is still known for its sweep's), each written whole or not at all, and read back
-checked, every flaw named with its file."""
+checked, every flaw named with its file. ``sweep.json`` names its layout (:data:`FORMAT`); one
+of another layout is refused as :class:`~fppo_jax.files.IncompatibleFormat`, not as damage."""
 
 from __future__ import annotations
 
@@ -18,8 +19,12 @@ from typing import Any
 import numpy as np
 
 from fppo_jax.errors import InvalidInput, MissingFile
-from fppo_jax.files import write_atomically, write_json
+from fppo_jax.files import check_format, write_atomically, write_json
 from fppo_jax.trainer import METRICS
+
+# The layout of sweep.json and curves.csv (files.check_format; a record without one is in the
+# first). Raise it when a change would make an earlier reader misread what this one writes.
+FORMAT = 1
 
 
 def write_sweep(
@@ -48,6 +53,7 @@ def write_sweep(
     ]
     write_atomically(directory / "curves.csv", curves)
     record = {
+        "format": FORMAT,
         **record,
         "curves_sha256": hashlib.sha256(curves).hexdigest(),
         "digest_columns": list(metrics),
@@ -185,6 +191,7 @@ def _read_record(path: Path) -> dict[str, Any]:
         raise InvalidInput(
             f"{path} holds a {type(record).__name__}, not a sweep's record (an object)"
         )
+    check_format(record, f"the sweep record {path}", FORMAT)
     missing = [key for key in RECORD if key not in record]
     if missing:
         raise InvalidInput(f"{path} has no {', '.join(missing)}")

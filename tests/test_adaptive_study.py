@@ -50,6 +50,7 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
     curves = (group_1 / "curves.csv").read_bytes()
     report = (output / "report.md").read_text()
     assert "**Not finished**" in report and "| frozen | worse | 8 | z = -" in report
+    assert "Planned in plan.json before any run (commit" in report
     # The repeated CI at the first look, at the level its boundary of α/2 sets, is wider than
     # the unadjusted interval beside it.
     level = 2 * stats.norm.cdf(plan["boundaries_if_none_decided"][0]) - 1
@@ -71,8 +72,11 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
     with pytest.raises(ValueError, match=r"settings\.learning_rate = 0\.003, not 0\.001"):
         fppo_jax.study("cartpole", candidates, "ppo", **{**settings, "learning_rate": 0.001})
 
+    planned_at = "0" * 40  # as if the plan had been made by an earlier commit
+    (output / "plan.json").write_text(json.dumps({**plan, "commit": planned_at}))
     resumed = fppo_jax.study("cartpole", candidates, "ppo", **settings)
     assert resumed.finished
+    assert f"before any run (commit {planned_at})" in (output / "report.md").read_text()
     assert (group_1 / "curves.csv").read_bytes() == curves  # the first group was not trained again
     group_2 = SweepResult.read(output / "cartpole" / "group-2")
     # The decided candidate stopped: the second group is fppo-lp and its baseline only.
@@ -193,7 +197,11 @@ def test_a_study_takes_the_baseline_s_recorded_runs_instead_of_training_them(tmp
             run_scores(done.results["cartpole"], "ppo", endpoint),
             run_scores(recorded, "ppo", endpoint),
         )
-    assert "were taken instead of trained" in (output / "report.md").read_text()
+    report = (output / "report.md").read_text()
+    assert "were taken instead of trained" in report
+    # Runs recorded before the plan: it says what it preregistered and what it did not.
+    assert "Planned in plan.json before any run it trained (commit" in report
+    assert "for them the plan is no preregistration" in report
     again = fppo_jax.study("cartpole", [frozen, "fppo-lp"], "ppo", reuse=pool.parent, **settings)
     assert again.decisions == done.decisions  # resumed: nothing trained, nothing taken anew
     with pytest.raises(ValueError, match="planned with reuse = "):

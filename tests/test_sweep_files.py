@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from helpers import sweep_by_hand
 
-from fppo_jax import METRICS, SweepResult
+from fppo_jax import METRICS, IncompatibleFormat, SweepResult
 from fppo_jax.cli import main
 
 
@@ -135,6 +135,20 @@ def test_a_damaged_sweep_json_is_refused_saying_what_is_wrong(tmp_path, damage, 
     text = json.dumps(json.loads(path.read_text()))  # on one line, to edit
     path.write_bytes(damage(text).encode(errors="surrogateescape"))
     refused(tmp_path, "sweep.json", message, capsys)
+
+
+def test_a_sweep_record_names_its_format_and_one_of_another_is_refused_not_damaged(tmp_path):
+    result = sweep_by_hand()
+    result.write(tmp_path)
+    assert json.loads((tmp_path / "sweep.json").read_text())["format"] == 1
+    rewrite_record(tmp_path, "format", None)  # as written before records named their format
+    assert SweepResult.read(tmp_path).table() == result.table()
+    rewrite_record(tmp_path, "format", 2)
+    before = {f.name: f.read_bytes() for f in tmp_path.iterdir()}
+    message = r"sweep record .*sweep\.json was written by a newer version of fppo-jax \(format 2"
+    with pytest.raises(IncompatibleFormat, match=message):
+        SweepResult.read(tmp_path)
+    assert {f.name: f.read_bytes() for f in tmp_path.iterdir()} == before  # left as it was
 
 
 def test_curves_not_written_with_the_sweep_json_beside_them_are_refused(tmp_path, capsys):

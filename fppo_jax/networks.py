@@ -106,6 +106,14 @@ class Networks:
         return DiagonalGaussian.noise(key, (*batch_shape, self.action_space.size))
 
 
+def policy_layers(params: dict[str, Any]) -> list[dict[str, jax.Array]]:
+    """The policy network's dense layers in order, hidden ones first, each its ``kernel`` and
+    ``bias``, from the policy's parameters, where flax names them ``MLP_0/Dense_<i>`` (as
+    checkpoints and saved policies keep them; numpy_policy reads the same names without JAX)."""
+    mlp = params["params"]["MLP_0"]
+    return [mlp[f"Dense_{i}"] for i in range(len(mlp))]
+
+
 def make_networks(action_space: Discrete | Box, hidden_sizes: Sequence[int]) -> Networks:
     """The policy for `action_space` (categorical or Gaussian) and the value function."""
     hidden_sizes = tuple(hidden_sizes)

@@ -17,6 +17,7 @@ import numpy as np
 
 from fppo_jax.envs import Discrete
 from fppo_jax.errors import MissingPackage, install_hint
+from fppo_jax.networks import policy_layers
 from fppo_jax.policy import Policy
 
 OPSET = 17
@@ -91,9 +92,7 @@ def _normalised(graph: _Graph, policy: Policy, x: str) -> str:
 
 def _network(graph: _Graph, policy: Policy, x: str) -> str:
     """The policy network's output at `x`: tanh hidden layers, then a linear head."""
-    layers = policy.params["params"]["MLP_0"]
-    for i in range(len(policy.hidden_sizes) + 1):
-        dense = layers[f"Dense_{i}"]
+    for i, dense in enumerate(policy_layers(policy.params)):
         x = graph.node(
             "MatMul", [x, graph.constant(f"kernel_{i}", dense["kernel"])], f"product_{i}"
         )

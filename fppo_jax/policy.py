@@ -12,7 +12,7 @@ import numpy as np
 
 from fppo_jax.envs import Box, Discrete
 from fppo_jax.errors import InvalidInput
-from fppo_jax.networks import make_networks
+from fppo_jax.networks import make_networks, policy_layers
 from fppo_jax.normalization import RunningStats
 from fppo_jax.trainer import Trainer, TrainState
 
@@ -36,7 +36,7 @@ class Policy:
     @property
     def observation_size(self) -> int:
         """The size of the observations the policy takes (its first layer's inputs)."""
-        return int(self.params["params"]["MLP_0"]["Dense_0"]["kernel"].shape[-2])
+        return int(policy_layers(self.params)[0]["kernel"].shape[-2])
 
     def act(self, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
         obs = jnp.asarray(obs, jnp.float32)

@@ -3,7 +3,7 @@ import jax
 import numpy as np
 
 from fppo_jax.envs import Box, Discrete
-from fppo_jax.networks import make_networks, orthogonal
+from fppo_jax.networks import make_networks, orthogonal, policy_layers
 
 
 def test_orthogonal_matches_flax_and_stays_unbatched_under_vmap():
@@ -32,3 +32,11 @@ def test_policies_for_each_action_space():
     dist = gaussian.distribution(params, obs)
     assert dist.mean.shape == (5, 2) and np.all(np.asarray(dist.log_std) == 0.0)
     assert gaussian.action_noise(jax.random.key(1), (7, 5)).shape == (7, 5, 2)
+
+
+def test_the_policy_s_layers_in_order_for_each_action_space():
+    for space, outputs in ((Discrete(4), 4), (Box((-1.0,) * 2, (1.0,) * 2), 2)):
+        params = make_networks(space, (16, 8)).init(jax.random.key(0), 3)["policy"]
+        layers = policy_layers(params)
+        assert [layer["kernel"].shape for layer in layers] == [(3, 16), (16, 8), (8, outputs)]
+        assert [layer["bias"].shape for layer in layers] == [(16,), (8,), (outputs,)]

@@ -101,28 +101,28 @@ class NativeEnvironment(OnHost):
     as truncation, separately from termination."""
 
     task_id: str
+    observation_size: int
+    action_space: Box
+    max_episode_steps: int
     backend = "native"
 
-    def __post_init__(self) -> None:
+    @classmethod
+    def of(cls, task_id: str) -> NativeEnvironment:
+        """envpool's `task_id`, refused unless envpool has it as a MuJoCo task."""
         envpool = import_envpool()
-        if self.task_id not in envpool.list_all_envs():
-            raise InvalidInput(f"envpool has no task {self.task_id!r}")
-        spec = envpool.make_spec(self.task_id)
+        if task_id not in envpool.list_all_envs():
+            raise InvalidInput(f"envpool has no task {task_id!r}")
+        spec = envpool.make_spec(task_id)
         space = spec.action_space
         if len(spec.observation_space.shape) != 1 or not hasattr(space, "low"):
             raise InvalidInput(
-                f"envpool's {self.task_id} is not a MuJoCo task (its observations have shape "
+                f"envpool's {task_id} is not a MuJoCo task (its observations have shape "
                 f"{spec.observation_space.shape}, its actions are {type(space).__name__}): "
                 "native/ takes envpool's MuJoCo tasks, e.g. native/Hopper-v4"
             )
         (size,) = spec.observation_space.shape
-        object.__setattr__(self, "observation_size", int(size))
-        object.__setattr__(
-            self,
-            "action_space",
-            Box(tuple(map(float, space.low)), tuple(map(float, space.high))),
-        )
-        object.__setattr__(self, "max_episode_steps", int(spec.config.max_episode_steps))
+        bounds = Box(tuple(map(float, space.low)), tuple(map(float, space.high)))
+        return cls(task_id, int(size), bounds, int(spec.config.max_episode_steps))
 
     def _host_reset(self, key_data: np.ndarray) -> tuple[HostState, np.ndarray]:
         envpool = import_envpool()

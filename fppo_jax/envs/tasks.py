@@ -70,7 +70,7 @@ def _native(task_id: str) -> Callable[[], Environment]:
     def make() -> Environment:
         from fppo_jax.envs.native import NativeEnvironment
 
-        return NativeEnvironment(task_id)
+        return NativeEnvironment.of(task_id)
 
     return make
 

@@ -42,8 +42,9 @@ ENDPOINTS: dict[str, str] = {
     "auc": "the area under the learning curve: the average return averaged over updates",
     "eval": "the last evaluation's return (eval_every): the deterministic policy's mean return",
 }
-# The endpoints a study decides on (fppo_jax.study); the one not chosen is reported beside it.
-STUDY_ENDPOINTS = ("final", "auc")
+# The endpoints a study decides on (fppo_jax.study; eval where its runs are evaluated); those not
+# chosen are reported beside it, with max.
+STUDY_ENDPOINTS = ("final", "auc", "eval")
 STATISTICS: dict[str, str] = {
     "iqm": "IQM",
     "mean": "mean",

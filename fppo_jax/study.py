@@ -45,7 +45,12 @@ from fppo_jax.study_report import SHARES, Scores, steps_name, write_figures, wri
 from fppo_jax.surrogates import Surrogate
 from fppo_jax.sweep import expand_grid, part_bounds, sweep
 
-ENDPOINTS = statistics.STUDY_ENDPOINTS  # decided on; the one not chosen is reported beside it
+ENDPOINTS = statistics.STUDY_ENDPOINTS  # decided on; those not chosen are reported beside it
+# Reported beside the plan's endpoints, never decided on: each run's best return over training
+# (the paper's statistic is its like over the seed-mean curve), biased upward.
+REPORTED = "max"
+# The options a plan records: evaluations make the eval endpoint, and change what runs record.
+EVALUATION = ("eval_every", "eval_episodes")
 
 # What the study sets itself for every group's sweep.
 OWN_SETTINGS = ("log_dir", "checkpoint_dir", "resume", "checkpoint_every", "keep", "callback")
@@ -93,9 +98,10 @@ def study(
     comparison, at family-wise error `level`, or `max_seeds` is reached (see the module).
 
     `level` is the test's α (not the hyperparameter ``alpha``, which `settings` may fix).
-    Variants are as :func:`~fppo_jax.sweep` takes them. `endpoint` (``final`` or ``auc``) is
-    decided on; the other is reported beside it. `groups` limits the looks this call trains
-    (0 writes the plan alone). `reuse` names directories of recorded sweeps to take runs from.
+    Variants are as :func:`~fppo_jax.sweep` takes them. `endpoint` (``final``, ``auc``, or
+    ``eval`` with ``eval_every``) is decided on; the others and ``max`` are reported beside it.
+    `groups` limits the looks this call trains (0 writes the plan alone). `reuse` names
+    directories of recorded sweeps to take runs from.
     ``part=(K, N)`` trains the K-th of N shares of the next look's groups and returns.
     `total_steps`, `preset`, `backend`, `chunk` and `settings` are the sweeps'.
     """
@@ -106,8 +112,8 @@ def study(
     sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
     shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
     source = _Source.of(tasks, [*candidates, baseline], settings, shape, chunk, part)
-    fixed = {k: v for k, v in settings.items() if k not in Options.names()}
-    plan = make_plan(tasks, candidates, baseline, design, endpoint, {**shape, **fixed}, sources)
+    planned = {**shape, **_planned_settings(settings)}
+    plan = make_plan(tasks, candidates, baseline, design, endpoint, planned, sources)
     output = writable_directory(output)
     lock = DirectoryLock(output, "a study")
     try:
@@ -182,8 +188,11 @@ def _check_arguments(
     settings: dict[str, Any],
 ) -> None:
     if endpoint not in ENDPOINTS:
+        raise InvalidInput(f"a study decides on {', '.join(ENDPOINTS)}, got endpoint {endpoint!r}")
+    if endpoint == "eval" and settings.get("eval_every") is None:
         raise InvalidInput(
-            f"a study decides on {' or '.join(ENDPOINTS)}, got endpoint {endpoint!r}"
+            "the eval endpoint is the deterministic policy's return in evaluations: give "
+            "eval_every (--eval-every) so that the study's runs are evaluated"
         )
     if groups is not None and (
         isinstance(groups, bool) or not isinstance(groups, int) or groups < 0
@@ -198,6 +207,14 @@ def _check_arguments(
     taken = sorted(set(OWN_SETTINGS) & set(settings))
     if taken:
         raise InvalidInput(f"a study sets {', '.join(taken)} itself, for each group's sweep")
+
+
+def _planned_settings(settings: dict[str, Any]) -> dict[str, Any]:
+    """What the plan records of the settings: all but how runs are driven, and the
+    evaluations' where the runs are evaluated (they make the eval endpoint)."""
+    evaluated = settings.get("eval_every") is not None
+    recorded = {k: v for k, v in settings.items() if k not in Options.names()}
+    return {**recorded, **{k: settings[k] for k in EVALUATION if evaluated and k in settings}}
 
 
 def _checked_settings(
@@ -279,7 +296,11 @@ def make_plan(
                     for c in candidates
                 ],
                 "primary_endpoint": endpoint,
-                "secondary_endpoints": [e for e in ENDPOINTS if e != endpoint],
+                "secondary_endpoints": [
+                    e
+                    for e in ENDPOINTS
+                    if e != endpoint and (e != "eval" or "eval_every" in settings)
+                ],
                 "test": TEST,
                 "level": design.level,
                 "group_size": design.group_size,
@@ -406,9 +427,17 @@ def _runs_of(result: SweepResult, variant: str) -> list[int]:
 
 def run_scores(result: SweepResult, variant: str, endpoint: str) -> np.ndarray:
     """`variant`'s score per run in `result`, in seed order; a run that diverged or finished no
-    episode scores −inf, below every other (a run that failed)."""
+    episode (or, for ``eval``, no evaluation) scores −inf, below every other (a run that
+    failed)."""
     runs = _runs_of(result, variant)
-    scores = statistics.endpoint(result.metrics["average_return"][runs], endpoint)
+    metric = "eval_return" if endpoint == "eval" else "average_return"
+    if metric not in result.metrics:
+        raise InvalidInput(
+            f"the eval endpoint needs every run's evaluations, and {variant}'s runs on "
+            f"{result.config['env']} have none: runs taken from recorded sweeps (reuse) that "
+            "were not evaluated cannot be scored on it"
+        )
+    scores = statistics.endpoint(result.metrics[metric][runs], endpoint)
     failed = (np.asarray(result.diverged)[runs] > 0) | ~np.isfinite(scores)
     return np.where(failed, -np.inf, scores)
 
@@ -533,7 +562,8 @@ def _task_scores(result: SweepResult, plan: dict[str, Any]) -> Scores:
     steps to each share of the baseline's final IQM (``steps to 50%``; none where that IQM is
     not positive, where a share of it is no lower bar)."""
     variants = (*plan["candidates"], plan["baseline"])
-    scores = {v: {e: run_scores(result, v, e) for e in ENDPOINTS} for v in variants}
+    shown = ("final", plan["primary_endpoint"], *plan["secondary_endpoints"], REPORTED)
+    scores = {v: {e: run_scores(result, v, e) for e in dict.fromkeys(shown)} for v in variants}
     final = scores[plan["baseline"]]["final"]
     target = float(statistics.iqm(final[np.isfinite(final)]))
     if not target > 0:

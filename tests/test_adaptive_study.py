@@ -148,6 +148,38 @@ def test_the_command_decides_at_the_first_look_and_refuses_a_changed_plan(tmp_pa
     assert "expected a count of looks, 0 or more, got '-1'" in capsys.readouterr().err
 
 
+def test_a_study_decides_on_evaluations_when_its_plan_asks_for_them(tmp_path, capsys):
+    output = tmp_path / "study"
+    common = ["study", "--candidates", "own_surrogates:frozen", "--tasks", "cartpole"]
+    common += ["--max-seeds", "8", "--group-size", "8", "--output", str(output), *FLAGS]
+    common += ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+    assert main([*common, "--endpoint", "eval"]) == 2  # nothing evaluates the runs
+    assert "give eval_every (--eval-every)" in capsys.readouterr().err
+    assert not output.exists()
+
+    assert main([*common, "--endpoint", "eval", "--eval-every", "16", "--eval-episodes", "3"]) == 0
+    plan = json.loads((output / "plan.json").read_text())
+    assert (plan["primary_endpoint"], plan["secondary_endpoints"]) == ("eval", ["final", "auc"])
+    assert (plan["settings"]["eval_every"], plan["settings"]["eval_episodes"]) == (16, 3)
+    result = SweepResult.read(output / "cartpole" / "group-1")
+    for variant in ("frozen", "ppo"):  # decided on each run's last evaluation
+        runs = [
+            i
+            for i, run in enumerate(result.runs)
+            if result.settings[run["setting"]]["variant"] == variant
+        ]
+        last = result.metrics["eval_return"][runs][:, -1]
+        assert np.all(np.isfinite(last))
+        np.testing.assert_array_equal(run_scores(result, variant, "eval"), last)
+    report = (output / "report.md").read_text()
+    assert "Primary endpoint, eval: decided by the test." in report
+    assert "Secondary endpoint, final" in report and "Secondary endpoint, auc" in report
+    assert "Each run's best, max: reported, not tested" in report
+    # The evaluations are part of the plan: another count of episodes is another study.
+    assert main([*common, "--endpoint", "eval", "--eval-every", "16"]) == 2
+    assert "planned with settings.eval_episodes = 3, not 10" in capsys.readouterr().err
+
+
 def test_no_group_writes_the_plan_alone_and_a_bad_setting_writes_nothing(tmp_path, tiny):
     output = tmp_path / "study"
     with pytest.raises(ValueError, match="no variant of the grid \\(spo, ppo\\) takes k"):

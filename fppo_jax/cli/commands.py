@@ -10,7 +10,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -139,6 +139,14 @@ def _sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _evaluation(args: argparse.Namespace) -> dict[str, Any]:
+    """A study's evaluation flags, given only where its runs are evaluated: the plan records
+    them then, and only then."""
+    if args.eval_every is None:
+        return {}
+    return {"eval_every": args.eval_every, "eval_episodes": args.eval_episodes}
+
+
 def _study(args: argparse.Namespace) -> int:
     part = array_part() if args.part == "auto" else args.part
     result = study(
@@ -156,6 +164,7 @@ def _study(args: argparse.Namespace) -> int:
         reuse=args.reuse,
         part=part,
         progress=not args.quiet,
+        **_evaluation(args),
         **hyperparameters_given(args),
         **config_overrides(args),
     )

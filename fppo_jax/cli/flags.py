@@ -289,11 +289,13 @@ def _option_dest(field: dataclasses.Field[Any]) -> str:
     return _option_flag(field)[2:].replace("-", "_")
 
 
-def add_option_flags(command: argparse.ArgumentParser) -> None:
-    """A flag per :class:`Options` field that has one, and ``--quiet`` (the command line
-    shows progress unless told not to)."""
+def add_option_flags(command: argparse.ArgumentParser, only: tuple[str, ...] | None = None) -> None:
+    """A flag per :class:`Options` field that has one (or those named `only`), and ``--quiet``
+    (the command line shows progress unless told not to)."""
     command.add_argument("--quiet", action="store_true", help="no progress bar or lines")
     for field in Options.flagged():
+        if only is not None and field.name not in only:
+            continue
         flag, text = _option_flag(field), field.metadata["help"]
         if field.type == "bool":
             command.add_argument(flag, dest=_option_dest(field), action="store_true", help=text)

@@ -11,6 +11,7 @@ from fppo_jax.cli.flags import (
     Parser,
     add_backend_flag,
     add_hyperparameter_flags,
+    add_option_flags,
     add_policy_flag,
     add_render_flag,
     add_run_flags,
@@ -201,8 +202,8 @@ def _add_study_design(studied: Parser) -> None:
         "--endpoint",
         default="final",
         choices=STUDY_ENDPOINTS,
-        help="the score decided on (the other is reported): "
-        + "; ".join(f"{name}: {ENDPOINTS[name]}" for name in STUDY_ENDPOINTS),
+        help="the score decided on (the others, and max, are reported; eval needs "
+        "--eval-every): " + "; ".join(f"{name}: {ENDPOINTS[name]}" for name in STUDY_ENDPOINTS),
     )
 
 
@@ -238,7 +239,7 @@ def _add_study_running(studied: Parser) -> None:
     studied.add_argument(
         "--chunk", type=count, help="runs per compiled call (default: what fits in memory)"
     )
-    studied.add_argument("--quiet", action="store_true", help="no progress bar or lines")
+    add_option_flags(studied, only=("eval_every", "eval_episodes"))
 
 
 def _add_reading(commands: argparse._SubParsersAction[Parser]) -> None:

@@ -41,7 +41,14 @@ from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, merge
 from fppo_jax.reuse import Pool, Taken
 from fppo_jax.sequential import Decision, Design, boundaries, decide
-from fppo_jax.study_report import SHARES, Scores, steps_name, write_figures, write_report
+from fppo_jax.study_report import (
+    SHARES,
+    START,
+    Scores,
+    steps_name,
+    write_figures,
+    write_report,
+)
 from fppo_jax.surrogates import Surrogate
 from fppo_jax.sweep import expand_grid, part_bounds, sweep
 
@@ -564,6 +571,9 @@ def _task_scores(result: SweepResult, plan: dict[str, Any]) -> Scores:
     variants = (*plan["candidates"], plan["baseline"])
     shown = ("final", plan["primary_endpoint"], *plan["secondary_endpoints"], REPORTED)
     scores = {v: {e: run_scores(result, v, e) for e in dict.fromkeys(shown)} for v in variants}
+    for variant in variants:  # where each run starts: the untrained policy's first return
+        curves = result.metrics["average_return"][_runs_of(result, variant)]
+        scores[variant][START] = np.array([_first_finite(row) for row in curves])
     final = scores[plan["baseline"]]["final"]
     target = float(statistics.iqm(final[np.isfinite(final)]))
     if not target > 0:
@@ -575,6 +585,11 @@ def _task_scores(result: SweepResult, plan: dict[str, Any]) -> Scores:
             reached = statistics.steps_to_threshold(curves, steps, share * target)
             scores[variant][steps_name(share)] = reached
     return scores
+
+
+def _first_finite(curve: np.ndarray) -> float:
+    finite = curve[np.isfinite(curve)]
+    return float(finite[0]) if finite.size else np.nan
 
 
 def _directory_name(task: str) -> str:

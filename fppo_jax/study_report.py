@@ -3,7 +3,9 @@ seeds it used and why it stopped, its probability of improvement and IQM differe
 bootstrap intervals (:mod:`fppo_jax.statistics`), and the relative effects the interval
 rules out, on the primary endpoint (with its repeated confidence interval, adjusted for stopping
 early) and then on the secondary ones; and how soon each setting's runs reach shares of the
-baseline's final IQM. Its figures beside it: learning curves and probabilities of improvement."""
+baseline's final IQM. Across the tasks (two or more): the probability of improvement averaged
+over them and the IQM of normalised scores, with stratified intervals. Its figures beside it:
+learning curves, probabilities of improvement and, across tasks, performance profiles."""
 
 from __future__ import annotations
 
@@ -22,6 +24,8 @@ from fppo_jax.sequential import Design, repeated_confidence
 Scores = dict[str, dict[str, np.ndarray]]
 # Shares of the baseline's final IQM whose env steps to reach are reported (lower is faster).
 SHARES = (0.5, 0.8)
+# The key in :data:`Scores` of each run's first recorded average return (the untrained policy's).
+START = "start"
 
 
 def steps_name(share: float) -> str:
@@ -49,7 +53,73 @@ def write_report(
             adjusted = plan if endpoint == plan["primary_endpoint"] else None
             lines += ["", *_table(scores[task], task_rows, endpoint, adjusted)]
         lines += ["", *_speed_table(scores[task], plan)]
+    lines += _across_tasks(plan, rows, scores)
     write_atomically(path, ("\n".join(lines) + "\n").encode())
+
+
+def normalised_scores(
+    plan: dict[str, Any], scores: dict[str, Scores]
+) -> dict[str, list[np.ndarray]]:
+    """Each setting's primary-endpoint scores per task on a common scale: 0 is where the task's
+    runs start (the mean over all of them of their first recorded average return), 1 the
+    baseline's IQM on the task. Empty unless every task with runs can be put on it (two
+    different finite ends)."""
+    endpoint, baseline = plan["primary_endpoint"], plan["baseline"]
+    variants = (*plan["candidates"], baseline)
+    normalised: dict[str, list[np.ndarray]] = {v: [] for v in variants}
+    for task in scores.values():
+        starts = np.concatenate([task[v][START] for v in variants])
+        low = float(np.nanmean(starts)) if np.isfinite(starts).any() else np.nan
+        reference = task[baseline][endpoint]
+        high = float(statistics.iqm(reference[np.isfinite(reference)]))
+        if not (np.isfinite(low) and np.isfinite(high) and high != low):
+            return {}
+        for variant in variants:
+            normalised[variant].append(statistics.normalise(task[variant][endpoint], low, high))
+    return normalised
+
+
+def _across_tasks(
+    plan: dict[str, Any], rows: Sequence[dict[str, Any]], scores: dict[str, Scores]
+) -> list[str]:
+    """Across the tasks with runs (two or more): each candidate's probability of improvement
+    averaged over tasks, over the runs its decisions used, and each setting's IQM of normalised
+    scores over every recorded run, with stratified bootstrap intervals."""
+    if len(scores) < 2:
+        return []
+    endpoint, baseline = plan["primary_endpoint"], plan["baseline"]
+    normalised = normalised_scores(plan, scores)
+    lines = [
+        "",
+        f"## Across the {len(scores)} tasks",
+        "",
+        f"Reported, not tested (the decisions are per task), on the primary endpoint, {endpoint}: "
+        f"the probability of improvement averaged over the tasks, over the runs each decision "
+        f"used; and the IQM of normalised scores over every recorded run, where 0 is where a "
+        f"task's runs start (their mean first average return) and 1 is {baseline}'s IQM on it. "
+        "Intervals are stratified bootstraps: each task's runs resampled among themselves.",
+        "",
+        f"| setting | mean P(setting > {baseline}) over tasks | IQM of normalised scores |",
+        "|---|---|---|",
+    ]
+    for variant in (*plan["candidates"], baseline):
+        pairs = [
+            (
+                scores[row["task"]][variant][endpoint][: row["seeds"]],
+                scores[row["task"]][baseline][endpoint][: row["seeds"]],
+            )
+            for row in rows
+            if row["candidate"] == variant and row["task"] in scores
+        ]
+        mean = _interval(statistics.aggregate_improvement(pairs), ".2f") if pairs else "–"
+        level = _interval(statistics.aggregate(normalised[variant]), ".3f") if normalised else "–"
+        lines.append(f"| {variant} | {mean} | {level} |")
+    if not normalised:
+        lines += [
+            "",
+            "Normalised scores: not reported, some task's start and baseline IQM coincide.",
+        ]
+    return lines
 
 
 def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[str]:
@@ -110,7 +180,7 @@ def write_figures(
     unadjusted 95% interval. Returns the paths written."""
     import matplotlib.pyplot as plt  # on first use: a study that writes no figure never waits
 
-    from fppo_jax.plots import plot_curves, plot_improvement
+    from fppo_jax.plots import plot_curves, plot_improvement, plot_profiles
 
     tasks = [task for task in plan["tasks"] if task in results]
     if not tasks:
@@ -132,6 +202,12 @@ def write_figures(
         "curves.png": figure,
         "improvement.png": plot_improvement(improvements, plan["baseline"]),
     }
+    normalised = normalised_scores(plan, scores) if len(scores) > 1 else {}
+    if normalised:
+        charts["profiles.png"] = plot_profiles(
+            {v: np.concatenate(x) for v, x in normalised.items()},
+            xlabel=f"normalised {endpoint} τ (1 = {plan['baseline']}'s IQM on the task)",
+        )
     paths = []
     for name, chart in charts.items():
         paths.append(output / name)

@@ -3,6 +3,7 @@ a comparison that is clearly decided, resuming after a stop without training aga
 refusing a changed plan; all in temporary directories."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -278,3 +279,32 @@ def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tm
     assert [row["decision"] for row in joined.decisions] == ["worse", "undecided"]
     assert [d.decision for d in expected] == ["worse", None]  # fppo-lp awaits the next look
     assert json.loads((output / "decisions.json").read_text())["comparisons"] == joined.decisions
+
+
+RECORDED = Path(__file__).resolve().parent.parent / "experiments" / "results" / "study"
+
+
+def test_the_report_aggregates_over_tasks_the_recorded_seed_study_unchanged(tmp_path):
+    tasks = ["hopper", "swimmer"]
+    done = fppo_jax.study(
+        tasks,
+        ["fppo-lp", "fppo-qp"],
+        "ppo",
+        output=tmp_path,
+        reuse=[RECORDED / task for task in tasks],
+        groups=0,
+        max_seeds=20,
+        group_size=20,
+        backend="native",
+        progress=False,
+    )
+    assert done.finished and not list(tmp_path.glob("*/group-*"))  # every run taken, none trained
+    report = (tmp_path / "report.md").read_text()
+    assert "## Across the 2 tasks" in report
+    final = {
+        t: {v: run_scores(done.results[t], v, "final") for v in ("fppo-qp", "ppo")} for t in tasks
+    }
+    pairs = [(final[t]["fppo-qp"], final[t]["ppo"]) for t in tasks]
+    mean = "{:.2f} [{:.2f}, {:.2f}]".format(*statistics.aggregate_improvement(pairs))
+    assert f"| fppo-qp | {mean} | " in report
+    assert (tmp_path / "profiles.png").read_bytes().startswith(b"\x89PNG")

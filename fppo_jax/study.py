@@ -118,7 +118,7 @@ def study(
     _check_arguments(endpoint, groups, chunk, part, settings)
     sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
     shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
-    source = _Source.of(tasks, [*candidates, baseline], settings, shape, chunk, part)
+    source = _Source.of(tasks, [*candidates, baseline], settings, shape, chunk, part, sources)
     planned = {**shape, **_planned_settings(settings)}
     plan = make_plan(tasks, candidates, baseline, design, endpoint, planned, sources)
     output = writable_directory(output)
@@ -127,7 +127,6 @@ def study(
         plan = check_plan(output, plan)
         if part is not None:  # the array's tasks train their shares side by side
             lock.release()
-        source = dataclasses.replace(source, pool=Pool.read(sources) if sources else None)
         return _run(output, plan, tasks, candidates, baseline, design, groups, source)
     finally:
         lock.release()
@@ -145,7 +144,7 @@ class _Source:
     part: tuple[int, int] | None
     expected: dict[str, tuple[dict[str, Any], dict[str, dict[str, Any]]]]
     identity: dict[str, Any]
-    pool: Pool | None = None
+    pool: Pool | None
 
     @classmethod
     def of(
@@ -156,9 +155,11 @@ class _Source:
         shape: dict[str, Any],
         chunk: int | None,
         part: tuple[int, int] | None,
+        reuse: list[str],
     ) -> _Source:
-        """The study's source of runs, every setting of every task checked (before the plan
-        is written)."""
+        """The study's source of runs, every setting of every task checked and the recorded
+        sweeps of `reuse` read, all before the plan is written: a mistyped directory or a
+        setting refused leaves no plan behind."""
         return cls(
             settings,
             {**shape, "chunk": chunk},
@@ -166,6 +167,7 @@ class _Source:
             part,
             {task: _checked_settings(task, everyone, settings, shape) for task in tasks},
             identities(everyone).get("surrogates", {}),
+            Pool.read(reuse) if reuse else None,
         )
 
     def train(

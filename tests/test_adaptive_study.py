@@ -250,6 +250,16 @@ def test_a_study_takes_the_baseline_s_recorded_runs_instead_of_training_them(tmp
     assert taken.take(protocol, {**ppo, "learning_rate": 0.001}, None, [0]) is None
     with pytest.raises(FileNotFoundError, match="no directory of recorded sweeps to reuse"):
         Pool.read([tmp_path / "nowhere"])
+    elsewhere = tmp_path / "another-study"  # a mistyped directory is refused before any plan
+    with pytest.raises(FileNotFoundError, match="no directory of recorded sweeps to reuse"):
+        fppo_jax.study(
+            "cartpole",
+            frozen,
+            "ppo",
+            reuse=tmp_path / "nowhere",
+            **{**settings, "output": elsewhere},
+        )
+    assert not elsewhere.exists()
 
 
 def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tmp_path, tiny):

@@ -182,11 +182,17 @@ class _Source:
         return sweep_group(task, variants, seeds, where, part=self.part, **self.shape, **fixed)
 
     def take(self, task: str, variant: Surrogate, seeds: list[int]) -> Taken | None:
+        """`variant`'s runs on `task` at `seeds` from the recorded sweeps, if they hold them
+        all under the study's protocol and setting (and evaluated, where the study evaluates:
+        how often and over how many episodes, a sweep's record does not say)."""
         if self.pool is None:
             return None
         protocol, setting_of = self.expected[task]
         name = variant.name
-        return self.pool.take(protocol, setting_of[name], self.identity.get(name), seeds)
+        taken = self.pool.take(protocol, setting_of[name], self.identity.get(name), seeds)
+        if taken is not None and self.settings.get("eval_every") is not None:
+            return taken if "eval_return" in taken.result.metrics else None
+        return taken
 
 
 def _check_arguments(

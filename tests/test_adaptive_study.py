@@ -176,6 +176,16 @@ def test_a_study_decides_on_evaluations_when_its_plan_asks_for_them(tmp_path, ca
     assert "Primary endpoint, eval: decided by the test." in report
     assert "Secondary endpoint, final" in report and "Secondary endpoint, auc" in report
     assert "Each run's best, max: reported, not tested" in report
+    # Recorded runs without evaluations are not taken for a study that evaluates: trained.
+    shape = [*FLAGS, "--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+    pool, again = tmp_path / "recorded", tmp_path / "again"
+    assert main(["sweep", "--variant", "ppo", "--seeds", "8", "--output", str(pool), *shape]) == 0
+    evaluated = [*common[:5], "--max-seeds", "8", "--group-size", "8", "--output", str(again)]
+    evaluated += [*shape, "--endpoint", "eval", "--eval-every", "16", "--eval-episodes", "3"]
+    assert main([*evaluated, "--reuse", str(pool)]) == 0
+    groups = json.loads((again / "decisions.json").read_text())["groups"]
+    assert [g.get("reused") for g in groups] == [None] and len(groups[0]["commit"]) == 40
+    capsys.readouterr()
     # The evaluations are part of the plan: another count of episodes is another study.
     assert main([*common, "--endpoint", "eval", "--eval-every", "16"]) == 2
     assert "planned with settings.eval_episodes = 3, not 10" in capsys.readouterr().err

@@ -3,6 +3,7 @@ refuses."""
 
 import hashlib
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -23,49 +24,56 @@ def recorded() -> dict[str, str]:
     }
 
 
-def _suite(*args: str) -> subprocess.CompletedProcess:
+def _suite(*args: str, tmp: Path | None = None) -> subprocess.CompletedProcess:
+    """The suite, run with `tmp` as its temporary directory where given: a smoke run's output
+    goes there, and pytest removes it."""
     return subprocess.run(
-        [sys.executable, str(SUITE), *args], capture_output=True, text=True, timeout=900
+        [sys.executable, str(SUITE), *args],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env={**os.environ, **({"TMPDIR": str(tmp)} if tmp else {})},
     )
 
 
-def test_a_smoke_part_runs_and_is_recorded_in_a_temporary_directory():
+def test_a_smoke_part_runs_and_is_recorded_in_a_temporary_directory(tmp_path):
     before = recorded()
-    done = _suite("--smoke", "--parts", "table1-reacher")  # no --results: a temporary directory
+    # No --results: a temporary directory.
+    done = _suite("--smoke", "--parts", "table1-reacher", tmp=tmp_path)
     assert done.returncode == 0, done.stdout + done.stderr
     assert recorded() == before
-    tmp_path = Path(done.stdout.split("wrote ")[-1].strip()).parent
-    assert tmp_path.name.startswith("fppo-gpu-suite-smoke-")
-    record = json.loads((tmp_path / "gpu_suite_cpu.json").read_text())
+    written = Path(done.stdout.split("wrote ")[-1].strip()).parent
+    assert written.parent == tmp_path and written.name.startswith("fppo-gpu-suite-smoke-")
+    record = json.loads((written / "gpu_suite_cpu.json").read_text())
     assert list(record) == ["table1-reacher"] and record["table1-reacher"]["status"] == "done"
-    table = (tmp_path / "table1_mujoco_native.md").read_text()
+    table = (written / "table1_mujoco_native.md").read_text()
     assert "Tasks done: reacher" in table and "ppo" in table and "fppo-lp" in table
-    assert "| table1-reacher | done |" in (tmp_path / "gpu_suite_cpu.md").read_text()
+    assert "| table1-reacher | done |" in (written / "gpu_suite_cpu.md").read_text()
 
 
 @pytest.mark.slow  # about four minutes on a 2-core CPU: MJX and Brax's trainer compile there
-def test_the_smoke_suite_runs_every_kind_of_part_and_records_each_in_a_temporary_directory():
+def test_the_smoke_suite_runs_every_kind_of_part_into_a_temporary_directory(tmp_path):
     before = recorded()
-    done = _suite("--smoke")  # no --results: a new temporary directory, never the record
+    done = _suite("--smoke", tmp=tmp_path)  # no --results: a temporary directory, never the record
     assert done.returncode == 0, done.stdout + done.stderr
     assert recorded() == before
-    tmp_path = Path(done.stdout.split("wrote ")[-1].strip()).parent
-    assert tmp_path.name.startswith("fppo-gpu-suite-smoke-")
-    record = json.loads((tmp_path / "gpu_suite_cpu.json").read_text())
+    written = Path(done.stdout.split("wrote ")[-1].strip()).parent
+    assert written.parent == tmp_path and written.name.startswith("fppo-gpu-suite-smoke-")
+    record = json.loads((written / "gpu_suite_cpu.json").read_text())
     assert list(record) == ["throughput-reacher", "table1-reacher", "ablation-reacher"]
     assert all(part["status"] == "done" for part in record.values())
-    bench = (tmp_path / "bench_mujoco_reacher_16envs_cpu.md").read_text()
+    bench = (written / "bench_mujoco_reacher_16envs_cpu.md").read_text()
     for row in ("MJX (a) environment alone", "MJX (b) fppo-jax", "MJX (c) Brax `ppo.train`"):
         assert row in bench
-    table = (tmp_path / "table1_mujoco_native.md").read_text()
+    table = (written / "table1_mujoco_native.md").read_text()
     assert "Tasks done: reacher" in table and "ppo" in table and "fppo-lp" in table
-    assert (tmp_path / "table1_mujoco_native" / "reacher" / "curves.csv").exists()
-    ablation = tmp_path / "ablation_native"
+    assert (written / "table1_mujoco_native" / "reacher" / "curves.csv").exists()
+    ablation = written / "ablation_native"
     assert "Parts done: reacher alpha, reacher k;" in (ablation / "ablation.md").read_text()
     for part in ("alpha", "k"):
         assert (ablation / "reacher" / part / "curves.csv").exists()
     assert (ablation / "reacher.png").stat().st_size > 0
-    assert "| table1-reacher | done |" in (tmp_path / "gpu_suite_cpu.md").read_text()
+    assert "| table1-reacher | done |" in (written / "gpu_suite_cpu.md").read_text()
 
 
 def test_without_a_gpu_the_full_suite_is_refused_and_unknown_parts_named(tmp_path):

@@ -2,6 +2,7 @@
 published ones, its statistic against SciPy's, its replay of the looks, Holm's recycling, and
 its error rates by simulation on synthetic scores (no training)."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -123,13 +124,18 @@ def test_the_family_wise_error_is_at_most_alpha_and_a_real_difference_takes_fewe
     assert shifted["seeds"] < needed - 3
 
 
-def test_the_experiments_smoke_run_writes_its_table_into_a_temporary_directory():
+def test_the_experiments_smoke_run_writes_its_table_into_a_temporary_directory(tmp_path):
     script = Path(__file__).resolve().parent.parent / "experiments" / "sequential_rule.py"
     done = subprocess.run(
-        [sys.executable, str(script), "--smoke"], capture_output=True, text=True, timeout=600
+        [sys.executable, str(script), "--smoke"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, "TMPDIR": str(tmp_path)},  # where its temporary directory goes
     )
     assert done.returncode == 0, done.stdout + done.stderr
     written = Path(done.stdout.split("wrote ")[-1].strip())
+    assert written.parent.parent == tmp_path
     assert written.parent.name.startswith("fppo-sequential-rule-smoke-")
     table = written.read_text()
     assert "- 200 simulated studies per row" in table

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import traceback
+from collections.abc import Callable
 from typing import Any, cast
 
 import numpy as np
@@ -67,29 +68,28 @@ class CheckedApi:
     def reset(self, env: Any, **arguments: Any) -> Any:
         """`env`'s first observation(s) from ``reset(**arguments)``, which must give
         (observation, info)."""
-        try:
-            out = env.reset(**arguments)
-        except Exception as error:
-            raise InvalidInput(f"{self.name}: reset {_raised(error)}") from error
-        if not (isinstance(out, tuple) and len(out) == 2):
-            raise InvalidInput(
-                f"{self.name}: reset returned {_described(out)}, not the pair (observation, "
-                "info) of Gymnasium's API"
-            )
-        return out[0]
+        expected = "the pair (observation, info) of Gymnasium's API"
+        return self._called("reset", lambda: env.reset(**arguments), 2, expected)[0]
 
     def step(self, env: Any, action: Any) -> tuple[Any, ...]:
         """``env.step(action)``, which must give Gymnasium's five values."""
+        expected = (
+            "the five values (observation, reward, terminated, truncated, info) of Gymnasium's "
+            "API (four are the old Gym API's, with one done for both terminated and truncated)"
+        )
+        return self._called("step", lambda: env.step(action), 5, expected)
+
+    def _called(
+        self, what: str, call: Callable[[], Any], size: int, expected: str
+    ) -> tuple[Any, ...]:
+        """`call`'s result, which must be a tuple of `size` values; what it raises, or returns
+        otherwise, is an error naming the environment and `what` was called."""
         try:
-            out = env.step(action)
+            out = call()
         except Exception as error:
-            raise InvalidInput(f"{self.name}: step {_raised(error)}") from error
-        if not (isinstance(out, tuple) and len(out) == 5):
-            raise InvalidInput(
-                f"{self.name}: step returned {_described(out)}, not the five values (observation, "
-                "reward, terminated, truncated, info) of Gymnasium's API (four are the old Gym "
-                "API's, with one done for both terminated and truncated)"
-            )
+            raise InvalidInput(f"{self.name}: {what} {_raised(error)}") from error
+        if not (isinstance(out, tuple) and len(out) == size):
+            raise InvalidInput(f"{self.name}: {what} returned {_described(out)}, not {expected}")
         return out
 
     def check_step(self, out: tuple[Any, ...], count: int | None = None) -> None:

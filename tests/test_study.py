@@ -51,17 +51,18 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
         "seeds-3-5_ppo+fppo-lp",
     ]
 
-    other = _run("study.py", *tiny, "--seeds", "0:2", "--variants", "tr-ppo")  # another grid
+    # Another grid, of the same shape (6 runs): the program compiled for the first is reused.
+    other = _run("study.py", *tiny, "--seeds", "0:3", "--variants", "tr-ppo", "ppo-rb")
     assert other.returncode == 0, other.stdout + other.stderr
 
     verdict = _run("verdict.py", "--results", str(tmp_path))
     assert verdict.returncode == 0, verdict.stdout + verdict.stderr
     text = (tmp_path / "study.md").read_text()
     assert "### cartpole, paper protocol" in text
-    assert "3 parts, 14 runs of 4,096 env steps" in text
+    assert "3 parts, 18 runs of 4,096 env steps" in text
     assert "| fppo-lp α=1.3 | 0." in text  # its probability of improvement over ppo
     tr_ppo = [line.split(" | ") for line in text.splitlines() if line.startswith("| tr-ppo")]
-    assert tr_ppo[0][1] == "2" and tr_ppo[1][3] == "–"  # 2 runs; exploratory, no Holm p
+    assert tr_ppo[0][1] == "3" and tr_ppo[1][3] == "–"  # 3 runs; exploratory, no Holm p
     assert "Exploratory, where time allowed (tr-ppo and ppo-rb at 10 seeds" in text
     # One of the paper protocol's 18 planned comparisons recorded: Holm multiplies its p by 18.
     merged = merge([SweepResult.read(d) for d in sorted(parts.iterdir())])

@@ -10,6 +10,7 @@ import hashlib
 import json
 import os
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
@@ -71,19 +72,21 @@ class DirectoryLock:
     holder exits, however it ends. :meth:`check` says, before each write, whether the
     directory is still the one locked."""
 
-    def __init__(self, directory: str | Path, what: str) -> None:
-        """`what` the directory holds, for messages ("checkpoints", "a run's outputs")."""
+    def __init__(self, directory: str | Path, what: str, wait: float = 0.0) -> None:
+        """`what` the directory holds, for messages ("checkpoints", "a run's outputs"); `wait`,
+        the seconds to wait for another holder to let go (for holders that take turns)."""
         self.directory, self.what = Path(directory), what
         descriptor = os.open(self.directory / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(descriptor, 64, 0).decode(errors="replace").strip() or "unknown"
-            os.close(descriptor)
-            raise DirectoryBusy(
-                f"another process (pid {holder}) is writing {what} in {self.directory}; wait "
-                "for it to end, or choose another directory"
-            ) from None
+        deadline = time.monotonic() + wait
+        while not _locked(descriptor):
+            if time.monotonic() >= deadline:
+                holder = os.pread(descriptor, 64, 0).decode(errors="replace").strip() or "unknown"
+                os.close(descriptor)
+                raise DirectoryBusy(
+                    f"another process (pid {holder}) is writing {what} in {self.directory}; "
+                    "wait for it to end, or choose another directory"
+                )
+            time.sleep(0.05)
         os.ftruncate(descriptor, 0)
         os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
         self._descriptor: int | None = descriptor
@@ -101,6 +104,15 @@ class DirectoryLock:
         if self._descriptor is not None:
             os.close(self._descriptor)
             self._descriptor = None
+
+
+def _locked(descriptor: int) -> bool:
+    """Whether this process now holds the lock on `descriptor`'s file (never waiting)."""
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True
 
 
 def _identity(directory: Path) -> tuple[int, int] | None:

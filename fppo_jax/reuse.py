@@ -15,6 +15,7 @@ run taken from it, with the sweep it came from.
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -79,6 +80,17 @@ class Pool:
             by_sweep.setdefault(where, (recorded, []))[1].append(run)
         parts = [_runs(recorded, runs) for recorded, runs in by_sweep.values()]
         return Taken(merge(parts), list(by_sweep))
+
+
+def protocol_differences(config: dict[str, Any], protocol: dict[str, Any]) -> list[str]:
+    """Where a recorded sweep's `config` and `protocol` differ, field by field, each as
+    ``name: <recorded>, not <protocol's>`` (the part fields aside)."""
+    recorded = _protocol(config)
+    return [
+        f"{name}: {json.dumps(recorded.get(name))}, not {json.dumps(protocol.get(name))}"
+        for name in sorted(set(recorded) | set(protocol))
+        if recorded.get(name) != protocol.get(name)
+    ]
 
 
 def _protocol(config: dict[str, Any]) -> dict[str, Any]:

@@ -39,7 +39,7 @@ from fppo_jax.objectives import BUILTINS, hyperparameter_names, identities, reso
 from fppo_jax.options import Options
 from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, merge
-from fppo_jax.reuse import Pool, Taken
+from fppo_jax.reuse import Pool, Taken, protocol_differences
 from fppo_jax.sequential import Decision, Design, boundaries, decide
 from fppo_jax.study_report import (
     SHARES,
@@ -58,6 +58,9 @@ ENDPOINTS = statistics.STUDY_ENDPOINTS  # decided on; those not chosen are repor
 REPORTED = "max"
 # The options a plan records: evaluations make the eval endpoint, and change what runs record.
 EVALUATION = ("eval_every", "eval_episodes")
+# Seconds an array task waits for the others that started with it to check the plan: each
+# holds the study's lock for that alone, well under a second, before it trains its share.
+PART_LOCK_WAIT = 60.0
 
 # What the study sets itself for every group's sweep.
 OWN_SETTINGS = ("log_dir", "checkpoint_dir", "resume", "checkpoint_every", "keep", "callback")
@@ -122,7 +125,8 @@ def study(
     planned = {**shape, **_planned_settings(settings)}
     plan = make_plan(tasks, candidates, baseline, design, endpoint, planned, sources)
     output = writable_directory(output)
-    lock = DirectoryLock(output, "a study")
+    # Array tasks that start together take turns to check the plan (each holds the lock briefly).
+    lock = DirectoryLock(output, "a study", wait=PART_LOCK_WAIT if part is not None else 0.0)
     try:
         plan = check_plan(output, plan)
         if part is not None:  # the array's tasks train their shares side by side
@@ -238,6 +242,12 @@ def _checked_settings(
     """Every setting of `task` checked before the plan is written, as a sweep checks them; and
     what a recorded run must match to be reused: the protocol, and each variant's setting."""
     run = prepare(task, dict(settings), sweepable(everyone), **shape)
+    several = [k for k, v in run.hyperparameters.items() if isinstance(v, list | tuple)]
+    if several:
+        raise InvalidInput(
+            f"a study compares one setting per variant: give {', '.join(several)} one value "
+            "each (to compare values, sweep them: fppo_jax.sweep)"
+        )
     by_name = {s.name: s for s in everyone}
     grid = expand_grid({"variant": everyone, **run.hyperparameters}, task)
     for setting in grid:
@@ -379,14 +389,9 @@ def sweep_group(
     (or its `part`, in ``where/part-<K>``), read back from there (as a resumed study reads it).
     One cut short (a killed study) is trained again; a group whose shares array tasks began is
     not trained whole over them."""
-    shares = sorted(where.glob("part-*/sweep.json"))
-    if part is None and shares:
-        raise InvalidInput(
-            f"{where} holds shares of its runs trained by array tasks (--part), and not all of "
-            f"them: {_missing_shares(shares)}. Run the missing ones with --part K/N, then this "
-            "again"
-        )
-    if part is not None:
+    if part is None:
+        refuse_missing_shares(where)
+    else:
         where = where / f"part-{part[0]}"
     if where.exists():
         shutil.rmtree(where)
@@ -405,32 +410,39 @@ def recorded_group(
     if part is not None:
         start, stop = part_bounds(part, runs)
         where, runs = where / f"part-{part[0]}", stop - start
+    found = [SweepResult.read(where)] if (where / "sweep.json").exists() else []
     shares = sorted(where.glob("part-*/sweep.json"))
-    if (where / "sweep.json").exists():
-        result = SweepResult.read(where)
-    elif shares:
+    if shares:
         try:
-            result = merge([SweepResult.read(share.parent) for share in shares])
+            found.append(merge([SweepResult.read(share.parent) for share in shares]))
         except InvalidInput:  # some shares are still to come
-            return None
-    else:
-        return None
-    names = [s["variant"] for s in result.settings]
-    if names != [v.name for v in variants] or result.config["seeds"] != seeds:
-        raise InvalidInput(
-            f"{where} holds a group of {', '.join(names)} on seeds {result.config['seeds']}, "
-            f"where the study's plan needs {', '.join(v.name for v in variants)} on {seeds}"
-        )
-    return result if len(result.runs) == runs else None
+            pass
+    for result in found:  # a group trained whole and cut short may have been finished in shares
+        names = [s["variant"] for s in result.settings]
+        if names != [v.name for v in variants] or result.config["seeds"] != seeds:
+            raise InvalidInput(
+                f"{where} holds a group of {', '.join(names)} on seeds {result.config['seeds']}, "
+                f"where the study's plan needs {', '.join(v.name for v in variants)} on {seeds}"
+            )
+        if len(result.runs) == runs:
+            return result
+    return None
 
 
-def _missing_shares(shares: list[Path]) -> str:
-    """What joining a group's `shares` (their ``sweep.json`` paths) says is missing."""
+def refuse_missing_shares(where: Path) -> None:
+    """Raise if the group in `where`, not recorded whole, holds some of the shares that array
+    tasks train (``part-<K>/``), naming what joining them says is missing: trained whole over
+    them, or decided without them, the shares would be lost."""
+    shares = sorted(where.glob("part-*/sweep.json"))
+    if not shares:
+        return
     try:
         merge([SweepResult.read(share.parent) for share in shares])
     except InvalidInput as error:
-        return str(error)
-    return "none"
+        raise InvalidInput(
+            f"{where} holds shares of its runs trained by array tasks (--part), and not all of "
+            f"them: {error}. Run the missing ones with --part K/N, then this again"
+        ) from None
 
 
 def _runs_of(result: SweepResult, variant: str) -> list[int]:
@@ -509,6 +521,8 @@ def _run(
                 if recorded_group(group.where, group.variants, group.seeds, source.part) is None:
                     source.train(group.task, group.variants, group.seeds, group.where)
             return StudyResult(plan, _rows(decisions, baseline), {}, False)
+        for group in to_train if source.part is None else []:
+            refuse_missing_shares(group.where)
         looks_trained = len({entry["group"] for entry in trained if "commit" in entry})
         if to_train and groups is not None and looks_trained >= groups:
             break
@@ -528,6 +542,13 @@ def _group(
     variants = [v for v in variants if v.name not in taken]
     where = output / _directory_name(task) / f"group-{look + 1}"
     result = recorded_group(where, variants, seeds) if variants else None
+    differences = protocol_differences(result.config, source.expected[task][0]) if result else []
+    if differences:
+        raise InvalidInput(
+            f"{where} was trained under another protocol than this call would train "
+            f"({'; '.join(differences)}): a study's groups share one protocol. Go on on a "
+            "machine that trains as this one did (a plan's backend auto is chosen by the machine)"
+        )
     return _Group(task, look, seeds, variants, where, result, taken)
 
 

@@ -62,8 +62,8 @@ def normalised_scores(
 ) -> dict[str, list[np.ndarray]]:
     """Each setting's primary-endpoint scores per task on a common scale: 0 is where the task's
     runs start (the mean over all of them of their first recorded average return), 1 the
-    baseline's IQM on the task. Empty unless every task with runs can be put on it (two
-    different finite ends)."""
+    baseline's IQM on the task. Empty unless every task with runs can be put on it: finite ends,
+    the baseline's IQM above the start (below it, the scale would turn the order round)."""
     endpoint, baseline = plan["primary_endpoint"], plan["baseline"]
     variants = (*plan["candidates"], baseline)
     normalised: dict[str, list[np.ndarray]] = {v: [] for v in variants}
@@ -72,7 +72,7 @@ def normalised_scores(
         low = float(np.nanmean(starts)) if np.isfinite(starts).any() else np.nan
         reference = task[baseline][endpoint]
         high = float(statistics.iqm(reference[np.isfinite(reference)]))
-        if not (np.isfinite(low) and np.isfinite(high) and high != low):
+        if not (np.isfinite(low) and np.isfinite(high) and high > low):
             return {}
         for variant in variants:
             normalised[variant].append(statistics.normalise(task[variant][endpoint], low, high))
@@ -117,7 +117,8 @@ def _across_tasks(
     if not normalised:
         lines += [
             "",
-            "Normalised scores: not reported, some task's start and baseline IQM coincide.",
+            "Normalised scores: not reported, some task's baseline IQM is not above where its "
+            "runs start.",
         ]
     return lines
 

@@ -13,7 +13,7 @@ from scipy import stats
 import fppo_jax
 from fppo_jax import statistics
 from fppo_jax.cli import main
-from fppo_jax.results import PART_FIELDS, SweepResult
+from fppo_jax.results import PART_FIELDS, SweepResult, merge
 from fppo_jax.reuse import Pool
 from fppo_jax.sequential import Design, decide
 from fppo_jax.study import recorded_group, run_scores
@@ -122,6 +122,19 @@ def test_a_group_cut_short_is_not_taken_for_a_recorded_one(tmp_path, tiny):
     assert run_scores(whole, "ppo", "final")[0] == -np.inf
 
 
+def test_a_group_of_another_protocol_is_refused_before_anything_trains(tmp_path, tiny):
+    # As where a study planned with backend auto goes on on a machine that chooses another.
+    output = tmp_path / "study"
+    settings = {**tiny, "output": output, "total_steps": 256, "max_seeds": 4, "group_size": 2}
+    fppo_jax.study("cartpole", "fppo-lp", "ppo", groups=1, **settings)
+    record = output / "cartpole" / "group-1" / "sweep.json"
+    written = json.loads(record.read_text())
+    record.write_text(json.dumps({**written, "config": {**written["config"], "backend": "mjx"}}))
+    with pytest.raises(ValueError, match=r'another protocol .*\(backend: "mjx", not "gymnax"\)'):
+        fppo_jax.study("cartpole", "fppo-lp", "ppo", **settings)
+    assert not (output / "cartpole" / "group-2").exists()
+
+
 def test_the_command_decides_at_the_first_look_and_refuses_a_changed_plan(tmp_path, capsys):
     output = tmp_path / "study"
     common = ["study", "--candidates", "own_surrogates:frozen", "--baseline", "ppo"]
@@ -193,6 +206,8 @@ def test_a_study_decides_on_evaluations_when_its_plan_asks_for_them(tmp_path, ca
 
 def test_no_group_writes_the_plan_alone_and_a_bad_setting_writes_nothing(tmp_path, tiny):
     output = tmp_path / "study"
+    with pytest.raises(ValueError, match="one setting per variant: give alpha one value each"):
+        fppo_jax.study("cartpole", "fppo-lp", output=output, alpha=[1.1, 1.3], **tiny)
     with pytest.raises(ValueError, match="no variant of the grid \\(spo, ppo\\) takes k"):
         fppo_jax.study("cartpole", "spo", output=output, k=0.3, **tiny)
     with pytest.raises(ValueError, match="unknown setting num_envz"):
@@ -281,13 +296,21 @@ def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tm
     group_1 = output / "cartpole" / "group-1"
     assert sorted(p.name for p in group_1.iterdir()) == ["part-1"]
     assert not first.finished and not (output / "decisions.json").exists()  # nothing decided
-    with pytest.raises(ValueError, match=r"holds shares of its runs .* not all of them: .*part"):
+    missing = r"holds shares of its runs .* not all of them: .*part"
+    with pytest.raises(ValueError, match=missing):
         fppo_jax.study("cartpole", candidates, "ppo", **settings)  # never trained whole over them
+    with pytest.raises(ValueError, match=missing):  # nor decided without them
+        fppo_jax.study("cartpole", candidates, "ppo", groups=0, **settings)
     assert sorted(p.name for p in group_1.iterdir()) == ["part-1"]
 
     fppo_jax.study("cartpole", candidates, "ppo", part=(2, 2), groups=1, **settings)
     shares = [SweepResult.read(group_1 / f"part-{k}") for k in (1, 2)]
     assert [len(s.runs) for s in shares] == [12, 12]  # 3 settings × 8 seeds, halved
+    # The group's record of a run of it whole, cut short, beside the shares: they finish it.
+    cut = merge(shares)
+    cut = SweepResult(**{**cut.__dict__, "runs": cut.runs[:5], "diverged": cut.diverged[:5]})
+    cut.metrics = {name: values[:5] for name, values in cut.metrics.items()}
+    cut.write(group_1)
     joined = fppo_jax.study("cartpole", candidates, "ppo", groups=0, **settings)
     merged = joined.results["cartpole"]
     assert len(merged.runs) == 24 and merged.seeds == list(range(8))
@@ -387,6 +410,9 @@ def test_across_tasks_the_report_normalises_only_where_every_task_can_be(tmp_pat
         for v, x in scores["b"].items()
     }
     assert normalised_scores(plan, {"a": scores["a"], "b": flat}) == {}
+    # Nor one whose baseline ends below where its runs start: the scale would turn round.
+    below = {v: {**x, "start": np.full(10, 500.0)} for v, x in scores["b"].items()}
+    assert normalised_scores(plan, {"a": scores["a"], "b": below}) == {}
     write_report(tmp_path / "flat.md", plan, rows, {"a": scores["a"], "b": flat}, True)
     flat_report = (tmp_path / "flat.md").read_text()
     assert "Normalised scores: not reported" in flat_report and "| ppo | – | – |" in flat_report

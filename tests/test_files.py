@@ -4,6 +4,7 @@ JSON as written, array digests and one-line error messages."""
 import hashlib
 import json
 import os
+import threading
 
 import jax.numpy as jnp
 import numpy as np
@@ -121,7 +122,12 @@ def test_one_lock_per_directory_until_released(tmp_path):
     held.release()
     held.release()  # twice is harmless
     again = DirectoryLock(tmp_path, "checkpoints")
-    again.release()
+    # A holder that takes its turn is waited for, as long as asked; then it is busy.
+    threading.Timer(0.3, again.release).start()
+    waited = DirectoryLock(tmp_path, "checkpoints", wait=30)
+    with pytest.raises(DirectoryBusy, match=message):
+        DirectoryLock(tmp_path, "checkpoints", wait=0.2)
+    waited.release()
 
 
 def test_a_lock_notices_its_directory_vanishing_or_replaced(tmp_path):

@@ -51,17 +51,18 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
         "seeds-3-5_ppo+fppo-lp",
     ]
 
-    other = _run("study.py", *tiny, "--seeds", "0:2", "--variants", "tr-ppo")  # another grid
+    # Another grid, of the same shape (6 runs): the program compiled for the first is reused.
+    other = _run("study.py", *tiny, "--seeds", "0:3", "--variants", "tr-ppo", "ppo-rb")
     assert other.returncode == 0, other.stdout + other.stderr
 
     verdict = _run("verdict.py", "--results", str(tmp_path))
     assert verdict.returncode == 0, verdict.stdout + verdict.stderr
     text = (tmp_path / "study.md").read_text()
     assert "### cartpole, paper protocol" in text
-    assert "3 parts, 14 runs of 4,096 env steps" in text
+    assert "3 parts, 18 runs of 4,096 env steps" in text
     assert "| fppo-lp α=1.3 | 0." in text  # its probability of improvement over ppo
     tr_ppo = [line.split(" | ") for line in text.splitlines() if line.startswith("| tr-ppo")]
-    assert tr_ppo[0][1] == "2" and tr_ppo[1][3] == "–"  # 2 runs; exploratory, no Holm p
+    assert tr_ppo[0][1] == "3" and tr_ppo[1][3] == "–"  # 3 runs; exploratory, no Holm p
     assert "Exploratory, where time allowed (tr-ppo and ppo-rb at 10 seeds" in text
     # One of the paper protocol's 18 planned comparisons recorded: Holm multiplies its p by 18.
     merged = merge([SweepResult.read(d) for d in sorted(parts.iterdir())])
@@ -79,11 +80,12 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
 def test_a_dose_response_is_one_sweep_whose_controls_train_as_ppo_and_its_report(tmp_path):
     tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
     report = ["--results", str(tmp_path), "--tasks", "cartpole"]
-    done = _run("study.py", *tiny, "--seeds", "0:2", "--plan", "plans/dose-response.json")
+    # Two parts of the same shape (60 runs), so that the second compiles nothing.
+    done = _run("study.py", *tiny, "--seeds", "0:5", "--plan", "plans/dose-response.json")
     assert done.returncode == 0, done.stdout + done.stderr
-    part = tmp_path / "dose_response" / "cartpole" / "paper" / "seeds-0-1_dose-response"
+    part = tmp_path / "dose_response" / "cartpole" / "paper" / "seeds-0-4_dose-response"
     result = SweepResult.read(part)
-    assert len(result.settings) == 12 and len(result.runs) == 24
+    assert len(result.settings) == 12 and len(result.runs) == 60
     index = {tuple(sorted(s.items())): i for i, s in enumerate(result.settings)}
     ppo = result.setting_metrics(index[(("variant", "ppo"),)])
     for control in ((("alpha", 1.0), ("variant", "fppo-lp")), (("k", 0.0), ("variant", "fppo-qp"))):
@@ -94,10 +96,10 @@ def test_a_dose_response_is_one_sweep_whose_controls_train_as_ppo_and_its_report
     assert not np.array_equal(strongest["average_return"], ppo["average_return"])
 
     early = _run("dose_response.py", *report)  # the planned test is over 10 seeds of each dose
-    assert early.returncode == 1 and "cartpole: ppo 2, fppo-lp α=1 2," in early.stderr
+    assert early.returncode == 1 and "cartpole: ppo 5, fppo-lp α=1 5," in early.stderr
     assert not (tmp_path / "dose_response.md").exists()
 
-    more = _run("study.py", *tiny, "--seeds", "2:10", "--plan", "plans/dose-response.json")
+    more = _run("study.py", *tiny, "--seeds", "5:10", "--plan", "plans/dose-response.json")
     assert more.returncode == 0, more.stdout + more.stderr
     study = tmp_path / "study" / "cartpole" / "paper"
     study.mkdir(parents=True)  # stands in for the seed study's PPO runs: the sweep's own
@@ -110,7 +112,7 @@ def test_a_dose_response_is_one_sweep_whose_controls_train_as_ppo_and_its_report
         in text
     )
     assert "fppo-qp at k = 0: identical" in text and "in 10 of 10 seeds" in text
-    assert "the same learning curve in 2 of 2 seeds" in text  # the seeds the stand-in holds
+    assert "the same learning curve in 5 of 5 seeds" in text  # the seeds the stand-in holds
     merged = merge([SweepResult.read(d) for d in sorted(part.parent.iterdir())])
     final = merged.scores("final")
     doses = {

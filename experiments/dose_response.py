@@ -57,6 +57,14 @@ SEEDS = 10
 FAMILY_ERROR = 0.05
 THRESHOLDS = (0.5, 0.8)  # of the sweep's PPO IQM final return
 DPI = 80
+# Why a control can part from PPO's run (tests/test_objectives.py shows the gradients).
+PARTED = (
+    "A control equals PPO's objective in real arithmetic, not always in float32: where r lies "
+    "within rounding of 1 ± ε, rA and (1 ± ε)A can round to the same number, and PPO's "
+    "min(rA, clip(r, 1 − ε, 1 + ε)A) is then a tie, whose gradient JAX splits between the two "
+    "terms (½A), while at α = 1 and k = 0 the pulled term is r itself and the gradient A. One "
+    "such sample sets the parameters apart in their last bits, and the runs part from there."
+)
 
 
 def doses(plan: dict) -> dict[str, tuple[str, list[float]]]:
@@ -113,6 +121,17 @@ def by_seed(result: SweepResult, index: int) -> dict[int, int]:
     return {run["seed"]: i for i, run in enumerate(result.runs) if run["setting"] == index}
 
 
+def first_difference(result: SweepResult, a: int, b: int) -> int | None:
+    """The first update (from 1) at which runs `a` and `b` differ on a recorded metric; None
+    if they never do."""
+    updates = [
+        int(np.argmax(differ)) + 1
+        for values in result.metrics.values()
+        if (differ := ~np.isclose(values[a], values[b], rtol=0, atol=0, equal_nan=True)).any()
+    ]
+    return min(updates, default=None)
+
+
 def controls(result: SweepResult, study: SweepResult | None, plan: dict) -> list[str]:
     """A line per control: in how many seeds it trains as the sweep's PPO run, bit for bit on
     every recorded metric, and how the seed study's recorded PPO runs compare."""
@@ -120,17 +139,13 @@ def controls(result: SweepResult, study: SweepResult | None, plan: dict) -> list
     lines = []
     for variant, (name, values) in doses(plan).items():
         control = by_seed(result, setting_index(result, variant, name, values[0]))
-        same = [
-            seed
-            for seed, run in control.items()
-            if all(
-                np.array_equal(v[run], v[ppo[seed]], equal_nan=True)
-                for v in result.metrics.values()
-            )
-        ]
+        parted = {seed: first_difference(result, run, ppo[seed]) for seed, run in control.items()}
+        same = [seed for seed, update in parted.items() if update is None]
+        apart = [f"seed {s} from update {u}" for s, u in sorted(parted.items()) if u is not None]
         lines.append(
             f"- {variant} at {SYMBOLS.get(name, name)} = {values[0]:g}: identical to the sweep's "
             f"PPO run on every recorded metric in {len(same)} of {len(control)} seeds"
+            + (f"; apart: {', '.join(apart)}" if apart else "")
         )
     if study is None:
         lines.append("- the seed study has no recorded PPO runs of this task to set beside them")
@@ -232,6 +247,8 @@ def report(
     ]
     for task, lines_of_task in checks.items():
         lines += [f"{task}:", "", *lines_of_task, ""]
+    if any("; apart: " in line for task_lines in checks.values() for line in task_lines):
+        lines += [PARTED, ""]
     lines += [
         "## The planned test: the trend of final return with the dose",
         "",

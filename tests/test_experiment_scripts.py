@@ -9,6 +9,8 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 
+from fppo_jax import SweepResult
+
 EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
 
 
@@ -78,3 +80,28 @@ def test_a_planned_verdict_tests_the_family_on_the_recorded_parts(tmp_path):
     holm = [float(row[6]) for row in rows]
     raw = [float(row[5]) for row in rows]
     assert all(h >= p for h, p in zip(holm, raw, strict=True))  # adjusted over the family
+
+
+def test_the_dose_response_names_the_seed_and_update_where_a_control_parts(monkeypatch):
+    # Recorded parts: Hopper's seed 6, where the controls train as PPO throughout, and
+    # Walker2d's seed 5, where both part from it at one update.
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    dose_response = importlib.import_module("dose_response")
+    plan = json.loads((EXPERIMENTS / "plans" / "dose-response.json").read_text())
+    parts = EXPERIMENTS / "results" / "dose_response"
+    hopper = SweepResult.read(parts / "hopper" / "paper" / "seeds-6-6_dose-response")
+    walker = SweepResult.read(parts / "walker2d" / "paper" / "seeds-5-5_dose-response")
+    assert dose_response.controls(hopper, None, plan)[:2] == [
+        "- fppo-lp at α = 1: identical to the sweep's PPO run on every recorded metric in 1 of 1 "
+        "seeds",
+        "- fppo-qp at k = 0: identical to the sweep's PPO run on every recorded metric in 1 of 1 "
+        "seeds",
+    ]
+    parted = dose_response.controls(walker, None, plan)[:2]
+    assert all(line.endswith("in 0 of 1 seeds; apart: seed 5 from update 126") for line in parted)
+    ppo_index = dose_response.setting_index(walker, "ppo", None, None)
+    ppo = walker.metrics["negative_fraction_after"][dose_response.by_seed(walker, ppo_index)[5]]
+    index = dose_response.setting_index(walker, "fppo-lp", "alpha", 1.0)
+    control = walker.metrics["negative_fraction_after"][dose_response.by_seed(walker, index)[5]]
+    np.testing.assert_array_equal(control[:125], ppo[:125])
+    assert control[125] != ppo[125]

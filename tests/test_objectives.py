@@ -175,6 +175,20 @@ def test_neutral_pulling_equals_ppo_everywhere():
             np.testing.assert_allclose(got[1], reference[1], rtol=0, atol=1e-7)
 
 
+def test_neutral_pulling_parts_from_ppo_only_where_ppo_s_min_ties_in_float32():
+    # One ulp past 1 + ε, rA and (1 + ε)A may round to the same number: PPO's min is then a
+    # tie, whose gradient JAX splits (A/2), where α = 1 and k = 0 pull with r itself (A).
+    r = np.nextafter(np.float32(1.2), np.float32(2))
+    advantages = -np.random.default_rng(0).uniform(0.01, 3.0, 1000).astype(np.float32)
+    ties = r * advantages == np.float32(1.2) * advantages
+    assert 0 < ties.sum() < len(ties)
+    for a, tie in ((advantages[ties][0], True), (advantages[~ties][0], False)):
+        ppo = float(jax.grad(objective("ppo"))(jnp.float32(r), jnp.float32(a)))
+        assert ppo == (a / 2 if tie else a)
+        for neutral in (objective("fppo-lp", alpha=1.0), objective("fppo-qp", k=0.0)):
+            assert float(jax.grad(neutral)(jnp.float32(r), jnp.float32(a))) == a
+
+
 def test_vmap_over_mixed_variants_matches_each_variant():
     objs = [
         objective("ppo"),

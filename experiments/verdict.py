@@ -3,18 +3,23 @@
     python experiments/verdict.py                       # results/study.md and its figures
     python experiments/verdict.py --results /tmp/smoke  # a smoke run's parts (study.py --results)
 
-Reads every part that `study.py` recorded under <results>/study/<task>/<protocol>/, merges the
-parts of each task and protocol (`fppo_jax.merge`, which refuses parts whose protocol differs,
-naming the field) and writes <results>/study.md and <results>/study/*.png. Decided before any
-part ran, and stated in the report: the primary endpoint is each run's final return (its
-last-100-episode average after the last update), the secondary the area under its learning
-curve (the average return averaged over updates, for "fast"); the paper's max average return
-is shown beside them, with an interval for its gap to PPO, since it is biased upward by a
-different amount per variant.
+Reads every part that `study.py` recorded under <results>/study/<task>/<protocol>/. The report's
+body is the library's own: `fppo_jax.study` over those parts (reused, nothing trained), one study
+per family of comparisons (a study has one seed schedule), each kept whole with its plan and
+decisions in <results>/study-command/<family>/. After it, what only this study has: the test
+planned before any part ran (Mann–Whitney, Holm over each protocol's planned comparisons), the
+paper's Table 1 beside the same statistic here, the exploratory variants and the escape speed.
+Writes <results>/study.md and <results>/study/curves_*.png. Decided before any part ran, and
+stated in the report: the primary endpoint is each run's final return (its last-100-episode
+average after the last update), the secondary the area under its learning curve (the average
+return averaged over updates, for "fast"); the paper's max average return is shown beside them,
+with an interval for its gap to PPO, since it is biased upward by a different amount per variant.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
 from pathlib import Path
 
 import matplotlib
@@ -38,12 +43,13 @@ from common import (
     read_run_record,
     write_result,
 )
+from study import PROTOCOLS as PROTOCOL_SETTINGS
 
+import fppo_jax
 from fppo_jax import SweepResult, merge, statistics
 from fppo_jax.envs import MUJOCO_TASKS
-from fppo_jax.plots import plot_curves, plot_improvement, plot_profiles
+from fppo_jax.plots import plot_curves
 from fppo_jax.results import labels, max_average_return
-from fppo_jax.study_report import ruled_out
 
 BASELINE = "ppo"
 CHALLENGERS = ("fppo-lp", "fppo-qp")
@@ -58,6 +64,14 @@ PROTOCOLS = {
     "paper": "the project's protocol: observation and reward normalisation",
     "unnormalised": "baselines' classic-control protocol: no normalisation",
 }
+# The planned comparisons as the library's study takes them, one family per seed schedule and
+# protocol: its folder under study-command/, its heading, tasks, seeds and protocol.
+FAMILIES = (
+    ("mujoco", "The MuJoCo tasks", MUJOCO_TASKS, 20, "paper"),
+    ("classic", "The classic tasks", CLASSIC_TASKS, 50, "paper"),
+    ("classic-unnormalised", "The classic tasks", CLASSIC_TASKS, 50, "unnormalised"),
+)
+REPOSITORY = Path(__file__).resolve().parent.parent
 DPI = 80
 
 
@@ -186,39 +200,7 @@ def task_section(
             f"| {paper_gap:+.1f} | {inside} | {percent(share)} | {paper_share:+.0%} "
             f"| {inside_share} |"
         )
-    return [*lines, "", *effects_and_speed(result, index, names), ""]
-
-
-def effects_and_speed(result: SweepResult, index: dict[str, int], names: list[str]) -> list[str]:
-    """Per variant against PPO: the relative effects on final return its IQM difference's
-    interval rules out, and how soon its runs first reach 50% and 80% of PPO's IQM final
-    return (``statistics.steps_to_threshold``; reported where that IQM is positive)."""
-    final, base = result.scores("final"), index[BASELINE]
-    target = float(statistics.iqm(final[base]))
-    lines = [
-        f"What each interval rules out, and speed: env steps until a run first reaches 50% and "
-        f"80% of {BASELINE}'s IQM final return ({target:.1f}); runs that do, and their median.",
-        "",
-        "| variant | Δ IQM final rules out | reach 50% | reach 80% |",
-        "|---|---|---|---|",
-    ]
-    for i in index.values():
-        difference = statistics.compare(final[i], final[base])["iqm_difference"]
-        excluded = "–" if i == base else ruled_out(difference, target)
-        cells = [names[i], excluded]
-        metrics = result.setting_metrics(i)
-        for share in (0.5, 0.8):
-            if target <= 0:  # a share of a negative return is no lower bar
-                cells.append("–")
-                continue
-            steps = statistics.steps_to_threshold(
-                metrics["average_return"], metrics["env_steps"], share * target
-            )
-            reached = steps[np.isfinite(steps)]
-            median = f", median {np.median(reached):,.0f}" if reached.size else ""
-            cells.append(f"{reached.size}/{steps.size}{median}")
-        lines.append("| " + " | ".join(cells) + " |")
-    return lines
+    return [*lines, ""]
 
 
 def percent(values: tuple[float, ...]) -> str:
@@ -227,60 +209,36 @@ def percent(values: tuple[float, ...]) -> str:
     return f"{point:+.0%} [{low:+.0%}, {high:+.0%}]"
 
 
-def aggregate_section(results: dict[str, SweepResult]) -> tuple[list[str], dict, dict]:
-    """Across the MuJoCo tasks that have every studied variant: the probability of improvement
-    averaged over tasks and the IQM of normalised final returns, with stratified CIs."""
-    tasks = {
-        t: r
-        for t, r in results.items()
-        if t in MUJOCO_TASKS and {BASELINE, *CHALLENGERS} <= set(by_variant(r))
-    }
-    if not tasks:
-        return [], {}, {}
-    lines = [
-        f"### Across the MuJoCo tasks ({', '.join(tasks)})",
-        "",
-        "Normalised score: 0 is the task's untrained policy (the mean over every run of its "
-        "first recorded average return), 1 is PPO's IQM final return on the task. Intervals "
-        "are stratified bootstraps: each task's runs are resampled among themselves.",
-        "",
-        "| variant | mean P(> ppo) over tasks, final | outcome | mean P(> ppo), AUC "
-        "| IQM of normalised final returns | optimality gap (τ = 1) |",
-        "|---|---|---|---|---|---|",
-    ]
-    normalised: dict[str, list[np.ndarray]] = {v: [] for v in (BASELINE, *CHALLENGERS)}
-    improvements = {}
-    for result in tasks.values():
-        index, final = by_variant(result), result.scores("final")
-        first = [_first_finite(row) for row in result.metrics["average_return"]]
-        low, high = float(np.nanmean(first)), statistics.iqm(final[index[BASELINE]])
-        for variant in normalised:
-            normalised[variant].append(statistics.normalise(final[index[variant]], low, high))
-    for variant in (BASELINE, *CHALLENGERS):
-        cells = []
-        if variant != BASELINE:
-            for endpoint in ("final", "auc"):
-                pairs = []
-                for result in tasks.values():
-                    index, scores = by_variant(result), result.scores(endpoint)
-                    pairs.append((scores[index[variant]], scores[index[BASELINE]]))
-                value = statistics.aggregate_improvement(pairs)
-                cells.append(interval_text(value, ".2f"))
-                if endpoint == "final":
-                    improvements[f"{variant}, all tasks"] = value
-                    cells.append(outcome(value))
-        else:
-            cells = ["–", "–", "–"]
-        cells.append(interval_text(statistics.aggregate(normalised[variant], "iqm"), ".3f"))
-        gap = statistics.aggregate(normalised[variant], "optimality_gap")
-        cells.append(interval_text(gap, ".3f"))
-        lines.append(f"| {variant} | {' | '.join(cells)} |")
-    return [*lines, ""], improvements, normalised
-
-
-def _first_finite(row: np.ndarray) -> float:
-    finite = row[np.isfinite(row)]
-    return float(finite[0]) if finite.size else np.nan
+def library_reports(results: Path) -> list[str]:
+    """Each family's report by the library's own study, `fppo_jax.study` with every run taken
+    from the recorded parts and none trained, written whole in <results>/study-command/<family>/
+    and returned with its headings put under this report's."""
+    lines = []
+    for folder, heading, tasks, seeds, protocol in FAMILIES:
+        output = results / "study-command" / folder
+        # From the repository, so the plan names the parts' folder as the command line would.
+        with contextlib.chdir(REPOSITORY):
+            fppo_jax.study(
+                tasks,
+                CHALLENGERS,
+                BASELINE,
+                output=output,
+                reuse=os.path.relpath(results / "study"),
+                groups=0,
+                max_seeds=seeds,
+                group_size=seeds,
+                progress=False,
+                **PROTOCOL_SETTINGS[protocol],
+            )
+        report = (output / "report.md").read_text().splitlines()[1:]  # its title is this one's
+        lines += [
+            f"### {heading}, {seeds} seeds ({protocol} protocol)",
+            "",
+            f"Its plan, decisions and figures: `{output.relative_to(results)}/`.",
+            *(f"##{line}" if line.startswith("#") else line for line in report),
+            "",
+        ]
+    return lines
 
 
 def escape_section(path: Path, label: str) -> list[str]:
@@ -342,7 +300,14 @@ def main() -> None:
         "# Does FPPO beat PPO? The seed study",
         "",
         "Written by `python experiments/verdict.py` from the parts `experiments/study.py` "
-        "recorded (each part's command is in its `run.json`).",
+        "recorded (each part's command is in its `run.json`). Its body is the library's own "
+        "report: `fppo_jax.study` (as `fppo-jax study --reuse experiments/results/study "
+        "--groups 0`) takes every run from those parts, trains none, decides each comparison "
+        "by its group-sequential test and reports what each interval rules out and how soon "
+        "the runs reach PPO's level, one study per family of comparisons (a study has one "
+        "seed schedule). After it, what only this study has: the test planned before any of "
+        "its parts ran, the paper's Table 1 beside the same statistic here, the exploratory "
+        "variants, and the escape speed.",
         "",
         "- Endpoints, fixed before the study ran: **final return** (primary: each run's "
         "last-100-episode average return after its last update) and the **area under the "
@@ -355,7 +320,7 @@ def main() -> None:
         "variants' runs; `outcome` is *better* or *worse* where that CI excludes 0.5, "
         "*not resolved* otherwise, one comparison at a time.",
         "- The planned comparisons, FPPO-LP and FPPO-QP against PPO on each task's final "
-        "returns, are also tested as a family: Mann–Whitney's U test of P = ½, each p-value "
+        "returns, are tested as planned, as a family: Mann–Whitney's U test of P = ½, each p-value "
         "adjusted by Holm's step-down method over every planned comparison of its protocol "
         "(one not recorded yet counts as p = 1). A *Holm p* below 0.05 is a difference that "
         "survives the number of comparisons made; TR-PPO's and PPO-RB's rows are exploratory "
@@ -406,42 +371,31 @@ def main() -> None:
         f"- Exploratory, where time allowed ({' and '.join(EXPLORATORY)} at "
         f"{EXPLORATORY_SEEDS} seeds on the MuJoCo tasks): {'; '.join(explored) or 'none yet'}.",
         "",
-        "## Per task",
-        "",
     ]
-    aggregate, improvements, normalised = aggregate_section(merged["paper"])
-    lines = preamble + head + sections
-    if aggregate:
-        lines += ["## Aggregate", "", *aggregate]
-    lines += escape_section(
-        args.results / ESCAPE_FRACTIONS,
-        "`results/escape_speed/`, as `results/escape_speed.md` records it",
-    )
+    lines = [
+        *preamble,
+        *head,
+        "## The library's report",
+        "",
+        *library_reports(args.results),
+        "## Per task: the planned test and the paper's numbers",
+        "",
+        *sections,
+        *escape_section(
+            args.results / ESCAPE_FRACTIONS,
+            "`results/escape_speed/`, as `results/escape_speed.md` records it",
+        ),
+    ]
     out.mkdir(parents=True, exist_ok=True)
-    pictures = [figures(results, out, p) for p, results in merged.items() if results]
-    for task, result in merged["paper"].items():
-        index, final = by_variant(result), result.scores("final")
-        if BASELINE in index:
-            for variant in CHALLENGERS:
-                if variant in index:
-                    value = statistics.compare(final[index[variant]], final[index[BASELINE]])
-                    improvements[f"{variant}, {task}"] = value["probability_of_improvement"]
-    if improvements:
-        fig = plot_improvement(dict(sorted(improvements.items())), BASELINE)
-        fig.savefig(out / "improvement.png", dpi=DPI, bbox_inches="tight")
-        plt.close(fig)
-        pictures.append(out / "improvement.png")
-    if normalised:
-        fig = plot_profiles(
-            {v: np.concatenate(x) for v, x in normalised.items()},
-            thresholds=np.linspace(-0.5, 2.0, 251),
-            xlabel="normalised final return τ (1 = PPO's IQM on the task)",
-        )
-        fig.savefig(out / "profiles.png", dpi=DPI, bbox_inches="tight")
-        plt.close(fig)
-        pictures.append(out / "profiles.png")
+    pictures = [
+        f"study/{figures(results, out, p).name}" for p, results in merged.items() if results
+    ]
+    for folder, *_ in FAMILIES:
+        for name in ("improvement.png", "profiles.png"):
+            if (args.results / "study-command" / folder / name).exists():
+                pictures.append(f"study-command/{folder}/{name}")
     lines += ["## Figures", ""]
-    lines += [f"![{p.stem}](study/{p.name})" for p in pictures]
+    lines += [f"![{p.removesuffix('.png').replace('/', ', ')}]({p})" for p in pictures]
     path = args.results / "study.md"
     write_result(path, lines)
     print(f"wrote {path}")

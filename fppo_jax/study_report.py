@@ -4,8 +4,9 @@ bootstrap intervals (:mod:`fppo_jax.statistics`), and the relative effects the i
 rules out, on the primary endpoint (with its repeated confidence interval, adjusted for stopping
 early) and then on the secondary ones; and how soon each setting's runs reach shares of the
 baseline's final IQM. Across the tasks (two or more): the probability of improvement averaged
-over them and the IQM of normalised scores, with stratified intervals. Its figures beside it:
-learning curves, probabilities of improvement and, across tasks, performance profiles."""
+over them on each endpoint and the IQM of normalised scores, with stratified intervals. Its
+figures beside it: learning curves, probabilities of improvement and, across tasks, performance
+profiles."""
 
 from __future__ import annotations
 
@@ -83,37 +84,46 @@ def _across_tasks(
     plan: dict[str, Any], rows: Sequence[dict[str, Any]], scores: dict[str, Scores]
 ) -> list[str]:
     """Across the tasks with runs (two or more): each candidate's probability of improvement
-    averaged over tasks, over the runs its decisions used, and each setting's IQM of normalised
-    scores over every recorded run, with stratified bootstrap intervals."""
+    averaged over tasks, on each endpoint over the runs its decisions used, and each setting's
+    IQM of normalised primary scores over every recorded run, with stratified bootstrap
+    intervals."""
     if len(scores) < 2:
         return []
     endpoint, baseline = plan["primary_endpoint"], plan["baseline"]
+    endpoints = (endpoint, *plan["secondary_endpoints"])
     normalised = normalised_scores(plan, scores)
     lines = [
         "",
         f"## Across the {len(scores)} tasks",
         "",
-        f"Reported, not tested (the decisions are per task), on the primary endpoint, {endpoint}: "
-        f"the probability of improvement averaged over the tasks, over the runs each decision "
-        f"used; and the IQM of normalised scores over every recorded run, where 0 is where a "
-        f"task's runs start (their mean first average return) and 1 is {baseline}'s IQM on it. "
-        "Intervals are stratified bootstraps: each task's runs resampled among themselves.",
+        "Reported, not tested (the decisions are per task): the probability of improvement "
+        "averaged over the tasks, on each endpoint over the runs each decision used; and, on "
+        f"the primary endpoint, {endpoint}, the IQM of normalised scores over every recorded "
+        "run, where 0 is where a task's runs start (their mean first average return) and 1 is "
+        f"{baseline}'s IQM on it. Intervals are stratified bootstraps: each task's runs "
+        "resampled among themselves.",
         "",
-        f"| setting | mean P(setting > {baseline}) over tasks | IQM of normalised scores |",
-        "|---|---|---|",
+        "| setting | "
+        + " | ".join(f"mean P(setting > {baseline}) over tasks, {e}" for e in endpoints)
+        + f" | IQM of normalised {endpoint} |",
+        "|---" * (len(endpoints) + 2) + "|",
     ]
     for variant in (*plan["candidates"], baseline):
-        pairs = [
-            (
-                scores[row["task"]][variant][endpoint][: row["seeds"]],
-                scores[row["task"]][baseline][endpoint][: row["seeds"]],
+        cells = [variant]
+        for on in endpoints:
+            pairs = [
+                (
+                    scores[row["task"]][variant][on][: row["seeds"]],
+                    scores[row["task"]][baseline][on][: row["seeds"]],
+                )
+                for row in rows
+                if row["candidate"] == variant and row["task"] in scores
+            ]
+            cells.append(
+                _interval(statistics.aggregate_improvement(pairs), ".2f") if pairs else "–"
             )
-            for row in rows
-            if row["candidate"] == variant and row["task"] in scores
-        ]
-        mean = _interval(statistics.aggregate_improvement(pairs), ".2f") if pairs else "–"
         level = _interval(statistics.aggregate(normalised[variant]), ".3f") if normalised else "–"
-        lines.append(f"| {variant} | {mean} | {level} |")
+        lines.append("| " + " | ".join([*cells, level]) + " |")
     if not normalised:
         lines += [
             "",

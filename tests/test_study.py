@@ -74,7 +74,13 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
     assert "cartpole (paper): fppo-lp 6 of 50 seeds" in text
     assert "hopper (paper): not started" in text
     assert (tmp_path / "study" / "curves_paper.png").stat().st_size > 0
-    assert (tmp_path / "study" / "improvement.png").stat().st_size > 0
+    # The body is the library's report of each family, which takes a group only whole: 6 of 50
+    # seeds are none, and nothing is trained.
+    classic = tmp_path / "study-command" / "classic"
+    library = (classic / "report.md").read_text().splitlines()[1:]
+    assert "\n".join(f"##{line}" if line.startswith("#") else line for line in library) in text
+    assert "#### cartpole\n\nNo group recorded yet." in text
+    assert not list(classic.glob("*/group-*"))
 
 
 def test_a_dose_response_is_one_sweep_whose_controls_train_as_ppo_and_its_report(tmp_path):

@@ -76,7 +76,7 @@ def test_run_killed_with_sigkill_resumes_to_the_same_bits(tmp_path):
     resumed = train(
         **RUN, checkpoint_dir=checkpoints, resume=True, checkpoint_every=1, log_dir=logs
     )
-    uninterrupted = train(**RUN)
+    uninterrupted = train(**RUN, progress=lambda _: None)  # in chunks, as the resumed run
     assert resumed.resumed_from > 0
     assert_same_run(resumed, uninterrupted)
     # The log holds each update once, even those the killed run logged after its checkpoint.
@@ -104,17 +104,17 @@ def damage(step_dir: Path, how: str) -> None:
 
 @pytest.mark.parametrize("how", ["truncated", "altered"])
 def test_damaged_latest_checkpoint_is_reported_and_the_previous_one_used(tmp_path, how):
-    run = {**RUN, "total_steps": 128 * 6}
-    first = train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
-    assert steps_on_disk(tmp_path) == [2, 4, 6]
-    damage(tmp_path / "6", how)
+    run = {**RUN, "total_steps": 128 * 4}
+    first = train(**run, checkpoint_dir=tmp_path, checkpoint_every=1)
+    assert steps_on_disk(tmp_path) == [2, 3, 4]
+    damage(tmp_path / "4", how)
 
-    with pytest.warns(DamagedCheckpoint, match="step 6 .* damaged"):
-        again = train(**run, checkpoint_dir=tmp_path, resume=True, checkpoint_every=2)
-    assert again.resumed_from == 4  # and updates 5 and 6 were trained again, to the same bits
+    with pytest.warns(DamagedCheckpoint, match="step 4 .* damaged"):
+        again = train(**run, checkpoint_dir=tmp_path, resume=True, checkpoint_every=1)
+    assert again.resumed_from == 3  # and update 4 was trained again, to the same bits
     assert_same_run(again, first)
-    assert (tmp_path / "damaged" / "6").is_dir()  # set aside, not deleted
-    assert steps_on_disk(tmp_path) == [2, 4, 6]
+    assert (tmp_path / "damaged" / "4").is_dir()  # set aside, not deleted
+    assert steps_on_disk(tmp_path) == [2, 3, 4]
 
 
 def test_a_checkpoint_is_deleted_only_once_a_newer_one_is_complete(tmp_path):
@@ -138,12 +138,13 @@ def test_a_checkpoint_is_deleted_only_once_a_newer_one_is_complete(tmp_path):
 
 
 def test_resume_with_another_configuration_is_refused_naming_the_fields(tmp_path):
-    train(**RUN, checkpoint_dir=tmp_path, checkpoint_every=10)
+    run = {**RUN, "total_steps": 128 * 4}
+    train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
     with pytest.raises(ConfigMismatch, match=r"differing: k .*0.4.*0.3.*; num_envs .*4.*8"):
-        train(**{**RUN, "num_envs": 8}, k=0.3, checkpoint_dir=tmp_path, resume=True)
+        train(**{**run, "num_envs": 8}, k=0.3, checkpoint_dir=tmp_path, resume=True)
     with pytest.raises(ValueError, match="already holds checkpoints; pass resume=True"):
-        train(**RUN, checkpoint_dir=tmp_path)
-    assert steps_on_disk(tmp_path) == [10, 20]  # untouched
+        train(**run, checkpoint_dir=tmp_path)
+    assert steps_on_disk(tmp_path) == [2, 4]  # untouched
 
 
 def test_cli_refuses_to_overwrite_checkpoints_and_resumes_with_the_flag(tmp_path, capsys):

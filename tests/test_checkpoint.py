@@ -184,7 +184,7 @@ def test_nan_guard_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
 def test_interrupted_sweep_resumes_at_its_group_and_update(tmp_path):
     grid = {"variant": ["ppo", "fppo-lp"]}
     run = {"seeds": [0, 1], "chunk": 3, "total_steps": 128 * 6, **TINY}
-    whole = fppo_jax.sweep("cartpole", grid, **run)
+    whole = fppo_jax.sweep("cartpole", grid, **run, progress=lambda _: None)  # in 1-update chunks
 
     calls = []
 
@@ -196,7 +196,7 @@ def test_interrupted_sweep_resumes_at_its_group_and_update(tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         fppo_jax.sweep(
-            "cartpole", grid, **run, progress=interrupt, checkpoint_dir=tmp_path, checkpoint_every=2
+            "cartpole", grid, **run, progress=interrupt, checkpoint_dir=tmp_path, checkpoint_every=1
         )
     assert max(steps_on_disk(tmp_path)) == 6 + 4  # group 1, update 4
     resumed = fppo_jax.sweep(
@@ -415,7 +415,7 @@ def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(
             if snapshot.update == 4:  # checkpoint 4 is being written in the background
                 resource.setrlimit(resource.RLIMIT_FSIZE, (1000, resource.RLIM_INFINITY))
         try:
-            fppo_jax.train(**{RUN!r}, checkpoint_dir={str(tmp_path)!r}, checkpoint_every=2,
+            fppo_jax.train(**{RUN!r}, checkpoint_dir={str(tmp_path)!r}, checkpoint_every=1,
                            keep=10, callback=refuse)
         except fppo_jax.CheckpointNotWritten as error:
             print(error)
@@ -427,9 +427,9 @@ def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(
     assert done.returncode == 3, done.stderr[-3000:]
     assert done.stdout == (
         f"could not write a checkpoint in {tmp_path} (File too large); the newest intact one is "
-        "step 2. Free space, or choose another checkpoint directory, and resume (--resume)\n"
+        "step 3. Free space, or choose another checkpoint directory, and resume (--resume)\n"
     )
     assert "Traceback" not in done.stderr and "Event loop is closed" not in done.stderr
-    assert steps_on_disk(tmp_path) == [2]
-    resumed = train(**RUN, checkpoint_dir=tmp_path, resume=True, checkpoint_every=2, keep=10)
-    assert resumed.resumed_from == 2 and len(resumed.metrics["env_steps"]) == 20
+    assert steps_on_disk(tmp_path) == [1, 2, 3]
+    resumed = train(**RUN, checkpoint_dir=tmp_path, resume=True, checkpoint_every=1, keep=10)
+    assert resumed.resumed_from == 3 and len(resumed.metrics["env_steps"]) == 20

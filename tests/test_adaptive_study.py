@@ -107,7 +107,7 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
 
 def test_a_group_cut_short_is_not_taken_for_a_recorded_one(tmp_path, tiny):
     where = tmp_path / "group"
-    fppo_jax.sweep("cartpole", {"variant": ["ppo"]}, [0, 1], total_steps=256, log_dir=where, **tiny)
+    fppo_jax.sweep("cartpole", {"variant": ["ppo"]}, [0, 1], total_steps=512, log_dir=where, **tiny)
     whole = SweepResult.read(where)
     ppo = fppo_jax.objectives.resolve("ppo")
     assert recorded_group(where, [ppo], [0, 1]) is not None
@@ -125,7 +125,7 @@ def test_a_group_cut_short_is_not_taken_for_a_recorded_one(tmp_path, tiny):
 def test_a_group_of_another_protocol_is_refused_before_anything_trains(tmp_path, tiny):
     # As where a study planned with backend auto goes on on a machine that chooses another.
     output = tmp_path / "study"
-    settings = {**tiny, "output": output, "total_steps": 256, "max_seeds": 4, "group_size": 2}
+    settings = {**tiny, "output": output, "total_steps": 512, "max_seeds": 2, "group_size": 1}
     fppo_jax.study("cartpole", "fppo-lp", "ppo", groups=1, **settings)
     record = output / "cartpole" / "group-1" / "sweep.json"
     written = json.loads(record.read_text())

@@ -76,7 +76,7 @@ def test_run_killed_with_sigkill_resumes_to_the_same_bits(tmp_path):
     resumed = train(
         **RUN, checkpoint_dir=checkpoints, resume=True, checkpoint_every=1, log_dir=logs
     )
-    uninterrupted = train(**RUN)
+    uninterrupted = train(**RUN, progress=lambda _: None)  # in chunks, as the resumed run
     assert resumed.resumed_from > 0
     assert_same_run(resumed, uninterrupted)
     # The log holds each update once, even those the killed run logged after its checkpoint.
@@ -104,17 +104,17 @@ def damage(step_dir: Path, how: str) -> None:
 
 @pytest.mark.parametrize("how", ["truncated", "altered"])
 def test_damaged_latest_checkpoint_is_reported_and_the_previous_one_used(tmp_path, how):
-    run = {**RUN, "total_steps": 128 * 6}
-    first = train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
-    assert steps_on_disk(tmp_path) == [2, 4, 6]
-    damage(tmp_path / "6", how)
+    run = {**RUN, "total_steps": 128 * 4}
+    first = train(**run, checkpoint_dir=tmp_path, checkpoint_every=1)
+    assert steps_on_disk(tmp_path) == [2, 3, 4]
+    damage(tmp_path / "4", how)
 
-    with pytest.warns(DamagedCheckpoint, match="step 6 .* damaged"):
-        again = train(**run, checkpoint_dir=tmp_path, resume=True, checkpoint_every=2)
-    assert again.resumed_from == 4  # and updates 5 and 6 were trained again, to the same bits
+    with pytest.warns(DamagedCheckpoint, match="step 4 .* damaged"):
+        again = train(**run, checkpoint_dir=tmp_path, resume=True, checkpoint_every=1)
+    assert again.resumed_from == 3  # and update 4 was trained again, to the same bits
     assert_same_run(again, first)
-    assert (tmp_path / "damaged" / "6").is_dir()  # set aside, not deleted
-    assert steps_on_disk(tmp_path) == [2, 4, 6]
+    assert (tmp_path / "damaged" / "4").is_dir()  # set aside, not deleted
+    assert steps_on_disk(tmp_path) == [2, 3, 4]
 
 
 def test_a_checkpoint_is_deleted_only_once_a_newer_one_is_complete(tmp_path):
@@ -138,12 +138,13 @@ def test_a_checkpoint_is_deleted_only_once_a_newer_one_is_complete(tmp_path):
 
 
 def test_resume_with_another_configuration_is_refused_naming_the_fields(tmp_path):
-    train(**RUN, checkpoint_dir=tmp_path, checkpoint_every=10)
+    run = {**RUN, "total_steps": 128 * 4}
+    train(**run, checkpoint_dir=tmp_path, checkpoint_every=2)
     with pytest.raises(ConfigMismatch, match=r"differing: k .*0.4.*0.3.*; num_envs .*4.*8"):
-        train(**{**RUN, "num_envs": 8}, k=0.3, checkpoint_dir=tmp_path, resume=True)
+        train(**{**run, "num_envs": 8}, k=0.3, checkpoint_dir=tmp_path, resume=True)
     with pytest.raises(ValueError, match="already holds checkpoints; pass resume=True"):
-        train(**RUN, checkpoint_dir=tmp_path)
-    assert steps_on_disk(tmp_path) == [10, 20]  # untouched
+        train(**run, checkpoint_dir=tmp_path)
+    assert steps_on_disk(tmp_path) == [2, 4]  # untouched
 
 
 def test_cli_refuses_to_overwrite_checkpoints_and_resumes_with_the_flag(tmp_path, capsys):
@@ -183,7 +184,7 @@ def test_nan_guard_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
 def test_interrupted_sweep_resumes_at_its_group_and_update(tmp_path):
     grid = {"variant": ["ppo", "fppo-lp"]}
     run = {"seeds": [0, 1], "chunk": 3, "total_steps": 128 * 6, **TINY}
-    whole = fppo_jax.sweep("cartpole", grid, **run)
+    whole = fppo_jax.sweep("cartpole", grid, **run, progress=lambda _: None)  # in 1-update chunks
 
     calls = []
 
@@ -195,7 +196,7 @@ def test_interrupted_sweep_resumes_at_its_group_and_update(tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         fppo_jax.sweep(
-            "cartpole", grid, **run, progress=interrupt, checkpoint_dir=tmp_path, checkpoint_every=2
+            "cartpole", grid, **run, progress=interrupt, checkpoint_dir=tmp_path, checkpoint_every=1
         )
     assert max(steps_on_disk(tmp_path)) == 6 + 4  # group 1, update 4
     resumed = fppo_jax.sweep(
@@ -414,7 +415,7 @@ def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(
             if snapshot.update == 4:  # checkpoint 4 is being written in the background
                 resource.setrlimit(resource.RLIMIT_FSIZE, (1000, resource.RLIM_INFINITY))
         try:
-            fppo_jax.train(**{RUN!r}, checkpoint_dir={str(tmp_path)!r}, checkpoint_every=2,
+            fppo_jax.train(**{RUN!r}, checkpoint_dir={str(tmp_path)!r}, checkpoint_every=1,
                            keep=10, callback=refuse)
         except fppo_jax.CheckpointNotWritten as error:
             print(error)
@@ -426,9 +427,9 @@ def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(
     assert done.returncode == 3, done.stderr[-3000:]
     assert done.stdout == (
         f"could not write a checkpoint in {tmp_path} (File too large); the newest intact one is "
-        "step 2. Free space, or choose another checkpoint directory, and resume (--resume)\n"
+        "step 3. Free space, or choose another checkpoint directory, and resume (--resume)\n"
     )
     assert "Traceback" not in done.stderr and "Event loop is closed" not in done.stderr
-    assert steps_on_disk(tmp_path) == [2]
-    resumed = train(**RUN, checkpoint_dir=tmp_path, resume=True, checkpoint_every=2, keep=10)
-    assert resumed.resumed_from == 2 and len(resumed.metrics["env_steps"]) == 20
+    assert steps_on_disk(tmp_path) == [1, 2, 3]
+    resumed = train(**RUN, checkpoint_dir=tmp_path, resume=True, checkpoint_every=1, keep=10)
+    assert resumed.resumed_from == 3 and len(resumed.metrics["env_steps"]) == 20

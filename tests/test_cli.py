@@ -33,7 +33,7 @@ def test_train_writes_metrics_config_and_summary(tmp_path, capsys):
             "--k",
             "0.3",
             "--steps",
-            "384",
+            "512",
             "--seed",
             "1",
             "--output",
@@ -44,16 +44,16 @@ def test_train_writes_metrics_config_and_summary(tmp_path, capsys):
     assert code == 0
     out, err = capsys.readouterr()
     assert "fppo-qp on cartpole (k = 0.3, epsilon = 0.2), seed 1" in out
-    assert "compiling" in err and "update     3/3" in err and "steps/s" in err
+    assert "compiling" in err and "update     4/4" in err and "steps/s" in err
     rows = list(csv.DictReader(open(tmp_path / "metrics.csv")))
-    assert [int(r["env_steps"]) for r in rows] == [128, 256, 384]
+    assert [int(r["env_steps"]) for r in rows] == [128, 256, 384, 512]
     config = json.loads((tmp_path / "config.json").read_text())
     assert config["variant"] == "fppo-qp" and config["k"] == 0.3 and config["num_envs"] == 4
     assert (tmp_path / "summary.txt").read_text().startswith("fppo-qp on cartpole")
 
 
 def test_a_recorded_run_reruns_from_its_config_and_flags_override_it(tmp_path, capsys):
-    first = ["train", "--variant", "fppo-qp", "--k", "0.3", "--steps", "384", "--seed", "1"]
+    first = ["train", "--variant", "fppo-qp", "--k", "0.3", "--steps", "512", "--seed", "1"]
     assert main([*first, *TINY_FLAGS, "--output", str(tmp_path / "a"), "--quiet"]) == 0
     config = str(tmp_path / "a" / "config.json")
     assert main(["train", "--config", config, "--output", str(tmp_path / "b"), "--quiet"]) == 0
@@ -70,13 +70,14 @@ def test_a_recorded_run_reruns_from_its_config_and_flags_override_it(tmp_path, c
 
 
 def test_a_recorded_sweep_reruns_from_its_config(tmp_path):
-    flags = ["sweep", "--variant", "ppo,fppo-qp", "--k", "0.2,0.4", "--seeds", "2"]
+    # 8 runs, as the sweep of test_sweep_then_table_then_plot: the same compiled program.
+    flags = ["sweep", "--variant", "ppo,fppo-qp", "--k", "0.2,0.3,0.4", "--seeds", "2"]
     flags += ["--steps", "256", *TINY_FLAGS, "--quiet"]
     assert main([*flags, "--output", str(tmp_path / "a")]) == 0
     config = str(tmp_path / "a" / "config.json")
     assert main(["sweep", "--config", config, "--output", str(tmp_path / "b"), "--quiet"]) == 0
     curves = [SweepResult.read(tmp_path / run) for run in ("a", "b")]
-    assert curves[0].runs == curves[1].runs and len(curves[0].runs) == 6
+    assert curves[0].runs == curves[1].runs and len(curves[0].runs) == 8
     for name, values in curves[0].metrics.items():
         np.testing.assert_array_equal(values, curves[1].metrics[name], err_msg=name)
 

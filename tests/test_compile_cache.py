@@ -98,7 +98,11 @@ def test_the_command_lines_help_names_the_switch():
 
 def test_a_cache_directory_given_to_jax_is_kept(tmp_path):
     theirs, ours = tmp_path / "theirs", tmp_path / "ours"
-    check = TRAIN + textwrap.dedent("""
+    # What train does first (compile_cache.enable), without a training run to compile.
+    check = textwrap.dedent("""
+        import json, jax
+        from fppo_jax import compile_cache
+        compile_cache.enable()
         print(json.dumps({"min_seconds": jax.config.jax_persistent_cache_min_compile_time_secs,
                           "dir": jax.config.jax_compilation_cache_dir}))
     """)

@@ -51,8 +51,8 @@ def test_periodic_evaluation_records_the_deterministic_return():
     assert np.isnan(np.delete(returns, [4, 9, 11])).all()
     final = evaluate(make_env("cartpole"), result.policy, 3, deterministic=True)
     assert returns[-1] == pytest.approx(final.mean(), rel=1e-6)
-    # Evaluating does not change training.
-    plain = train(**RUN)
+    # Evaluating does not change training (in the same chunks: chunks change nothing either).
+    plain = train(**RUN, progress=lambda _: None)
     assert_bitwise_equal(plain.params, result.params)
 
 
@@ -103,8 +103,16 @@ def test_a_sweep_logs_every_run_and_its_evaluations(tmp_path):
     last = [scores.tolist() for scores in back.scores("eval")]
     assert last == [result.metrics["eval_return"][2 * i : 2 * i + 2, 3].tolist() for i in (0, 1)]
     assert "| ppo |" in back.table("iqm", "eval")
+    unevaluated = sweep(
+        "cartpole",
+        {"variant": "ppo"},
+        seeds=1,
+        total_steps=128 * 4,
+        **TINY,
+        progress=lambda _: None,
+    )
     with pytest.raises(ValueError, match="recorded none: train it with eval_every"):
-        sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=128, **TINY).scores("eval")
+        unevaluated.scores("eval")
 
 
 def test_train_with_a_log_dir_writes_the_summary_as_the_cli_does(tmp_path):
@@ -119,7 +127,7 @@ def test_a_callback_can_stop_a_sweep():
         return snapshot.update < 2
 
     result = sweep(
-        "cartpole", {"variant": "ppo"}, seeds=2, total_steps=128 * 6, **TINY, callback=callback
+        "cartpole", {"variant": "ppo"}, seeds=2, total_steps=128 * 4, **TINY, callback=callback
     )
     assert result.metrics["env_steps"].shape == (2, 2)
 
@@ -142,7 +150,7 @@ def test_a_finished_run_goes_on_for_more_steps_as_if_it_had_been_longer(tmp_path
     short = {**RUN, "total_steps": 128 * 6}
     train(**short, checkpoint_dir=tmp_path)
     longer = train(**RUN, checkpoint_dir=tmp_path, resume=True)
-    whole = train(**RUN)
+    whole = train(**RUN, progress=lambda _: None)  # in the resumed run's chunks
     assert longer.resumed_from == 6 and len(longer.metrics["env_steps"]) == 12
     assert_bitwise_equal(longer.metrics, whole.metrics)
     assert_bitwise_equal(longer.params, whole.params)
@@ -188,7 +196,7 @@ def test_weights_and_biases_logs_each_run_of_a_sweep_as_one_run_grouped(tmp_path
         grid,
         seeds=[0, 7],
         chunk=2,
-        total_steps=128 * 2,
+        total_steps=128 * 4,
         **TINY,
         wandb_project="fppo-test",
         log_dir=tmp_path,
@@ -412,25 +420,29 @@ class _Compilations:
             self.events.append(event)
 
 
-def test_a_repeated_train_or_sweep_with_the_same_shapes_compiles_nothing():
-    # Layer widths no other test uses: the first call here compiles.
-    run = {**RUN, "hidden_sizes": (24, 24)}
-    first = train(**run)
+def test_a_repeated_train_or_sweep_with_the_same_shapes_compiles_nothing(monkeypatch):
+    from fppo_jax import execution
+
+    # An empty store of compiled programs: the first call here prepares its own whatever ran
+    # before it in this process (loading it from the session's cache where a test compiled it).
+    monkeypatch.setattr(execution, "_PROGRAMS", execution._Programs())
+    chunked = {"progress": lambda _: None}  # the chunks most tests here train in: one update
+    first = train(**RUN, **chunked)
     assert first.compile_seconds > 0
     with _Compilations() as compiled:
-        again = train(**{**run, "variant": "fppo-qp", "seed": 7, "learning_rate": 1e-3})
+        again = train(**{**RUN, "variant": "fppo-qp", "seed": 7, "learning_rate": 1e-3}, **chunked)
     assert compiled == [] and again.compile_seconds == 0
     assert not np.array_equal(again.metrics["policy_loss"], first.metrics["policy_loss"])
-    # A shape that differs is compiled for.
+    # A shape that differs is compiled for: layer widths no other test uses.
     with _Compilations() as compiled:
-        train(**{**run, "num_envs": 8})
+        train(**{**RUN, "hidden_sizes": (24, 24)}, **chunked)
     assert compiled
 
-    settings = {"total_steps": RUN["total_steps"], "hidden_sizes": (24, 24), **TINY}
+    settings = {"total_steps": 128 * 4, **TINY, **chunked}
     grid = {"variant": ["ppo", "fppo-lp"]}
-    assert sweep("cartpole", grid, seeds=2, **settings).compile_seconds > 0
+    assert sweep("cartpole", grid, seeds=1, **settings).compile_seconds > 0
     with _Compilations() as compiled:
-        other = sweep("cartpole", {"variant": ["tr-ppo", "fppo-qp"]}, seeds=[5, 6], **settings)
+        other = sweep("cartpole", {"variant": ["tr-ppo", "fppo-qp"]}, seeds=[5], **settings)
     assert compiled == [] and other.compile_seconds == 0
 
 
@@ -439,10 +451,10 @@ def test_one_writer_per_output_directory_from_the_first_moment(tmp_path):
 
     held = DirectoryLock(tmp_path, "a run's outputs")  # as another sweep starting on it would
     with pytest.raises(ValueError, match=rf"another process \(pid {os.getpid()}\) is writing"):
-        sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=256, **TINY, log_dir=tmp_path)
+        sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=512, **TINY, log_dir=tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == [".lock"]  # nothing written
     held.release()
-    sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=256, **TINY, log_dir=tmp_path)
+    sweep("cartpole", {"variant": "ppo"}, seeds=1, total_steps=512, **TINY, log_dir=tmp_path)
     assert (tmp_path / "sweep.json").exists()
 
 

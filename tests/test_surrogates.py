@@ -109,15 +109,16 @@ def test_a_user_surrogates_hyperparameters_are_checked_before_compiling():
 
 
 def test_a_user_ppo_trains_bit_for_bit_like_the_builtin(tiny):
-    builtin = train("cartpole", "ppo", seed=2, total_steps=TINY_STEPS, **tiny)
-    ours = train("cartpole", my_ppo, seed=2, total_steps=TINY_STEPS, **tiny)
+    # In one-update chunks, as the other tests here train: their compiled programs are reused.
+    run = {"total_steps": TINY_STEPS, "progress": lambda _: None, **tiny}
+    builtin = train("cartpole", "ppo", seed=2, **run)
+    ours = train("cartpole", my_ppo, seed=2, **run)
     for name, values in builtin.metrics.items():
         np.testing.assert_array_equal(ours.metrics[name], values, err_msg=name)
     assert ours.config["variant"] == "my-ppo"
     assert ours.config["surrogates"]["my-ppo"]["import"] == "own_surrogates:my_ppo"
     builtin, ours = (
-        sweep("cartpole", {"variant": [v]}, seeds=[2, 3], total_steps=TINY_STEPS, **tiny)
-        for v in ("ppo", my_ppo)
+        sweep("cartpole", {"variant": [v]}, seeds=[2, 3], **run) for v in ("ppo", my_ppo)
     )
     for name, values in builtin.metrics.items():
         np.testing.assert_array_equal(ours.metrics[name], values, err_msg=name)
@@ -174,13 +175,15 @@ def test_the_command_line_takes_a_surrogate_by_module_and_its_flags(tiny, tmp_pa
 
 
 def test_a_record_tells_two_functions_under_one_name_apart(tiny):
-    first = sweep("cartpole", {"variant": [my_ppo]}, seeds=[0], total_steps=TINY_STEPS, **tiny)
+    # The shape of the sweeps of test_a_user_ppo_trains_bit_for_bit_like_the_builtin.
+    run = {"total_steps": TINY_STEPS, "progress": lambda _: None, **tiny}
+    first = sweep("cartpole", {"variant": [my_ppo]}, seeds=[0, 1], **run)
     other = surrogate("my-ppo", lambda ratio, advantage: ratio * advantage)
-    second = sweep("cartpole", {"variant": [other]}, seeds=[1], total_steps=TINY_STEPS, **tiny)
+    second = sweep("cartpole", {"variant": [other]}, seeds=[2, 3], **run)
     with pytest.raises(ValueError, match="another surrogate named 'my-ppo'"):
         fppo_jax.merge([first, second])
-    same = sweep("cartpole", {"variant": [my_ppo]}, seeds=[1], total_steps=TINY_STEPS, **tiny)
-    assert len(fppo_jax.merge([first, same]).runs) == 2
+    same = sweep("cartpole", {"variant": [my_ppo]}, seeds=[2, 3], **run)
+    assert len(fppo_jax.merge([first, same]).runs) == 4
 
 
 def test_a_resumed_run_refuses_another_function_under_the_same_name(tiny, tmp_path):

@@ -1,6 +1,7 @@
 """experiments/bench_startup.py: its smoke run measures every arm and writes its table into a
 temporary directory, never into the recorded results."""
 
+import importlib.util
 import re
 import subprocess
 import sys
@@ -37,3 +38,14 @@ def test_the_smoke_run_measures_every_arm_into_a_temporary_directory():
 def test_the_smoke_run_refuses_the_recorded_results():
     into = bench("--smoke", "--results", str(SCRIPT.parent / "results"))
     assert into.returncode != 0 and "never writes into the recorded results" in into.stderr
+
+
+def test_the_benchmark_s_own_load_does_not_count_as_other_work(monkeypatch):
+    monkeypatch.syspath_prepend(str(SCRIPT.parent))  # as `python experiments/...` has it
+    spec = importlib.util.spec_from_file_location("bench_startup", SCRIPT)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert not script.shared_machine(0.6, 1.1, cores=2)  # quiet: the load after is its own
+    assert script.shared_machine(5.1, 4.3, cores=2)  # busy before and after
+    assert script.shared_machine(0.2, 2.5, cores=2)  # other work came while it ran
+    assert not script.shared_machine(0.2, 2.5, cores=8)

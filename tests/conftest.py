@@ -10,6 +10,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 # A few updates of a small batch: enough to exercise every part of an update quickly.
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
+# A progress callback that reports nothing: the run is called in the chunks progress reporting
+# uses (one update each, up to 20 updates), as a run with checkpoints, logs or a callback is. A
+# test that compares with such runs, or trains beside them, passes it to share their program.
+IN_CHUNKS = {"progress": lambda _: None}
 
 
 @pytest.fixture

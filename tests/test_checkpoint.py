@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import IN_CHUNKS, TINY
 from helpers import NaNRewardAfter, assert_bitwise_equal
 
 import fppo_jax
@@ -30,7 +31,6 @@ from fppo_jax.checkpoint import Checkpoints
 from fppo_jax.cli import main
 from fppo_jax.trainer import METRICS
 
-TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 20, **TINY}
 
 
@@ -76,7 +76,7 @@ def test_run_killed_with_sigkill_resumes_to_the_same_bits(tmp_path):
     resumed = train(
         **RUN, checkpoint_dir=checkpoints, resume=True, checkpoint_every=1, log_dir=logs
     )
-    uninterrupted = train(**RUN, progress=lambda _: None)  # in chunks, as the resumed run
+    uninterrupted = train(**RUN, **IN_CHUNKS)  # in the resumed run's chunks
     assert resumed.resumed_from > 0
     assert_same_run(resumed, uninterrupted)
     # The log holds each update once, even those the killed run logged after its checkpoint.
@@ -184,7 +184,7 @@ def test_nan_guard_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path):
 def test_interrupted_sweep_resumes_at_its_group_and_update(tmp_path):
     grid = {"variant": ["ppo", "fppo-lp"]}
     run = {"seeds": [0, 1], "chunk": 3, "total_steps": 128 * 6, **TINY}
-    whole = fppo_jax.sweep("cartpole", grid, **run, progress=lambda _: None)  # in 1-update chunks
+    whole = fppo_jax.sweep("cartpole", grid, **run, **IN_CHUNKS)
 
     calls = []
 

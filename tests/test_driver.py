@@ -12,7 +12,7 @@ from pathlib import Path
 import jax
 import numpy as np
 import pytest
-from conftest import TINY
+from conftest import IN_CHUNKS, TINY
 from helpers import assert_bitwise_equal
 
 import fppo_jax
@@ -52,7 +52,7 @@ def test_periodic_evaluation_records_the_deterministic_return():
     final = evaluate(make_env("cartpole"), result.policy, 3, deterministic=True)
     assert returns[-1] == pytest.approx(final.mean(), rel=1e-6)
     # Evaluating does not change training (in the same chunks: chunks change nothing either).
-    plain = train(**RUN, progress=lambda _: None)
+    plain = train(**RUN, **IN_CHUNKS)
     assert_bitwise_equal(plain.params, result.params)
 
 
@@ -109,7 +109,7 @@ def test_a_sweep_logs_every_run_and_its_evaluations(tmp_path):
         seeds=1,
         total_steps=128 * 4,
         **TINY,
-        progress=lambda _: None,
+        **IN_CHUNKS,
     )
     with pytest.raises(ValueError, match="recorded none: train it with eval_every"):
         unevaluated.scores("eval")
@@ -150,7 +150,7 @@ def test_a_finished_run_goes_on_for_more_steps_as_if_it_had_been_longer(tmp_path
     short = {**RUN, "total_steps": 128 * 6}
     train(**short, checkpoint_dir=tmp_path)
     longer = train(**RUN, checkpoint_dir=tmp_path, resume=True)
-    whole = train(**RUN, progress=lambda _: None)  # in the resumed run's chunks
+    whole = train(**RUN, **IN_CHUNKS)  # in the resumed run's chunks
     assert longer.resumed_from == 6 and len(longer.metrics["env_steps"]) == 12
     assert_bitwise_equal(longer.metrics, whole.metrics)
     assert_bitwise_equal(longer.params, whole.params)
@@ -426,19 +426,20 @@ def test_a_repeated_train_or_sweep_with_the_same_shapes_compiles_nothing(monkeyp
     # An empty store of compiled programs: the first call here prepares its own whatever ran
     # before it in this process (loading it from the session's cache where a test compiled it).
     monkeypatch.setattr(execution, "_PROGRAMS", execution._Programs())
-    chunked = {"progress": lambda _: None}  # the chunks most tests here train in: one update
-    first = train(**RUN, **chunked)
+    first = train(**RUN, **IN_CHUNKS)
     assert first.compile_seconds > 0
     with _Compilations() as compiled:
-        again = train(**{**RUN, "variant": "fppo-qp", "seed": 7, "learning_rate": 1e-3}, **chunked)
+        again = train(
+            **{**RUN, "variant": "fppo-qp", "seed": 7, "learning_rate": 1e-3}, **IN_CHUNKS
+        )
     assert compiled == [] and again.compile_seconds == 0
     assert not np.array_equal(again.metrics["policy_loss"], first.metrics["policy_loss"])
     # A shape that differs is compiled for: layer widths no other test uses.
     with _Compilations() as compiled:
-        train(**{**RUN, "hidden_sizes": (24, 24)}, **chunked)
+        train(**{**RUN, "hidden_sizes": (24, 24)}, **IN_CHUNKS)
     assert compiled
 
-    settings = {"total_steps": 128 * 4, **TINY, **chunked}
+    settings = {"total_steps": 128 * 4, **TINY, **IN_CHUNKS}
     grid = {"variant": ["ppo", "fppo-lp"]}
     assert sweep("cartpole", grid, seeds=1, **settings).compile_seconds > 0
     with _Compilations() as compiled:

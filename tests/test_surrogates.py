@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import IN_CHUNKS
 from own_surrogates import clipped, my_clip_higher, my_ppo
 
 import fppo_jax
@@ -110,7 +111,7 @@ def test_a_user_surrogates_hyperparameters_are_checked_before_compiling():
 
 def test_a_user_ppo_trains_bit_for_bit_like_the_builtin(tiny):
     # In one-update chunks, as the other tests here train: their compiled programs are reused.
-    run = {"total_steps": TINY_STEPS, "progress": lambda _: None, **tiny}
+    run = {"total_steps": TINY_STEPS, **IN_CHUNKS, **tiny}
     builtin = train("cartpole", "ppo", seed=2, **run)
     ours = train("cartpole", my_ppo, seed=2, **run)
     for name, values in builtin.metrics.items():
@@ -176,7 +177,7 @@ def test_the_command_line_takes_a_surrogate_by_module_and_its_flags(tiny, tmp_pa
 
 def test_a_record_tells_two_functions_under_one_name_apart(tiny):
     # The shape of the sweeps of test_a_user_ppo_trains_bit_for_bit_like_the_builtin.
-    run = {"total_steps": TINY_STEPS, "progress": lambda _: None, **tiny}
+    run = {"total_steps": TINY_STEPS, **IN_CHUNKS, **tiny}
     first = sweep("cartpole", {"variant": [my_ppo]}, seeds=[0, 1], **run)
     other = surrogate("my-ppo", lambda ratio, advantage: ratio * advantage)
     second = sweep("cartpole", {"variant": [other]}, seeds=[2, 3], **run)

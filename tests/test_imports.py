@@ -66,3 +66,29 @@ def test_every_public_name_is_importable_and_listed():
     assert fppo_jax.expand_grid is expand_grid
     with pytest.raises(AttributeError, match="no_such_name"):
         fppo_jax.no_such_name  # noqa: B018
+
+
+def test_gymnax_loads_its_drawing_libraries_on_first_use():
+    """gymnax imports seaborn and pyplot for a few render functions: a gymnax environment is
+    made without loading them, and a render function that uses them gets the usual modules."""
+    code = """
+        import json, sys
+        from fppo_jax import make_env
+        make_env("cartpole")
+        drawing = ("seaborn", "scipy", "matplotlib.pyplot")
+        deferred = [name for name in drawing if name in sys.modules]
+        from gymnax.environments.misc import pong
+        palette = pong.sns.color_palette("cubehelix", 3)
+        import matplotlib.pyplot, seaborn
+        same = [pong.sns.color_palette is seaborn.color_palette, pong.plt is not matplotlib.pyplot,
+                pong.plt.subplots is matplotlib.pyplot.subplots]
+        print(json.dumps([deferred, len(palette), same]))
+    """
+    done = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert json.loads(done.stdout.splitlines()[-1]) == [[], 3, [True, True, True]]

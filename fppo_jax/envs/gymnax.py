@@ -7,8 +7,10 @@ JAX's backends before a multi-process run can join (fppo_jax.distributed).
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import math
 import sys
+from types import ModuleType
 from typing import Any, TypeGuard
 
 import jax
@@ -64,8 +66,7 @@ class GymnaxEnvironment:
 def gymnax_environment(env_id: str, max_steps: int | None = None) -> GymnaxEnvironment:
     """gymnax's environment `env_id`, with its default parameters and, if given, `max_steps`
     steps per episode."""
-    import gymnax
-
+    gymnax = imported_gymnax()
     if env_id not in gymnax.registered_envs:
         raise InvalidInput(
             f"gymnax has no environment {env_id!r}; it offers: " + ", ".join(gymnax.registered_envs)
@@ -74,6 +75,38 @@ def gymnax_environment(env_id: str, max_steps: int | None = None) -> GymnaxEnvir
     if max_steps is not None:
         params = params.replace(max_steps_in_episode=max_steps)
     return GymnaxEnvironment(env, params)
+
+
+# gymnax 1.0 imports seaborn and matplotlib's pyplot as it is imported, though only the render
+# functions of a few of its environments use them; loading them is most of its one-second import.
+_DRAWING = ("seaborn", "matplotlib.pyplot")
+
+
+class _StandIn(ModuleType):
+    """What gymnax's modules import in place of a drawing library: the library itself is
+    imported, the usual way, when an attribute is first asked of this."""
+
+    def __getattr__(self, attr: str) -> Any:
+        if sys.modules.get(self.__name__) is self:
+            del sys.modules[self.__name__]
+        return getattr(importlib.import_module(self.__name__), attr)
+
+
+def imported_gymnax() -> ModuleType:
+    """gymnax, imported with its drawing libraries deferred (see :class:`_StandIn`);
+    ``sys.modules`` is left as a plain import would leave it, less those libraries."""
+    stand_ins = {
+        name: _StandIn(name)
+        for name in _DRAWING
+        if name not in sys.modules and "gymnax" not in sys.modules
+    }
+    sys.modules.update(stand_ins)
+    try:
+        return importlib.import_module("gymnax")
+    finally:
+        for name, stand_in in stand_ins.items():
+            if sys.modules.get(name) is stand_in:
+                del sys.modules[name]
 
 
 def is_gymnax_env(env: Any) -> TypeGuard[Any]:

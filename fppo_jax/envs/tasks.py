@@ -192,9 +192,9 @@ def _suggestion(name: str) -> str:
 
     found = []
     if importlib.util.find_spec("gymnax") is not None:
-        import gymnax
+        from fppo_jax.envs.gymnax import imported_gymnax
 
-        if name in gymnax.registered_envs:
+        if name in imported_gymnax().registered_envs:
             found.append(f"gymnax/{name}")
     if importlib.util.find_spec("gymnasium") is not None:
         import gymnasium

@@ -44,6 +44,33 @@ def test_one_row_per_update_and_chunks_change_nothing(tiny):
     assert reports[-1].env_steps == 512 and reports[-1].total_steps == 512
 
 
+def test_a_chunk_past_the_run_end_updates_nothing(tiny):
+    """A chunk longer than what is left of the run makes the updates left, gives NaN rows
+    (env_steps -1) for the rest and leaves the state where the run ended, alone and vmapped."""
+    config = TrainConfig(total_steps=3 * 128, **tiny)
+    trainer = make_train(config, make_env("cartpole"))
+    key, hp = jax.random.key(0), hyperparameters("ppo")
+    chunk = jax.jit(lambda state, hp: trainer.run(state, hp, 2))
+    started = jax.jit(trainer.init)(key, hp)
+    halfway, first = chunk(started, hp)
+    state, second = chunk(halfway, hp)
+    after_end, third = chunk(state, hp)
+    steps = np.concatenate([first.env_steps, second.env_steps, third.env_steps])
+    assert steps.tolist() == [128, 256, 384, -1, -1, -1]
+    assert np.isfinite(second.policy_loss[0]) and np.isnan(second.policy_loss[1])
+    assert np.isnan(np.stack(third[1:])).all()
+    assert int(state.update) == int(after_end.update) == 3
+    learnt = lambda s: jax.tree.leaves((s.params, s.opt_state, s.obs_stats, s.envs))  # noqa: E731
+    for ended, unchanged in zip(learnt(state), learnt(after_end), strict=True):
+        np.testing.assert_array_equal(ended, unchanged)
+    # Vmapped runs at different updates: one ends within the chunk, the other does not.
+    runs = jax.tree.map(lambda *x: jnp.stack(x), halfway, started)
+    hps = jax.tree.map(lambda x: jnp.stack([x, x]), hp)
+    _, vmapped = jax.jit(jax.vmap(lambda s, h: trainer.run(s, h, 2)))(runs, hps)
+    assert vmapped.env_steps.tolist() == [[384, -1], [128, 256]]
+    assert np.isnan(vmapped.policy_loss[0, 1]) and np.isfinite(vmapped.policy_loss[1]).all()
+
+
 def test_cartpole_learns_with_ppo():
     result = train("cartpole", "ppo", total_steps=40_960)
     assert np.nanmax(result.metrics["average_return"]) > 120

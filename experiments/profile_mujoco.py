@@ -1,0 +1,131 @@
+"""Where an MJX update's time goes beyond the environment's own, and what running each update
+inside a `lax.cond` costs.
+
+    python experiments/profile_mujoco.py [--env hopper] [--num-envs 128] [--updates 20]
+        [--repeats 3]
+
+At the shape of bench_mujoco.py's MJX rows (16-step unrolls, 4 minibatches × 4 epochs, one reset
+state per environment per rollout, PPO), each arm one compiled program of `--updates` updates of
+one run, interleaved, best of `--repeats`:
+- the environment alone, random actions (bench_mujoco.py's (a));
+- the rollout alone: the policy acting and the environments stepping, the parameters fixed;
+- the whole update, as `Trainer.run` runs it (a loop of the updates left of the run);
+- the whole update inside a `lax.cond` in a loop of the chunk's length, as `Trainer.run` ran it
+  before (the `cond` skipped updates past the run's end).
+The difference between two arms is what the second adds. Writes
+experiments/results/profile_mujoco_<env>_<N>envs_<platform>.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from common import (
+    add_record_flags,
+    argument_parser,
+    env_alone,
+    header,
+    refuse_to_replace,
+    seconds,
+    write_result,
+)
+
+from fppo_jax import hyperparameters, make_train
+from fppo_jax.config import describe_update, preset_config
+from fppo_jax.envs import make_env
+from fppo_jax.trainer import METRICS, Metrics, Trainer
+
+
+class InCond(Trainer):
+    """The trainer with each update in a `lax.cond`, as `Trainer.run` was before."""
+
+    def run(self, state, hp, num_updates):
+        def step(state, _):
+            active = state.update < self.config.num_updates
+            return jax.lax.cond(active, self.update, self._past_end, state, hp)
+
+        return jax.lax.scan(step, state, None, length=num_updates)
+
+    def _past_end(self, state, hp):
+        nan = jnp.asarray(jnp.nan, jnp.float32)
+        return state, Metrics(jnp.asarray(-1, jnp.int32), *[nan] * (len(METRICS) - 1))
+
+
+def rollouts_alone(trainer: Trainer, updates: int):
+    """`updates` rollouts from a state, its parameters fixed; the rewards' sum."""
+
+    def run(state, hp):
+        def rollout(state, _):
+            key, rollout_key = jax.random.split(state.key)
+            trajectory, envs = trainer._rollout(state, hp, rollout_key)
+            return dataclasses.replace(state, envs=envs, key=key), trajectory.reward.sum()
+
+        return jax.lax.scan(rollout, state, None, length=updates)
+
+    return run
+
+
+def main() -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--env", default="hopper")
+    parser.add_argument("--num-envs", type=int, default=128)
+    parser.add_argument("--updates", type=int, default=20)
+    parser.add_argument("--repeats", type=int, default=3)
+    add_record_flags(parser)
+    args = parser.parse_args()
+    platform = jax.devices()[0].platform
+    path = args.results / f"profile_mujoco_{args.env}_{args.num_envs}envs_{platform}.md"
+    refuse_to_replace([path], args.force)
+
+    shape = {"num_envs": args.num_envs, "num_steps": 16, "num_minibatches": 4, "num_epochs": 4}
+    samples = args.num_envs * shape["num_steps"]
+    config = preset_config(
+        "paper", total_steps=args.updates * samples, resets_per_rollout=1, **shape
+    )
+    env = make_env(args.env, "mjx")
+    trainer = make_train(config, env)
+    in_cond = InCond(trainer.config, trainer.env, trainer.networks)
+    hp = hyperparameters("ppo")
+    state = jax.jit(trainer.init)(jax.random.key(0), hp)
+    arms = {
+        "the environment alone": (env_alone(env, args.num_envs, 16, args.updates), (state.key,)),
+        "the rollout alone": (rollouts_alone(trainer, args.updates), (state, hp)),
+        "the whole update (`Trainer.run`)": (trainer.run, (state, hp, args.updates)),
+        "the whole update inside a `lax.cond`": (in_cond.run, (state, hp, args.updates)),
+    }
+    programs = {}
+    for name, (fn, inputs) in arms.items():
+        static = (2,) if len(inputs) == 3 else ()
+        compiled = jax.jit(fn, static_argnums=static).lower(*inputs).compile()
+        dynamic = tuple(x for i, x in enumerate(inputs) if i not in static)
+        programs[name] = (lambda c, d: lambda: c(*d))(compiled, dynamic)
+        print(f"compiled {name}", flush=True)
+    best = dict.fromkeys(programs, float("inf"))
+    for repeat in range(args.repeats):
+        for name, program in programs.items():
+            best[name] = min(best[name], seconds(program))
+        print(f"repeat {repeat + 1}: " + ", ".join(f"{k} {v:.2f} s" for k, v in best.items()))
+
+    alone = best["the environment alone"]
+    lines = [
+        *header(f"Where an MJX update's time goes: {args.env}, {args.num_envs} environments"),
+        f"- Shape: {describe_update(config)}, one reset state per environment per rollout, "
+        f"PPO; {args.updates} updates of one run per compiled call, arms interleaved, best of "
+        f"{args.repeats}",
+        "",
+        "| arm | per update (ms) | env steps/s | beyond the environment alone (ms) |",
+        "|---|---|---|---|",
+        *[
+            f"| {name} | {1000 * wall / args.updates:.1f} | "
+            f"{args.updates * samples / wall:,.0f} | {1000 * (wall - alone) / args.updates:+.1f} |"
+            for name, wall in best.items()
+        ],
+    ]
+    write_result(path, lines)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -16,9 +16,11 @@ from __future__ import annotations
 import argparse
 import csv
 import datetime
+import functools
 import json
 import os
 import platform
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -35,7 +37,7 @@ if TYPE_CHECKING:
     from fppo_jax.results import SweepResult
 
 RESULTS = Path(__file__).resolve().parent / "results"
-RUN_RECORD = "run.json"  # beside a sweep's curves: the machine, date, wall time and command
+RUN_RECORD = "run.json"  # beside a sweep's curves: the machine, date, wall time, commit, command
 
 PAPER_VARIANTS = ("fppo-lp", "fppo-qp", "ppo", "tr-ppo", "ppo-rb")
 CLASSIC_TASKS = ("cartpole", "acrobot", "mountaincar")
@@ -126,19 +128,36 @@ def machine() -> str:
     return f"{cpu}, {cores}, {accelerator}; jax {jax.__version__}"
 
 
+def commit() -> str:
+    """The commit the code runs at, and whether the package's or the scripts' code differed from
+    it (``unknown`` outside a git checkout)."""
+    here = Path(__file__).resolve().parent
+    git = functools.partial(subprocess.run, cwd=here, capture_output=True, text=True, check=True)
+    try:
+        head = git(["git", "rev-parse", "HEAD"]).stdout.strip()
+        changed = git(["git", "status", "--porcelain", "--", "../fppo_jax", "*.py"]).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + (" with uncommitted changes to the code" if changed.strip() else "")
+
+
+# The code a script runs, taken as it starts: whatever is committed while it runs is not its.
+STARTED_AT = commit()
+
+
 def command() -> str:
     """The command line that is running, as it is typed from the repository root."""
     return " ".join([f"python experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]])
 
 
 def header(title: str) -> list[str]:
-    """A Markdown result's first lines: its title, then the machine, date and command that made
-    it."""
+    """A Markdown result's first lines: its title, then the machine, date, command and commit
+    that made it."""
     return [
         f"# {title}",
         "",
         f"- Machine: {machine()}; {datetime.date.today()}",
-        f"- Command: `{command()}`",
+        f"- Command: `{command()}`, at {STARTED_AT}",
     ]
 
 
@@ -149,11 +168,13 @@ def write_result(path: Path, lines: Iterable[str]) -> None:
 
 
 def write_run_record(directory: Path, wall_seconds: float, **more: str) -> None:
-    """`directory`'s run record: the machine, date, wall time and command, with `more`."""
+    """`directory`'s run record: the machine, date, wall time, commit and command, with
+    `more`."""
     record = {
         "machine": machine(),
         "date": str(datetime.date.today()),
         "wall_seconds": round(wall_seconds, 1),
+        "commit": STARTED_AT,
         **more,
         "command": command(),
     }

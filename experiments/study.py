@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -57,25 +56,6 @@ PROTOCOLS = {
     "paper": {},
     "unnormalised": {"normalize_observations": False, "normalize_rewards": False},
 }
-
-
-def commit() -> str:
-    """The commit the code ran at, and whether the tree differed from it."""
-    here = Path(__file__).resolve().parent
-    try:
-        head = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, check=True
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--", "../fppo_jax"],
-            cwd=here,
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-    return head + (" with uncommitted changes to fppo_jax/" if dirty else "")
 
 
 def part_name(variants: list[str], seeds: list[int]) -> str:
@@ -178,7 +158,6 @@ def main() -> None:
             "remove that part to record it again"
         )
     print(f"part: {directory}", flush=True)
-    code = commit()  # the code that trains, whatever is committed while it runs
     start = time.perf_counter()
     result = sweep(
         args.task,
@@ -195,7 +174,7 @@ def main() -> None:
     directory.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=".part-", dir=directory.parent))
     result.write(staging, metrics=RECORDED_METRICS)
-    write_run_record(staging, wall, protocol=args.protocol, commit=code)
+    write_run_record(staging, wall, protocol=args.protocol)
     if directory.exists():  # --force
         shutil.rmtree(directory)
     staging.rename(directory)

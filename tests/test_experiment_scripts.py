@@ -105,3 +105,16 @@ def test_the_dose_response_names_the_seed_and_update_where_a_control_parts(monke
     control = walker.metrics["negative_fraction_after"][dose_response.by_seed(walker, index)[5]]
     np.testing.assert_array_equal(control[:125], ppo[:125])
     assert control[125] != ppo[125]
+
+
+def test_a_result_records_the_commit_it_was_made_at(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    common = importlib.import_module("common")
+    head = subprocess.run(
+        ["git", "rev-parse", "HEAD"], cwd=EXPERIMENTS, capture_output=True, text=True, check=True
+    ).stdout.strip()
+    assert common.STARTED_AT.split(" ")[0] == head
+    command = next(line for line in common.header("a result") if line.startswith("- Command: "))
+    assert command.endswith(f", at {common.STARTED_AT}")
+    common.write_run_record(tmp_path, 1.0, protocol="paper")
+    assert common.read_run_record(tmp_path)["commit"] == common.STARTED_AT

@@ -128,6 +128,9 @@ def machine() -> str:
     return f"{cpu}, {cores}, {accelerator}; jax {jax.__version__}"
 
 
+UNCOMMITTED = "with uncommitted changes to the code"
+
+
 def commit() -> str:
     """The commit the code runs at, and whether the package's or the scripts' code differed from
     it (``unknown`` outside a git checkout)."""
@@ -138,7 +141,7 @@ def commit() -> str:
         changed = git(["git", "status", "--porcelain", "--", "../fppo_jax", "*.py"]).stdout
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
-    return head + (" with uncommitted changes to the code" if changed.strip() else "")
+    return head + (f" {UNCOMMITTED}" if changed.strip() else "")
 
 
 # The code a script runs, taken as it starts: whatever is committed while it runs is not its.

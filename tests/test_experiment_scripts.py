@@ -1,5 +1,6 @@
 """experiments/: what the scripts advise when they refuse, and their helpers on every space."""
 
+import datetime
 import importlib
 import json
 import subprocess
@@ -118,3 +119,20 @@ def test_a_result_records_the_commit_it_was_made_at(monkeypatch, tmp_path):
     assert command.endswith(f", at {common.STARTED_AT}")
     common.write_run_record(tmp_path, 1.0, protocol="paper")
     assert common.read_run_record(tmp_path)["commit"] == common.STARTED_AT
+
+
+def test_the_results_index_is_current_and_reads_what_a_result_records(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    common = importlib.import_module("common")
+    results_index = importlib.import_module("results_index")
+    assert results_index.INDEX.read_text() == results_index.index(), (
+        "experiments/results/README.md is not current: run python experiments/results_index.py"
+    )
+    record = tmp_path / "result.md"
+    common.write_result(record, [*common.header("A result"), "", "| a | b |"])
+    about = results_index.described(record)
+    assert about["title"] == "A result"
+    assert about["machine"] == common.machine().split(";")[0]
+    assert about["date"] == str(datetime.date.today())
+    assert about["command"].startswith("`python experiments/")
+    assert about["commit"] == common.STARTED_AT[:12] + common.STARTED_AT[40:]

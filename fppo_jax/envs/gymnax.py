@@ -87,8 +87,8 @@ class _StandIn(ModuleType):
     imported, the usual way, when an attribute is first asked of this."""
 
     def __getattr__(self, attr: str) -> Any:
-        if sys.modules.get(self.__name__) is self:
-            del sys.modules[self.__name__]
+        if sys.modules.get(self.__name__) is self:  # asked during gymnax's own import
+            sys.modules.pop(self.__name__, None)
         return getattr(importlib.import_module(self.__name__), attr)
 
 

@@ -198,6 +198,17 @@ def seconds(program: Callable[[], object]) -> float:
     return time.perf_counter() - start
 
 
+def best_interleaved(programs: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
+    """Each program's best wall seconds over `repeats` rounds that call every program in turn,
+    so that load that comes and goes falls on all of them alike; each round is printed."""
+    best = dict.fromkeys(programs, float("inf"))
+    for repeat in range(repeats):
+        for name, program in programs.items():
+            best[name] = min(best[name], seconds(program))
+        print(f"repeat {repeat + 1}: " + ", ".join(f"{k} {v:.2f} s" for k, v in best.items()))
+    return best
+
+
 def env_alone(
     env: Environment, num_envs: int, num_steps: int, num_rollouts: int
 ) -> Callable[[jax.Array], jax.Array]:

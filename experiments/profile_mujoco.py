@@ -19,16 +19,17 @@ experiments/results/profile_mujoco_<env>_<N>envs_<platform>.md.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
 from common import (
     add_record_flags,
     argument_parser,
+    best_interleaved,
     env_alone,
     header,
     refuse_to_replace,
-    seconds,
     write_result,
 )
 
@@ -89,24 +90,19 @@ def main() -> None:
     in_cond = InCond(trainer.config, trainer.env, trainer.networks)
     hp = hyperparameters("ppo")
     state = jax.jit(trainer.init)(jax.random.key(0), hp)
+    run = functools.partial(Trainer.run, num_updates=args.updates)
     arms = {
         "the environment alone": (env_alone(env, args.num_envs, 16, args.updates), (state.key,)),
         "the rollout alone": (rollouts_alone(trainer, args.updates), (state, hp)),
-        "the whole update (`Trainer.run`)": (trainer.run, (state, hp, args.updates)),
-        "the whole update inside a `lax.cond`": (in_cond.run, (state, hp, args.updates)),
+        "the whole update (`Trainer.run`)": (functools.partial(run, trainer), (state, hp)),
+        "the whole update inside a `lax.cond`": (functools.partial(run, in_cond), (state, hp)),
     }
     programs = {}
     for name, (fn, inputs) in arms.items():
-        static = (2,) if len(inputs) == 3 else ()
-        compiled = jax.jit(fn, static_argnums=static).lower(*inputs).compile()
-        dynamic = tuple(x for i, x in enumerate(inputs) if i not in static)
-        programs[name] = (lambda c, d: lambda: c(*d))(compiled, dynamic)
+        compiled = jax.jit(fn).lower(*inputs).compile()
+        programs[name] = functools.partial(compiled, *inputs)
         print(f"compiled {name}", flush=True)
-    best = dict.fromkeys(programs, float("inf"))
-    for repeat in range(args.repeats):
-        for name, program in programs.items():
-            best[name] = min(best[name], seconds(program))
-        print(f"repeat {repeat + 1}: " + ", ".join(f"{k} {v:.2f} s" for k, v in best.items()))
+    best = best_interleaved(programs, args.repeats)
 
     alone = best["the environment alone"]
     lines = [

@@ -32,9 +32,9 @@ import purejaxrl_settings as pjr
 from common import (
     add_record_flags,
     argument_parser,
+    best_interleaved,
     header,
     refuse_to_replace,
-    seconds,
     write_result,
 )
 
@@ -106,11 +106,7 @@ def main() -> None:
         "a plain scan of updates": arm(PlainScan),
         "without any of them": arm(WithoutAny, ppo_surrogate_only, without_guard),
     }
-    best = dict.fromkeys(arms, float("inf"))
-    for repeat in range(args.repeats):
-        for name, program in arms.items():
-            best[name] = min(best[name], seconds(program))
-        print(f"repeat {repeat + 1}: " + ", ".join(f"{k} {v:.2f} s" for k, v in best.items()))
+    best = best_interleaved(arms, args.repeats)
     base, n, steps = best["as is"], args.seeds, args.steps
     lines = [
         *header("What each extra costs under vmap"),

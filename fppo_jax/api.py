@@ -14,7 +14,7 @@ from fppo_jax.config import (
 from fppo_jax.distributed import is_main_process
 from fppo_jax.driver import Outcome, Plan, drive
 from fppo_jax.envs import Environment
-from fppo_jax.execution import batch_of_one, first_run
+from fppo_jax.execution import batch_of_one_on_device, first_run, first_run_on_device
 from fppo_jax.objectives import (
     BUILTINS,
     DEFAULT_VARIANT,
@@ -68,14 +68,14 @@ def train(
     seed = check_seed(seed)
     record = {**setting, **run.record(seed=seed, **identities([surrogate]))}
     description = f"{surrogate.name} on {run.name}"
-    keys, hps = batch_of_one((jax.random.key(seed), hp))
+    keys, hps = batch_of_one_on_device((jax.random.key(seed), hp))
     plan = Plan("train", run.trainer, keys, hps, record, description, run.header(description))
     return _result(run, record, drive(plan, run.options))
 
 
 def _result(run: Prepared, record: dict[str, Any], outcome: Outcome) -> TrainResult:
     """The run's result, its ``summary.txt`` written beside what the driver wrote in ``log_dir``."""
-    metrics, state = first_run((outcome.metrics, outcome.state))
+    metrics, state = first_run(outcome.metrics), first_run_on_device(outcome.state)
     result = TrainResult(
         metrics=metrics,
         params=state.params,

@@ -196,7 +196,8 @@ def drive(plan: Plan, options: Options) -> Outcome:
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
         if plan.runs_per_call is None and checkpointed is None:
             runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
-            size = runs_per_call(plan.trainer, *first_run((plan.keys, plan.hps)), size, runs, data)
+            shapes = jax.eval_shape(first_run, (plan.keys, plan.hps))
+            size = runs_per_call(plan.trainer, *shapes, size, runs, data)
         program = _compile(plan, options, mesh, size, main)
         with (
             reporter(options.progress if main else False, plan.description) as report,
@@ -317,6 +318,8 @@ def _updates_per_call(options: Options, num_updates: int) -> int:
 def _group(plan: Plan, group: int, size: int) -> tuple[jax.Array, Hyperparameters]:
     """The keys and hyperparameters of group `group`: runs group·size … (group+1)·size − 1,
     the last run repeated past the end, so that every group has one shape."""
+    if group == 0 and size == plan.num_runs:
+        return plan.keys, plan.hps  # as they are: a gather would compile a program per leaf
     index = _padded(group * size, size, plan.num_runs)
     return plan.keys[index], jax.tree.map(lambda x: x[index], plan.hps)
 

@@ -21,7 +21,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from fppo_jax.config import Hyperparameters
-from fppo_jax.distributed import input_sharding, place, state_shardings
+from fppo_jax.distributed import fetch, input_sharding, place, state_shardings
 from fppo_jax.trainer import Trainer, TrainState
 
 PROGRAMS_KEPT = 8  # compiled programs kept for reuse, the most recently used first
@@ -38,6 +38,13 @@ def first_run(tree: T) -> T:
 def batch_of_one(tree: T) -> T:
     """`tree` with a leading run axis of length one on every leaf."""
     return cast(T, jax.tree.map(lambda x: x[None], tree))
+
+
+# The same two, as one program for a whole tree of arrays on a device. Outside a trace, each
+# leaf's slice would be a small program of its own, compiled on its first use for each shape
+# and dtype: a few milliseconds each, for the dozens of leaves of a state, on every start.
+first_run_on_device = jax.jit(first_run)
+batch_of_one_on_device = jax.jit(batch_of_one)
 
 
 def one_run(fn: F) -> F:
@@ -191,7 +198,7 @@ def run_chunks(
     after each call and that call's metrics ([run, update]). The next
     call is dispatched before the caller's work on the current one, so the two overlap."""
     config = program.trainer.config
-    first = int(np.max(state.update))
+    first = int(np.max(fetch(state.update)))
     calls = -(-(config.num_updates - first) // program.updates_per_call)
     pending = program.run(state, hps) if calls else None
     for call in range(calls):

@@ -196,8 +196,8 @@ def drive(plan: Plan, options: Options) -> Outcome:
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
         if plan.runs_per_call is None and checkpointed is None:
             runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
-            shapes = jax.eval_shape(first_run, (plan.keys, plan.hps))
-            size = runs_per_call(plan.trainer, *shapes, size, runs, data)
+            key, hp = jax.eval_shape(first_run, (plan.keys, plan.hps))
+            size = runs_per_call(plan.trainer, key, hp, size, runs, data)
         program = _compile(plan, options, mesh, size, main)
         with (
             reporter(options.progress if main else False, plan.description) as report,

@@ -1,6 +1,6 @@
 """Training throughput on CartPole against PureJaxRL's PPO, measured in the same process.
 
-    python experiments/bench_cartpole.py [--repeats 3] [--quick]
+    python experiments/benchmarks/bench_cartpole.py [--repeats 3] [--quick]
 
 PureJaxRL's `ppo.py` (from `--purejaxrl`, default ../shared/anchors/purejaxrl beside the
 repository; it needs `distrax`) and `fppo_jax.make_train` run the same settings, neither
@@ -28,6 +28,12 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+
+from fppo_jax import make_train
+from fppo_jax.execution import one_run
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 import purejaxrl_settings as pjr
 from common import (
     RESULTS,
@@ -39,10 +45,7 @@ from common import (
     write_result,
 )
 
-from fppo_jax import make_train
-from fppo_jax.execution import one_run
-
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 PUREJAXRL = REPO.parent / "shared" / "anchors" / "purejaxrl"
 
 # (workload, seeds, vmapped, steps per seed, goal: fppo-jax / PureJaxRL, None where none is set)

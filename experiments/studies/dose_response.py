@@ -1,8 +1,9 @@
 """FPPO's dose-response, as planned in experiments/plans/dose-response.json: does more pull
 (FPPO-LP's α, FPPO-QP's k) give more return, and is there a dose at which FPPO beats PPO?
 
-    python experiments/dose_response.py     # results/dose_response.md and its figure
-    python experiments/dose_response.py --results /tmp/smoke --tasks cartpole --output /tmp/d.md
+    python experiments/studies/dose_response.py     # results/dose_response.md and its figure
+    python experiments/studies/dose_response.py \
+        --results /tmp/smoke --tasks cartpole --output /tmp/d.md
 
 Reads the parts ``study.py --plan plans/dose-response.json`` recorded under
 <results>/dose_response/<task>/paper/, merges each task's, and writes the report and
@@ -34,6 +35,14 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+
+from fppo_jax import SweepResult, merge, statistics
+from fppo_jax.config import SYMBOLS
+from fppo_jax.results import labels
+from fppo_jax.study_report import ruled_out
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     RESULTS,
     RUN_RECORD,
@@ -45,12 +54,7 @@ from common import (
     write_result,
 )
 
-from fppo_jax import SweepResult, merge, statistics
-from fppo_jax.config import SYMBOLS
-from fppo_jax.results import labels
-from fppo_jax.study_report import ruled_out
-
-EXPERIMENTS = Path(__file__).resolve().parent
+EXPERIMENTS = Path(__file__).resolve().parents[1]
 PLAN = EXPERIMENTS / "plans" / "dose-response.json"
 FOLDER = "dose_response"  # study.py's folder of the plan's parts
 SEEDS = 10

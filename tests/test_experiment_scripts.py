@@ -9,6 +9,7 @@ from pathlib import Path
 
 import gymnasium
 import numpy as np
+import pytest
 
 from fppo_jax import SweepResult
 
@@ -150,3 +151,40 @@ def test_the_results_index_says_where_a_moved_script_is_now(monkeypatch):
     assert results_index.now_at("`fppo-jax study --reuse experiments/results/study`") is None
     row = next(line for line in results_index.index().splitlines() if "(bench_sweep.md)" in line)
     assert "(now `experiments/benchmarks/bench_sweep.py`)" in row
+
+
+FOLDERS = ("paper", "studies", "benchmarks", "profiles")
+
+
+@pytest.mark.parametrize("folder", FOLDERS)
+def test_a_folder_s_entry_point_lists_each_of_its_scripts(folder):
+    done = subprocess.run(
+        [sys.executable, str(EXPERIMENTS / folder)], capture_output=True, text=True, check=True
+    )
+    listed = [line for line in done.stdout.splitlines() if line.startswith("python ")]
+    scripts = sorted((EXPERIMENTS / folder).glob("[!_]*.py"))
+    assert listed == [f"python experiments/{folder}/{script.name}" for script in scripts]
+
+
+def test_a_folder_s_entry_point_refuses_a_script_without_its_smoke_run(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    common = importlib.import_module("common")
+    for name in ("first.py", "new.py"):
+        (tmp_path / name).write_text('"""A script."""\n')
+    monkeypatch.setattr(sys, "argv", ["folder"])
+    with pytest.raises(SystemExit, match=r"does not name the folder's scripts: \['new.py'\]"):
+        common.folder_entry_point("A folder.", tmp_path, {"first.py": ""})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("folder", FOLDERS)
+def test_every_script_of_a_folder_runs_tiny_into_a_temporary_directory(folder):
+    before = sorted(path.stat().st_mtime_ns for path in (EXPERIMENTS / "results").rglob("*"))
+    done = subprocess.run(
+        [sys.executable, str(EXPERIMENTS / folder), "--smoke"], capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    ran = [line for line in done.stdout.splitlines() if line.startswith(f"{folder}/")]
+    assert len(ran) == len(list((EXPERIMENTS / folder).glob("[!_]*.py"))), done.stdout
+    after = sorted(path.stat().st_mtime_ns for path in (EXPERIMENTS / "results").rglob("*"))
+    assert after == before  # nothing recorded was written

@@ -11,11 +11,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: sh
 
 from common import folder_entry_point
 
-SMOKE = {  # in the order they run: the reports read the part the first one trains
+# In the order they run: the verdict reads the part the first one trains; the planned verdict
+# and the dose-response, which report nothing until every planned run is there, read the
+# recorded runs and write their reports into the temporary directory.
+SMOKE = {
     "study.py": "--task cartpole --seeds 0:2 --steps 4096 --variants ppo fppo-lp --results {tmp}",
     "verdict.py": "--results {tmp}",
-    "planned_verdict.py": "plans/spo-dpo.json --results {tmp} --output {tmp}/spo-dpo.md",
-    "dose_response.py": "--results {tmp} --tasks cartpole --output {tmp}/dose_response.md",
+    "planned_verdict.py": "plans/spo-dpo.json --output {tmp}/spo-dpo.md",
+    "dose_response.py": "--output {tmp}/dose_response.md",
     "sequential_rule.py": "--smoke",
 }
 

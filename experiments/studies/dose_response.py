@@ -6,9 +6,9 @@
         --results /tmp/smoke --tasks cartpole --output /tmp/d.md
 
 Reads the parts ``study.py --plan plans/dose-response.json`` recorded under
-<results>/dose_response/<task>/paper/, merges each task's, and writes the report and
-<results>/dose_response/dose_response.png (IQM final return against the dose, with 95% bootstrap
-bands). Until every setting of every task has the plan's seeds, it names what is missing,
+<results>/dose_response/<task>/paper/, merges each task's, and writes the report and, in the
+report's folder, dose_response/dose_response.png (IQM final return against the dose, with 95%
+bootstrap bands). Until every setting of every task has the plan's seeds, it names what is missing,
 writes nothing and exits with 1: the planned test is over the whole family.
 
 What the plan fixed before its runs, computed here:
@@ -372,7 +372,7 @@ def main() -> int:
     args = parser.parse_args()
     plan = json.loads(PLAN.read_text())
     out = args.output or args.results / f"{FOLDER}.md"
-    figure = args.results / FOLDER / f"{FOLDER}.png"
+    figure = out.parent / FOLDER / f"{FOLDER}.png"
     refuse_to_replace([out, figure], args.force, elsewhere="--results DIR or --output FILE")
     merged = {task: recorded(args.results, task) for task in args.tasks or plan["tasks"]}
     short = missing(plan, merged)

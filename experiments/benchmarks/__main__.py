@@ -14,9 +14,9 @@ from common import folder_entry_point
 
 TINY_UPDATE = "--num-envs 16 --num-steps 8 --minibatches 2 --epochs 1 --updates 2"
 SMOKE = {
-    "bench_cartpole.py": "--quick --output {tmp}/bench_cartpole.md",
+    "bench_cartpole.py": "--smoke --output {tmp}/bench_cartpole.md",
     "bench_mujoco.py": f"--env reacher --backends mjx {TINY_UPDATE} --results {{tmp}}",
-    "bench_gymnasium.py": "--steps 1024 --repeats 1 --results {tmp}",
+    "bench_gymnasium.py": "--steps 4096 --repeats 1 --results {tmp}",
     "bench_sweep.py": "--seeds 2 --steps 4096 --output {tmp}/bench_sweep.md",
     "bench_parts.py": "--seeds 1 --steps 2048 --repeats 1 --results {tmp}",
     "bench_logging.py": "--steps 4096 --repeats 1 --results {tmp}",

@@ -14,6 +14,7 @@ runs the other scripts in processes of their own, lists its parts and refuses wi
 from __future__ import annotations
 
 import argparse
+import ast
 import csv
 import datetime
 import functools
@@ -22,6 +23,8 @@ import os
 import platform
 import subprocess
 import sys
+import tempfile
+import textwrap
 import time
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
@@ -150,7 +153,12 @@ STARTED_AT = commit()
 
 def command() -> str:
     """The command line that is running, as it is typed from the repository root."""
-    return " ".join([f"python experiments/{Path(sys.argv[0]).name}", *sys.argv[1:]])
+    script, experiments = Path(sys.argv[0]).resolve(), Path(__file__).resolve().parent
+    if experiments in script.parents:
+        where = script.relative_to(experiments.parent)
+    else:  # not a script of this folder (a test, say)
+        where = Path("experiments") / script.name
+    return " ".join([f"python {where.as_posix()}", *sys.argv[1:]])
 
 
 def header(title: str) -> list[str]:
@@ -162,6 +170,49 @@ def header(title: str) -> list[str]:
         f"- Machine: {machine()}; {datetime.date.today()}",
         f"- Command: `{command()}`, at {STARTED_AT}",
     ]
+
+
+def folder_entry_point(doc: str, folder: Path, smoke: dict[str, str]) -> None:
+    """A folder's entry point, ``python experiments/<folder>``: lists its scripts, each with
+    the first line of its docstring; with ``--smoke``, runs each (or those of ``--scripts``)
+    tiny, in a process of its own, with its arguments in `smoke`, into a new temporary
+    directory (``{tmp}`` there), and exits 1 if any failed. `smoke` names every script of the
+    folder: a new script is refused until it has its smoke arguments."""
+    parser = argument_parser(doc)
+    parser.add_argument("--smoke", action="store_true", help="run each script tiny")
+    parser.add_argument(
+        "--scripts", nargs="+", default=list(smoke), choices=list(smoke), metavar="SCRIPT"
+    )
+    args = parser.parse_args()
+    scripts = sorted(path.name for path in folder.glob("*.py") if path.name != "__main__.py")
+    if scripts != sorted(smoke):
+        differ = sorted(set(scripts) ^ set(smoke))
+        sys.exit(f"{folder.name}/__main__.py does not name the folder's scripts: {differ}")
+    if not args.smoke:
+        for name in scripts:
+            about = ast.get_docstring(ast.parse((folder / name).read_text())) or "–"
+            summary = " ".join(about.split("\n\n")[0].split())
+            print(f"python experiments/{folder.name}/{name}")
+            print(textwrap.fill(summary, 96, initial_indent="    ", subsequent_indent="    "))
+        return
+    tmp = Path(tempfile.mkdtemp(prefix=f"fppo-{folder.name}-smoke-"))
+    failed = []
+    for name in args.scripts:
+        arguments = [argument.format(tmp=tmp) for argument in smoke[name].split()]
+        start = time.perf_counter()
+        done = subprocess.run(
+            [sys.executable, str(folder / name), *arguments], capture_output=True, text=True
+        )
+        took = f"in {time.perf_counter() - start:.0f} s"
+        if done.returncode:
+            failed.append(name)
+            print(f"{folder.name}/{name}: FAILED (exit {done.returncode}) {took}", flush=True)
+            print("\n".join((done.stdout + done.stderr).splitlines()[-15:]), flush=True)
+        else:
+            print(f"{folder.name}/{name}: ran {took}", flush=True)
+    print(f"what they wrote is in {tmp}")
+    if failed:
+        sys.exit(f"{len(failed)} of {len(args.scripts)} failed: {', '.join(failed)}")
 
 
 def write_result(path: Path, lines: Iterable[str]) -> None:

@@ -57,27 +57,27 @@ def parts(smoke: bool) -> dict[str, list[list[str]]]:
         one = ["--backend", "native", "--tasks", "reacher", "--seeds", "1"]
         return {
             "throughput-reacher": [
-                ["bench_mujoco.py", "--env", "reacher", "--backends", "mjx", *tiny]
+                ["benchmarks/bench_mujoco.py", "--env", "reacher", "--backends", "mjx", *tiny]
             ],
             "table1-reacher": [
-                ["table1_mujoco.py", *one, "--variants", "ppo", "fppo-lp", "--steps", "4096"]
+                ["paper/table1_mujoco.py", *one, "--variants", "ppo", "fppo-lp", "--steps", "4096"]
             ],
-            "ablation-reacher": [["ablation.py", *one, "--steps", "2048"]],
+            "ablation-reacher": [["paper/ablation.py", *one, "--steps", "2048"]],
         }
     massive = ["--preset", "massive", "--backends", "mjx", "--updates", "30"]
     throughput = {
         f"throughput-{task}": [
-            ["bench_mujoco.py", "--env", task, *massive, "--num-envs", str(n)]
+            ["benchmarks/bench_mujoco.py", "--env", task, *massive, "--num-envs", str(n)]
             for n in THROUGHPUT_ENVS
         ]
         for task in ("hopper", "ant")
     }
     table1 = {
-        f"table1-{task}": [["table1_mujoco.py", "--backend", "mjx", "--tasks", task]]
+        f"table1-{task}": [["paper/table1_mujoco.py", "--backend", "mjx", "--tasks", task]]
         for task in MUJOCO
     }
     ablation = {
-        f"ablation-{task}": [["ablation.py", "--backend", "mjx", "--tasks", task]]
+        f"ablation-{task}": [["paper/ablation.py", "--backend", "mjx", "--tasks", task]]
         for task in ("walker2d", "ant")
     }
     return {**throughput, **table1, **ablation}

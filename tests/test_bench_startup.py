@@ -1,5 +1,5 @@
-"""experiments/bench_startup.py: its smoke run measures every arm and writes its table into a
-temporary directory, never into the recorded results."""
+"""experiments/benchmarks/bench_startup.py: its smoke run measures every arm and writes its table
+into a temporary directory, never into the recorded results."""
 
 import importlib.util
 import re
@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 from test_gpu_suite import recorded
 
-SCRIPT = Path(__file__).resolve().parent.parent / "experiments" / "bench_startup.py"
+EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
+SCRIPT = EXPERIMENTS / "benchmarks" / "bench_startup.py"
 
 
 def bench(*args: str) -> subprocess.CompletedProcess:
@@ -27,7 +28,7 @@ def test_the_smoke_run_measures_every_arm_into_a_temporary_directory():
     written = Path(done.stdout.split("wrote ")[-1].strip())
     assert written.parent.name.startswith("fppo-bench-startup-smoke-")
     table = written.read_text()
-    assert "- Command: `python experiments/bench_startup.py --smoke`" in table
+    assert "- Command: `python experiments/benchmarks/bench_startup.py --smoke`" in table
     assert "- Machine: " in table and "- Load average (1 min)" in table
     for arm in ("import jax", "import fppo_jax", "from fppo_jax import train", "fppo-jax --help"):
         assert re.search(rf"\| `{arm}` \| [\d.]+ \| [+-][\d.]+ \|", table), arm
@@ -36,12 +37,12 @@ def test_the_smoke_run_measures_every_arm_into_a_temporary_directory():
 
 
 def test_the_smoke_run_refuses_the_recorded_results():
-    into = bench("--smoke", "--results", str(SCRIPT.parent / "results"))
+    into = bench("--smoke", "--results", str(EXPERIMENTS / "results"))
     assert into.returncode != 0 and "never writes into the recorded results" in into.stderr
 
 
 def test_the_benchmark_s_own_load_does_not_count_as_other_work(monkeypatch):
-    monkeypatch.syspath_prepend(str(SCRIPT.parent))  # as `python experiments/...` has it
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))  # as the script puts it
     spec = importlib.util.spec_from_file_location("bench_startup", SCRIPT)
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)

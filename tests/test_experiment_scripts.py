@@ -9,6 +9,7 @@ from pathlib import Path
 
 import gymnasium
 import numpy as np
+import pytest
 
 from fppo_jax import SweepResult
 
@@ -19,7 +20,7 @@ def test_table1_classic_advises_its_own_flags_when_a_result_is_recorded(tmp_path
     recorded = tmp_path / "table.md"
     recorded.write_text("recorded\n")
     done = subprocess.run(
-        [sys.executable, str(EXPERIMENTS / "table1_classic.py"), "--output", str(recorded)],
+        [sys.executable, str(EXPERIMENTS / "paper" / "table1_classic.py"), "--output", recorded],
         capture_output=True,
         text=True,
         timeout=300,
@@ -33,6 +34,7 @@ def test_table1_classic_advises_its_own_flags_when_a_result_is_recorded(tmp_path
 
 def test_bench_gymnasium_draws_random_actions_of_discrete_and_box_spaces(monkeypatch):
     monkeypatch.syspath_prepend(str(EXPERIMENTS))  # the scripts import their common.py
+    monkeypatch.syspath_prepend(str(EXPERIMENTS / "benchmarks"))
     bench_gymnasium = importlib.import_module("bench_gymnasium")
     steps = 8 * bench_gymnasium.NUM_ENVS
     discrete = bench_gymnasium.random_actions(gymnasium.spaces.Discrete(3, start=-1), steps)
@@ -51,7 +53,7 @@ def test_bench_gymnasium_draws_random_actions_of_discrete_and_box_spaces(monkeyp
 
 def _planned_verdict(*args):
     return subprocess.run(
-        [sys.executable, str(EXPERIMENTS / "planned_verdict.py"), *map(str, args)],
+        [sys.executable, str(EXPERIMENTS / "studies" / "planned_verdict.py"), *map(str, args)],
         capture_output=True,
         text=True,
         timeout=600,
@@ -87,6 +89,7 @@ def test_the_dose_response_names_the_seed_and_update_where_a_control_parts(monke
     # Recorded parts: Hopper's seed 6, where the controls train as PPO throughout, and
     # Walker2d's seed 5, where both part from it at one update.
     monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    monkeypatch.syspath_prepend(str(EXPERIMENTS / "studies"))
     dose_response = importlib.import_module("dose_response")
     plan = json.loads((EXPERIMENTS / "plans" / "dose-response.json").read_text())
     parts = EXPERIMENTS / "results" / "dose_response"
@@ -136,3 +139,52 @@ def test_the_results_index_is_current_and_reads_what_a_result_records(monkeypatc
     assert about["date"] == str(datetime.date.today())
     assert about["command"].startswith("`python experiments/")
     assert about["commit"] == common.STARTED_AT[:12] + common.STARTED_AT[40:]
+
+
+def test_the_results_index_says_where_a_moved_script_is_now(monkeypatch):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    results_index = importlib.import_module("results_index")
+    moved = "`python experiments/bench_sweep.py --force`"
+    assert results_index.now_at(moved) == "experiments/benchmarks/bench_sweep.py"
+    assert results_index.now_at("`python experiments/results_index.py`") is None  # in place
+    assert results_index.now_at("`python experiments/no_such_script.py`") is None
+    assert results_index.now_at("`fppo-jax study --reuse experiments/results/study`") is None
+    row = next(line for line in results_index.index().splitlines() if "(bench_sweep.md)" in line)
+    assert "(now `experiments/benchmarks/bench_sweep.py`)" in row
+
+
+FOLDERS = ("paper", "studies", "benchmarks", "profiles")
+
+
+@pytest.mark.parametrize("folder", FOLDERS)
+def test_a_folder_s_entry_point_lists_each_of_its_scripts(folder):
+    done = subprocess.run(
+        [sys.executable, str(EXPERIMENTS / folder)], capture_output=True, text=True, check=True
+    )
+    listed = [line for line in done.stdout.splitlines() if line.startswith("python ")]
+    scripts = sorted((EXPERIMENTS / folder).glob("[!_]*.py"))
+    assert listed == [f"python experiments/{folder}/{script.name}" for script in scripts]
+
+
+def test_a_folder_s_entry_point_refuses_a_script_without_its_smoke_run(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    common = importlib.import_module("common")
+    for name in ("first.py", "new.py"):
+        (tmp_path / name).write_text('"""A script."""\n')
+    monkeypatch.setattr(sys, "argv", ["folder"])
+    with pytest.raises(SystemExit, match=r"does not name the folder's scripts: \['new.py'\]"):
+        common.folder_entry_point("A folder.", tmp_path, {"first.py": ""})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("folder", FOLDERS)
+def test_every_script_of_a_folder_runs_tiny_into_a_temporary_directory(folder):
+    before = sorted(path.stat().st_mtime_ns for path in (EXPERIMENTS / "results").rglob("*"))
+    done = subprocess.run(
+        [sys.executable, str(EXPERIMENTS / folder), "--smoke"], capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    ran = [line for line in done.stdout.splitlines() if line.startswith(f"{folder}/")]
+    assert len(ran) == len(list((EXPERIMENTS / folder).glob("[!_]*.py"))), done.stdout
+    after = sorted(path.stat().st_mtime_ns for path in (EXPERIMENTS / "results").rglob("*"))
+    assert after == before  # nothing recorded was written

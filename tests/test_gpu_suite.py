@@ -89,9 +89,9 @@ def test_smoke_runs_never_write_into_the_record_and_scripts_refuse_to_replace_it
     into = _suite("--smoke", "--results", str(EXPERIMENTS / "results" / "smoke"))
     assert into.returncode != 0 and "never writes into the recorded results" in into.stderr
     for script, *args in [
-        ("study.py", "--task", "hopper", "--seeds", "0:5"),
-        ("escape_speed.py", "--tasks", "cartpole", "--seeds", "1"),
-        ("bench_logging.py", "--steps", "4096"),
+        ("studies/study.py", "--task", "hopper", "--seeds", "0:5"),
+        ("paper/escape_speed.py", "--tasks", "cartpole", "--seeds", "1"),
+        ("benchmarks/bench_logging.py", "--steps", "4096"),
     ]:
         done = subprocess.run(
             [sys.executable, str(EXPERIMENTS / script), *args],

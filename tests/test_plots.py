@@ -188,8 +188,9 @@ def test_fppo_jax_plot_without_a_display(result, tmp_path):
 
 
 def test_figures_script_draws_from_the_recorded_results(tmp_path, monkeypatch):
-    monkeypatch.syspath_prepend(str(REPO / "experiments"))  # as `python experiments/...` has it
-    spec = importlib.util.spec_from_file_location("figures", REPO / "experiments" / "figures.py")
+    monkeypatch.syspath_prepend(str(REPO / "experiments"))  # as the script puts it
+    script = REPO / "experiments" / "paper" / "figures.py"
+    spec = importlib.util.spec_from_file_location("figures", script)
     figures = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(figures)
     monkeypatch.setattr(sys, "argv", ["figures.py", "--out", str(tmp_path / "now")])

@@ -2,7 +2,7 @@
 ``tests/data/pinned_metrics.json``.
 
 A change that moves any bit of a run's metrics fails here, loudly: the seed study's parts
-(``experiments/study.py``), recorded across sessions, are comparable only while training is
+(``experiments/studies/study.py``), recorded across sessions, are comparable only while training is
 unchanged. A change meant to alter training re-records the pins and says so in its commit; the
 study's parts recorded before it then belong to another protocol.
 

@@ -125,7 +125,8 @@ def test_the_family_wise_error_is_at_most_alpha_and_a_real_difference_takes_fewe
 
 
 def test_the_experiments_smoke_run_writes_its_table_into_a_temporary_directory(tmp_path):
-    script = Path(__file__).resolve().parent.parent / "experiments" / "sequential_rule.py"
+    experiments = Path(__file__).resolve().parent.parent / "experiments"
+    script = experiments / "studies" / "sequential_rule.py"
     done = subprocess.run(
         [sys.executable, str(script), "--smoke"],
         capture_output=True,
@@ -141,7 +142,7 @@ def test_the_experiments_smoke_run_writes_its_table_into_a_temporary_directory(t
     assert "- 200 simulated studies per row" in table
     assert "| 2 tasks × 2 candidates | 1 | 0.000 | 0.9" in table
     refused = subprocess.run(
-        [sys.executable, str(script), "--smoke", "--results", str(script.parent / "results")],
+        [sys.executable, str(script), "--smoke", "--results", str(experiments / "results")],
         capture_output=True,
         text=True,
     )

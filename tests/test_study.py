@@ -1,5 +1,5 @@
-"""experiments/study.py and verdict.py: parts recorded whole, never replaced unasked, merged into
-the verdict; all in a temporary directory."""
+"""experiments/studies/study.py and verdict.py: parts recorded whole, never replaced unasked,
+merged into the verdict; all in a temporary directory."""
 
 import json
 import shutil
@@ -16,7 +16,7 @@ EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
 
 def _run(script: str, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, str(EXPERIMENTS / script), *args],
+        [sys.executable, str(EXPERIMENTS / "studies" / script), *args],
         capture_output=True,
         text=True,
         timeout=900,

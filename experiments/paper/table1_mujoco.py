@@ -1,9 +1,9 @@
 """The paper's Table 1, MuJoCo rows, and its Figs. 4–5: variants × seeds × 1M steps, each task one
 sweep, on the backend asked for.
 
-    python experiments/table1_mujoco.py --backend native --tasks reacher swimmer   # a CPU
-    python experiments/table1_mujoco.py --backend mjx --tasks hopper ant           # a GPU
-    python experiments/table1_mujoco.py --backend native --steps 8192 --seeds 1 \\
+    python experiments/paper/table1_mujoco.py --backend native --tasks reacher swimmer   # a CPU
+    python experiments/paper/table1_mujoco.py --backend mjx --tasks hopper ant           # a GPU
+    python experiments/paper/table1_mujoco.py --backend native --steps 8192 --seeds 1 \\
         --variants ppo --tasks reacher --results /tmp/smoke                        # a smoke run
 
 Each task's runs (all five variants × seeds 0–4 by default, Table 2's α and k, the `paper` preset:
@@ -19,9 +19,17 @@ so absolute returns differ; what should agree is how the variants compare.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import matplotlib
+
+from fppo_jax.config import describe, preset_config, task_preset
+from fppo_jax.envs import MUJOCO_TASKS
+from fppo_jax.results import SweepResult
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     PAPER_VARIANTS,
     RUN_RECORD,
@@ -34,10 +42,6 @@ from common import (
     sweep_directory,
     write_result,
 )
-
-from fppo_jax.config import describe, preset_config, task_preset
-from fppo_jax.envs import MUJOCO_TASKS
-from fppo_jax.results import SweepResult
 
 
 def run_task(task: str, args: argparse.Namespace, directory: Path) -> None:

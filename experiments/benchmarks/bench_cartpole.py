@@ -1,6 +1,6 @@
 """Training throughput on CartPole against PureJaxRL's PPO, measured in the same process.
 
-    python experiments/bench_cartpole.py [--repeats 3] [--quick]
+    python experiments/benchmarks/bench_cartpole.py [--repeats 3] [--smoke]
 
 PureJaxRL's `ppo.py` (from `--purejaxrl`, default ../shared/anchors/purejaxrl beside the
 repository; it needs `distrax`) and `fppo_jax.make_train` run the same settings, neither
@@ -28,6 +28,12 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+
+from fppo_jax import make_train
+from fppo_jax.execution import one_run
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 import purejaxrl_settings as pjr
 from common import (
     RESULTS,
@@ -39,10 +45,7 @@ from common import (
     write_result,
 )
 
-from fppo_jax import make_train
-from fppo_jax.execution import one_run
-
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 PUREJAXRL = REPO.parent / "shared" / "anchors" / "purejaxrl"
 
 # (workload, seeds, vmapped, steps per seed, goal: fppo-jax / PureJaxRL, None where none is set)
@@ -98,7 +101,9 @@ def main() -> None:
     parser = argument_parser(__doc__)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--purejaxrl", type=Path, default=PUREJAXRL, help="its ppo.py's folder")
-    parser.add_argument("--quick", action="store_true", help="a tenth of the steps, 1 repeat")
+    parser.add_argument(
+        "--smoke", action="store_true", help="each workload's single run, 8,192 steps, 1 repeat"
+    )
     add_output_flags(parser, RESULTS / "bench_cartpole.md")
     args = parser.parse_args()
     refuse_to_replace([args.output], args.force, elsewhere="--output FILE")
@@ -107,8 +112,10 @@ def main() -> None:
     sys.path.insert(0, str(args.purejaxrl))
     import ppo as purejaxrl  # found only once its folder is on the path
 
-    repeats = 1 if args.quick else args.repeats
-    arms = [(w, n, v, s // 10 if args.quick else s, g) for w, n, v, s, g in ARMS]
+    repeats = 1 if args.smoke else args.repeats
+    arms = (
+        [(w, n, v, 8192, g) for w, n, v, _, g in ARMS if n == 1 and not v] if args.smoke else ARMS
+    )
     programs = []
     for workload, seeds, vmapped, steps, _ in arms:
         theirs, their_compile = compiled_in(

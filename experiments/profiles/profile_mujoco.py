@@ -1,7 +1,7 @@
 """Where an MJX update's time goes beyond the environment's own, and what running each update
 inside a `lax.cond` costs.
 
-    python experiments/profile_mujoco.py [--env hopper] [--num-envs 128] [--updates 20]
+    python experiments/profiles/profile_mujoco.py [--env hopper] [--num-envs 128] [--updates 20]
         [--repeats 3]
 
 At the shape of bench_mujoco.py's MJX rows (16-step unrolls, 4 minibatches × 4 epochs, one reset
@@ -20,9 +20,19 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+
+from fppo_jax import hyperparameters, make_train
+from fppo_jax.config import describe_update, preset_config
+from fppo_jax.envs import make_env
+from fppo_jax.trainer import METRICS, Metrics, Trainer
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     add_record_flags,
     argument_parser,
@@ -32,11 +42,6 @@ from common import (
     refuse_to_replace,
     write_result,
 )
-
-from fppo_jax import hyperparameters, make_train
-from fppo_jax.config import describe_update, preset_config
-from fppo_jax.envs import make_env
-from fppo_jax.trainer import METRICS, Metrics, Trainer
 
 
 class InCond(Trainer):

@@ -2,8 +2,9 @@
 fraction of its batch in R+ ∪ R- under PPO, FPPO-LP and FPPO-QP, the three from the same state,
 batch and minibatch order.
 
-    python experiments/escape_speed.py                  # CartPole, Acrobot, Hopper, Walker2d
-    python experiments/escape_speed.py --tasks cartpole --seeds 2 --points 2 4 --results /tmp/e
+    python experiments/paper/escape_speed.py                  # CartPole, Acrobot, Hopper, Walker2d
+    python experiments/paper/escape_speed.py \
+        --tasks cartpole --seeds 2 --points 2 4 --results /tmp/e
 
 For each task and seed, PPO trains from scratch (the task's `paper` preset). At each update
 point the next rollout is collected once and each variant (Table 2's α and k) runs that
@@ -19,6 +20,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import functools
+import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -26,6 +28,14 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from fppo_jax import make_env, make_train
+from fppo_jax.config import describe, resolve_config, resolve_hyperparameters
+from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, choose_backend
+from fppo_jax.statistics import sample_std
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     ESCAPE_FRACTIONS,
     ESCAPE_VARIANTS,
@@ -35,11 +45,6 @@ from common import (
     refuse_to_replace,
     write_result,
 )
-
-from fppo_jax import make_env, make_train
-from fppo_jax.config import describe, resolve_config, resolve_hyperparameters
-from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, choose_backend
-from fppo_jax.statistics import sample_std
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,10 +1,13 @@
 """Training throughput on a MuJoCo task, per backend: the environment alone, this trainer, and
 Brax's PPO on MJX.
 
-    python experiments/bench_mujoco.py --env hopper --shape paper      # CPU: native against MJX
-    python experiments/bench_mujoco.py --env hopper --shape paper --runs 25   # Table 1's sweep
-    python experiments/bench_mujoco.py --env hopper --num-envs 128     # CPU, MJX's best shape
-    python experiments/bench_mujoco.py --env ant --preset massive --backends mjx     # GPU
+    # CPU: native against MJX
+    python experiments/benchmarks/bench_mujoco.py --env hopper --shape paper
+    # Table 1's sweep
+    python experiments/benchmarks/bench_mujoco.py --env hopper --shape paper --runs 25
+    # CPU, MJX's best shape
+    python experiments/benchmarks/bench_mujoco.py --env hopper --num-envs 128
+    python experiments/benchmarks/bench_mujoco.py --env ant --preset massive --backends mjx  # GPU
 
 Measured side by side in one run, on the same task, environment count and samples per update,
 for each backend (`--backends`, default native and mjx):
@@ -30,10 +33,19 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import sys
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+
+import fppo_jax
+from fppo_jax.config import describe_update, preset_config
+from fppo_jax.envs import make_env
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     add_record_flags,
     argument_parser,
@@ -43,10 +55,6 @@ from common import (
     refuse_to_replace,
     write_result,
 )
-
-import fppo_jax
-from fppo_jax.config import describe_update, preset_config
-from fppo_jax.envs import make_env
 
 
 def timed(fn, *args) -> tuple[float, float]:

@@ -1,7 +1,8 @@
 """The seed study's verdict: does FPPO beat PPO? Every recorded part, merged, with its statistics.
 
-    python experiments/verdict.py                       # results/study.md and its figures
-    python experiments/verdict.py --results /tmp/smoke  # a smoke run's parts (study.py --results)
+    python experiments/studies/verdict.py                       # results/study.md and its figures
+    # a smoke run's parts (study.py --results)
+    python experiments/studies/verdict.py --results /tmp/smoke
 
 Reads every part that `study.py` recorded under <results>/study/<task>/<protocol>/. The report's
 body is the library's own: `fppo_jax.study` over those parts (reused, nothing trained), one study
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -27,6 +29,16 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from study import PROTOCOLS as PROTOCOL_SETTINGS
+
+import fppo_jax
+from fppo_jax import SweepResult, merge, statistics
+from fppo_jax.envs import MUJOCO_TASKS
+from fppo_jax.plots import plot_curves
+from fppo_jax.results import labels, max_average_return
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     CLASSIC_TASKS,
     ESCAPE_FRACTIONS,
@@ -43,13 +55,6 @@ from common import (
     read_run_record,
     write_result,
 )
-from study import PROTOCOLS as PROTOCOL_SETTINGS
-
-import fppo_jax
-from fppo_jax import SweepResult, merge, statistics
-from fppo_jax.envs import MUJOCO_TASKS
-from fppo_jax.plots import plot_curves
-from fppo_jax.results import labels, max_average_return
 
 BASELINE = "ppo"
 CHALLENGERS = ("fppo-lp", "fppo-qp")
@@ -71,7 +76,7 @@ FAMILIES = (
     ("classic", "The classic tasks", CLASSIC_TASKS, 50, "paper"),
     ("classic-unnormalised", "The classic tasks", CLASSIC_TASKS, 50, "unnormalised"),
 )
-REPOSITORY = Path(__file__).resolve().parent.parent
+REPOSITORY = Path(__file__).resolve().parents[2]
 DPI = 80
 
 
@@ -299,15 +304,15 @@ def main() -> None:
     preamble = [
         "# Does FPPO beat PPO? The seed study",
         "",
-        "Written by `python experiments/verdict.py` from the parts `experiments/study.py` "
-        "recorded (each part's command is in its `run.json`). Its body is the library's own "
-        "report: `fppo_jax.study` (as `fppo-jax study --reuse experiments/results/study "
-        "--groups 0`) takes every run from those parts, trains none, decides each comparison "
-        "by its group-sequential test and reports what each interval rules out and how soon "
-        "the runs reach PPO's level, one study per family of comparisons (a study has one "
-        "seed schedule). After it, what only this study has: the test planned before any of "
-        "its parts ran, the paper's Table 1 beside the same statistic here, the exploratory "
-        "variants, and the escape speed.",
+        "Written by `python experiments/studies/verdict.py` from the parts that "
+        "`experiments/studies/study.py` recorded (each part's command is in its `run.json`). "
+        "Its body is the library's own report: `fppo_jax.study` (as `fppo-jax study --reuse "
+        "experiments/results/study --groups 0`) takes every run from those parts, trains "
+        "none, decides each comparison by its group-sequential test and reports what each "
+        "interval rules out and how soon the runs reach PPO's level, one study per family of "
+        "comparisons (a study has one seed schedule). After it, what only this study has: the "
+        "test planned before any of its parts ran, the paper's Table 1 beside the same "
+        "statistic here, the exploratory variants, and the escape speed.",
         "",
         "- Endpoints, fixed before the study ran: **final return** (primary: each run's "
         "last-100-episode average return after its last update) and the **area under the "

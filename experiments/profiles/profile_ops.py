@@ -1,6 +1,6 @@
 """Where a vmapped run's time goes, operation by operation, from XLA's own trace.
 
-    python experiments/profile_ops.py [--workload purejaxrl|paper] [--seeds 8] [--steps N]
+    python experiments/profiles/profile_ops.py [--workload purejaxrl|paper] [--seeds 8] [--steps N]
 
 One whole run (`--seeds` vmapped seeds, one compiled call) is traced with `jax.profiler`.
 Each operation XLA's CPU runtime executed is charged its own time (its span less the operations
@@ -18,11 +18,20 @@ from __future__ import annotations
 import collections
 import math
 import re
+import sys
 import tempfile
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+
+from fppo_jax import make_train
+from fppo_jax.config import Hyperparameters
+from fppo_jax.losses import Batch
+from fppo_jax.trainer import Trainer, TrainState
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 import purejaxrl_settings as pjr
 from common import (
     add_record_flags,
@@ -32,11 +41,6 @@ from common import (
     seconds,
     write_result,
 )
-
-from fppo_jax import make_train
-from fppo_jax.config import Hyperparameters
-from fppo_jax.losses import Batch
-from fppo_jax.trainer import Trainer, TrainState
 
 # The trainer's named scopes: an operation belongs to the innermost of them on its name path.
 PARTS = (

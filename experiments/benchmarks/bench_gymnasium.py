@@ -1,6 +1,7 @@
 """Gymnasium's MuJoCo task against envpool's (native), alone and trained, in one process.
 
-    python experiments/bench_gymnasium.py [--task Hopper-v4] [--steps 40960] [--repeats 2]
+    python experiments/benchmarks/bench_gymnasium.py \
+        [--task Hopper-v4] [--steps 40960] [--repeats 2]
 
 The same task version on both backends, 8 environments (the paper preset's), random actions
 or PPO: (a) the environments alone on the host, no JAX: a loop over 8 ``gymnasium.Env``
@@ -13,14 +14,19 @@ experiments/results/bench_gymnasium_<task>.md.
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
-from common import add_record_flags, argument_parser, header, refuse_to_replace, write_result
 
 import fppo_jax
 from fppo_jax.envs.native import import_envpool
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
+from common import add_record_flags, argument_parser, header, refuse_to_replace, write_result
 
 NUM_ENVS = 8
 

@@ -1,6 +1,6 @@
 """Where one update's time goes: each compiled part of it timed on its own.
 
-    python experiments/profile_update.py [--repeats 200]
+    python experiments/profiles/profile_update.py [--repeats 200]
 
 Parts: the environment alone (random actions, the same number of steps as a rollout, one reset
 state per environment), the rollout (policy + environment), the epochs of minibatch updates,
@@ -9,10 +9,17 @@ Settings: PureJaxRL's CartPole (see purejaxrl_settings.py). Prints its table and
 experiments/results/profile_update.md.
 """
 
+import sys
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+
+from fppo_jax import make_train
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 import purejaxrl_settings as pjr
 from common import (
     add_record_flags,
@@ -22,8 +29,6 @@ from common import (
     refuse_to_replace,
     write_result,
 )
-
-from fppo_jax import make_train
 
 
 def seconds_per_call(fn, *args, repeats, blocks=7):

@@ -1,9 +1,10 @@
 """The verdict of a comparison planned in experiments/plans/: candidates against a baseline's
 recorded seed-study runs, with the plan's fixed seeds, test and family.
 
-    python experiments/planned_verdict.py plans/spo-dpo.json    # results/spo-dpo.md
-    python experiments/planned_verdict.py plans/baseline-shape.json
-    python experiments/planned_verdict.py plans/spo-dpo.json --results /tmp/smoke --output /tmp/v.md
+    python experiments/studies/planned_verdict.py plans/spo-dpo.json    # results/spo-dpo.md
+    python experiments/studies/planned_verdict.py plans/baseline-shape.json
+    python experiments/studies/planned_verdict.py plans/spo-dpo.json \
+        --results /tmp/smoke --output /tmp/v.md
 
 Reads the plan (its baseline, candidates and tasks) and writes results/<plan's name>.md (or
 --output). The baseline's runs are the seed study's, recorded under <results>/study/<task>/paper/.
@@ -29,6 +30,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from fppo_jax import SweepResult, merge, statistics
+from fppo_jax.envs import MUJOCO_TASKS
+from fppo_jax.study_report import ruled_out
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     CLASSIC_TASKS,
     RESULTS,
@@ -43,11 +51,7 @@ from common import (
     write_result,
 )
 
-from fppo_jax import SweepResult, merge, statistics
-from fppo_jax.envs import MUJOCO_TASKS
-from fppo_jax.study_report import ruled_out
-
-EXPERIMENTS = Path(__file__).resolve().parent
+EXPERIMENTS = Path(__file__).resolve().parents[1]
 SEEDS = {**dict.fromkeys(CLASSIC_TASKS, 50), **dict.fromkeys(MUJOCO_TASKS, 20)}
 FAMILY_ERROR = 0.05
 HIGH_CLUSTER = {"halfcheetah": 3000.0}  # its final returns split there (plans/baseline-shape.json)

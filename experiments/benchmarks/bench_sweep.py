@@ -1,7 +1,7 @@
 """The same runs as one sweep vs one after another with train: training time and compilation
 apart.
 
-    python experiments/bench_sweep.py [--seeds 5] [--steps 100000]
+    python experiments/benchmarks/bench_sweep.py [--seeds 5] [--steps 100000]
 
 25 runs by default: the 5 compared variants × 5 seeds on CartPole with the paper's protocol.
 Both sides produce every run's metrics. The sequential `train` calls compile once: every later
@@ -13,7 +13,13 @@ Writes experiments/results/bench_sweep.md.
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
+
+from fppo_jax import sweep, train
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
 from common import (
     PAPER_VARIANTS,
@@ -24,8 +30,6 @@ from common import (
     refuse_to_replace,
     write_result,
 )
-
-from fppo_jax import sweep, train
 
 
 def main() -> None:

@@ -1,8 +1,8 @@
 """What users wait for before anything trains: importing the package, and the README's first
 command with an empty compilation cache (cold) and with the cache that run filled (warm).
 
-    python experiments/bench_startup.py [--repeats 5]
-    python experiments/bench_startup.py --smoke    # tiny, into a new temporary directory
+    python experiments/benchmarks/bench_startup.py [--repeats 5]
+    python experiments/benchmarks/bench_startup.py --smoke    # tiny, into a new temporary directory
 
 Each measurement is the wall time of a fresh process of this checkout, from its start to its
 exit; the arms are interleaved and each one's best of `--repeats` is kept. Imports: ``import
@@ -24,6 +24,8 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     RESULTS,
     add_force_flag,
@@ -34,7 +36,7 @@ from common import (
     write_result,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FIRST_COMMAND = ["train", "--env", "cartpole", "--variant", "fppo-lp", "--steps", "50000"]
 SMOKE_COMMAND = [*FIRST_COMMAND[:-1], "512", "--num-envs", "4", "--num-steps", "32"]
 SMOKE_COMMAND += ["--minibatches", "4", "--epochs", "2"]

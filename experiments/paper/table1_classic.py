@@ -1,6 +1,6 @@
 """The paper's Table 1, classic-control rows: 5 variants × 5 seeds × 100k steps per task.
 
-    python experiments/table1_classic.py [--tasks cartpole acrobot mountaincar] [--seeds 5]
+    python experiments/paper/table1_classic.py [--tasks cartpole acrobot mountaincar] [--seeds 5]
 
 Each task's 25 runs (variants × seeds) are one sweep: one vmapped, compiled program. "Max average
 return" is the paper's: per seed, the mean return of the last 100 finished episodes after every
@@ -9,14 +9,21 @@ that update; runs that diverged are left out, and counted beside their variant, 
 does. Writes experiments/results/table1_classic.md, with the escape-speed comparison (the paper's
 mechanism) beside it, and each task's curves (`SweepResult.write`, with the metrics the table and
 the figures use) to experiments/results/table1_classic/<task>/, which `fppo-jax plot` and
-experiments/figures.py read."""
+experiments/paper/figures.py read."""
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from fppo_jax import TrainConfig, sweep
+from fppo_jax.results import max_average_return
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     CLASSIC_TASKS,
     PAPER_VARIANTS,
@@ -29,9 +36,6 @@ from common import (
     refuse_to_replace,
     write_result,
 )
-
-from fppo_jax import TrainConfig, sweep
-from fppo_jax.results import max_average_return
 
 
 def main() -> None:

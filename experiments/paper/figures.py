@@ -1,6 +1,6 @@
 """The figures README.md shows, drawn from recorded results into results/figures/.
 
-    python experiments/figures.py [--records DIR] [--out DIR]
+    python experiments/paper/figures.py [--records DIR] [--out DIR]
 
 Each figure below but the surrogate chart is drawn when its records are found in `--records`
 (default `results/`); `--records results/earlier-protocol --out DIR` draws the 5-seed Table 1
@@ -23,10 +23,18 @@ Nothing is trained.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
+
+from fppo_jax.plots import plot_curves, plot_escape_speed, plot_objectives
+from fppo_jax.results import SweepResult
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     CLASSIC_TASKS,
     ESCAPE_FRACTIONS,
@@ -38,10 +46,6 @@ from common import (
     draw_ablation,
     read_fractions,
 )
-from matplotlib.figure import Figure
-
-from fppo_jax.plots import plot_curves, plot_escape_speed, plot_objectives
-from fppo_jax.results import SweepResult
 
 DPI = 90
 

@@ -1,6 +1,6 @@
 """What feedback costs: training throughput with and without progress, logging and checkpoints.
 
-    python experiments/bench_logging.py [--steps 500000] [--chunks 20] [--repeats 3]
+    python experiments/benchmarks/bench_logging.py [--steps 500000] [--chunks 20] [--repeats 3]
 
 The same run (CartPole, FPPO-LP, the paper preset, seed 0) through ``fppo_jax.train`` in four
 ways, side by side: (a) one compiled call, nothing on the host until the end; (b) `--chunks`
@@ -19,10 +19,13 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from common import add_record_flags, argument_parser, header, refuse_to_replace, write_result
 
 import fppo_jax
 from fppo_jax.progress import print_progress
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
+from common import add_record_flags, argument_parser, header, refuse_to_replace, write_result
 
 
 def arms(chunks: int, per_call: int, scratch: Path) -> dict[str, dict]:

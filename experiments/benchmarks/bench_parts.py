@@ -1,7 +1,8 @@
 """A sweep in two parts: one process after another, against two processes at once on one core
 each, as a cluster's nodes would share it.
 
-    python experiments/bench_parts.py [--task hopper] [--seeds 2] [--steps 100000] [--repeats 2]
+    python experiments/benchmarks/bench_parts.py \
+        [--task hopper] [--seeds 2] [--steps 100000] [--repeats 2]
 
 The sweep is PPO and FPPO-LP × `--seeds` on native MuJoCo. Each arm runs
 ``fppo-jax sweep --part K/2`` for K = 1 and 2 in fresh processes: (a) one after another, each
@@ -21,6 +22,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from fppo_jax import SweepResult, merge
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     RESULTS,
     RUN_RECORD,
@@ -31,8 +36,6 @@ from common import (
     refuse_to_replace,
     write_result,
 )
-
-from fppo_jax import SweepResult, merge
 
 PARTS = 2
 

@@ -1,7 +1,7 @@
 """What each of the trainer's extras costs under vmap: the same vmapped program with one extra
 taken out at a time.
 
-    python experiments/profile_vmap.py [--workload purejaxrl|paper] [--seeds 8]
+    python experiments/profiles/profile_vmap.py [--workload purejaxrl|paper] [--seeds 8]
         [--steps 500000] [--repeats 3]
 
 One of the CartPole workloads measured against PureJaxRL (`purejaxrl_settings.py`), `--seeds`
@@ -24,10 +24,20 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import sys
+from pathlib import Path
 from unittest import mock
 
 import jax
 import jax.numpy as jnp
+
+import fppo_jax.objectives as objectives
+import fppo_jax.trainer as trainer_module
+from fppo_jax import make_train
+from fppo_jax.trainer import Trainer
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 import purejaxrl_settings as pjr
 from common import (
     add_record_flags,
@@ -37,11 +47,6 @@ from common import (
     refuse_to_replace,
     write_result,
 )
-
-import fppo_jax.objectives as objectives
-import fppo_jax.trainer as trainer_module
-from fppo_jax import make_train
-from fppo_jax.trainer import Trainer
 
 
 class WithoutEscape(Trainer):

@@ -1,7 +1,7 @@
 """The error rates and seeds of `fppo-jax study`'s rule, by simulating studies on synthetic scores.
 
-    python experiments/sequential_rule.py            # experiments/results/sequential_rule.md
-    python experiments/sequential_rule.py --smoke    # 200 studies, into a temporary directory
+    python experiments/studies/sequential_rule.py  # experiments/results/sequential_rule.md
+    python experiments/studies/sequential_rule.py --smoke  # 200 studies, into a temporary directory
 
 No training: each simulated study draws every score from a normal distribution with sd 1,
 each candidate's mean `shift` sd above its task's baseline, and applies
@@ -20,6 +20,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from fppo_jax.sequential import Design, simulate
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     RESULTS,
     add_force_flag,
@@ -29,8 +33,6 @@ from common import (
     refuse_to_replace,
     write_result,
 )
-
-from fppo_jax.sequential import Design, simulate
 
 DESIGN = Design(group_size=5, max_seeds=30, level=0.05)
 FAMILIES = {"1 task × 1 candidate": [1], "2 tasks × 2 candidates": [2, 2]}

@@ -1,18 +1,19 @@
 """Does FPPO beat PPO? One part of the seed study: a task's variants × a range of seeds, recorded.
 
-    python experiments/study.py --task hopper --seeds 0:10                 # PPO, FPPO-LP, FPPO-QP
-    python experiments/study.py --task cartpole --seeds 0:50 --variants all --protocol unnormalised
-    python experiments/study.py --task reacher --seeds 0:2 --steps 8192 --results /tmp/smoke
-    python experiments/study.py --task hopper --seeds 0:2 --plan plans/dose-response.json
-    python experiments/study.py --task swimmer --seeds 0:5 --plan plans/baseline-shape.json
+    python experiments/studies/study.py --task hopper --seeds 0:10  # PPO, FPPO-LP, FPPO-QP
+    python experiments/studies/study.py \
+        --task cartpole --seeds 0:50 --variants all --protocol unnormalised
+    python experiments/studies/study.py --task reacher --seeds 0:2 --steps 8192 --results /tmp/smoke
+    python experiments/studies/study.py --task hopper --seeds 0:2 --plan plans/dose-response.json
+    python experiments/studies/study.py --task swimmer --seeds 0:5 --plan plans/baseline-shape.json
 
 A part is one sweep (one compiled program) of `--variants` × `--seeds` on `--task`, with the
 `paper` preset, Table 2's α and k and the paper's budget (100k steps on the classic tasks, 1M on
 MuJoCo). Run seed s starts from ``jax.random.key(s)`` whatever else the part holds, so parts
 with disjoint seeds or other variants are samples of one study and are merged by what reads
-them (``experiments/verdict.py``). Protocols: ``paper`` is the project's default (observation and
-reward normalisation everywhere); ``unnormalised`` is baselines' classic-control protocol
-(no VecNormalize: baselines wraps only its MuJoCo runs).
+them (``verdict.py``, beside this script). Protocols: ``paper`` is the project's default
+(observation and reward normalisation everywhere); ``unnormalised`` is baselines'
+classic-control protocol (no VecNormalize: baselines wraps only its MuJoCo runs).
 
 With ``--plan PLAN`` the part is the plan's own, recorded under
 <results>/<plan's name>/<task>/<protocol>/: every dose of its variants in one sweep (its
@@ -36,6 +37,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+from fppo_jax import sweep
+from fppo_jax.config import parse_seeds
+from fppo_jax.envs import MUJOCO_TASKS
+from fppo_jax.objectives import VARIANTS
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     CLASSIC_TASKS,
     PAPER_VARIANTS,
@@ -45,11 +53,6 @@ from common import (
     refuse_to_replace,
     write_run_record,
 )
-
-from fppo_jax import sweep
-from fppo_jax.config import parse_seeds
-from fppo_jax.envs import MUJOCO_TASKS
-from fppo_jax.objectives import VARIANTS
 
 STUDIED = ("ppo", "fppo-lp", "fppo-qp")
 PROTOCOLS = {
@@ -144,7 +147,7 @@ def main() -> None:
     folder = args.results / "study" / args.task / args.protocol
     settings: dict[str, Any] = {}
     if args.plan:
-        plan = args.plan if args.plan.exists() else Path(__file__).parent / args.plan
+        plan = args.plan if args.plan.exists() else Path(__file__).resolve().parents[1] / args.plan
         grid, settings = planned_sweep(json.loads(plan.read_text()))
         variants = [plan.stem]
         folder = args.results / plan.stem.replace("-", "_") / args.task / args.protocol

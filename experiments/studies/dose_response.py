@@ -1,13 +1,14 @@
 """FPPO's dose-response, as planned in experiments/plans/dose-response.json: does more pull
 (FPPO-LP's α, FPPO-QP's k) give more return, and is there a dose at which FPPO beats PPO?
 
-    python experiments/dose_response.py     # results/dose_response.md and its figure
-    python experiments/dose_response.py --results /tmp/smoke --tasks cartpole --output /tmp/d.md
+    python experiments/studies/dose_response.py     # results/dose_response.md and its figure
+    python experiments/studies/dose_response.py \
+        --results /tmp/smoke --tasks cartpole --output /tmp/d.md
 
 Reads the parts ``study.py --plan plans/dose-response.json`` recorded under
-<results>/dose_response/<task>/paper/, merges each task's, and writes the report and
-<results>/dose_response/dose_response.png (IQM final return against the dose, with 95% bootstrap
-bands). Until every setting of every task has the plan's seeds, it names what is missing,
+<results>/dose_response/<task>/paper/, merges each task's, and writes the report and, in the
+report's folder, dose_response/dose_response.png (IQM final return against the dose, with 95%
+bootstrap bands). Until every setting of every task has the plan's seeds, it names what is missing,
 writes nothing and exits with 1: the planned test is over the whole family.
 
 What the plan fixed before its runs, computed here:
@@ -34,6 +35,14 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+
+from fppo_jax import SweepResult, merge, statistics
+from fppo_jax.config import SYMBOLS
+from fppo_jax.results import labels
+from fppo_jax.study_report import ruled_out
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     RESULTS,
     RUN_RECORD,
@@ -45,12 +54,7 @@ from common import (
     write_result,
 )
 
-from fppo_jax import SweepResult, merge, statistics
-from fppo_jax.config import SYMBOLS
-from fppo_jax.results import labels
-from fppo_jax.study_report import ruled_out
-
-EXPERIMENTS = Path(__file__).resolve().parent
+EXPERIMENTS = Path(__file__).resolve().parents[1]
 PLAN = EXPERIMENTS / "plans" / "dose-response.json"
 FOLDER = "dose_response"  # study.py's folder of the plan's parts
 SEEDS = 10
@@ -368,7 +372,7 @@ def main() -> int:
     args = parser.parse_args()
     plan = json.loads(PLAN.read_text())
     out = args.output or args.results / f"{FOLDER}.md"
-    figure = args.results / FOLDER / f"{FOLDER}.png"
+    figure = out.parent / FOLDER / f"{FOLDER}.png"
     refuse_to_replace([out, figure], args.force, elsewhere="--results DIR or --output FILE")
     merged = {task: recorded(args.results, task) for task in args.tasks or plan["tasks"]}
     short = missing(plan, merged)

@@ -1,8 +1,8 @@
 """The paper's Fig. 6 ablation: FPPO-LP's α and FPPO-QP's k, × seeds, each part one program.
 
-    python experiments/ablation.py --backend native                     # Walker2d and Ant
-    python experiments/ablation.py --backend native --tasks ant --parts k   # one part
-    python experiments/ablation.py --tasks reacher --steps 4096 --seeds 1 --results /tmp/smoke
+    python experiments/paper/ablation.py --backend native                     # Walker2d and Ant
+    python experiments/paper/ablation.py --backend native --tasks ant --parts k   # one part
+    python experiments/paper/ablation.py --tasks reacher --steps 4096 --seeds 1 --results /tmp/smoke
 
 Each task has two parts, each one vmapped sweep (`fppo_jax.sweep`, `paper` preset) of 5
 settings × 5 seeds × 1M steps, chunked automatically to fit device memory: `alpha`, FPPO-LP
@@ -17,9 +17,17 @@ saying which are still to run: a long ablation can go part by part, across sitti
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import matplotlib
+
+from fppo_jax.config import table2
+from fppo_jax.envs import TASKS
+from fppo_jax.results import SweepResult
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
 from common import (
     ABLATION_PARTS,
     ablation_parts,
@@ -32,10 +40,6 @@ from common import (
     sweep_directory,
     write_result,
 )
-
-from fppo_jax.config import table2
-from fppo_jax.envs import TASKS
-from fppo_jax.results import SweepResult
 
 TASKS_IN_PAPER = ("walker2d", "ant")
 

@@ -261,12 +261,14 @@ def best_interleaved(programs: dict[str, Callable[[], object]], repeats: int) ->
 
 
 def env_alone(
-    env: Environment, num_envs: int, num_steps: int, num_rollouts: int
+    env: Environment, num_envs: int, num_steps: int, num_rollouts: int, fresh_resets: bool = True
 ) -> Callable[[jax.Array], jax.Array]:
     """The environment alone, to jit and time: random actions for `num_rollouts` ×
     `num_steps` steps of `num_envs` environments, restarting ended episodes from one reset
-    state per environment per rollout (native environments restart themselves). It returns the
-    rewards' sum, so that the compiler leaves none of the steps out."""
+    state per environment per rollout, drawn afresh (or, without `fresh_resets`, the first one
+    drawn, reused for the whole run, as Brax's auto-reset does; native environments restart
+    themselves). It returns the rewards' sum, so that the compiler leaves none of the steps
+    out."""
     import jax
     import jax.numpy as jnp
 
@@ -285,12 +287,15 @@ def env_alone(
     def run(key: jax.Array) -> jax.Array:
         init_key, key = jax.random.split(key)
         state, _ = draw_resets(env, init_key, (num_envs,))
+        first = state
 
         def rollout(state, key):
             action_key, step_key, reset_key = jax.random.split(key, 3)
             shape = (num_steps, num_envs)
             actions = random_actions(action_key, shape)
-            resets = None if own_resets else draw_resets(env, reset_key, (num_envs,))[0]
+            resets = None if own_resets else first
+            if fresh_resets and not own_resets:
+                resets = draw_resets(env, reset_key, (num_envs,))[0]
 
             def step(state, inputs):
                 keys, action = inputs

@@ -2,12 +2,15 @@
 inside a `lax.cond` costs.
 
     python experiments/profiles/profile_mujoco.py [--env hopper] [--num-envs 128] [--updates 20]
-        [--repeats 3]
+        [--minibatches 4] [--repeats 3]
 
 At the shape of bench_mujoco.py's MJX rows (16-step unrolls, 4 minibatches × 4 epochs, one reset
-state per environment per rollout, PPO), each arm one compiled program of `--updates` updates of
-one run, interleaved, best of `--repeats`:
+state per environment per rollout, PPO; `--minibatches 16` at 2,048 environments is the
+`massive` preset's), each arm one compiled program of `--updates` updates of one run,
+interleaved, best of `--repeats`:
 - the environment alone, random actions (bench_mujoco.py's (a));
+- the same, each environment's first reset state reused for the whole run instead of one drawn
+  afresh per rollout, as Brax's auto-reset does (what bench_mujoco.py's (c) pays for resets);
 - the rollout alone: the policy acting and the environments stepping, the parameters fixed;
 - the whole update, as `Trainer.run` runs it (a loop of the updates left of the run);
 - the whole update inside a `lax.cond` in a loop of the chunk's length, as `Trainer.run` ran it
@@ -78,6 +81,7 @@ def main() -> None:
     parser.add_argument("--env", default="hopper")
     parser.add_argument("--num-envs", type=int, default=128)
     parser.add_argument("--updates", type=int, default=20)
+    parser.add_argument("--minibatches", type=int, default=4)
     parser.add_argument("--repeats", type=int, default=3)
     add_record_flags(parser)
     args = parser.parse_args()
@@ -85,7 +89,8 @@ def main() -> None:
     path = args.results / f"profile_mujoco_{args.env}_{args.num_envs}envs_{platform}.md"
     refuse_to_replace([path], args.force)
 
-    shape = {"num_envs": args.num_envs, "num_steps": 16, "num_minibatches": 4, "num_epochs": 4}
+    shape = {"num_envs": args.num_envs, "num_steps": 16, "num_epochs": 4}
+    shape["num_minibatches"] = args.minibatches
     samples = args.num_envs * shape["num_steps"]
     config = preset_config(
         "paper", total_steps=args.updates * samples, resets_per_rollout=1, **shape
@@ -98,6 +103,10 @@ def main() -> None:
     run = functools.partial(Trainer.run, num_updates=args.updates)
     arms = {
         "the environment alone": (env_alone(env, args.num_envs, 16, args.updates), (state.key,)),
+        "the environment alone, its first reset states reused": (
+            env_alone(env, args.num_envs, 16, args.updates, fresh_resets=False),
+            (state.key,),
+        ),
         "the rollout alone": (rollouts_alone(trainer, args.updates), (state, hp)),
         "the whole update (`Trainer.run`)": (functools.partial(run, trainer), (state, hp)),
         "the whole update inside a `lax.cond`": (functools.partial(run, in_cond), (state, hp)),

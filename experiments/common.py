@@ -105,6 +105,32 @@ def refuse_to_replace(paths: Iterable[Path], force: bool, elsewhere: str = "--re
         )
 
 
+def add_smoke_flags(parser: argparse.ArgumentParser, smoke: str) -> None:
+    """``--smoke`` (what it runs: `smoke`), ``--results DIR`` and ``--force``, for a script
+    whose smoke run writes into a new temporary directory (see :func:`results_of`)."""
+    parser.add_argument("--smoke", action="store_true", help=smoke)
+    parser.add_argument(
+        "--results",
+        type=Path,
+        help="where results go (default: experiments/results, or a new temporary directory "
+        "with --smoke)",
+    )
+    add_force_flag(parser)
+
+
+def results_of(args: argparse.Namespace, name: str) -> Path:
+    """Where the results of a script with :func:`add_smoke_flags` go: ``--results``, else the
+    recorded results, else with ``--smoke`` a new temporary directory (``fppo-<name>-smoke-…``);
+    a smoke run never writes into the recorded results."""
+    if not args.smoke:
+        return args.results or RESULTS
+    if args.results is None:
+        return Path(tempfile.mkdtemp(prefix=f"fppo-{name}-smoke-"))
+    if inside_results(args.results):
+        sys.exit(f"--smoke never writes into the recorded results ({RESULTS}); pass another")
+    return args.results
+
+
 def inside_results(path: Path) -> bool:
     """Whether `path` is this repository's recorded results or inside them."""
     path, results = path.resolve(), RESULTS.resolve()

@@ -28,17 +28,15 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 from common import (
-    RESULTS,
-    add_force_flag,
+    add_smoke_flags,
     argument_parser,
     header,
-    inside_results,
     refuse_to_replace,
+    results_of,
     write_result,
 )
 
@@ -127,14 +125,7 @@ def main() -> None:
     parser = argument_parser(__doc__)
     parser.add_argument("--parts", nargs="+", help="default: every part (see --list)")
     parser.add_argument("--list", action="store_true", help="print the parts and exit")
-    parser.add_argument("--smoke", action="store_true", help="tiny parts, for a CPU")
-    parser.add_argument(
-        "--results",
-        type=Path,
-        help="where results go (default: experiments/results, or a new temporary directory "
-        "with --smoke)",
-    )
-    add_force_flag(parser)
+    add_smoke_flags(parser, "tiny parts, for a CPU")
     parser.add_argument("--part-seconds", type=float, default=540, help="each part's time limit")
     args = parser.parse_args()
     planned = parts(args.smoke)
@@ -145,13 +136,7 @@ def main() -> None:
     if unknown:
         sys.exit(f"unknown part {', '.join(unknown)}; parts: {', '.join(planned)}")
     chosen = args.parts or list(planned)
-    if args.smoke and args.results is None:
-        args.results = Path(tempfile.mkdtemp(prefix="fppo-gpu-suite-smoke-"))
-    elif args.smoke and inside_results(args.results):
-        sys.exit(
-            f"--smoke never writes into the recorded results ({RESULTS}); pass another --results"
-        )
-    results = args.results or RESULTS
+    results = results_of(args, "gpu-suite")
     import jax
 
     platform = jax.devices()[0].platform

@@ -27,12 +27,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
 from common import (
-    RESULTS,
-    add_force_flag,
+    add_smoke_flags,
     argument_parser,
     header,
-    inside_results,
     refuse_to_replace,
+    results_of,
     write_result,
 )
 
@@ -80,20 +79,9 @@ def shared_machine(load_before: float, load_after: float, cores: int) -> bool:
 def main() -> None:
     parser = argument_parser(__doc__)
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--smoke", action="store_true", help="a few tiny updates, once")
-    parser.add_argument(
-        "--results",
-        type=Path,
-        help="where results go (default: experiments/results, or a new temporary directory "
-        "with --smoke)",
-    )
-    add_force_flag(parser)
+    add_smoke_flags(parser, "a few tiny updates, once")
     args = parser.parse_args()
-    if args.smoke and args.results is None:
-        args.results = Path(tempfile.mkdtemp(prefix="fppo-bench-startup-smoke-"))
-    elif args.smoke and inside_results(args.results):
-        sys.exit(f"--smoke never writes into the recorded results ({RESULTS}); pass another")
-    path = (args.results or RESULTS) / "bench_startup.md"
+    path = results_of(args, "bench-startup") / "bench_startup.md"
     refuse_to_replace([path], args.force)
     command = SMOKE_COMMAND if args.smoke else FIRST_COMMAND
     repeats = 1 if args.smoke else args.repeats

@@ -16,7 +16,6 @@ same simulated scores. Seeded: the same command writes the same figures.
 from __future__ import annotations
 
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -25,12 +24,11 @@ from fppo_jax.sequential import Design, simulate
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
 from common import (
-    RESULTS,
-    add_force_flag,
+    add_smoke_flags,
     argument_parser,
     header,
-    inside_results,
     refuse_to_replace,
+    results_of,
     write_result,
 )
 
@@ -60,21 +58,10 @@ def fixed_seeds_for(power: float, family: list[int], shift: float, studies: int)
 def main() -> None:
     parser = argument_parser(__doc__)
     parser.add_argument("--studies", type=int, default=2000, help="simulated studies per row")
-    parser.add_argument("--smoke", action="store_true", help="200 studies per row")
-    parser.add_argument(
-        "--results",
-        type=Path,
-        help="where results go (default: experiments/results, or a new temporary directory "
-        "with --smoke)",
-    )
-    add_force_flag(parser)
+    add_smoke_flags(parser, "200 studies per row")
     args = parser.parse_args()
-    if args.smoke and args.results is None:
-        args.results = Path(tempfile.mkdtemp(prefix="fppo-sequential-rule-smoke-"))
-    elif args.smoke and inside_results(args.results):
-        sys.exit(f"--smoke never writes into the recorded results ({RESULTS}); pass another")
     studies = 200 if args.smoke else args.studies
-    path = (args.results or RESULTS) / "sequential_rule.md"
+    path = results_of(args, "sequential-rule") / "sequential_rule.md"
     refuse_to_replace([path], args.force)
 
     start = time.perf_counter()

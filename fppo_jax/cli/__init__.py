@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
-import logging
 import sys
 import warnings
 from collections.abc import Iterator, Sequence
@@ -54,7 +53,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     # What the commands need (the trainer, checkpoints, JAX's devices) only now: --help and a
     # mistyped flag answer without waiting for it.
     from fppo_jax import compile_cache
-    from fppo_jax.checkpoint import CheckpointNotWritten
     from fppo_jax.cli.commands import COMMANDS
     from fppo_jax.distributed import initialize
     from fppo_jax.driver import StoppedBySignal
@@ -67,9 +65,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             return COMMANDS[args.command](args)
         except FppoError as error:  # what the user can act on; any other error is a bug
             print(f"fppo-jax: error: {error}", file=sys.stderr)
-            if isinstance(error, CheckpointNotWritten):
-                # The failed write's own tasks, collected at the exit, say it again at length.
-                logging.getLogger("asyncio").addFilter(_UnretrievedTasks())
             return 2
         except OSError as error:
             # A file or directory the command reads or writes (a full disk, a read-only or
@@ -102,14 +97,6 @@ def _with_settings_file(
     check_preset(args.config, settings, _given(parser, argv, command, "preset"))
     command.set_defaults(**settings)
     return parser.parse_args(argv)
-
-
-class _UnretrievedTasks(logging.Filter):
-    """Drops asyncio's reports of tasks whose exception nobody retrieved: a checkpoint write
-    that failed leaves orbax's, already reported as CheckpointNotWritten."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return not str(record.msg).startswith("Task exception was never retrieved")
 
 
 def _given(

@@ -1,5 +1,3 @@
-import sys
+from fppo_jax.cli import entry_point
 
-from fppo_jax.cli import main
-
-sys.exit(main())
+entry_point()

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import jax
-
 from fppo_jax.config import (
     HYPERPARAMETER_DEFAULTS,
     check_seed,
@@ -14,7 +12,7 @@ from fppo_jax.config import (
 from fppo_jax.distributed import is_main_process
 from fppo_jax.driver import Outcome, Plan, drive
 from fppo_jax.envs import Environment
-from fppo_jax.execution import batch_of_one_on_device, first_run, first_run_on_device
+from fppo_jax.execution import batch_of_one_on_device, first_run, first_run_on_device, run_keys
 from fppo_jax.objectives import (
     BUILTINS,
     DEFAULT_VARIANT,
@@ -68,7 +66,7 @@ def train(
     seed = check_seed(seed)
     record = {**setting, **run.record(seed=seed, **identities([surrogate]))}
     description = f"{surrogate.name} on {run.name}"
-    keys, hps = batch_of_one_on_device((jax.random.key(seed), hp))
+    keys, hps = run_keys([seed]), batch_of_one_on_device(hp)
     plan = Plan("train", run.trainer, keys, hps, record, description, run.header(description))
     return _result(run, record, drive(plan, run.options))
 

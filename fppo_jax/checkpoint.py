@@ -431,6 +431,7 @@ class _Writes:
                 raise self._not_written(f"step {step} is not on disk after writing it")
 
     def _not_written(self, why: str) -> CheckpointNotWritten:
+        _FAILED_WRITE_TASKS.install()
         kept = _steps(self.manager)
         before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
         return CheckpointNotWritten(
@@ -468,6 +469,25 @@ class _OrbaxChatter(logging.Filter):
 
 
 _ORBAX_CHATTER = _OrbaxChatter()
+
+
+class _FailedWriteTasks(logging.Filter):
+    """Drops asyncio's reports of orbax's tasks whose exception nobody retrieved: those of a
+    write that failed, which :class:`CheckpointNotWritten` reports already, would say it again
+    at length whenever they are collected (at the exit, or sooner). Installed once a write
+    has failed; any other task's report passes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = str(record.msg)
+        return not (message.startswith("Task exception was never retrieved") and "orbax" in message)
+
+    def install(self) -> None:
+        logger = logging.getLogger("asyncio")
+        if self not in logger.filters:
+            logger.addFilter(self)
+
+
+_FAILED_WRITE_TASKS = _FailedWriteTasks()
 
 
 class _ReadsLeftBehind:

@@ -289,10 +289,10 @@ def hyperparameters(
         value = real_number(name, value)
         if not (math.isfinite(value) and ok(value)):
             raise InvalidInput(f"{name} must be {bound}, got {value}")
-    return Hyperparameters(
-        objective=objective(surrogate, epsilon=epsilon, **own),
-        **{name: jnp.asarray(value, jnp.float32) for name, value in settings.items()},
-    )
+    # NumPy's scalars, put on the device as they are (as the objective's own: no conversion
+    # program to compile).
+    scalars = jax.device_put({name: np.float32(value) for name, value in settings.items()})
+    return Hyperparameters(objective=objective(surrogate, epsilon=epsilon, **own), **scalars)
 
 
 CONFIG_FIELDS: tuple[str, ...] = tuple(field.name for field in dataclasses.fields(TrainConfig))

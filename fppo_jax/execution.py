@@ -13,7 +13,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar, cast
 
 import jax
@@ -45,6 +45,14 @@ def batch_of_one(tree: T) -> T:
 # and dtype: a few milliseconds each, for the dozens of leaves of a state, on every start.
 first_run_on_device = jax.jit(first_run)
 batch_of_one_on_device = jax.jit(batch_of_one)
+_keys = jax.jit(jax.vmap(jax.random.key))
+
+
+def run_keys(seeds: Sequence[int]) -> jax.Array:
+    """``jax.random.key(seed)`` of each of `seeds` along a leading run axis, in one compiled
+    call. A seed counts by its 64 bits (modulo 2**64): one from 2**63, which
+    ``jax.random.key`` itself refuses, gives the key of its signed equal."""
+    return cast(jax.Array, _keys(np.array([seed % 2**64 for seed in seeds], np.uint64)))
 
 
 def one_run(fn: F) -> F:

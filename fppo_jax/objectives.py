@@ -432,15 +432,11 @@ def objective(
     if not s.builtin:
         probe(s, values, eps)
     menu = union([s])
-    return Objective(
-        variant=jnp.asarray(menu.index(s), jnp.int32),
-        epsilon=jnp.asarray(eps, jnp.float32),
-        hyperparameters={
-            key: jnp.asarray(values.get(key, 0.0), jnp.float32)
-            for key in hyperparameter_names(menu)
-        },
-        surrogates=menu,
-    )
+    # NumPy's scalars, put on the device as they are: JAX's own conversion of a Python number
+    # is a small program, compiled for each dtype on every start.
+    own = {key: np.float32(values.get(key, 0.0)) for key in hyperparameter_names(menu)}
+    index, epsilon_value, own = jax.device_put((np.int32(menu.index(s)), np.float32(eps), own))
+    return Objective(variant=index, epsilon=epsilon_value, hyperparameters=own, surrogates=menu)
 
 
 def stack(objectives: Sequence[Objective]) -> Objective:

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.envs import Box, Discrete
+from fppo_jax.envs.core import key_shape
 from fppo_jax.errors import InvalidInput
 from fppo_jax.networks import make_networks, policy_layers
 from fppo_jax.normalization import RunningStats
@@ -110,7 +111,7 @@ class Policy:
         hidden sizes make (a description edited apart from its arrays, say)."""
         networks = make_networks(self.action_space, self.hidden_sizes)
         obs = jax.ShapeDtypeStruct((self.observation_size,), jnp.float32)
-        expected = jax.eval_shape(networks.policy.init, jax.random.key(0), obs)
+        expected = jax.eval_shape(networks.policy.init, key_shape(), obs)
         shapes = {
             jax.tree_util.keystr(path): tuple(leaf.shape)
             for path, leaf in jax.tree_util.tree_leaves_with_path(expected)

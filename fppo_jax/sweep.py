@@ -30,6 +30,7 @@ from fppo_jax.config import (
 from fppo_jax.driver import Outcome, Plan, drive
 from fppo_jax.envs import Environment
 from fppo_jax.errors import InvalidInput
+from fppo_jax.execution import run_keys
 from fppo_jax.objectives import (
     BUILTINS,
     DEFAULT_VARIANT,
@@ -198,7 +199,7 @@ def _plan(
     return Plan(
         "sweep",
         run.trainer,
-        jnp.stack([jax.random.key(run["seed"]) for run in runs]),
+        run_keys([run["seed"] for run in runs]),
         # Every run in the program of all the sweep's surrogates, so that a part is the whole
         # sweep's program on fewer runs.
         jax.tree.map(lambda x: x[jnp.asarray([run["setting"] for run in runs])], hps),

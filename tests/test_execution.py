@@ -1,9 +1,19 @@
-"""fppo_jax.execution: chunks of a run's metrics joined along updates, and groups of runs
-joined along runs."""
+"""fppo_jax.execution: the runs' keys, chunks of a run's metrics joined along updates, and
+groups of runs joined along runs."""
 
+import jax
 import numpy as np
 
-from fppo_jax.execution import concatenate, updates_per_call
+from fppo_jax.execution import concatenate, run_keys, updates_per_call
+
+
+def test_run_keys_are_jax_keys_of_the_seeds_and_an_unsigned_seed_that_of_its_signed_equal():
+    seeds = [0, 1, 7, -1, -(2**63), 2**31, 2**32 + 5, 2**63 - 1]
+    expected = np.stack([jax.random.key_data(jax.random.key(seed)) for seed in seeds])
+    np.testing.assert_array_equal(jax.random.key_data(run_keys(seeds)), expected)
+    unsigned = jax.random.key_data(run_keys([2**63, 2**64 - 1]))
+    signed = [jax.random.key_data(jax.random.key(seed)) for seed in (-(2**63), -1)]
+    np.testing.assert_array_equal(unsigned, np.stack(signed))
 
 
 def chunk(steps, returns):

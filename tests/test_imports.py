@@ -69,19 +69,21 @@ def test_every_public_name_is_importable_and_listed():
 
 
 def test_gymnax_loads_its_drawing_libraries_on_first_use():
-    """gymnax imports seaborn and pyplot for a few render functions: a gymnax environment is
-    made without loading them, and a render function that uses them gets the usual modules."""
+    """gymnax imports seaborn and matplotlib for a few render functions: a gymnax environment
+    is made without loading them, and a render function that uses them gets the usual
+    modules."""
     code = """
         import json, sys
         from fppo_jax import make_env
         make_env("cartpole")
-        drawing = ("seaborn", "scipy", "matplotlib.pyplot")
+        drawing = ("seaborn", "scipy", "matplotlib")
         deferred = [name for name in drawing if name in sys.modules]
         from gymnax.environments.misc import pong
         palette = pong.sns.color_palette("cubehelix", 3)
-        import matplotlib.pyplot, seaborn
+        import matplotlib.colors, matplotlib.pyplot, seaborn
         same = [pong.sns.color_palette is seaborn.color_palette, pong.plt is not matplotlib.pyplot,
-                pong.plt.subplots is matplotlib.pyplot.subplots]
+                pong.plt.subplots is matplotlib.pyplot.subplots,
+                pong.colors.ListedColormap is matplotlib.colors.ListedColormap]
         print(json.dumps([deferred, len(palette), same]))
     """
     done = subprocess.run(
@@ -91,4 +93,4 @@ def test_gymnax_loads_its_drawing_libraries_on_first_use():
         text=True,
         check=True,
     )
-    assert json.loads(done.stdout.splitlines()[-1]) == [[], 3, [True, True, True]]
+    assert json.loads(done.stdout.splitlines()[-1]) == [[], 3, [True, True, True, True]]

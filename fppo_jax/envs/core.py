@@ -189,6 +189,12 @@ def where_done(done: jax.Array, reset: Any, stepped: Any) -> Any:
     return jax.tree.map(select, reset, stepped)
 
 
+def key_shape() -> jax.ShapeDtypeStruct:
+    """A PRNG key's shape and dtype, for ``jax.eval_shape``: outside a trace a key of its own
+    would be a small compiled program."""
+    return cast(jax.ShapeDtypeStruct, jax.eval_shape(jax.random.key, 0))
+
+
 def check_environment(env: Environment) -> None:
     """Raise ``TypeError`` unless `env` keeps the contract the trainer relies on, checked on
     shapes alone (``jax.eval_shape``: nothing runs): `reset` gives a ``(observation_size,)``
@@ -202,7 +208,7 @@ def check_environment(env: Environment) -> None:
     space = env.action_space
     if not isinstance(space, Discrete | Box):
         raise TypeError(f"action_space must be a Discrete or a Box, got {space!r}")
-    key = jax.random.key(0)
+    key = key_shape()
     state, obs = jax.eval_shape(env.reset, key)
     _expect("reset's observation", obs, (size,), jnp.floating, OBSERVATION_SIZE)
     action = (

@@ -7,8 +7,8 @@ JAX's backends before a multi-process run can join (fppo_jax.distributed).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib
-import math
 import sys
 from types import ModuleType
 from typing import Any, TypeGuard
@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.envs.core import Box, Discrete, Step
+from fppo_jax.envs.core import Box, Discrete, Step, key_shape
 from fppo_jax.errors import InvalidInput
 
 
@@ -33,9 +33,12 @@ class GymnaxEnvironment:
     params: Any
     backend = "gymnax"
 
-    @property
+    @functools.cached_property
     def observation_size(self) -> int:
-        return math.prod(self.env.observation_space(self.params).shape)
+        # From the reset's shapes, as the other adapters do: gymnax's observation space holds
+        # arrays, each a small compiled program outside a trace.
+        _, obs = jax.eval_shape(self.reset, key_shape())
+        return int(obs.shape[-1])
 
     @property
     def action_space(self) -> Discrete | Box:
@@ -77,9 +80,9 @@ def gymnax_environment(env_id: str, max_steps: int | None = None) -> GymnaxEnvir
     return GymnaxEnvironment(env, params)
 
 
-# gymnax 1.0 imports seaborn and matplotlib's pyplot as it is imported, though only the render
-# functions of a few of its environments use them; loading them is most of its one-second import.
-_DRAWING = ("seaborn", "matplotlib.pyplot")
+# gymnax 1.0 imports seaborn and matplotlib (pyplot, colors) as it is imported, though only the
+# render functions of a few of its environments use them; loading them is most of its import.
+_DRAWING = ("seaborn", "matplotlib", "matplotlib.pyplot", "matplotlib.colors")
 
 
 class _StandIn(ModuleType):
@@ -87,6 +90,11 @@ class _StandIn(ModuleType):
     imported, the usual way, when an attribute is first asked of this."""
 
     def __getattr__(self, attr: str) -> Any:
+        if attr.startswith("__"):  # the import system's questions (``__path__``), not a use
+            raise AttributeError(attr)
+        submodule = sys.modules.get(f"{self.__name__}.{attr}")
+        if isinstance(submodule, _StandIn):  # ``import matplotlib.pyplot as plt``, say
+            return submodule
         if sys.modules.get(self.__name__) is self:  # asked during gymnax's own import
             sys.modules.pop(self.__name__, None)
         return getattr(importlib.import_module(self.__name__), attr)

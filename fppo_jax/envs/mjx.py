@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
-from fppo_jax.envs.core import Box, Step, Timed, limited_step
+from fppo_jax.envs.core import Box, Step, Timed, key_shape, limited_step
 from fppo_jax.errors import InvalidInput
 
 
@@ -82,7 +82,7 @@ class BraxEnvironment:
     @functools.cached_property
     def observation_size(self) -> int:
         # Brax's own `observation_size` runs a reset op by op: 20 s for an MJX model on a CPU.
-        state = jax.eval_shape(self.env.reset, jax.random.key(0))
+        state = jax.eval_shape(self.env.reset, key_shape())
         return int(state.obs.shape[-1])
 
     @property

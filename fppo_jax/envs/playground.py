@@ -17,7 +17,7 @@ from typing import Any, cast
 import jax
 import jax.numpy as jnp
 
-from fppo_jax.envs.core import Box, Step, Timed, limited_step
+from fppo_jax.envs.core import Box, Step, Timed, key_shape, limited_step
 from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
 
 
@@ -46,7 +46,7 @@ class PlaygroundEnvironment:
 
     @functools.cached_property
     def observation_size(self) -> int:
-        _, obs = jax.eval_shape(self.reset, jax.random.key(0))
+        _, obs = jax.eval_shape(self.reset, key_shape())
         return int(obs.shape[-1])
 
     @property

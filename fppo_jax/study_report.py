@@ -80,6 +80,23 @@ def normalised_scores(
     return normalised
 
 
+def _mean_improvement(
+    variant: str, baseline: str, on: str, rows: Sequence[dict[str, Any]], scores: dict[str, Scores]
+) -> str:
+    """`variant`'s probability of improvement over `baseline` on endpoint `on`, averaged over
+    the tasks where a decision compared the two, each over the runs that decision used ("–"
+    where none did)."""
+    pairs = [
+        (
+            scores[row["task"]][variant][on][: row["seeds"]],
+            scores[row["task"]][baseline][on][: row["seeds"]],
+        )
+        for row in rows
+        if row["candidate"] == variant and row["task"] in scores
+    ]
+    return _interval(statistics.aggregate_improvement(pairs), ".2f") if pairs else "–"
+
+
 def _across_tasks(
     plan: dict[str, Any], rows: Sequence[dict[str, Any]], scores: dict[str, Scores]
 ) -> list[str]:
@@ -109,21 +126,9 @@ def _across_tasks(
         "|---" * (len(endpoints) + 2) + "|",
     ]
     for variant in (*plan["candidates"], baseline):
-        cells = [variant]
-        for on in endpoints:
-            pairs = [
-                (
-                    scores[row["task"]][variant][on][: row["seeds"]],
-                    scores[row["task"]][baseline][on][: row["seeds"]],
-                )
-                for row in rows
-                if row["candidate"] == variant and row["task"] in scores
-            ]
-            cells.append(
-                _interval(statistics.aggregate_improvement(pairs), ".2f") if pairs else "–"
-            )
+        cells = [_mean_improvement(variant, baseline, on, rows, scores) for on in endpoints]
         level = _interval(statistics.aggregate(normalised[variant]), ".3f") if normalised else "–"
-        lines.append("| " + " | ".join([*cells, level]) + " |")
+        lines.append("| " + " | ".join([variant, *cells, level]) + " |")
     if not normalised:
         lines += [
             "",

@@ -374,8 +374,11 @@ class Checkpoints:
             if not quiet:
                 raise
         finally:
-            if self._process_hook is not None and isinstance(sys.unraisablehook, _ReadsLeftBehind):
-                sys.unraisablehook = self._process_hook  # every write is done: the user's again
+            # Every write is done: the user's hook again, unless one failed, whose reports come
+            # up to the interpreter's exit, as a read's do.
+            ours = isinstance(sys.unraisablehook, _ReadsLeftBehind)
+            if self._process_hook is not None and ours and not self._writes.failed:
+                sys.unraisablehook = self._process_hook
             self._process_hook = None
             if self._lock is not None:
                 self._lock.release()
@@ -398,6 +401,7 @@ class _Writes:
     def __init__(self, manager: ocp.CheckpointManager, directory: Path):
         self.manager, self.directory = manager, directory
         self.pending: int | None = None  # the step being written, until it is on disk
+        self.failed = False  # whether a write failed (its leftovers report up to the exit)
 
     def start(self, step: int, args: ocp.args.Composite) -> None:
         if not self._written(lambda: self.manager.save(step, args=args)):
@@ -431,6 +435,7 @@ class _Writes:
                 raise self._not_written(f"step {step} is not on disk after writing it")
 
     def _not_written(self, why: str) -> CheckpointNotWritten:
+        self.failed = True
         _FAILED_WRITE_TASKS.install()
         kept = _steps(self.manager)
         before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
@@ -521,7 +526,8 @@ class _ReadsLeftBehind:
         """Install the hook, unless it is the one installed, and return the hook it replaced
         (None if none): before the process first reads a checkpoint, for good, as a read's
         reports come up to the interpreter's exit; while a :class:`Checkpoints` writes, whose
-        write's reports come before it closes (it puts the process's hook back)."""
+        write's reports come before it closes (it puts the process's hook back, unless a write
+        failed: then they too come up to the exit)."""
         if isinstance(sys.unraisablehook, cls):
             return None
         previous = sys.unraisablehook

@@ -419,6 +419,8 @@ def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(
                            keep=10, callback=refuse)
         except fppo_jax.CheckpointNotWritten as error:
             print(error)
+            # The failed write's leftovers report up to the exit: their quieting stays.
+            print(type(sys.unraisablehook).__name__)
             sys.exit(3)
     """)
     done = subprocess.run(
@@ -428,6 +430,7 @@ def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(
     assert done.stdout == (
         f"could not write a checkpoint in {tmp_path} (File too large); the newest intact one is "
         "step 3. Free space, or choose another checkpoint directory, and resume (--resume)\n"
+        "_ReadsLeftBehind\n"
     )
     assert "Traceback" not in done.stderr and "Event loop is closed" not in done.stderr
     assert steps_on_disk(tmp_path) == [1, 2, 3]

@@ -87,12 +87,11 @@ def run_script(path: Path, *args: str, cwd: Path) -> subprocess.CompletedProcess
     process, whose imports and compiled programs it reuses (a fresh process takes seconds to
     start): its exit status, as Python's would be, and what it printed."""
     argv, out, err = [str(path), *args], io.StringIO(), io.StringIO()
+    folder = [] if path.is_dir() else [str(path.parent)]  # runpy puts a folder there itself
     with (
         contextlib.chdir(cwd),
         mock.patch.object(sys, "argv", argv),
-        # The interpreter's first entry on the path: the script's folder (a folder run as a
-        # script is put there by runpy itself).
-        mock.patch.object(sys, "path", [str(path if path.is_dir() else path.parent), *sys.path]),
+        mock.patch.object(sys, "path", [*folder, *sys.path]),
         contextlib.redirect_stdout(out),
         contextlib.redirect_stderr(err),
     ):

@@ -1,6 +1,14 @@
 """Environments and checks shared by the tests."""
 
+import contextlib
 import dataclasses
+import io
+import runpy
+import subprocess
+import sys
+import traceback
+from pathlib import Path
+from unittest import mock
 
 import jax
 import jax.numpy as jnp
@@ -72,3 +80,31 @@ def sweep_by_hand() -> SweepResult:
         compile_seconds=0.0,
         train_seconds=0.0,
     )
+
+
+def run_script(path: Path, *args: str, cwd: Path) -> subprocess.CompletedProcess:
+    """Script `path` run with `args` from `cwd` as ``python path args`` runs it, but in this
+    process, whose imports and compiled programs it reuses (a fresh process takes seconds to
+    start): its exit status, as Python's would be, and what it printed."""
+    argv, out, err = [str(path), *args], io.StringIO(), io.StringIO()
+    folder = [] if path.is_dir() else [str(path.parent)]  # runpy puts a folder there itself
+    with (
+        contextlib.chdir(cwd),
+        mock.patch.object(sys, "argv", argv),
+        mock.patch.object(sys, "path", [*folder, *sys.path]),
+        contextlib.redirect_stdout(out),
+        contextlib.redirect_stderr(err),
+    ):
+        try:
+            runpy.run_path(str(path), run_name="__main__")
+            status = 0
+        except SystemExit as stopped:  # what the interpreter makes of it
+            if stopped.code is None or isinstance(stopped.code, int):
+                status = stopped.code or 0
+            else:
+                print(stopped.code, file=sys.stderr)
+                status = 1
+        except Exception:
+            traceback.print_exc()
+            status = 1
+    return subprocess.CompletedProcess(argv, status, out.getvalue(), err.getvalue())

@@ -10,6 +10,7 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 import pytest
+from helpers import run_script
 
 from fppo_jax import SweepResult
 
@@ -19,12 +20,8 @@ EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
 def test_table1_classic_advises_its_own_flags_when_a_result_is_recorded(tmp_path):
     recorded = tmp_path / "table.md"
     recorded.write_text("recorded\n")
-    done = subprocess.run(
-        [sys.executable, str(EXPERIMENTS / "paper" / "table1_classic.py"), "--output", recorded],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=EXPERIMENTS,
+    done = run_script(
+        EXPERIMENTS / "paper" / "table1_classic.py", "--output", str(recorded), cwd=EXPERIMENTS
     )
     assert done.returncode != 0 and "is already recorded" in done.stderr
     assert "--output FILE and --curves DIR to record elsewhere" in done.stderr
@@ -52,13 +49,8 @@ def test_bench_gymnasium_draws_random_actions_of_discrete_and_box_spaces(monkeyp
 
 
 def _planned_verdict(*args):
-    return subprocess.run(
-        [sys.executable, str(EXPERIMENTS / "studies" / "planned_verdict.py"), *map(str, args)],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        cwd=EXPERIMENTS,
-    )
+    script = EXPERIMENTS / "studies" / "planned_verdict.py"
+    return run_script(script, *map(str, args), cwd=EXPERIMENTS)
 
 
 def test_a_planned_verdict_waits_for_every_comparison_naming_what_is_missing(tmp_path):
@@ -158,9 +150,8 @@ FOLDERS = ("paper", "studies", "benchmarks", "profiles")
 
 @pytest.mark.parametrize("folder", FOLDERS)
 def test_a_folder_s_entry_point_lists_each_of_its_scripts(folder):
-    done = subprocess.run(
-        [sys.executable, str(EXPERIMENTS / folder)], capture_output=True, text=True, check=True
-    )
+    done = run_script(EXPERIMENTS / folder, cwd=EXPERIMENTS)
+    assert done.returncode == 0, done.stdout + done.stderr
     listed = [line for line in done.stdout.splitlines() if line.startswith("python ")]
     scripts = sorted((EXPERIMENTS / folder).glob("[!_]*.py"))
     assert listed == [f"python experiments/{folder}/{script.name}" for script in scripts]

@@ -2,13 +2,12 @@
 published ones, its statistic against SciPy's, its replay of the looks, Holm's recycling, and
 its error rates by simulation on synthetic scores (no training)."""
 
-import os
-import subprocess
-import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import run_script
 from scipy import stats
 
 from fppo_jax import statistics
@@ -124,16 +123,13 @@ def test_the_family_wise_error_is_at_most_alpha_and_a_real_difference_takes_fewe
     assert shifted["seeds"] < needed - 3
 
 
-def test_the_experiments_smoke_run_writes_its_table_into_a_temporary_directory(tmp_path):
+def test_the_experiments_smoke_run_writes_its_table_into_a_temporary_directory(
+    tmp_path, monkeypatch
+):
     experiments = Path(__file__).resolve().parent.parent / "experiments"
     script = experiments / "studies" / "sequential_rule.py"
-    done = subprocess.run(
-        [sys.executable, str(script), "--smoke"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        env={**os.environ, "TMPDIR": str(tmp_path)},  # where its temporary directory goes
-    )
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # where its temporary directory goes
+    done = run_script(script, "--smoke", cwd=experiments)
     assert done.returncode == 0, done.stdout + done.stderr
     written = Path(done.stdout.split("wrote ")[-1].strip())
     assert written.parent.parent == tmp_path
@@ -141,9 +137,6 @@ def test_the_experiments_smoke_run_writes_its_table_into_a_temporary_directory(t
     table = written.read_text()
     assert "- 200 simulated studies per row" in table
     assert "| 2 tasks × 2 candidates | 1 | 0.000 | 0.9" in table
-    refused = subprocess.run(
-        [sys.executable, str(script), "--smoke", "--results", str(experiments / "results")],
-        capture_output=True,
-        text=True,
-    )
+    results = str(experiments / "results")
+    refused = run_script(script, "--smoke", "--results", results, cwd=experiments)
     assert refused.returncode != 0 and "never writes into the recorded results" in refused.stderr

@@ -4,10 +4,10 @@ merged into the verdict; all in a temporary directory."""
 import json
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
+from helpers import run_script
 
 from fppo_jax import SweepResult, merge, statistics
 
@@ -15,13 +15,7 @@ EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
 
 
 def _run(script: str, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, str(EXPERIMENTS / "studies" / script), *args],
-        capture_output=True,
-        text=True,
-        timeout=900,
-        cwd=EXPERIMENTS,
-    )
+    return run_script(EXPERIMENTS / "studies" / script, *args, cwd=EXPERIMENTS)
 
 
 def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):

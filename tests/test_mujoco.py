@@ -141,7 +141,7 @@ def test_truncation_is_bootstrapped_on_a_continuous_task():
     config = TrainConfig(total_steps=24, num_envs=2, num_steps=12, num_minibatches=1)
     trainer = make_train(config, env)
     hp = hyperparameters("ppo")
-    state = jax.jit(trainer.init)(jax.random.key(0), hp)  # op by op, a hundred small programs
+    state = jax.jit(trainer.init)(jax.random.key(0), hp)  # one program, not a hundred op by op
     traj, _ = jax.jit(trainer._rollout)(state, hp, jax.random.key(1))
     truncated = np.asarray(traj.truncated)
     assert np.flatnonzero(truncated[:, 0]).tolist() == [4, 9] and truncated[:, 1].sum() == 2

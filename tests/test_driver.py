@@ -275,14 +275,15 @@ def test_a_sweep_chooses_its_runs_per_call_once_before_compiling(monkeypatch):
         fppo_jax.TrainConfig(total_steps=128 * 2, **TINY), make_env("cartpole")
     )
     one_run = memory.run_bytes(trainer, jax.random.key(0), fppo_jax.hyperparameters())
-    monkeypatch.setattr(memory, "free_bytes", lambda: 2 * 3.5 * one_run)  # 3 runs fit in half
+    monkeypatch.setattr(memory, "free_bytes", lambda: 2 * 2.5 * one_run)  # 2 runs fit in half
     compiled = []
     compile_program = driver.compile_program
     monkeypatch.setattr(
         driver, "compile_program", lambda *a, **k: compiled.append(1) or compile_program(*a, **k)
     )
-    result = sweep("cartpole", {"variant": "ppo"}, seeds=8, total_steps=128 * 2, **TINY)
-    assert result.config["runs_per_call"] == 3 and len(compiled) == 1
+    grid, shape = {"variant": "ppo"}, {"total_steps": 128 * 2, **TINY, **IN_CHUNKS}
+    result = sweep("cartpole", grid, seeds=8, **shape)
+    assert result.config["runs_per_call"] == 2 and len(compiled) == 1
     assert result.metrics["env_steps"].shape == (8, 2)
 
 

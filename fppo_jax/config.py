@@ -237,8 +237,9 @@ class Hyperparameters:
     """Traced settings. The surrogate's own (variant, ε, α, k, δ) live in `objective`.
 
     `num_updates`, the run's length in updates (the learning-rate schedule's horizon and the
-    run's end), is the configuration's unless set: the driver sets it (:func:`with_budget`),
-    so that one compiled program serves every step budget."""
+    run's end), is the configuration's unless set. A compiled program's runs carry it
+    (:func:`with_budget`, from :meth:`~fppo_jax.execution.Program.run`), so that one program
+    serves every step budget."""
 
     objective: Objective
     learning_rate: jax.Array

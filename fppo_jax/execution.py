@@ -209,9 +209,6 @@ class _Placed:
     def __call__(self, *args: Any) -> Any:
         return self.compiled(*(place(a, s) for a, s in zip(args, self.shardings, strict=True)))
 
-    def memory_analysis(self) -> Any:
-        return self.compiled.memory_analysis()
-
 
 def run_chunks(
     program: Program, state: TrainState, hps: Hyperparameters

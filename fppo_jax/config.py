@@ -234,7 +234,12 @@ def preset_config(preset: str, **overrides: Any) -> TrainConfig:
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Hyperparameters:
-    """Traced settings. The surrogate's own (variant, ε, α, k, δ) live in `objective`."""
+    """Traced settings. The surrogate's own (variant, ε, α, k, δ) live in `objective`.
+
+    `num_updates`, the run's length in updates (the learning-rate schedule's horizon and the
+    run's end), is the configuration's unless set. A compiled program's runs carry it
+    (:func:`with_budget`, from :meth:`~fppo_jax.execution.Program.run`), so that one program
+    serves every step budget."""
 
     objective: Objective
     learning_rate: jax.Array
@@ -243,6 +248,20 @@ class Hyperparameters:
     entropy_coef: jax.Array
     value_coef: jax.Array
     max_grad_norm: jax.Array
+    num_updates: jax.Array | None = None
+
+
+def run_length(hp: Hyperparameters, config: TrainConfig) -> jax.Array | int:
+    """Updates in the run: `hp`'s, traced, if it carries them; else `config`'s, a constant."""
+    return config.num_updates if hp.num_updates is None else hp.num_updates
+
+
+def with_budget(hps: Hyperparameters, num_updates: int) -> Hyperparameters:
+    """`hps` (along a leading run axis) carrying `num_updates` as every run's length."""
+    runs = hps.learning_rate.shape[0]
+    return dataclasses.replace(
+        hps, num_updates=jax.device_put(np.full(runs, num_updates, np.int32))
+    )
 
 
 HYPERPARAMETER_DEFAULTS: dict[str, float] = {

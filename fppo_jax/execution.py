@@ -4,8 +4,9 @@ Its inputs, state and metrics always carry a leading run axis: a sweep's runs ar
 it, and a single run is its own program with the axis added around it (:func:`one_run`).
 Every chunk, and every group of runs of the same size, reuses the one compiled program, and so
 does a later run in the same process with the same static configuration, environment object and
-array shapes (hyperparameters are traced: their values are not part of the shape). What the
-host does between chunks is the driver's (:mod:`fppo_jax.driver`).
+array shapes (hyperparameters are traced: their values are not part of the shape, and nor is
+the step budget, which the program takes as one of them). What the host does between chunks is
+the driver's (:mod:`fppo_jax.driver`).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import jax
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from fppo_jax.config import Hyperparameters
+from fppo_jax.config import Hyperparameters, with_budget
 from fppo_jax.distributed import fetch, input_sharding, place, state_shardings
 from fppo_jax.trainer import Trainer, TrainState
 
@@ -77,17 +78,22 @@ class Program:
 
     trainer: Trainer
     init: Callable[[jax.Array, Hyperparameters], TrainState]
-    run: Callable[[TrainState, Hyperparameters], tuple[TrainState, Any]]
+    chunk: Callable[[TrainState, Hyperparameters], tuple[TrainState, Any]]  # hps with a budget
     runs: int
     updates_per_call: int
     compile_seconds: float  # spent compiling it for this run: 0 when reused
 
+    def run(self, state: TrainState, hps: Hyperparameters) -> tuple[TrainState, Any]:
+        """`updates_per_call` updates of every run from `state`, none past the trainer's
+        budget."""
+        return self.chunk(state, with_budget(hps, self.trainer.config.num_updates))
+
 
 class _Programs:
-    """Compiled programs by what they were compiled for: the static configuration, the
-    environment (by identity: each entry keeps it alive), the inputs' tree structure, shapes
-    and dtypes, the chunk length and the mesh. A trainer's networks follow from its
-    configuration and environment, so equal keys make equal programs."""
+    """Compiled programs by what they were compiled for: the static configuration but its step
+    budget, the environment (by identity: each entry keeps it alive), the inputs' tree
+    structure, shapes and dtypes, the chunk length and the mesh. A trainer's networks follow
+    from its configuration and environment, so equal keys make equal programs."""
 
     def __init__(self) -> None:
         self.entries: collections.OrderedDict[tuple[Any, ...], tuple[Any, Program]] = (
@@ -104,7 +110,8 @@ class _Programs:
     ) -> tuple[Any, ...]:
         leaves, treedef = jax.tree.flatten(inputs)
         shapes = tuple((x.shape, str(x.dtype)) for x in leaves)
-        static = (trainer.config, id(trainer.env), along_runs, updates_per_call, mesh)
+        config = dataclasses.replace(trainer.config, total_steps=trainer.config.samples_per_update)
+        static = (config, id(trainer.env), along_runs, updates_per_call, mesh)
         return (*static, treedef, shapes)
 
     def get(self, key: tuple[Any, ...]) -> Program | None:
@@ -144,15 +151,16 @@ def compile_program(
         return trainer.run(state, hp, updates_per_call)
 
     init, run = along_runs(trainer.init), along_runs(run)
+    budgeted = with_budget(hps, trainer.config.num_updates)
     # Both programs are compiled here, ahead of time, so that compilation is never counted as
     # training time.
     start = time.perf_counter()
     if mesh is None:
         state = jax.eval_shape(init, keys, hps)
         compiled_init: Callable[..., Any] = jax.jit(init).lower(keys, hps).compile()
-        compiled_run: Callable[..., Any] = jax.jit(run).lower(state, hps).compile()
+        compiled_run: Callable[..., Any] = jax.jit(run).lower(state, budgeted).compile()
     else:
-        compiled_init, compiled_run = _compile_on_mesh(init, run, keys, hps, mesh)
+        compiled_init, compiled_run = _compile_on_mesh(init, run, keys, hps, budgeted, mesh)
     seconds = time.perf_counter() - start
     runs = keys.shape[0]
     program = Program(trainer, compiled_init, compiled_run, runs, updates_per_call, seconds)
@@ -161,9 +169,15 @@ def compile_program(
 
 
 def _compile_on_mesh(
-    init: Callable[..., Any], run: Callable[..., Any], keys: jax.Array, hps: Any, mesh: Mesh
+    init: Callable[..., Any],
+    run: Callable[..., Any],
+    keys: jax.Array,
+    hps: Any,
+    budgeted: Any,
+    mesh: Mesh,
 ) -> tuple[_Placed, _Placed]:
-    """`init` and `run` compiled with their inputs and state laid out on `mesh`."""
+    """`init` and `run` compiled with their inputs and state laid out on `mesh` (`run`'s
+    hyperparameters `budgeted`: carrying the run's length)."""
     inputs, state = input_sharding(mesh), jax.eval_shape(init, keys, hps)
     placed = state_shardings(mesh, state)
     compiled_init = _Placed(
@@ -177,7 +191,7 @@ def _compile_on_mesh(
     metrics = NamedSharding(mesh, PartitionSpec())
     compiled_run = _Placed(
         jax.jit(run, in_shardings=(placed, inputs), out_shardings=(placed, metrics))
-        .lower(state, hps)
+        .lower(state, budgeted)
         .compile(),
         (placed, inputs),
     )
@@ -194,9 +208,6 @@ class _Placed:
 
     def __call__(self, *args: Any) -> Any:
         return self.compiled(*(place(a, s) for a, s in zip(args, self.shardings, strict=True)))
-
-    def memory_analysis(self) -> Any:
-        return self.compiled.memory_analysis()
 
 
 def run_chunks(

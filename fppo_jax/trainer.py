@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from fppo_jax.config import Hyperparameters, TrainConfig
+from fppo_jax.config import Hyperparameters, TrainConfig, run_length
 from fppo_jax.distributions import Distribution
 from fppo_jax.envs import (
     Box,
@@ -142,9 +142,10 @@ def make_optimizer(hp: Hyperparameters, config: TrainConfig) -> optax.GradientTr
     learning_rate: Any = hp.learning_rate
     if config.anneal_learning_rate:
         steps_per_update = config.num_epochs * config.num_minibatches
+        num_updates = run_length(hp, config)
 
         def learning_rate(count: jax.Array) -> jax.Array:
-            return hp.learning_rate * (1.0 - (count // steps_per_update) / config.num_updates)
+            return hp.learning_rate * (1.0 - (count // steps_per_update) / num_updates)
 
     return optax.flatten(
         optax.chain(
@@ -303,7 +304,7 @@ class Trainer:
             state, metrics = self.update(state, hp)
             return state, jax.tree.map(lambda all_rows, row: all_rows.at[i].set(row), rows, metrics)
 
-        left = jnp.clip(self.config.num_updates - state.update, 0, num_updates)
+        left = jnp.clip(run_length(hp, self.config) - state.update, 0, num_updates)
         return cast("tuple[TrainState, Metrics]", jax.lax.fori_loop(0, left, step, (state, rows)))
 
     def update(self, state: TrainState, hp: Hyperparameters) -> tuple[TrainState, Metrics]:

@@ -20,8 +20,9 @@ from fppo_jax.study import recorded_group, run_scores
 
 # PPO learns CartPole in this budget (its final return 57–106 over 8 seeds against 20–24 for
 # `frozen`, which never moves its policy): 8 seeds a side are enough to decide at the first look.
-BUDGET = {"total_steps": 4096, "learning_rate": 0.003}
-FLAGS = ["--steps", "4096", "--learning-rate", "0.003", "--quiet"]
+# Eight runs per compiled call: the tests' groups, of 8 seeds per variant, share one program.
+BUDGET = {"total_steps": 4096, "learning_rate": 0.003, "chunk": 8}
+FLAGS = ["--steps", "4096", "--learning-rate", "0.003", "--chunk", "8", "--quiet"]
 
 
 def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(tmp_path, tiny):

@@ -275,14 +275,15 @@ def test_a_sweep_chooses_its_runs_per_call_once_before_compiling(monkeypatch):
         fppo_jax.TrainConfig(total_steps=128 * 2, **TINY), make_env("cartpole")
     )
     one_run = memory.run_bytes(trainer, jax.random.key(0), fppo_jax.hyperparameters())
-    monkeypatch.setattr(memory, "free_bytes", lambda: 2 * 3.5 * one_run)  # 3 runs fit in half
+    monkeypatch.setattr(memory, "free_bytes", lambda: 2 * 2.5 * one_run)  # 2 runs fit in half
     compiled = []
     compile_program = driver.compile_program
     monkeypatch.setattr(
         driver, "compile_program", lambda *a, **k: compiled.append(1) or compile_program(*a, **k)
     )
-    result = sweep("cartpole", {"variant": "ppo"}, seeds=8, total_steps=128 * 2, **TINY)
-    assert result.config["runs_per_call"] == 3 and len(compiled) == 1
+    grid, shape = {"variant": "ppo"}, {"total_steps": 128 * 2, **TINY, **IN_CHUNKS}
+    result = sweep("cartpole", grid, seeds=8, **shape)
+    assert result.config["runs_per_call"] == 2 and len(compiled) == 1
     assert result.metrics["env_steps"].shape == (8, 2)
 
 
@@ -445,6 +446,35 @@ def test_a_repeated_train_or_sweep_with_the_same_shapes_compiles_nothing(monkeyp
     with _Compilations() as compiled:
         other = sweep("cartpole", {"variant": ["tr-ppo", "fppo-qp"]}, seeds=[5], **settings)
     assert compiled == [] and other.compile_seconds == 0
+
+
+def test_another_step_budget_reuses_the_program_and_anneals_over_its_own_length(monkeypatch):
+    """The budget is traced: a run of another length compiles nothing, ends where its own
+    budget ends, and its learning rate anneals over its own length, bit for bit as the
+    trainer compiled for that budget alone."""
+    from fppo_jax import execution, hyperparameters, make_env, make_train
+    from fppo_jax.config import TrainConfig
+    from fppo_jax.trainer import METRICS
+
+    monkeypatch.setattr(execution, "_PROGRAMS", execution._Programs())
+    longer = train(**RUN, **IN_CHUNKS)  # 12 updates
+    with _Compilations() as compiled:
+        shorter = train(**{**RUN, "total_steps": 128 * 5}, **IN_CHUNKS)
+    assert compiled == [] and shorter.compile_seconds == 0
+    assert shorter.metrics["env_steps"].tolist() == [128 * u for u in range(1, 6)]
+    for name in METRICS:  # a constant learning rate: the first updates are the same
+        assert_bitwise_equal(shorter.metrics[name], longer.metrics[name][:5])
+
+    annealed = {**RUN, "anneal_learning_rate": True}
+    train(**annealed, **IN_CHUNKS)
+    with _Compilations() as compiled:
+        short = train(**{**annealed, "total_steps": 128 * 5}, **IN_CHUNKS)
+    assert compiled == []
+    config = TrainConfig(total_steps=128 * 5, anneal_learning_rate=True, **TINY)
+    trainer = make_train(config, make_env("cartpole"))
+    _, alone = jax.jit(trainer)(jax.random.key(1), hyperparameters("fppo-lp", alpha=1.3))
+    for name in METRICS:
+        assert_bitwise_equal(short.metrics[name], np.asarray(getattr(alone, name)))
 
 
 def test_one_writer_per_output_directory_from_the_first_moment(tmp_path):

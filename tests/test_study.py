@@ -12,6 +12,8 @@ from helpers import run_script
 from fppo_jax import SweepResult, merge, statistics
 
 EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
+# Six runs per compiled call in every test's sweeps of the paper's shape: one program for all.
+SHARED = ["--chunk", "6"]
 
 
 def _run(script: str, *args: str) -> subprocess.CompletedProcess:
@@ -19,7 +21,7 @@ def _run(script: str, *args: str) -> subprocess.CompletedProcess:
 
 
 def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
-    tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
+    tiny = ["--task", "cartpole", "--steps", "4096", *SHARED, "--results", str(tmp_path)]
     for seeds in ("0:3", "3:6"):
         done = _run("study.py", *tiny, "--seeds", seeds, "--variants", "ppo", "fppo-lp")
         assert done.returncode == 0, done.stdout + done.stderr
@@ -78,7 +80,7 @@ def test_parts_are_recorded_refused_twice_and_merged_into_the_verdict(tmp_path):
 
 
 def test_a_dose_response_is_one_sweep_whose_controls_train_as_ppo_and_its_report(tmp_path):
-    tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
+    tiny = ["--task", "cartpole", "--steps", "4096", *SHARED, "--results", str(tmp_path)]
     report = ["--results", str(tmp_path), "--tasks", "cartpole"]
     # Two parts of the same shape (60 runs), so that the second compiles nothing.
     done = _run("study.py", *tiny, "--seeds", "0:5", "--plan", "plans/dose-response.json")
@@ -142,7 +144,7 @@ def test_a_dose_response_is_one_sweep_whose_controls_train_as_ppo_and_its_report
 
 
 def test_a_planned_part_trains_the_plan_s_settings_and_is_compared_with_the_study(tmp_path):
-    tiny = ["--task", "cartpole", "--steps", "4096", "--results", str(tmp_path)]
+    tiny = ["--task", "cartpole", "--steps", "4096", *SHARED, "--results", str(tmp_path)]
     done = _run("study.py", *tiny, "--seeds", "0:50", "--plan", "plans/baseline-shape.json")
     assert done.returncode == 0, done.stdout + done.stderr
     part = tmp_path / "baseline_shape" / "cartpole" / "paper" / "seeds-0-49_baseline-shape"

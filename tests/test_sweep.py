@@ -6,6 +6,7 @@ import sys
 import jax
 import numpy as np
 import pytest
+from conftest import IN_CHUNKS
 from helpers import sweep_by_hand
 
 import fppo_jax
@@ -99,10 +100,11 @@ def test_chunked_sweep_matches_the_unchunked_one(mixed):
         "cartpole",
         {"variant": ["ppo", "fppo-lp", "tr-ppo"], "alpha": [1.5]},
         seeds=[0, 3],
-        chunk=4,
+        chunk=2,
         **FAST,
+        **IN_CHUNKS,  # two runs in chunks of updates: the program of other tests' sweeps
     )
-    assert chunked.config["runs_per_call"] == 4 and mixed.config["runs_per_call"] == 6
+    assert chunked.config["runs_per_call"] == 2 and mixed.config["runs_per_call"] == 6
     for name in METRICS:
         np.testing.assert_allclose(chunked.metrics[name], mixed.metrics[name], rtol=1e-4, atol=1e-6)
 
@@ -322,7 +324,7 @@ def test_a_part_s_checkpoint_is_not_resumed_as_another_part(tmp_path):
 
 def test_a_stopped_part_resumes_from_its_checkpoint_as_if_never_stopped(tmp_path):
     grid, shape = {"variant": ["ppo", "fppo-lp"]}, {**TINY, "total_steps": 128 * 4}
-    whole = sweep("cartpole", grid, seeds=2, part=(2, 2), **shape)
+    whole = sweep("cartpole", grid, seeds=2, part=(2, 2), **shape, **IN_CHUNKS)
     stopped = sweep(
         "cartpole",
         grid,

@@ -32,7 +32,7 @@ def test_the_smoke_run_measures_every_arm_into_a_temporary_directory():
     assert "- Machine: " in table and "- Load average (1 min)" in table
     for arm in ("import jax", "import fppo_jax", "from fppo_jax import train", "fppo-jax --help"):
         assert re.search(rf"\| `{arm}` \| [\d.]+ \| [+-][\d.]+ \|", table), arm
-    for run in ("cold", "warm", "cache off"):
+    for run in ("cold", "warm", "another budget", "cache off"):
         assert re.search(rf"\| {run} \| [\d.]+ \| [\d.]+ s \| [\d.]+ \|", table), run
 
 

@@ -238,8 +238,8 @@ class Hyperparameters:
 
     `num_updates`, the run's length in updates (the learning-rate schedule's horizon and the
     run's end), is the configuration's unless set. A compiled program's runs carry it
-    (:func:`with_budget`, from :meth:`~fppo_jax.execution.Program.run`), so that one program
-    serves every step budget."""
+    (:func:`with_budget`, once per run, in :func:`~fppo_jax.execution.run_chunks`), so that
+    one program serves every step budget."""
 
     objective: Objective
     learning_rate: jax.Array

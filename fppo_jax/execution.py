@@ -78,15 +78,10 @@ class Program:
 
     trainer: Trainer
     init: Callable[[jax.Array, Hyperparameters], TrainState]
-    chunk: Callable[[TrainState, Hyperparameters], tuple[TrainState, Any]]  # hps with a budget
+    run: Callable[[TrainState, Hyperparameters], tuple[TrainState, Any]]  # hps with_budget
     runs: int
     updates_per_call: int
     compile_seconds: float  # spent compiling it for this run: 0 when reused
-
-    def run(self, state: TrainState, hps: Hyperparameters) -> tuple[TrainState, Any]:
-        """`updates_per_call` updates of every run from `state`, none past the trainer's
-        budget."""
-        return self.chunk(state, with_budget(hps, self.trainer.config.num_updates))
 
 
 class _Programs:
@@ -217,6 +212,7 @@ def run_chunks(
     after each call and that call's metrics ([run, update]). The next
     call is dispatched before the caller's work on the current one, so the two overlap."""
     config = program.trainer.config
+    hps = with_budget(hps, config.num_updates)
     first = int(np.max(fetch(state.update)))
     calls = -(-(config.num_updates - first) // program.updates_per_call)
     pending = program.run(state, hps) if calls else None

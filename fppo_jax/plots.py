@@ -10,7 +10,8 @@ falls back to Agg.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+import functools
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import cast
 
@@ -54,8 +55,7 @@ def plot_objective(
     ax = _axes(ax, (5.5, 3.5))
     ratio = jnp.linspace(1 - 2.5 * epsilon, 1 + 2.5 * epsilon, 401)
     for i, variant in enumerate(variants):
-        value = _surrogate(variant, epsilon, advantage)
-        curve = jax.vmap(jax.grad(value) if slope else value)(ratio)
+        curve = _curve(ratio, jnp.float32(advantage), variant, epsilon, slope)
         # Where variants coincide, the first (PPO, the reference) stays in sight.
         ax.plot(ratio, curve, label=variant, zorder=2 + len(variants) - i)
     if advantage > 0:
@@ -71,17 +71,20 @@ def plot_objective(
     return cast(Figure, ax.figure)
 
 
-def _surrogate(variant: str, epsilon: float, advantage: float) -> Callable[[jax.Array], jax.Array]:
-    """L(r) for one variant and advantage, a scalar function of the ratio to differentiate."""
+@functools.partial(jax.jit, static_argnums=(2, 3, 4))
+def _curve(
+    ratio: jax.Array, advantage: jax.Array, variant: str, epsilon: float, slope: bool
+) -> jax.Array:
+    """L(r, A) for one variant at each ratio, or its slope ∂L/∂r: one compiled program per
+    variant and kind (drawn op by op, each of its dozens of operations compiled on its own)."""
     f = objective(variant, epsilon=epsilon)
-    a = jnp.asarray(advantage, jnp.float32)
 
     def value(r: jax.Array) -> jax.Array:
         # The trust-region variants gate on KL(π_old ‖ π_θ); drawn against the ratio alone, the
         # per-sample estimate (r − 1) − log r stands in for it.
-        return f(r, a, kl=(r - 1) - jnp.log(r))
+        return f(r, advantage, kl=(r - 1) - jnp.log(r))
 
-    return value
+    return jax.vmap(jax.grad(value) if slope else value)(ratio)
 
 
 def plot_objectives(

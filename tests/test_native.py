@@ -18,7 +18,6 @@ from fppo_jax.envs.native import NativeEnvironment
 
 if not native.envpool_installed():
     pytest.skip("the native backend's envpool is Linux-only", allow_module_level=True)
-envpool = native.import_envpool()
 
 TINY = {"total_steps": 256, "num_envs": 4, "num_steps": 32, "num_minibatches": 2, "num_epochs": 2}
 
@@ -47,7 +46,9 @@ def test_reacher_matches_envpool_and_is_truncated_at_50_steps_then_starts_afresh
 
     # The same environments stepped by envpool itself, seeded as the adapter seeds them.
     seeds = native.seeds_of(jax.random.key_data(jax.random.split(jax.random.key(0), 2)))
-    pool = envpool.make("Reacher-v2", env_type="gymnasium", num_envs=2, env_seed=seeds)
+    pool = native.import_envpool().make(
+        "Reacher-v2", env_type="gymnasium", num_envs=2, env_seed=seeds
+    )
     obs, _ = pool.reset()
     np.testing.assert_allclose(first, obs, rtol=1e-6)
     for t in range(50):

@@ -9,7 +9,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from mujoco_playground import registry
 
 from fppo_jax import TrainConfig, hyperparameters, make_env, make_train
 from fppo_jax.envs import Box
@@ -79,6 +78,6 @@ def test_unknown_names_and_offline_assets_are_explained(monkeypatch):
     def clone_fails(name, config=None, config_overrides=None):
         raise subprocess.CalledProcessError(128, ["git", "clone"])
 
-    monkeypatch.setattr(registry, "load", clone_fails)
+    monkeypatch.setattr("mujoco_playground.registry.load", clone_fails)
     with pytest.raises(RuntimeError, match=r"fetches its assets .* at run time, which needs net"):
         make_env("playground/Go1JoystickFlatTerrain")

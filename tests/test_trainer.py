@@ -100,9 +100,10 @@ def test_metrics_are_in_range(tiny):
 
 
 def test_a_gymnax_environment_object_is_accepted(tiny):
-    result = train(CartPole(), "ppo", total_steps=256, **tiny)
+    # The shape of test_same_seed_gives_identical_metrics: the program it compiled is reused.
+    result = train(CartPole(), "fppo-lp", total_steps=512, **tiny)
     assert result.config["env"] == "CartPole"
-    assert len(result.metrics["env_steps"]) == 2
+    assert len(result.metrics["env_steps"]) == 4
 
 
 def test_vmapped_seeds_and_variants_match_single_runs(tiny):
@@ -276,15 +277,22 @@ def test_escape_by_epoch_ends_where_the_update_does(tiny):
     config = fppo_jax.TrainConfig(total_steps=128 * 3, **{**tiny, "num_epochs": 8})
     trainer = make_train(config, make_env("cartpole"))
     hp = hyperparameters("fppo-lp", alpha=1.3, learning_rate=3e-3)
-    state, _ = jax.jit(lambda k: trainer.run(trainer.init(k, hp), hp, 2))(jax.random.key(0))
-    by_epoch = np.asarray(jax.jit(trainer.escape_by_epoch)(state, hp))
-    _, metrics = jax.jit(trainer.update)(state, hp)
+
+    # One program (each of its parts compiled alone took seconds): two updates, then the next
+    # update's escape by epoch, the update itself, and the escape given the batch it collects.
+    @jax.jit
+    def after_two_updates(key):
+        state, _ = trainer.run(trainer.init(key, hp), hp, 2)
+        rollout_key = jax.random.split(state.key, 3)[1]
+        batch = trainer.collect(state, hp, rollout_key)[0]
+        by_epoch = trainer.escape_by_epoch(state, hp)
+        return by_epoch, trainer.update(state, hp)[1], trainer.escape_by_epoch(state, hp, batch)
+
+    by_epoch, metrics, given = after_two_updates(jax.random.key(0))
+    by_epoch = np.asarray(by_epoch)
     assert by_epoch.shape == (config.num_epochs,)
     assert ((by_epoch >= 0) & (by_epoch <= 1)).all() and by_epoch.max() > 0.05
     # The same batch and minibatch order as the update: its last epoch is the update's result.
     np.testing.assert_allclose(by_epoch[-1], metrics.negative_fraction_after, atol=1e-6)
     # Given the batch the update collects, the same epochs.
-    rollout_key = jax.random.split(state.key, 3)[1]
-    batch = jax.jit(trainer.collect)(state, hp, rollout_key)[0]
-    given = jax.jit(trainer.escape_by_epoch)(state, hp, batch)
     np.testing.assert_array_equal(given, by_epoch)

@@ -103,10 +103,11 @@ def test_a_sweep_logs_every_run_and_its_evaluations(tmp_path):
     last = [scores.tolist() for scores in back.scores("eval")]
     assert last == [result.metrics["eval_return"][2 * i : 2 * i + 2, 3].tolist() for i in (0, 1)]
     assert "| ppo |" in back.table("iqm", "eval")
+    # The program of test_a_callback_can_stop_a_sweep (two runs, one-update chunks).
     unevaluated = sweep(
         "cartpole",
         {"variant": "ppo"},
-        seeds=1,
+        seeds=2,
         total_steps=128 * 4,
         **TINY,
         **IN_CHUNKS,

@@ -4,6 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from conftest import IN_CHUNKS
 from helpers import sweep_by_hand
 
 from fppo_jax import METRICS, SweepResult, sweep
@@ -77,8 +78,10 @@ def test_compare_against_a_baseline():
 
 def test_parts_of_one_sweep_merge_into_the_one_process_sweep(tmp_path):
     grid = {"variant": ["ppo", "fppo-qp"]}
-    whole = sweep("cartpole", grid, seeds=[0, 1, 2], **TINY)
-    parts = [sweep("cartpole", grid, seeds=s, **TINY) for s in ([0, 2], [1])]
+    # Two runs per call in one-update chunks: the program of the driver's tests' sweeps.
+    shape = {**TINY, "chunk": 2, **IN_CHUNKS}
+    whole = sweep("cartpole", grid, seeds=[0, 1, 2], **shape)
+    parts = [sweep("cartpole", grid, seeds=s, **shape) for s in ([0, 2], [1])]
     merged = merge(parts)
     assert merged.settings == whole.settings
     assert sorted(map(tuple, (r.values() for r in merged.runs))) == sorted(

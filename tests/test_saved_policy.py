@@ -8,6 +8,7 @@ from pathlib import Path
 import jax
 import numpy as np
 import pytest
+from conftest import IN_CHUNKS
 from helpers import assert_bitwise_equal
 from test_policy import gaussian_policy
 
@@ -23,7 +24,7 @@ RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 
 
 
 def test_a_saved_policy_acts_as_the_trained_policy_and_is_not_overwritten(tmp_path, capsys):
-    result = train(**RUN)
+    result = train(**RUN, **IN_CHUNKS)  # in one-update chunks: test_checkpoint's program
     assert result.save(tmp_path / "policy") == tmp_path / "policy"
     policy, record = read_policy(tmp_path / "policy")
     assert_bitwise_equal(policy.arrays(), result.policy.arrays())

@@ -164,7 +164,8 @@ def test_the_table_counts_only_the_runs_that_did_not_diverge(tmp_path):
 
 def test_a_sweep_whose_setting_diverges_shows_it():
     grid = {"variant": "ppo", "learning_rate": [3e-4, 1e30]}
-    result = sweep("cartpole", grid, seeds=2, **TINY)
+    # Two runs per call in one-update chunks: the program of the driver's tests' sweeps.
+    result = sweep("cartpole", grid, seeds=2, chunk=2, **TINY, **IN_CHUNKS)
     assert result.diverged.tolist() == [0, 0, 1, 1]
     rows = result.table().splitlines()[2:]
     assert rows[0].startswith("| ppo learning_rate=0.0003 | 2 | ")

@@ -4,6 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import IN_CHUNKS
 from gymnax.environments.classic_control import CartPole
 from helpers import NaNRewardAfter
 
@@ -72,7 +73,8 @@ def test_a_chunk_past_the_run_end_updates_nothing(tiny):
 
 
 def test_cartpole_learns_with_ppo():
-    result = train("cartpole", "ppo", total_steps=40_960)
+    # 24 updates in chunks of 2: the program of the README's first run and of the CartPole pin.
+    result = train("cartpole", "ppo", total_steps=49_152, **IN_CHUNKS)
     assert np.nanmax(result.metrics["average_return"]) > 120
     # The policy acts on raw observations; deterministic without a key.
     obs = jnp.zeros((3, 4))

@@ -193,8 +193,8 @@ class SweepResult:
         if statistic != "paper":
             return self._interval_table(statistic, endpoint, confidence)
         lines = [
-            "| setting | seeds | max average return | at env steps | final average return "
-            "| in R± after update |",
+            "| setting | seeds | max average return ± sample std | at env steps "
+            "| final average return | in R± after update |",
             "|---|---|---|---|---|---|",
         ]
         for index, name in enumerate(labels(self.settings)):

@@ -163,9 +163,9 @@ def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[st
         f"Planned in plan.json {planned} (commit {plan['commit']}). Primary endpoint: "
         f"{plan['primary_endpoint']} ({statistics.ENDPOINTS[plan['primary_endpoint']]}); "
         f"reported beside it: {', '.join([*plan['secondary_endpoints'], 'max'])}. Test: "
-        f"{plan['test']}; "
-        f"family-wise error at most {plan['level']:g} over the {comparisons} comparisons. Seeds "
-        f"per setting at the looks: {looks}.{reused}",
+        f"{plan['test']}; family-wise error at most {plan['level']:g} over the {comparisons} "
+        f"comparison{'s' if comparisons > 1 else ''}. Seeds per setting at the looks: "
+        f"{looks}.{reused}",
         "",
         status,
         "",
@@ -239,7 +239,7 @@ def _table(
     decision and the repeated confidence interval."""
     baseline = rows[0]["baseline"]
     if plan is not None:
-        head = f"Primary endpoint, {endpoint}: decided by the test."
+        head = f"Primary endpoint, {endpoint}: tested; the decision column is the test's."
         columns = ["candidate", "decision", "seeds", "why it stopped"]
         columns.append(f"P(candidate > {baseline}), repeated CI")
         design = Design(plan["group_size"], plan["max_seeds"], plan["level"])

@@ -53,6 +53,7 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
     report = (output / "report.md").read_text()
     assert "**Not finished**" in report and "| frozen | worse | 8 | z = -" in report
     assert "Planned in plan.json before any run (commit" in report
+    assert "family-wise error at most 0.05 over the 2 comparisons." in report
     # The repeated CI at the first look, at the level its boundary of α/2 sets, is wider than
     # the unadjusted interval beside it.
     level = 2 * stats.norm.cdf(plan["boundaries_if_none_decided"][0]) - 1
@@ -187,7 +188,8 @@ def test_a_study_decides_on_evaluations_when_its_plan_asks_for_them(tmp_path, ca
         assert np.all(np.isfinite(last))
         np.testing.assert_array_equal(run_scores(result, variant, "eval"), last)
     report = (output / "report.md").read_text()
-    assert "Primary endpoint, eval: decided by the test." in report
+    assert "Primary endpoint, eval: tested; the decision column is the test's." in report
+    assert "over the 1 comparison." in report  # frozen against ppo alone
     assert "Secondary endpoint, final" in report and "Secondary endpoint, auc" in report
     assert "Each run's best, max: reported, not tested" in report
     # Recorded runs without evaluations are not taken for a study that evaluates: trained.

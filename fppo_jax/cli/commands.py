@@ -37,7 +37,7 @@ from fppo_jax.saved_policy import (
     load_policy,
     read_policy,
 )
-from fppo_jax.statistics import CONFIDENCE, STATISTICS
+from fppo_jax.statistics import CONFIDENCE, STATISTICS, sample_std
 from fppo_jax.study import study
 from fppo_jax.sweep import sweep
 
@@ -209,14 +209,14 @@ def _eval(args: argparse.Namespace) -> int:
     source = "saved policy" if record["kind"] == "policy" else "checkpoint"
     print(
         f"{config['variant']} on {config['env']}, seed {config['seed']}: {source} at update "
-        f"{record['update']} ({steps:,} env steps); {args.episodes} episodes each"
+        f"{record['update']} ({steps:,} env steps); {args.episodes} episodes each, their "
+        "return's mean ± sample std"
     )
     for name, deterministic in (("deterministic", True), ("stochastic", False)):
         returns = evaluate(env, policy, args.episodes, seed=args.seed, deterministic=deterministic)
-        print(
-            f"  {name:<13} return {returns.mean():.1f} ± {returns.std():.1f} "
-            f"(min {returns.min():.1f}, max {returns.max():.1f})"
-        )
+        spread = sample_std(returns)  # NaN for one episode: no spread to show
+        shown = f"{returns.mean():.1f}" + ("" if np.isnan(spread) else f" ± {spread:.1f}")
+        print(f"  {name:<13} return {shown} (min {returns.min():.1f}, max {returns.max():.1f})")
     if args.render:
         from fppo_jax.render import RenderingUnavailable, drawable, render_policy
 

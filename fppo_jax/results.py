@@ -455,9 +455,10 @@ def _check_shares(
     if missing:
         more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
         spelled = ", ".join(f"--part {k}/{count}" for k in missing_parts)
+        many = len(missing_parts) > 1
         which = (
-            f"parts {', '.join(map(str, missing_parts))} of {count} ({spelled}) are missing: "
-            * bool(missing_parts)
+            f"part{'s' * many} {', '.join(map(str, missing_parts))} of {count} ({spelled}) "
+            f"{'are' if many else 'is'} missing: " * bool(missing_parts)
         )
         raise InvalidInput(f"{which}the sweep's runs {', '.join(missing[:5])}{more} are not there")
 

@@ -298,7 +298,7 @@ def test_two_parts_in_two_processes_merge_into_the_one_process_sweep(tmp_path, c
     assert part2.config["part"] == [2, 2] and part2.seeds == [0, 1, 2]
     assert [(r["setting"], r["seed"]) for r in part2.runs] == [(1, 0), (1, 1), (1, 2)]
 
-    missing = r"parts 2 of 2 \(--part 2/2\) are missing: the sweep's runs fppo-lp"
+    missing = r"part 2 of 2 \(--part 2/2\) is missing: the sweep's runs fppo-lp"
     with pytest.raises(ValueError, match=missing):
         merge([SweepResult.read(tmp_path / "part1")])
     parts = [str(tmp_path / "part1"), str(tmp_path / "part2")]

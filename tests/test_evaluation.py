@@ -25,7 +25,7 @@ def test_eval_reports_deterministic_and_stochastic_returns(tmp_path, capsys):
     assert main(["eval", "--checkpoint", str(tmp_path), "--episodes", "4"]) == 0
     out = capsys.readouterr().out
     assert "fppo-qp on cartpole, seed 3: checkpoint at update 20 (2,560 env steps)" in out
-    assert "4 episodes each, their return's mean ± sample std" in out
+    assert "(2,560 env steps); 4 episodes each\n" in out
     env, policy = fppo_jax.make_env("cartpole"), fppo_jax.load_policy(tmp_path)
     for line, deterministic in (("deterministic return", True), ("stochastic    return", False)):
         text = next(x for x in out.splitlines() if line in x)
@@ -33,6 +33,10 @@ def test_eval_reports_deterministic_and_stochastic_returns(tmp_path, capsys):
         returns = evaluate(env, policy, 4, seed=0, deterministic=deterministic)
         assert 1 <= mean <= 200  # CartPole-v0 episodes: 1 to 200 steps, reward 1 per step
         assert (mean, spread) == (round(returns.mean(), 1), round(returns.std(ddof=1), 1))
+        assert f"(mean ± sample std; min {returns.min():.1f}, max {returns.max():.1f})" in text
+    assert main(["eval", "--checkpoint", str(tmp_path), "--episodes", "1"]) == 0
+    one = capsys.readouterr().out
+    assert "; 1 episode each\n" in one and "±" not in one  # one episode: no spread
     assert main(["eval", "--checkpoint", str(tmp_path / "none")]) == 2
     assert "not found" in capsys.readouterr().err
 

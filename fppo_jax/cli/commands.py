@@ -209,14 +209,16 @@ def _eval(args: argparse.Namespace) -> int:
     source = "saved policy" if record["kind"] == "policy" else "checkpoint"
     print(
         f"{config['variant']} on {config['env']}, seed {config['seed']}: {source} at update "
-        f"{record['update']} ({steps:,} env steps); {args.episodes} episodes each, their "
-        "return's mean ± sample std"
+        f"{record['update']} ({steps:,} env steps); {args.episodes} "
+        f"episode{'s' if args.episodes > 1 else ''} each"
     )
     for name, deterministic in (("deterministic", True), ("stochastic", False)):
         returns = evaluate(env, policy, args.episodes, seed=args.seed, deterministic=deterministic)
-        spread = sample_std(returns)  # NaN for one episode: no spread to show
-        shown = f"{returns.mean():.1f}" + ("" if np.isnan(spread) else f" ± {spread:.1f}")
-        print(f"  {name:<13} return {shown} (min {returns.min():.1f}, max {returns.max():.1f})")
+        shown = f"{returns.mean():.1f}"
+        if returns.size > 1:  # one episode has no spread
+            shown += f" ± {sample_std(returns):.1f} (mean ± sample std; "
+            shown += f"min {returns.min():.1f}, max {returns.max():.1f})"
+        print(f"  {name:<13} return {shown}")
     if args.render:
         from fppo_jax.render import RenderingUnavailable, drawable, render_policy
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from fppo_jax import statistics
 from fppo_jax.config import SYMBOLS, VARIANT_SPECIFIC
-from fppo_jax.envs import Environment, resets_itself
+from fppo_jax.envs import Environment, backend_name, resets_itself
 from fppo_jax.errors import InvalidInput
 from fppo_jax.files import write_atomically
 from fppo_jax.policy import Policy
@@ -79,15 +79,17 @@ class TrainResult:
         samples = c["num_envs"] * c["num_steps"]
         trained = steps - self.resumed_from * samples
         speed = f"{trained / self.train_seconds:,.0f} env steps/s" if trained else "nothing left"
+        backend = backend_name(c.get("backend"))  # a MuJoCo run's, which physics stepped it
         resumed = f", resumed at update {self.resumed_from}" if self.resumed_from else ""
         if resumed and resets_itself(self.env):
             resumed += " in fresh environments"
         if self.stopped_at is not None:
             resumed += f", stopped by the callback at update {self.stopped_at}"
+        shape = ", ".join(filter(None, [f"preset {c.get('preset', 'paper')}", backend]))
         lines = [
             f"{c['variant']} on {c['env']} ({settings}), seed {c['seed']}",
             f"  updates   {len(returns)} × {samples:,} samples = {steps:,} env steps "
-            f"(preset {c.get('preset', 'paper')}){resumed}",
+            f"({shape}){resumed}",
             f"  time      compile {self.compile_seconds:.1f} s, train {self.train_seconds:.1f} s "
             f"({speed})",
         ]

@@ -94,6 +94,21 @@ def test_unknown_variant_is_rejected_by_the_parser(capsys):
     assert "unknown variant 'sppo'; valid variants: ppo," in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "argv, error",
+    [
+        (["train", "--bogus", "1"], "fppo-jax train: error: unrecognized arguments: --bogus 1"),
+        (["--bogus", "list"], "fppo-jax list: error: unrecognized arguments: --bogus"),
+    ],
+)
+def test_an_unknown_flag_is_the_command_s_one_line_error(argv, error, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    command = error.split(":")[0]
+    assert capsys.readouterr().err == f"{error} (see {command} --help)\n"
+
+
 def test_version_is_the_installed_package_s(capsys):
     from importlib import metadata
 

@@ -122,7 +122,10 @@ def test_a_resumed_native_run_restarts_its_environments_and_keeps_its_learning(t
     )
     assert stopped.stopped_at == 2
     resumed = fppo_jax.train("hopper", "ppo", backend="native", resume=True, **settings)
-    assert resumed.resumed_from == 2 and "in fresh environments" in resumed.summary()
+    assert resumed.resumed_from == 2
+    assert "(preset paper, native MuJoCo), resumed at update 2 in fresh environments" in (
+        resumed.summary()
+    )
     assert "resuming at update 2 in fresh environments" in capsys.readouterr().err
     assert resumed.config["backend"] == "native" and int(resumed.state.update) == 4
     for name in ("policy_loss", "average_return", "value_loss"):

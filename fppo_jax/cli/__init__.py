@@ -43,7 +43,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"fppo-jax: error: {error}", file=sys.stderr)
         return 2
     parser = build_parser(surrogates)
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:  # the command's one-line error, pointing at its --help, not the whole usage
+        args.commands[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
     if getattr(args, "config", None) is not None:
         try:
             args = _with_settings_file(parser, argv, args, surrogates)

@@ -256,11 +256,16 @@ def choose_backend(env: str | Any, backend: str = "auto") -> tuple[str, str]:
     return backend, ""
 
 
+def backend_name(backend: str | None) -> str | None:
+    """What a MuJoCo run's backend is called in what it prints (None for other tasks')."""
+    return {"mjx": "MJX", "native": "native MuJoCo"}.get(backend or "")
+
+
 def describe_backend(backend: str, why: str) -> str:
-    """How a summary names the backend a MuJoCo run ran on ("" for other tasks)."""
-    if backend not in ("mjx", "native"):
-        return ""
-    return f" ({'native MuJoCo' if backend == 'native' else 'MJX'}{'; ' + why if why else ''})"
+    """How the line printed before compiling names the backend a MuJoCo run runs on, and
+    why it was chosen ("" for other tasks)."""
+    name = backend_name(backend)
+    return f" ({name}{'; ' + why if why else ''})" if name else ""
 
 
 def make_env(name: str, backend: str = "auto") -> Environment:

@@ -211,3 +211,9 @@ def test_figures_script_draws_from_the_recorded_results(tmp_path, monkeypatch):
         "ablation.png",
     }
     assert all(size < 200_000 for size in written.values())
+    missing = tmp_path / "no-records"
+    argv = ["figures.py", "--records", str(missing), "--out", str(tmp_path / "none")]
+    monkeypatch.setattr(sys, "argv", argv)
+    with pytest.raises(SystemExit) as refused:
+        figures.main()
+    assert refused.value.code == 2 and not (tmp_path / "none").exists()

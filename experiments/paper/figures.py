@@ -56,6 +56,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RESULTS / "figures")
     args = parser.parse_args()
     records: Path = args.records
+    if not records.is_dir():  # else only the objectives would be drawn, silently
+        parser.error(f"--records {records}: no such directory (relative to where this runs)")
     figures = {"objectives.png": plot_objectives()}
     classic = [records / "table1_classic" / task for task in CLASSIC_TASKS]
     if all((directory / "curves.csv").exists() for directory in classic):

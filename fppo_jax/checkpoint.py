@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
 import jax
 import numpy as np
 
+from fppo_jax.config import positive_int
 from fppo_jax.errors import FppoError, InvalidInput, MissingFile
 from fppo_jax.files import (
     DirectoryBusy,
@@ -197,8 +198,7 @@ class Checkpoints:
     """The checkpoints of one run (or one sweep) in `directory`, keeping the newest `keep`."""
 
     def __init__(self, directory: str | Path, keep: int = 3):
-        if isinstance(keep, bool) or not isinstance(keep, int) or keep < 1:
-            raise InvalidInput(f"keep must be a positive number of checkpoints, got {keep!r}")
+        keep = positive_int("keep (checkpoints kept)", keep)
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
         # The process's unraisable hook, while this object's writes have theirs in its place.

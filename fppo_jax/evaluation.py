@@ -9,8 +9,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.config import positive_int
+from fppo_jax.config import check_seed, positive_int
 from fppo_jax.envs import Environment
+from fppo_jax.errors import InvalidInput
 from fppo_jax.policy import Policy
 
 
@@ -41,7 +42,10 @@ def make_evaluator(
     """:func:`evaluate` as a pure function of the policy, to jit once and call (or vmap over a
     batch of policies) as often as training goes: the same episodes (same `seed`) each time."""
     positive_int("episodes", episodes)
-    reset_key, run_key = jax.random.split(jax.random.key(seed))
+    positive_int("max_steps", max_steps)  # else no step, and returns of 0 that look measured
+    if not isinstance(deterministic, bool | np.bool_):
+        raise InvalidInput(f"deterministic must be True or False, got {deterministic!r}")
+    reset_key, run_key = jax.random.split(jax.random.key(check_seed(seed)))
 
     def run(policy: Policy) -> jax.Array:
         state, obs = jax.vmap(env.reset)(jax.random.split(reset_key, episodes))

@@ -211,6 +211,7 @@ class SweepResult:
 
     def _interval_table(self, statistic: str, endpoint: str, confidence: float) -> str:
         statistics.estimator(statistic)
+        confidence = statistics.check_confidence(confidence)
         level = f"{confidence:.0%} CI"
         lines = [
             f"| setting | seeds | {statistics.STATISTICS[statistic]} of the {endpoint} score "
@@ -240,7 +241,7 @@ class SweepResult:
         names = labels(self.settings)
         index = self.setting_index(baseline)
         scores = self.scores(endpoint)
-        level = f"{confidence:.0%} CI"
+        level = f"{statistics.check_confidence(confidence):.0%} CI"
         lines = [
             f"Against {names[index]} ({self.setting_seeds(index)} seeds), {endpoint} return "
             f"({statistics.ENDPOINTS[endpoint]}):",

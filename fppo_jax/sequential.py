@@ -61,12 +61,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fppo_jax.config import positive_int
+from fppo_jax.config import MAX_SEEDS, positive_int
 from fppo_jax.errors import InvalidInput
 
 # Points per look of the boundaries' integration grid, odd for Simpson's rule: enough for the
 # published boundaries to four decimals (tests/test_sequential.py).
 GRID_POINTS = 801
+# Far more looks than a study plans, and few enough that their boundaries take seconds.
+MAX_LOOKS = 200
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,12 +82,20 @@ class Design:
 
     def __post_init__(self) -> None:
         positive_int("group_size", self.group_size)
-        positive_int("max_seeds", self.max_seeds)
+        if positive_int("max_seeds", self.max_seeds) > MAX_SEEDS:
+            raise InvalidInput(f"max_seeds must be at most {MAX_SEEDS:,}, got {self.max_seeds:,}")
+        if -(-self.max_seeds // self.group_size) > MAX_LOOKS:
+            raise InvalidInput(
+                f"max_seeds / group_size gives more than {MAX_LOOKS} looks: take larger groups"
+            )
         if self.group_size > self.max_seeds:
             raise InvalidInput(
                 f"group_size ({self.group_size}) is larger than max_seeds ({self.max_seeds})"
             )
-        if not (isinstance(self.level, float | int) and 0 < self.level < 1):
+        level = isinstance(self.level, float | int | np.floating) and not isinstance(
+            self.level, bool
+        )
+        if not (level and 0 < self.level < 1):
             raise InvalidInput(f"the error level must be in (0, 1), got {self.level!r}")
 
     @property

@@ -135,8 +135,10 @@ def _finite(x: np.ndarray) -> np.ndarray:
     return cast(np.ndarray, x[np.isfinite(x)])
 
 
-def _check_confidence(confidence: float) -> float:
-    if not 0 < confidence < 1:
+def check_confidence(confidence: float) -> float:
+    """`confidence` if it is a level in (0, 1)."""
+    number = isinstance(confidence, int | float | np.integer | np.floating)
+    if isinstance(confidence, bool) or not number or not 0 < confidence < 1:
         raise InvalidInput(f"the confidence level must be in (0, 1), got {confidence!r}")
     return float(confidence)
 
@@ -153,7 +155,7 @@ def bootstrap(
     `confidence`: each sample is resampled with replacement among its own values (a stratified
     bootstrap when the samples are tasks). `statistic(*samples, axis=-1)` must be vectorised.
     Non-finite values are dropped first; a sample left empty gives NaNs."""
-    confidence = _check_confidence(confidence)
+    confidence = check_confidence(confidence)
     samples = [_finite(s) for s in samples]
     if any(s.size == 0 for s in samples):
         return float("nan"), float("nan"), float("nan")
@@ -201,7 +203,7 @@ def curve_interval(
     """`statistic` of `curves` [run, update] over runs at every update, with a percentile
     bootstrap band: each resample draws runs (whole curves) with replacement, the same draw for
     every update. NaN (a run with no finished episode yet) is left out of its update."""
-    confidence = _check_confidence(confidence)
+    confidence = check_confidence(confidence)
     f = estimator(statistic)
     curves = np.asarray(curves, dtype=float)
     runs = np.random.default_rng(seed).integers(0, len(curves), (resamples, len(curves)))
@@ -284,7 +286,7 @@ def max_average_difference(
     `x`'s curves [run, update] minus that of `y`'s, with a percentile bootstrap interval that
     resamples each setting's runs (whole curves) independently. This is the interval a gap in
     the paper's Table 1 can be set against."""
-    confidence = _check_confidence(confidence)
+    confidence = check_confidence(confidence)
     rng = np.random.default_rng(seed)
 
     def paper_statistic(curves: np.ndarray) -> np.ndarray:  # [..., run, update] -> [...]

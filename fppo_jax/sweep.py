@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.config import (
+    MAX_SEEDS,
     Hyperparameters,
     check_seed,
     positive_int,
@@ -226,6 +227,10 @@ def _settings(
     task: str | None,
 ) -> tuple[list[dict[str, Any]], Hyperparameters]:
     """The grid's settings with the `fixed` values, and their hyperparameters stacked."""
+    if "variant" in fixed:  # the grid's variants are what its surrogates were made for
+        raise InvalidInput(
+            "a sweep's variants are the grid's: give {'variant': ...} in the grid, not variant="
+        )
     clash = sorted(set(fixed) & set(grid))
     if clash:
         raise InvalidInput(f"{', '.join(clash)} given both in the grid and as a fixed value")
@@ -273,9 +278,15 @@ def part_bounds(part: object, num_runs: int) -> tuple[int, int]:
 def _seeds(seeds: int | Sequence[int]) -> list[int]:
     """Seeds 0 … n−1 for a count, else the given ones, checked."""
     if isinstance(seeds, int | np.integer) and not isinstance(seeds, bool | np.bool_):
-        return list(range(positive_int("seeds", seeds)))
-    if isinstance(seeds, str) or not isinstance(seeds, Sequence | np.ndarray):
+        seeds = range(positive_int("seeds", seeds))
+    elif (
+        isinstance(seeds, str)
+        or not isinstance(seeds, Sequence | np.ndarray)
+        or np.ndim(seeds) != 1
+    ):
         raise InvalidInput(f"seeds must be a count or a sequence of integers, got {seeds!r}")
+    if len(seeds) > MAX_SEEDS:
+        raise InvalidInput(f"a sweep takes at most {MAX_SEEDS:,} seeds, got {len(seeds):,}")
     checked = [check_seed(seed) for seed in seeds]
     if not checked:
         raise InvalidInput("a sweep needs at least one seed")

@@ -120,7 +120,7 @@ def test_damaged_latest_checkpoint_is_reported_and_the_previous_one_used(tmp_pat
 def test_a_checkpoint_is_deleted_only_once_a_newer_one_is_complete(tmp_path):
     state = {"x": jnp.arange(100_000.0), "key": jax.random.key(0)}
     curves = {"env_steps": np.arange(1, dtype=np.int32)}
-    checkpoints = Checkpoints(tmp_path, keep=1)
+    checkpoints = Checkpoints(tmp_path, keep=np.int64(1))  # numpy integers are integers
     checkpoints.save(1, state, curves, {"kind": "test"})
     checkpoints.wait()
     seen = []

@@ -403,11 +403,20 @@ def test_numpy_integers_are_integers():
         ("5", "seeds must be a count or a sequence of integers, got '5'"),
         (0, "seeds must be a positive integer, got 0"),
         ([], "a sweep needs at least one seed"),
+        (np.array(2), "seeds must be a count or a sequence of integers, got array(2)"),
+        (10**9, "a sweep takes at most 100,000 seeds, got 1,000,000,000"),
     ],
 )
 def test_seeds_are_checked_before_anything_is_made(seeds, message):
     with pytest.raises(ValueError, match=re.escape(message)):
         sweep("cartpole", {"variant": "ppo"}, seeds=seeds)
+
+
+def test_a_sweep_s_variants_are_its_grid_s():
+    with pytest.raises(
+        ValueError, match=re.escape("give {'variant': ...} in the grid, not variant=")
+    ):
+        sweep("cartpole", {"learning_rate": [1e-3, 3e-4]}, variant="ppo")
 
 
 class _Compilations:

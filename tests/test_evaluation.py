@@ -12,6 +12,7 @@ import fppo_jax
 from fppo_jax import train
 from fppo_jax.cli import main
 from fppo_jax.envs import Discrete, Step
+from fppo_jax.errors import InvalidInput
 from fppo_jax.evaluation import evaluate, make_evaluator
 from fppo_jax.networks import make_networks
 from fppo_jax.policy import Policy
@@ -39,6 +40,20 @@ def test_eval_reports_deterministic_and_stochastic_returns(tmp_path, capsys):
     assert "; 1 episode each\n" in one and "±" not in one  # one episode: no spread
     assert main(["eval", "--checkpoint", str(tmp_path / "none")]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "given, message",
+    [
+        ({"max_steps": 0}, "max_steps must be a positive integer, got 0"),
+        ({"deterministic": "no"}, "deterministic must be True or False, got 'no'"),
+        ({"seed": 1.5}, "a seed must be an integer, got 1.5"),
+    ],
+)
+def test_evaluate_refuses_what_would_measure_nothing_or_the_wrong_thing(given, message):
+    policy = Policy(make_cartpole_params(), None, fppo_jax.make_env("cartpole").action_space, (4,))
+    with pytest.raises(InvalidInput, match=message):
+        fppo_jax.evaluate(fppo_jax.make_env("cartpole"), policy, 2, **given)
 
 
 def test_evaluate_counts_each_episode_until_it_ends():

@@ -52,6 +52,11 @@ def test_an_interval_table_gives_each_setting_its_statistic_and_interval():
     assert result.table("mean", "auc", 0.9).splitlines()[0].endswith("[90% CI] | sample std |")
     with pytest.raises(ValueError, match="unknown statistic 'mode'"):
         result.table("mode")
+    for level in ("0.9", None, 1.5):  # refused before a header is formatted with it
+        with pytest.raises(ValueError, match="the confidence level must be in"):
+            result.table("iqm", confidence=level)
+        with pytest.raises(ValueError, match="the confidence level must be in"):
+            result.compare(confidence=level)
 
 
 def test_a_table_leaves_diverged_runs_out_of_the_interval():

@@ -119,6 +119,13 @@ def test_a_damaged_saved_policy_is_reported_naming_its_directory(tmp_path, how):
         load_policy(tmp_path)
 
 
+def test_a_policy_json_that_is_not_an_object_is_damage(tmp_path):
+    save_gaussian_policy(tmp_path)
+    (tmp_path / "policy.json").write_text("[1]")
+    with pytest.raises(ValueError, match=r"is damaged \(ValueError: policy.json holds a JSON list"):
+        load_policy(tmp_path)
+
+
 def test_a_directory_with_neither_a_policy_nor_checkpoints_is_refused_by_name(tmp_path, capsys):
     (tmp_path / "notes.txt").write_text("not a policy")
     message = f"{tmp_path} holds neither a saved policy (policy.json and policy.npz) nor checkp"

@@ -78,6 +78,23 @@ def test_a_clear_difference_stops_at_its_first_look_and_a_null_one_runs_to_the_m
         decide([(np.array([np.nan] * 8), baseline)], design)
 
 
+@pytest.mark.parametrize(
+    "group_size, max_seeds, message",
+    [
+        (1, 10**9, "max_seeds must be at most 100,000, got 1,000,000,000"),
+        (1, 201, "max_seeds / group_size gives more than 200 looks: take larger groups"),
+    ],
+)
+def test_a_design_too_large_to_compute_is_refused_at_once(group_size, max_seeds, message):
+    with pytest.raises(ValueError, match=message):
+        Design(group_size, max_seeds)
+
+
+def test_a_design_takes_numpy_numbers():
+    design = Design(np.int64(5), np.int64(20), np.float32(0.05))
+    assert design.looks == (5, 10, 15, 20)
+
+
 def test_the_looks_are_replayed_so_that_later_seeds_never_change_a_decision():
     design = Design(group_size=5, max_seeds=30, level=0.2)
     rng = np.random.default_rng(2)

@@ -108,7 +108,7 @@ def _read_saved_policy(directory: Path) -> tuple[Policy, dict[str, Any]]:
     try:
         saved = json.loads((directory / POLICY_FILE).read_text())
         if not isinstance(saved, dict):
-            raise ValueError(f"{POLICY_FILE} holds a JSON {type(saved).__name__}, not an object")
+            raise InvalidInput(f"{POLICY_FILE} holds a JSON {type(saved).__name__}, not an object")
     except Exception as error:
         raise _damaged(directory, error) from error
     check_format(saved, f"the saved policy in {directory}", FORMAT)

@@ -22,7 +22,7 @@ import jax
 import numpy as np
 
 from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
-from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
+from fppo_jax.files import DirectoryLock, first_line, json_value, writable_directory, write_json
 from fppo_jax.trainer import METRICS
 
 LoggedRuns = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
@@ -227,14 +227,20 @@ class WandbLog:
                 setting = self._runs[index]
                 config = {**config, **setting, "run": index}
                 name = f"run-{index:03d} " + " ".join(f"{k}={v}" for k, v in setting.items())
-            run = self._wandb.init(
-                project=self._project,
-                config=config,
-                name=name,
-                group=self._group,
-                dir=self._directory,
-                reinit="create_new",
-            )
+            try:
+                run = self._wandb.init(
+                    project=self._project,
+                    config=config,
+                    name=name,
+                    group=self._group,
+                    dir=self._directory,
+                    reinit="create_new",
+                )
+            except self._wandb.errors.UsageError as error:  # no account set up: the user's to fix
+                raise InvalidInput(
+                    f"Weights & Biases could not start a run: {first_line(error)} (or set "
+                    "WANDB_MODE=offline to log without an account)"
+                ) from error
             run.define_metric("env_steps")
             run.define_metric("*", step_metric="env_steps")
             self._open[index] = run

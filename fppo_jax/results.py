@@ -293,10 +293,19 @@ class SweepResult:
     def write(self, directory: str | Path, metrics: Sequence[str] | None = None) -> None:
         """`curves.csv` and `sweep.json` in `directory` (see :mod:`fppo_jax.sweep_files`), with
         a column per name in `metrics`: by default every metric recorded, the trainer's and the
-        host's such as ``eval_return``. Fewer metrics make a smaller file to keep."""
+        host's such as ``eval_return``; ``env_steps`` always. Fewer metrics make a smaller file
+        to keep."""
         if metrics is None:
             metrics = [*(m for m in METRICS if m in self.metrics)]
             metrics += sorted(set(self.metrics) - set(METRICS))
+        unknown = [name for name in metrics if name not in self.metrics]
+        if unknown:
+            raise InvalidInput(
+                f"no metric {', '.join(map(repr, unknown))} in this sweep; it has "
+                + ", ".join(self.metrics)
+            )
+        if "env_steps" not in metrics:  # every curve's x axis, which a reader needs
+            metrics = ["env_steps", *metrics]
         record = {
             "settings": self.settings,
             "seeds": self.seeds,

@@ -214,7 +214,7 @@ def _check_arguments(
             "eval_every (--eval-every) so that the study's runs are evaluated"
         )
     if groups is not None and (
-        isinstance(groups, bool) or not isinstance(groups, int) or groups < 0
+        isinstance(groups, bool) or not isinstance(groups, int | np.integer) or groups < 0
     ):
         raise InvalidInput(f"groups must be a count of groups (0 or more), got {groups!r}")
     if chunk is not None:

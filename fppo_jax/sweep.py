@@ -84,6 +84,10 @@ def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[s
 
 def grid_surrogates(grid: Mapping[str, Any]) -> dict[str, Surrogate]:
     """The surrogates a grid's variants name, by name, in the grid's order (default: FPPO-LP)."""
+    if not isinstance(grid, Mapping):
+        raise InvalidInput(
+            f"a grid maps names to values, such as {{'alpha': [1.1, 1.3]}}; got {grid!r}"
+        )
     given = [resolve(v) for v in _as_list("variant", grid.get("variant", [DEFAULT_VARIANT]))]
     union(given)  # two different surrogates under one name are refused
     return {s.name: s for s in given}
@@ -263,11 +267,11 @@ def part_bounds(part: object, num_runs: int) -> tuple[int, int]:
     if (
         not isinstance(part, tuple | list)
         or len(part) != 2
-        or not all(isinstance(x, int) and not isinstance(x, bool) for x in part)
+        or not all(isinstance(x, int | np.integer) and not isinstance(x, bool) for x in part)
         or not 1 <= part[0] <= part[1]
     ):
         raise InvalidInput(f"part must be (K, N) with 1 <= K <= N, got {part!r}")
-    k, n = part
+    k, n = int(part[0]), int(part[1])
     if n > num_runs:
         raise InvalidInput(f"part {k} of {n}: the sweep has only {num_runs} runs to share")
     size, extra = divmod(num_runs, n)

@@ -217,7 +217,9 @@ def test_no_group_writes_the_plan_alone_and_a_bad_setting_writes_nothing(tmp_pat
         fppo_jax.study("cartpole", "spo", output=output, num_envz=3)
     assert not output.exists()  # refused before the plan was written
 
-    planned = fppo_jax.study(["cartpole", "acrobot"], ["spo", "dpo"], output=output, groups=0)
+    planned = fppo_jax.study(
+        ["cartpole", "acrobot"], ["spo", "dpo"], output=output, groups=np.int64(0)
+    )
     plan = json.loads((output / "plan.json").read_text())
     assert len(plan["comparisons"]) == 4 and plan["looks"] == [5, 10, 15, 20, 25, 30]
     # Holm's first level, 0.05 / 4, spent over six looks: the last boundary above the one of a

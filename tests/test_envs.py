@@ -115,6 +115,14 @@ def test_an_unknown_name_lists_the_registered_tasks_and_the_namespaces(name, sug
         make_env(name)
 
 
+@pytest.mark.parametrize("name", [None, 3])
+def test_make_env_takes_a_name(name):
+    with pytest.raises(
+        ValueError, match=f"make_env takes a task's name, such as 'cartpole'; got {name}"
+    ):
+        make_env(name)
+
+
 def test_lookup_gives_registered_and_namespaced_tasks():
     assert lookup("hopper") is TASKS["hopper"]
     task = lookup("brax/humanoid")

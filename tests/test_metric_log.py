@@ -13,6 +13,7 @@ import pytest
 from tensorboardX.proto.event_pb2 import Event
 
 from fppo_jax import train
+from fppo_jax.errors import FppoError
 from fppo_jax.metric_log import (
     MetricLog,
     WandbLog,
@@ -228,3 +229,17 @@ def test_wandb_gets_one_run_per_run_finished_once_its_group_is_done(monkeypatch)
             }
         ),
     ]
+
+
+def test_wandb_without_an_account_is_the_user_s_error_saying_what_to_do(monkeypatch):
+    fake = FakeWandb()
+    fake.errors = types.SimpleNamespace(UsageError=type("UsageError", (Exception,), {}))
+
+    def refuse(**settings):
+        raise fake.errors.UsageError("No API key configured. Use `wandb login` to log in.")
+
+    fake.init = refuse
+    monkeypatch.setitem(sys.modules, "wandb", fake)
+    log = WandbLog("project", {"env": "test"}, None, None)
+    with pytest.raises(FppoError, match=r"could not start a run: No API key .* WANDB_MODE=off"):
+        log.write(metrics(2, runs=1), range(0, 1))

@@ -254,3 +254,23 @@ def test_a_dose_trend_leaves_nans_out_and_refuses_a_single_dose():
     assert statistics.trend_test(doses, [np.ones(3), np.ones(2)]) == 1.0
     with pytest.raises(statistics.InvalidInput, match="two doses or more"):
         statistics.dose_trend([1.0, 1.0], groups)
+
+
+def test_no_resample_or_permutation_is_refused_not_answered():
+    x, curves = np.arange(8.0), np.ones((4, 3))
+    calls = {
+        "resamples": [
+            lambda n: statistics.interval(x, "iqm", resamples=n),
+            lambda n: statistics.curve_interval(curves, resamples=n),
+            lambda n: statistics.max_average_difference(curves, curves, resamples=n),
+        ],
+        "permutations": [
+            lambda n: statistics.trend_test([1.0, 2.0], [x, x + 1], permutations=n),
+        ],
+    }
+    for name, functions in calls.items():
+        for call in functions:
+            for bad in (0, -1, 2.5, True):
+                with pytest.raises(ValueError, match=f"{name} must be a positive integer"):
+                    call(bad)
+    statistics.trend_test([1.0, 2.0], [x, x + 1], permutations=np.int64(10))  # numpy counts

@@ -188,11 +188,18 @@ def test_every_variant_trains_with_continuous_actions():
     assert (m["approx_kl"][:, -1] > 0).all()  # every variant moved its policy
 
 
+@pytest.mark.parametrize("grid", [None, [("alpha", 1.1)], "alpha"])
+def test_a_grid_that_is_not_a_mapping_is_refused_saying_what_one_is(grid):
+    with pytest.raises(ValueError, match=r"a grid maps names to values, such as \{'alpha'"):
+        sweep("cartpole", grid)
+
+
 def test_parts_share_the_runs_in_run_order():
     from fppo_jax.sweep import part_bounds
 
     assert [part_bounds((k, 3), 7) for k in (1, 2, 3)] == [(0, 3), (3, 5), (5, 7)]
     assert part_bounds((1, 1), 4) == (0, 4)
+    assert part_bounds((np.int64(2), np.int64(3)), 7) == (3, 5)  # numpy integers are integers
     for bad in ((0, 2), (3, 2), (1.0, 2), "1/2", (1, 2, 3)):
         with pytest.raises(ValueError, match="part must be"):
             part_bounds(bad, 4)

@@ -54,6 +54,17 @@ def cell(row: int, column: str, value: str):
     return change
 
 
+def test_a_chosen_metric_is_one_the_sweep_has_and_env_steps_always_comes_along(tmp_path):
+    result = sweep_by_hand()
+    with pytest.raises(ValueError, match="no metric 'nonesuch' in this sweep; it has "):
+        result.write(tmp_path / "unknown", metrics=["nonesuch"])
+    assert not (tmp_path / "unknown" / "curves.csv").exists()
+    result.write(tmp_path, metrics=["average_return"])
+    back = SweepResult.read(tmp_path)
+    assert set(back.metrics) == {"env_steps", "average_return"}
+    np.testing.assert_array_equal(back.metrics["env_steps"], result.metrics["env_steps"])
+
+
 @pytest.mark.parametrize(
     "change, match",
     [

@@ -273,6 +273,8 @@ def make_env(name: str, backend: str = "auto") -> Environment:
     :data:`BACKENDS` and :func:`choose_backend`). Environments hold no state of their own, so
     one object is made per task and backend and shared: a later run on it reuses the training
     program compiled for it (:mod:`fppo_jax.execution`)."""
+    if not isinstance(name, str):
+        raise InvalidInput(f"make_env takes a task's name, such as 'cartpole'; got {name!r}")
     lookup(name)
     return _made(name, choose_backend(name, backend)[0])
 

@@ -92,10 +92,8 @@ class Design:
             raise InvalidInput(
                 f"group_size ({self.group_size}) is larger than max_seeds ({self.max_seeds})"
             )
-        level = isinstance(self.level, float | int | np.floating) and not isinstance(
-            self.level, bool
-        )
-        if not (level and 0 < self.level < 1):
+        number = isinstance(self.level, float | int | np.floating)
+        if isinstance(self.level, bool) or not (number and 0 < self.level < 1):
             raise InvalidInput(f"the error level must be in (0, 1), got {self.level!r}")
 
     @property

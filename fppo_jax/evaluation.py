@@ -45,7 +45,9 @@ def make_evaluator(
     positive_int("max_steps", max_steps)  # else no step, and returns of 0 that look measured
     if not isinstance(deterministic, bool | np.bool_):
         raise InvalidInput(f"deterministic must be True or False, got {deterministic!r}")
-    reset_key, run_key = jax.random.split(jax.random.key(check_seed(seed)))
+    signed = check_seed(seed) % 2**64  # as run_keys counts it: 2**64 − 1 is −1's key
+    key = jax.random.key(signed - 2**64 if signed >= 2**63 else signed)
+    reset_key, run_key = jax.random.split(key)
 
     def run(policy: Policy) -> jax.Array:
         state, obs = jax.vmap(env.reset)(jax.random.split(reset_key, episodes))

@@ -296,4 +296,14 @@ def _seeds(seeds: int | Sequence[int]) -> list[int]:
         raise InvalidInput("a sweep needs at least one seed")
     if len(set(checked)) < len(checked):
         raise InvalidInput(f"seeds must be distinct, got {checked}")
+    # JAX's keys (without 64-bit mode) keep a seed's low 32 bits: seeds equal there would train
+    # the same run twice, and count it as two.
+    first: dict[int, int] = {}
+    for seed in checked:
+        other = first.setdefault(seed % 2**32, seed)
+        if other != seed:
+            raise InvalidInput(
+                f"seeds {other} and {seed} give the same key (JAX keeps a seed's low 32 bits), "
+                "so the same run: choose seeds that differ below 2**32"
+            )
     return checked

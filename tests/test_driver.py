@@ -405,6 +405,8 @@ def test_numpy_integers_are_integers():
         ([], "a sweep needs at least one seed"),
         (np.array(2), "seeds must be a count or a sequence of integers, got array(2)"),
         (10**9, "a sweep takes at most 100,000 seeds, got 1,000,000,000"),
+        ([0, 1, 2**32], "seeds 0 and 4294967296 give the same key"),
+        ([-1, 2**32 - 1], "seeds -1 and 4294967295 give the same key"),
     ],
 )
 def test_seeds_are_checked_before_anything_is_made(seeds, message):

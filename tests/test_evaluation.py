@@ -56,6 +56,14 @@ def test_evaluate_refuses_what_would_measure_nothing_or_the_wrong_thing(given, m
         fppo_jax.evaluate(fppo_jax.make_env("cartpole"), policy, 2, **given)
 
 
+def test_an_unsigned_64_bit_seed_evaluates_as_its_signed_equal():
+    env = fppo_jax.make_env("cartpole")
+    policy = Policy(make_cartpole_params(), None, env.action_space, (4,))
+    unsigned = fppo_jax.evaluate(env, policy, 3, seed=2**64 - 1, deterministic=False)
+    signed = fppo_jax.evaluate(env, policy, 3, seed=-1, deterministic=False)
+    np.testing.assert_array_equal(unsigned, signed)
+
+
 def test_evaluate_counts_each_episode_until_it_ends():
     env = fppo_jax.make_env("cartpole")
     policy = Policy(make_cartpole_params(), None, env.action_space, (4,))

@@ -253,6 +253,8 @@ def resolve(variant: object) -> Surrogate:
 
 def _imported(path: str) -> Surrogate:
     module_name, _, attribute = path.partition(":")
+    if not module_name or module_name.startswith(".") or not attribute:
+        raise InvalidInput(f"variant {path!r}: expected module:attribute, such as my_pkg.mod:ppo_x")
     try:
         found: Any = importlib.import_module(module_name)
     except ImportError as error:

@@ -32,7 +32,7 @@ from fppo_jax.objectives import (
     resolve,
     union,
 )
-from fppo_jax.surrogates import Surrogate, real_number
+from fppo_jax.surrogates import Surrogate, as_trained, float32_note, real_number
 
 # The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task.
 TABLE2: dict[str, dict[str, float]] = {
@@ -308,6 +308,8 @@ def hyperparameters(
         value = real_number(name, value)
         if not (math.isfinite(value) and ok(value)):
             raise InvalidInput(f"{name} must be {bound}, got {value}")
+        if not (math.isfinite(as_trained(value)) and ok(as_trained(value))):
+            raise InvalidInput(f"{name} must be {bound}, got {value}, {float32_note(value)}")
     # NumPy's scalars, put on the device as they are (as the objective's own: no conversion
     # program to compile).
     scalars = jax.device_put({name: np.float32(value) for name, value in settings.items()})

@@ -47,7 +47,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.errors import InvalidInput
-from fppo_jax.surrogates import Range, Surrogate, declare, probe, real_number
+from fppo_jax.surrogates import (
+    Range,
+    Surrogate,
+    as_trained,
+    declare,
+    float32_note,
+    probe,
+    real_number,
+)
 
 EPSILON = 0.2  # the clip range every variant takes, as the paper and baselines use it
 EPSILON_RANGE = Range("(0, 1)")
@@ -245,6 +253,8 @@ def resolve(variant: object) -> Surrogate:
 
 def _imported(path: str) -> Surrogate:
     module_name, _, attribute = path.partition(":")
+    if not module_name or module_name.startswith(".") or not attribute:
+        raise InvalidInput(f"variant {path!r}: expected module:attribute, such as my_pkg.mod:ppo_x")
     try:
         found: Any = importlib.import_module(module_name)
     except ImportError as error:
@@ -428,6 +438,8 @@ def objective(
     eps = real_number("epsilon", epsilon)
     if eps not in EPSILON_RANGE:
         raise InvalidInput(f"epsilon must be {EPSILON_RANGE}, got {eps}")
+    if as_trained(eps) not in EPSILON_RANGE:
+        raise InvalidInput(f"epsilon must be {EPSILON_RANGE}, got {eps}, {float32_note(eps)}")
     values = {key: s.check(key, value) for key, value in {**s.defaults, **given}.items()}
     if not s.builtin:
         probe(s, values, eps)

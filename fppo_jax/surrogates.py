@@ -92,6 +92,18 @@ class Range:
         return f"in {self.text.strip()}" if interval else self.text.strip()
 
 
+def as_trained(value: float) -> float:
+    """`value` as training holds it, a float32: past float32's range it is infinite, and
+    below its smallest it is 0, so a range is checked on both."""
+    with np.errstate(over="ignore"):
+        return float(np.float32(value))
+
+
+def float32_note(value: float) -> str:
+    """Why `value`, in range itself, is refused: what training's float32 makes of it."""
+    return f"which training's float32 holds as {as_trained(value):g}"
+
+
 def real_number(name: str, value: object) -> float:
     """`value` as a float if it is a real number (numpy's included); strings and booleans,
     which ``float`` would take, are refused."""
@@ -144,6 +156,12 @@ class Surrogate:
         if math.isinf(value):
             raise InvalidInput(f"{name} must be finite for {self.name}, got {value}")
         valid = self.ranges.get(name)
+        trained = as_trained(value)
+        if math.isinf(trained) or (valid is not None and value in valid and trained not in valid):
+            bound = "finite" if valid is None else str(valid)
+            raise InvalidInput(
+                f"{name} must be {bound} for {self.name}, got {value}, {float32_note(value)}"
+            )
         # NaN lies outside every range, and is finite nowhere.
         if valid is not None and value not in valid:
             why = f" ({valid.why})" if valid.why else ""

@@ -466,3 +466,19 @@ def test_a_recorded_run_s_shape_and_another_preset_are_refused_not_mislabelled(
     ]:
         assert main(["train", "--config", str(tmp_path / config), *given]) is None
         assert presets.pop() == preset, config
+
+
+@pytest.mark.parametrize("variant", [":x", ".x:y", "x:"])
+def test_a_variant_path_without_a_module_or_an_attribute_is_one_line(variant, capsys):
+    assert main(["train", "--variant", variant, "--quiet"]) == 2
+    expected = f"variant {variant!r}: expected module:attribute, such as my_pkg.mod:ppo_x"
+    assert capsys.readouterr().err == f"fppo-jax: error: {expected}\n"
+
+
+def test_a_settings_file_that_is_a_directory_or_not_text_is_one_line(tmp_path, capsys):
+    (tmp_path / "bytes.json").write_bytes(b"\xff\xfe")
+    for path in (tmp_path, tmp_path / "bytes.json"):
+        assert main(["train", "--config", str(path)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"fppo-jax: error: {path} cannot be read as settings: ")
+        assert len(err.splitlines()) == 1

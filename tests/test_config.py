@@ -227,6 +227,27 @@ def test_hyperparameters_take_defaults_and_check_each_range_at_its_bounds():
         hyperparameters(lr=1e-3)
 
 
+@pytest.mark.parametrize(
+    "given, message",
+    [
+        (
+            {"gamma": 1e-300},
+            "gamma must be in (0, 1], got 1e-300, which training's float32 holds as 0",
+        ),
+        (
+            {"learning_rate": 1e300},
+            "learning_rate must be > 0, got 1e+300, which training's float32",
+        ),
+        ({"variant": "fppo-qp", "k": 1e300}, "k must be >= 0 for fppo-qp, got 1e+300, which train"),
+        ({"variant": "tr-ppo", "delta": 1e-300}, "delta must be > 0 for tr-ppo, got 1e-300, which"),
+        ({"epsilon": 1e-300}, "epsilon must be in (0, 1), got 1e-300, which training's float32 h"),
+    ],
+)
+def test_a_value_in_range_that_float32_takes_out_of_it_is_refused(given, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        hyperparameters(**given)
+
+
 def test_resolve_hyperparameters_reports_the_setting_as_plain_decimals():
     hp, settings = resolve_hyperparameters("fppo-qp", "cartpole", gamma=None, value_coef=0.7)
     assert settings == {

@@ -21,7 +21,10 @@ def settings_file(path: Path) -> dict[str, Any]:
     flag names written by hand. A surrogate of one's own that the record names is given by
     where an import finds it (``module:attribute``); one made in a script or a notebook cannot
     be found, and is refused with what to pass instead."""
-    text = Path(path).read_text()
+    try:
+        text = Path(path).read_text()
+    except (IsADirectoryError, UnicodeDecodeError) as error:  # not a settings file at all
+        raise InvalidInput(f"{path} cannot be read as settings: {error}") from None
     try:
         if Path(path).suffix in (".yaml", ".yml"):
             settings = _yaml_without_repeated_keys(text)

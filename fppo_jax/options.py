@@ -178,6 +178,13 @@ class Options:
                 raise InvalidInput(f"{name} must be a path, got {value!r}")
             if value is not None and os.fspath(value) == "":
                 raise InvalidInput(f"{name} is an empty path: name a directory ('.' for this one)")
+        if self.checkpoint_dir is not None and self.log_dir is not None:
+            where = Path(self.log_dir).absolute()
+            if Path(self.checkpoint_dir).absolute() == where:
+                raise InvalidInput(
+                    "checkpoint_dir and log_dir (--checkpoint-dir and --output) name the same "
+                    f"directory, {where}: give each its own"
+                )
         if self.checkpoint_dir is None and (self.resume or self.checkpoint_every is not None):
             flag = "resume" if self.resume else "checkpoint_every"
             raise InvalidInput(f"{flag} needs a checkpoint directory")

@@ -25,6 +25,7 @@ from fppo_jax.options import Options, callback_stops
         ({"resume": True}, "resume needs a checkpoint directory"),
         ({"checkpoint_every": 5}, "checkpoint_every needs a checkpoint directory"),
         ({"wandb_project": 7}, "wandb_project must be a name, got 7"),
+        ({"checkpoint_dir": "runs/a", "log_dir": "runs/./a"}, "name the same directory"),
     ],
 )
 def test_each_option_is_checked_when_made(settings, message):

@@ -308,7 +308,8 @@ def hyperparameters(
         value = real_number(name, value)
         if not (math.isfinite(value) and ok(value)):
             raise InvalidInput(f"{name} must be {bound}, got {value}")
-        if not (math.isfinite(as_trained(value)) and ok(as_trained(value))):
+        trained = as_trained(value)
+        if not (math.isfinite(trained) and ok(trained)):
             raise InvalidInput(f"{name} must be {bound}, got {value}, {float32_note(value)}")
     # NumPy's scalars, put on the device as they are (as the objective's own: no conversion
     # program to compile).

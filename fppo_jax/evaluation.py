@@ -12,6 +12,7 @@ import numpy as np
 from fppo_jax.config import check_seed, positive_int
 from fppo_jax.envs import Environment
 from fppo_jax.errors import InvalidInput
+from fppo_jax.execution import run_keys
 from fppo_jax.policy import Policy
 
 
@@ -45,9 +46,7 @@ def make_evaluator(
     positive_int("max_steps", max_steps)  # else no step, and returns of 0 that look measured
     if not isinstance(deterministic, bool | np.bool_):
         raise InvalidInput(f"deterministic must be True or False, got {deterministic!r}")
-    signed = check_seed(seed) % 2**64  # as run_keys counts it: 2**64 − 1 is −1's key
-    key = jax.random.key(signed - 2**64 if signed >= 2**63 else signed)
-    reset_key, run_key = jax.random.split(key)
+    reset_key, run_key = jax.random.split(run_keys([check_seed(seed)])[0])
 
     def run(policy: Policy) -> jax.Array:
         state, obs = jax.vmap(env.reset)(jax.random.split(reset_key, episodes))

@@ -30,6 +30,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from fppo_jax.config import positive_int
 from fppo_jax.errors import InvalidInput
 
 CONFIDENCE = 0.95
@@ -135,14 +136,6 @@ def _finite(x: np.ndarray) -> np.ndarray:
     return cast(np.ndarray, x[np.isfinite(x)])
 
 
-def _count(name: str, value: int) -> int:
-    """`value` if it is a positive integer: resamples or permutations (none would answer 1.0
-    or an empty interval, as if measured)."""
-    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer) or value < 1:
-        raise InvalidInput(f"{name} must be a positive integer, got {value!r}")
-    return int(value)
-
-
 def check_confidence(confidence: float) -> float:
     """`confidence` if it is a level in (0, 1)."""
     number = isinstance(confidence, int | float | np.integer | np.floating)
@@ -164,7 +157,7 @@ def bootstrap(
     bootstrap when the samples are tasks). `statistic(*samples, axis=-1)` must be vectorised.
     Non-finite values are dropped first; a sample left empty gives NaNs."""
     confidence = check_confidence(confidence)
-    resamples = _count("resamples", resamples)
+    resamples = positive_int("resamples", resamples)
     samples = [_finite(s) for s in samples]
     if any(s.size == 0 for s in samples):
         return float("nan"), float("nan"), float("nan")
@@ -213,7 +206,7 @@ def curve_interval(
     bootstrap band: each resample draws runs (whole curves) with replacement, the same draw for
     every update. NaN (a run with no finished episode yet) is left out of its update."""
     confidence = check_confidence(confidence)
-    resamples = _count("resamples", resamples)
+    resamples = positive_int("resamples", resamples)
     f = estimator(statistic)
     curves = np.asarray(curves, dtype=float)
     runs = np.random.default_rng(seed).integers(0, len(curves), (resamples, len(curves)))
@@ -297,7 +290,7 @@ def max_average_difference(
     resamples each setting's runs (whole curves) independently. This is the interval a gap in
     the paper's Table 1 can be set against."""
     confidence = check_confidence(confidence)
-    resamples = _count("resamples", resamples)
+    resamples = positive_int("resamples", resamples)
     rng = np.random.default_rng(seed)
 
     def paper_statistic(curves: np.ndarray) -> np.ndarray:  # [..., run, update] -> [...]
@@ -455,7 +448,7 @@ def trend_test(
     the share of `permutations` seeded relabellings of the runs' doses whose |ρ| is at least the
     observed, the observed labelling counted among them ((1 + count) / (1 + permutations), so
     never 0). Exact in its error rate whatever the scores' distribution."""
-    permutations = _count("permutations", permutations)
+    permutations = positive_int("permutations", permutations)  # none would answer 1.0
     kept, labels = _dose_runs(doses, groups)
     scores = np.concatenate(kept)
     observed = spearman(labels, scores)

@@ -8,7 +8,8 @@ policy, checkpointed and resumable; :func:`sweep` runs a grid of settings × see
 program; :func:`load_policy` reads a trained policy back, saved or from its checkpoints;
 :func:`merge` joins sweeps of other seeds into one, and :mod:`fppo_jax.statistics` compares
 settings with interval estimates; :func:`study` compares candidates with a baseline, adding
-seeds until a preregistered test decides.
+seeds until a preregistered test decides; :func:`tune` tunes every arm with the same budget
+(successive halving over a population, each rung one program) for a study on fresh seeds.
 
 Each public name is imported from its module on first use (PEP 562), so that importing the
 package, or a light part of it such as :mod:`fppo_jax.numpy_policy` or the command line's
@@ -64,6 +65,7 @@ _MODULES = {
     "fppo_jax.surrogates": ("Surrogate", "surrogate"),
     "fppo_jax.sweep": ("expand_grid", "sweep"),
     "fppo_jax.trainer": ("METRICS", "Metrics", "Trainer", "TrainState", "make_train"),
+    "fppo_jax.tuning": ("TuneResult", "tune"),
 }
 _MODULE_OF = {name: module for module, names in _MODULES.items() for name in names}
 
@@ -96,6 +98,7 @@ __all__ = [
     "TrainState",
     "Trainer",
     "TrainingDiverged",
+    "TuneResult",
     "evaluate",
     "expand_grid",
     "hyperparameters",
@@ -111,6 +114,7 @@ __all__ = [
     "surrogate",
     "sweep",
     "train",
+    "tune",
 ]
 
 

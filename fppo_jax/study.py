@@ -101,6 +101,7 @@ def study(
     chunk: int | None = None,
     reuse: str | Path | Sequence[str | Path] | None = None,
     part: tuple[int, int] | None = None,
+    tuned: str | Path | None = None,
     **settings: Any,
 ) -> StudyResult:
     """Compare each of `candidates` with `baseline` on each of `tasks`, adding seeds in groups
@@ -113,7 +114,10 @@ def study(
     `groups` limits the looks this call trains (0 writes the plan alone). `reuse` names
     directories of recorded sweeps to take runs from.
     ``part=(K, N)`` trains the K-th of N shares of the next look's groups and returns.
-    `total_steps`, `preset`, `backend`, `chunk` and `settings` are the sweeps'.
+    `tuned`, a finished tune's directory (:func:`~fppo_jax.tune`), trains each arm at the
+    setting the tune chose for it on each task; the plan records the tune's digest, and seeds
+    that the tune used are refused. `total_steps`, `preset`, `backend`, `chunk` and `settings`
+    are the sweeps'.
     """
     tasks = _names_of_tasks(tasks)
     candidates, baseline = _variants(candidates, baseline)
@@ -121,9 +125,15 @@ def study(
     _check_arguments(endpoint, groups, chunk, part, settings)
     sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
     shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
-    source = _Source.of(tasks, [*candidates, baseline], settings, shape, chunk, part, sources)
+    everyone = [*candidates, baseline]
+    chosen = None if tuned is None else tuned_settings(tuned, tasks, everyone, design, settings)
+    source = _Source.of(tasks, everyone, settings, shape, chunk, part, sources, chosen)
+    if tuned is not None:
+        _check_tuned_protocol(tuned, source)
     planned = {**shape, **_planned_settings(settings)}
     plan = make_plan(tasks, candidates, baseline, design, endpoint, planned, sources)
+    if chosen is not None:
+        plan["tuned"] = json_value(chosen)
     output = writable_directory(output)
     # Array tasks that start together take turns to check the plan (each holds the lock briefly).
     lock = DirectoryLock(output, "a study", wait=PART_LOCK_WAIT if part is not None else 0.0)
@@ -149,6 +159,7 @@ class _Source:
     expected: dict[str, tuple[dict[str, Any], dict[str, dict[str, Any]]]]
     identity: dict[str, Any]
     pool: Pool | None
+    tuned: dict[str, Any] | None  # a tune's chosen settings, by task and variant
 
     @classmethod
     def of(
@@ -160,6 +171,7 @@ class _Source:
         chunk: int | None,
         part: tuple[int, int] | None,
         reuse: list[str],
+        tuned: dict[str, Any] | None = None,
     ) -> _Source:
         """The study's source of runs, every setting of every task checked and the recorded
         sweeps of `reuse` read, all before the plan is written: a mistyped directory or a
@@ -169,9 +181,19 @@ class _Source:
             {**shape, "chunk": chunk},
             set(hyperparameter_names([*BUILTINS.values(), *everyone])),
             part,
-            {task: _checked_settings(task, everyone, settings, shape) for task in tasks},
+            {
+                task: _checked_settings(
+                    task,
+                    everyone,
+                    settings,
+                    shape,
+                    None if tuned is None else tuned["settings"][task],
+                )
+                for task in tasks
+            },
             identities(everyone).get("surrogates", {}),
             Pool.read(reuse) if reuse else None,
+            tuned,
         )
 
     def train(
@@ -183,7 +205,11 @@ class _Source:
             for name, value in self.settings.items()
             if name not in self.specific or takers(name, by_name)
         }
-        return sweep_group(task, variants, seeds, where, part=self.part, **self.shape, **fixed)
+        grid: dict[str, Any] | list[dict[str, Any]] = {"variant": variants}
+        if self.tuned is not None:
+            chosen = self.tuned["settings"][task]
+            grid = [{"variant": v, **chosen[v.name]} for v in variants]
+        return sweep_group(task, grid, seeds, where, part=self.part, **self.shape, **fixed)
 
     def take(self, task: str, variant: Surrogate, seeds: list[int]) -> Taken | None:
         """`variant`'s runs on `task` at `seeds` from the recorded sweeps, if they hold them
@@ -237,10 +263,15 @@ def _planned_settings(settings: dict[str, Any]) -> dict[str, Any]:
 
 
 def _checked_settings(
-    task: str, everyone: list[Surrogate], settings: dict[str, Any], shape: dict[str, Any]
+    task: str,
+    everyone: list[Surrogate],
+    settings: dict[str, Any],
+    shape: dict[str, Any],
+    tuned: dict[str, dict[str, Any]] | None = None,
 ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
     """Every setting of `task` checked before the plan is written, as a sweep checks them; and
-    what a recorded run must match to be reused: the protocol, and each variant's setting."""
+    what a recorded run must match to be reused: the protocol, and each variant's setting (its
+    `tuned` one, where a tune chose it)."""
     run = prepare(task, dict(settings), sweepable(everyone), **shape)
     several = [k for k, v in run.hyperparameters.items() if isinstance(v, list | tuple)]
     if several:
@@ -249,11 +280,87 @@ def _checked_settings(
             "each (to compare values, sweep them: fppo_jax.sweep)"
         )
     by_name = {s.name: s for s in everyone}
-    grid = expand_grid({"variant": everyone, **run.hyperparameters}, task)
+    if tuned is None:
+        grid = expand_grid({"variant": everyone, **run.hyperparameters}, task)
+    else:
+        grid = expand_grid([{"variant": s, **tuned[s.name]} for s in everyone], task)
     for setting in grid:
         values = {k: v for k, v in setting.items() if k != "variant"}
         resolve_hyperparameters(by_name[setting["variant"]], None, **values)
     return json_value(run.record()), {s["variant"]: s for s in grid}
+
+
+def tuned_settings(
+    directory: str | Path,
+    tasks: list[str],
+    everyone: list[Surrogate],
+    design: Design,
+    settings: dict[str, Any],
+) -> dict[str, Any]:
+    """What a study on a tune's chosen settings records of the tune in `directory`: where it is,
+    its plan's digest, its tuning seeds and each variant's chosen setting on each task; refused
+    if the tune is not finished, lacks a task or a variant, or used a seed the study would."""
+    from fppo_jax.tuning import PLAN_FILE as TUNE_PLAN
+    from fppo_jax.tuning import RESULTS_FILE, plan_digest
+
+    directory = Path(directory)
+    digest = plan_digest(directory)
+    results_path = directory / RESULTS_FILE
+    if not results_path.exists():
+        raise InvalidInput(
+            f"the tune in {directory} is not finished ({RESULTS_FILE} is missing): run it to "
+            "the end first"
+        )
+    tune_plan = json.loads((directory / TUNE_PLAN).read_text())
+    results = json.loads(results_path.read_text())
+    given = sorted(set(settings) & set(sweepable(everyone)))
+    if given:
+        raise InvalidInput(
+            f"a study on a tune's settings takes each arm's from the tune: {', '.join(given)} "
+            "cannot be given beside it"
+        )
+    chosen: dict[str, dict[str, Any]] = {}
+    for task in tasks:
+        if task not in results:
+            raise InvalidInput(f"the tune in {directory} did not tune {task}")
+        for variant in everyone:
+            found = results[task].get(variant.name)
+            if found is None:
+                raise InvalidInput(f"the tune in {directory} did not tune {variant.name}")
+            if found["chosen"] is None:
+                raise InvalidInput(
+                    f"the tune in {directory} chose no setting for {variant.name} on {task}: "
+                    "every trial diverged"
+                )
+            chosen.setdefault(task, {})[variant.name] = found["chosen"]["setting"]
+    overlap = sorted(set(tune_plan["seeds"]) & set(range(design.max_seeds)))
+    if overlap:
+        raise InvalidInput(
+            f"the tune in {directory} used seeds {overlap} that this study would test on: a "
+            "test needs seeds the tune never saw (tune on others)"
+        )
+    return {
+        "directory": str(directory.absolute()),
+        "plan_digest": digest,
+        "tuning_seeds": tune_plan["seeds"],
+        "protocol": {task: tune_plan["protocol"][task] for task in tasks},
+        "settings": chosen,
+    }
+
+
+def _check_tuned_protocol(directory: str | Path, source: _Source) -> None:
+    """The study's runs trained as the tune's were (the task's shape, backend and budget): a
+    setting tuned for one protocol says little of another."""
+    assert source.tuned is not None
+    for task, (protocol, _) in source.expected.items():
+        tuned = source.tuned["protocol"][task]
+        differs = [k for k in dict.fromkeys([*protocol, *tuned]) if protocol.get(k) != tuned.get(k)]
+        if differs:
+            key = differs[0]
+            raise InvalidInput(
+                f"the tune in {directory} trained {task} with {key} = {tuned.get(key)!r}, this "
+                f"study with {protocol.get(key)!r}: test a tuned setting under its own protocol"
+            )
 
 
 def _names_of_tasks(tasks: str | Sequence[str]) -> list[str]:
@@ -347,18 +454,20 @@ def _fractions(design: Design) -> tuple[float, ...]:
     return tuple(n / design.max_seeds for n in design.looks)
 
 
-def check_plan(output: Path, plan: dict[str, Any]) -> dict[str, Any]:
-    """Write `plan` as ``plan.json`` in `output`, or check it against the one there: a study
-    goes on only under the plan it started with (the commit aside: a group records its own).
-    Returns the plan as recorded, with the commit it was made at."""
-    path = output / PLAN_FILE
+def check_plan(
+    output: Path, plan: dict[str, Any], what: str = "a study", name: str = PLAN_FILE
+) -> dict[str, Any]:
+    """Write `plan` as `name` in `output`, or check it against the one there: `what` (a study,
+    a tune) goes on only under the plan it started with (the commit aside: a group records its
+    own). Returns the plan as recorded, with the commit it was made at."""
+    path = output / name
     if not path.exists():
         write_json(path, plan)
         return plan
     try:
         recorded = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as error:
-        raise InvalidInput(f"cannot read the study's plan {path}: {error}") from None
+        raise InvalidInput(f"cannot read the plan {path}: {error}") from None
     for field in dict.fromkeys([*recorded, *plan]):
         if field == "commit" or recorded.get(field) == plan.get(field):
             continue
@@ -367,8 +476,8 @@ def check_plan(output: Path, plan: dict[str, Any]) -> dict[str, Any]:
             key = next(k for k in dict.fromkeys([*was, *now]) if was.get(k) != now.get(k))
             field, was, now = f"{field}.{key}", was.get(key), now.get(key)
         raise InvalidInput(
-            f"{output} holds a study planned with {field} = {_shown(was)}, not {_shown(now)}: "
-            "a study goes on only under its plan (start another in a new directory)"
+            f"{output} holds {what} planned with {field} = {_shown(was)}, not {_shown(now)}: "
+            f"{what} goes on only under its plan (start another in a new directory)"
         )
     return cast(dict[str, Any], recorded)
 
@@ -379,14 +488,15 @@ def _shown(value: Any) -> str:
 
 def sweep_group(
     task: str,
-    variants: list[Surrogate],
+    grid: dict[str, Any] | list[dict[str, Any]],
     seeds: list[int],
     where: Path,
     part: tuple[int, int] | None = None,
     **settings: Any,
 ) -> SweepResult:
-    """One group: `variants` × `seeds` on `task` as one sweep that records itself in `where`
-    (or its `part`, in ``where/part-<K>``), read back from there (as a resumed study reads it).
+    """One group: the settings of `grid` × `seeds` on `task` as one sweep that records itself
+    in `where` (or its `part`, in ``where/part-<K>``), read back from there (as a resumed study
+    reads it).
     One cut short (a killed study) is trained again; a group whose shares array tasks began is
     not trained whole over them."""
     if part is None:
@@ -395,7 +505,7 @@ def sweep_group(
         where = where / f"part-{part[0]}"
     if where.exists():
         shutil.rmtree(where)
-    sweep(task, {"variant": variants}, seeds, log_dir=where, part=part, **settings)
+    sweep(task, grid, seeds, log_dir=where, part=part, **settings)
     return SweepResult.read(where)
 
 

@@ -156,6 +156,14 @@ def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[st
         if plan.get("reuse")
         else ""
     )
+    tuned = plan.get("tuned")
+    if tuned:
+        reused += (
+            f" Each arm trained at the setting a tune chose for it on each task (the tune in "
+            f"{tuned['directory']}, plan digest {tuned['plan_digest'][:12]}, tuning seeds "
+            f"{tuned['tuning_seeds'][0]} … {tuned['tuning_seeds'][-1]}, none of them tested "
+            "here); plan.json lists the settings."
+        )
     planned = "before any run it trained" if plan.get("reuse") else "before any run"
     return [
         f"# {', '.join(plan['candidates'])} against {plan['baseline']}",

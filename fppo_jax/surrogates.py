@@ -132,6 +132,8 @@ class Surrogate:
     needs_kl: bool = False
     clip_range: tuple[str, str] | None = None
     builtin: bool = False
+    # Where a tune searches each of its own hyperparameters (fppo_jax.search_space).
+    search: Mapping[str, Any] = dataclasses.field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def hyperparameters(self) -> tuple[str, ...]:
@@ -203,6 +205,7 @@ def surrogate(
     ranges: Mapping[str, str | Range] | None = None,
     needs_kl: bool = False,
     clip_range: tuple[str, str] | None = None,
+    search: Mapping[str, Any] | None = None,
     **defaults: float,
 ) -> Surrogate:
     """A surrogate of one's own, accepted wherever a variant's name is (``train``, ``sweep``
@@ -213,9 +216,11 @@ def surrogate(
     hyperparameter's valid range as text (``"> 0"``, ``"[0, 1)"``); `needs_kl` says the
     surrogate gates on the KL divergence (so calling its objective without one is refused);
     `clip_range` names the two hyperparameters that are its distances below and above 1 (for
-    the R± diagnostics; ε's otherwise). Everything is checked here, and the function is tried
-    on a grid of ratios and advantages: a value that is not finite, of the wrong shape or not
-    a float is refused, naming the surrogate.
+    the R± diagnostics; ε's otherwise); `search` gives the interval a tune searches each of
+    them over, as ``(low, high)`` or ``(low, high, scale)`` with scale ``linear``, ``log`` or
+    ``log1m`` (see :mod:`fppo_jax.search_space`). Everything is checked here, and the function
+    is tried on a grid of ratios and advantages: a value that is not finite, of the wrong shape
+    or not a float is refused, naming the surrogate.
     """
     from fppo_jax.objectives import BUILTINS  # the built-ins are declared with this function
 
@@ -226,7 +231,23 @@ def surrogate(
         )
     declared = declare(name, function, ranges, needs_kl, clip_range, defaults)
     probe(declared, declared.defaults)
-    return declared
+    if search is None:
+        return declared
+    from fppo_jax.search_space import interval
+
+    if not isinstance(search, Mapping):
+        raise InvalidInput(
+            f"surrogate {name!r}: search maps its hyperparameters to (low, high), got {search!r}"
+        )
+    stray = sorted(set(search) - set(defaults))
+    if stray:
+        raise InvalidInput(
+            f"surrogate {name!r}: search names {', '.join(map(repr, stray))}, which it does not "
+            f"take (it takes: {', '.join(defaults) or 'none'})"
+        )
+    where = f"surrogate {name!r}'s search"
+    intervals = {key: interval(key, value, where) for key, value in search.items()}
+    return dataclasses.replace(declared, search=MappingProxyType(intervals))
 
 
 def declare(

@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.config import (
+    HYPERPARAMETER_DEFAULTS,
     MAX_SEEDS,
     Hyperparameters,
     check_seed,
@@ -46,15 +47,20 @@ from fppo_jax.results import SweepResult, labels
 from fppo_jax.surrogates import Surrogate, real_number
 
 
-def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[str, Any]]:
+def expand_grid(
+    grid: Mapping[str, Any] | Sequence[Mapping[str, Any]], task: str | None = None
+) -> list[dict[str, Any]]:
     """The distinct settings of a grid, in order: every combination of its values.
 
     Its variants are built-ins' names or surrogates of one's own; a setting names its variant.
     A variant-specific value (α, k, δ, a surrogate's own) applies to the variants that take it
     and is dropped for the others, so ``{"variant": ["ppo", "fppo-lp"], "alpha": [1.1, 1.3]}``
     is three settings. For a registered `task`, FPPO-LP's α and FPPO-QP's k default to the
-    paper's Table 2.
+    paper's Table 2. A list of settings instead of a grid (each a mapping with its
+    ``variant`` and values, such as each arm's tuned setting) is those settings, in order.
     """
+    if not isinstance(grid, Mapping):
+        return _listed_settings(grid, task)
     surrogates = grid_surrogates(grid)
     specific = hyperparameter_names([*BUILTINS.values(), *surrogates.values()])
     valid = sweepable(surrogates.values())
@@ -82,12 +88,45 @@ def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[s
     return settings
 
 
-def grid_surrogates(grid: Mapping[str, Any]) -> dict[str, Surrogate]:
-    """The surrogates a grid's variants name, by name, in the grid's order (default: FPPO-LP)."""
+def _listed_settings(
+    settings: Sequence[Mapping[str, Any]], task: str | None
+) -> list[dict[str, Any]]:
+    """A list of settings checked: each names its variant and only values that variant takes,
+    Table 2's α or k filled in for a registered `task`; no setting twice."""
+    surrogates = grid_surrogates(settings)
+    listed: list[dict[str, Any]] = []
+    for given in settings:
+        surrogate = surrogates[resolve(given["variant"]).name]
+        taken = ("epsilon", *surrogate.defaults, *HYPERPARAMETER_DEFAULTS)
+        stray = sorted(set(given) - {"variant", *taken})
+        if stray:
+            raise InvalidInput(
+                f"a setting of {surrogate.name} gives {', '.join(stray)}, which it does not "
+                f"take (it takes: {', '.join(taken)})"
+            )
+        setting: dict[str, Any] = {"variant": surrogate.name}
+        setting |= {k: real_number(k, v) for k, v in given.items() if k != "variant"}
+        setting |= {k: v for k, v in table2(task, surrogate.name).items() if k not in setting}
+        if setting in listed:
+            raise InvalidInput(f"the setting {setting} is listed twice")
+        listed.append(setting)
+    return listed
+
+
+def grid_surrogates(grid: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> dict[str, Surrogate]:
+    """The surrogates a grid's variants name, by name, in the grid's order (default: FPPO-LP),
+    or those of a list of settings."""
     if not isinstance(grid, Mapping):
-        raise InvalidInput(
-            f"a grid maps names to values, such as {{'alpha': [1.1, 1.3]}}; got {grid!r}"
-        )
+        listed = isinstance(grid, Sequence) and not isinstance(grid, str) and bool(grid)
+        if not listed or not all(isinstance(s, Mapping) and "variant" in s for s in grid):
+            raise InvalidInput(
+                "a grid maps names to values, such as {'alpha': [1.1, 1.3]}, and a list of "
+                "settings holds mappings that each name their variant, such as "
+                f"[{{'variant': 'ppo', 'learning_rate': 1e-3}}]; got {grid!r}"
+            )
+        listed_surrogates = [resolve(s["variant"]) for s in grid]
+        union(listed_surrogates)
+        return {s.name: s for s in listed_surrogates}
     given = [resolve(v) for v in _as_list("variant", grid.get("variant", [DEFAULT_VARIANT]))]
     union(given)  # two different surrogates under one name are refused
     return {s.name: s for s in given}
@@ -103,7 +142,7 @@ def _as_list(name: str, values: Any) -> list[Any]:
 
 def sweep(
     env: str | Environment | Any,
-    grid: Mapping[str, Any],
+    grid: Mapping[str, Any] | Sequence[Mapping[str, Any]],
     seeds: int | Sequence[int] = 5,
     *,
     chunk: int | None = None,
@@ -114,7 +153,8 @@ def sweep(
     part: tuple[int, int] | None = None,
     **settings: Any,
 ) -> SweepResult:
-    """Train every setting of `grid` (see :func:`expand_grid`) with every seed, as one program.
+    """Train every setting of `grid` (see :func:`expand_grid`: a grid of values, or a list of
+    settings) with every seed, as one program.
 
     `seeds` is a count (0 … n−1) or a list; run (setting, seed) starts from
     ``jax.random.key(seed)``, as ``train(..., seed=seed)`` does, and matches that run to float
@@ -138,7 +178,7 @@ def sweep(
     names = sweepable(surrogates.values())
     run = prepare(env, settings, names, total_steps=total_steps, preset=preset, backend=backend)
     settings, hps = _settings(grid, run.hyperparameters, surrogates, run.task)
-    seeds = _seeds(seeds)
+    seeds = check_seeds(seeds)
     runs = _runs(len(settings), seeds, part)
     for name, value in {"chunk": chunk, "data_parallel": data_parallel}.items():
         if value is not None:
@@ -155,13 +195,14 @@ def sweep(
 
 def _record(
     run: Prepared,
-    grid: Mapping[str, Any],
+    grid: Mapping[str, Any] | Sequence[Mapping[str, Any]],
     surrogates: dict[str, Surrogate],
     seeds: list[int],
     part: tuple[int, int] | None,
 ) -> dict[str, Any]:
-    """What the sweep's outputs and checkpoints record of it."""
-    values = {key: _as_list(key, v) for key, v in {**grid, **run.hyperparameters}.items()}
+    """What the sweep's outputs and checkpoints record of it: its grid, or for a list of
+    settings each axis's values in them (as a merged sweep records its parts')."""
+    values = {key: _as_list(key, v) for key, v in {**_axes(grid), **run.hyperparameters}.items()}
     if "variant" in values:
         values["variant"] = list(surrogates)
     shares = {} if part is None else {"part": list(part)}
@@ -216,6 +257,18 @@ def _plan(
     )
 
 
+def _axes(grid: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    if isinstance(grid, Mapping):
+        return dict(grid)
+    axes: dict[str, list[Any]] = {}
+    for setting in grid:
+        for key, value in setting.items():
+            known = axes.setdefault(key, [])
+            if value not in known:
+                known.append(value)
+    return axes
+
+
 def _runs(
     num_settings: int, seeds: list[int], part: tuple[int, int] | None
 ) -> list[dict[str, int]]:
@@ -225,7 +278,7 @@ def _runs(
 
 
 def _settings(
-    grid: Mapping[str, Any],
+    grid: Mapping[str, Any] | Sequence[Mapping[str, Any]],
     fixed: dict[str, Any],
     surrogates: dict[str, Surrogate],
     task: str | None,
@@ -235,10 +288,13 @@ def _settings(
         raise InvalidInput(
             "a sweep's variants are the grid's: give {'variant': ...} in the grid, not variant="
         )
-    clash = sorted(set(fixed) & set(grid))
+    clash = sorted(set(fixed) & set(_axes(grid)))
     if clash:
         raise InvalidInput(f"{', '.join(clash)} given both in the grid and as a fixed value")
-    settings = expand_grid({**grid, **fixed}, task)
+    if isinstance(grid, Mapping):
+        settings = expand_grid({**grid, **fixed}, task)
+    else:
+        settings = expand_grid([{**setting, **fixed} for setting in grid], task)
     # expand_grid applied Table 2 to each setting: resolved as given, not again per task.
     hps = stack_hyperparameters(
         [
@@ -279,7 +335,7 @@ def part_bounds(part: object, num_runs: int) -> tuple[int, int]:
     return start, start + size + (k <= extra)
 
 
-def _seeds(seeds: int | Sequence[int]) -> list[int]:
+def check_seeds(seeds: int | Sequence[int]) -> list[int]:
     """Seeds 0 … n−1 for a count, else the given ones, checked."""
     if isinstance(seeds, int | np.integer) and not isinstance(seeds, bool | np.bool_):
         seeds = range(positive_int("seeds", seeds))

@@ -163,6 +163,7 @@ def _study(args: argparse.Namespace) -> int:
         backend=args.backend,
         reuse=args.reuse,
         part=part,
+        tuned=args.tuned,
         progress=not args.quiet,
         **_evaluation(args),
         **hyperparameters_given(args),
@@ -183,6 +184,42 @@ def _study(args: argparse.Namespace) -> int:
     print(f"wrote {args.output}/plan.json, decisions.json, report.md")
     if not result.finished:
         print("not finished: the same command again goes on")
+    return 0
+
+
+def _tune(args: argparse.Namespace) -> int:
+    from fppo_jax.tuning import tune
+
+    result = tune(
+        args.tasks,
+        args.variants,
+        output=args.output,
+        trials=args.trials,
+        seeds=args.seeds_per_trial,
+        eta=args.eta,
+        baseline=args.baseline,
+        space=args.space,
+        sampler=args.sampler,
+        sampler_seed=args.sampler_seed,
+        storage=args.storage,
+        rungs=args.rungs,
+        backend=args.backend,
+        progress=not args.quiet,
+        **config_overrides(args),
+    )
+    if not result.finished:
+        print(f"wrote {args.output}/tune.json and the rungs so far; the same command goes on")
+        return 0
+    for task, arms in result.results.items():
+        for arm, found in arms.items():
+            chosen = found["chosen"]
+            what = (
+                "every trial diverged"
+                if chosen is None
+                else f"trial {chosen['trial']}, score {chosen['score']:.1f}"
+            )
+            print(f"{task}: {arm}: {what}")
+    print(f"wrote {args.output}/tune.json, results.json, report.md")
     return 0
 
 
@@ -336,6 +373,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "train": _train,
     "sweep": _sweep,
     "study": _study,
+    "tune": _tune,
     "table": _table,
     "compare": _compare,
     "merge": _merge,

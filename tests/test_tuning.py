@@ -1,0 +1,288 @@
+"""fppo_jax.tune: the plan first, rungs that halve in one program each, the same steps for every
+arm, a resume bit for bit, a changed plan refused, and the chosen settings tested by a study
+on seeds the tune never used."""
+
+import json
+import shutil
+
+import jax.numpy as jnp
+import pytest
+from conftest import TINY
+
+import fppo_jax
+from fppo_jax import tuning
+from fppo_jax.errors import InvalidInput
+from fppo_jax.study import study
+from fppo_jax.tuning import TUNING_SEED_START, schedule, tune
+
+# Four trials per arm halved by 2 over 8 updates: rungs of 4, 2 and 1 trials ending at updates
+# 2, 4 and 8.
+SMALL = dict(trials=4, eta=2, seeds=2, total_steps=8 * 128, progress=False, **TINY)
+ARMS = ["ppo", "fppo-lp"]
+
+
+def rung_scores(directory, task="cartpole"):
+    rungs = sorted((directory / task).glob("rung-*/scores.json"))
+    return [json.loads(path.read_text()) for path in rungs]
+
+
+def seed_scores(directory):
+    return [
+        {arm: [row["seed_scores"] for row in rung[arm]["trials"]] for arm in ARMS}
+        for rung in rung_scores(directory)
+    ]
+
+
+@pytest.fixture(scope="module")
+def tuned(tmp_path_factory):
+    """A whole tune, counting the programs it compiles."""
+    output = tmp_path_factory.mktemp("tune")
+    compiled = []
+    with pytest.MonkeyPatch.context() as patch:
+
+        def counting(*args, **kwargs):
+            compiled.append(args[1].shape[0])  # the runs of the program
+            return original(*args, **kwargs)
+
+        original = tuning.compile_program
+        patch.setattr(tuning, "compile_program", counting)
+        result = tune("cartpole", ARMS, output=output, **SMALL)
+    return output, result, compiled
+
+
+def test_schedule_halves_the_trials_and_ends_at_the_full_budget():
+    rungs = schedule(27, 3, 81)
+    assert rungs.trials == (27, 9, 3, 1)
+    assert rungs.ends == (3, 9, 27, 81)
+    assert schedule(10, 3, 100).trials == (10, 3, 1)
+    assert schedule(10, 3, 100).ends == (11, 33, 100)
+    # Every trial trains the first rung; the survivors each rung's further updates.
+    assert rungs.updates_per_arm(seeds=2) == 2 * (27 * 3 + 9 * 6 + 3 * 18 + 1 * 54)
+    assert schedule(1, 3, 5).ends == (5,)
+    with pytest.raises(InvalidInput, match="too short for 4 rungs"):
+        schedule(27, 3, 20)
+
+
+def test_a_tune_halves_each_arm_in_one_program_per_rung(tuned):
+    output, result, compiled = tuned
+    assert result.finished
+    scores = rung_scores(output)
+    for arm in ARMS:
+        assert [len(rung[arm]["trials"]) for rung in scores] == [4, 2, 1]
+        # The survivors of a rung are the live trials of the next.
+        for rung, following in zip(scores, scores[1:], strict=False):
+            assert [row["trial"] for row in following[arm]["trials"]] == rung[arm]["survivors"]
+    # Every arm's live trials × seeds in one program per rung, none compiled twice.
+    assert compiled == [2 * 4 * 2, 2 * 2 * 2, 2 * 1 * 2]
+    assert all(seed == TUNING_SEED_START + i for i, seed in enumerate(result.plan["seeds"]))
+
+
+def test_every_arm_spends_the_planned_env_steps(tuned):
+    output, result, _ = tuned
+    planned = result.plan["budget"]["cartpole"]["env_steps_per_arm"]
+    assert planned == 2 * (4 * 2 + 2 * 2 + 1 * 4) * 128
+    assert [result.results["cartpole"][arm]["env_steps"] for arm in ARMS] == [planned] * 2
+
+
+def test_trial_0_is_each_arms_default_and_the_shared_axes_are_the_same_points(tuned):
+    output, result, _ = tuned
+    ppo, lp = (
+        tuning._optuna().load_study(
+            study_name=f"cartpole/{arm}", storage=f"sqlite:///{output}/optuna.db"
+        )
+        for arm in ARMS
+    )
+    first = ppo.trials[0].params
+    assert first == {
+        "learning_rate": 3e-4,
+        "1-gamma": pytest.approx(0.01),
+        "gae_lambda": 0.95,
+        "epsilon": 0.2,
+        "entropy_coef": 0.0,
+        "max_grad_norm": 0.5,
+        "value_coef": 0.5,
+    }
+    assert lp.trials[0].params["alpha"] == 1.3  # Table 2 on CartPole
+    for a, b in zip(ppo.trials, lp.trials, strict=True):
+        assert {k: v for k, v in b.params.items() if k != "alpha"} == a.params
+    assert len({t.params["learning_rate"] for t in ppo.trials}) == 4
+    # Optuna holds each trial's score at each rung it reached, and how it ended.
+    states = [t.state.name for t in ppo.trials]
+    assert states.count("COMPLETE") == 1 and states.count("PRUNED") == 3
+    chosen = result.results["cartpole"]["ppo"]["chosen"]
+    assert ppo.best_trial.number == chosen["trial"]
+    assert ppo.best_trial.value == chosen["score"]
+    assert sorted(ppo.best_trial.intermediate_values) == [2, 4, 8]
+
+
+def test_the_plan_is_written_before_any_run(tmp_path):
+    result = tune("cartpole", ARMS, output=tmp_path, rungs=0, **SMALL)
+    assert not result.finished
+    plan = json.loads((tmp_path / "tune.json").read_text())
+    assert plan["variants"] == ARMS and plan["trials"] == 4 and plan["eta"] == 2
+    assert plan["budget"]["cartpole"]["rungs"][-1]["env_steps_per_run"] == 8 * 128
+    assert plan["space"]["fppo-lp"]["alpha"] == {"low": 1.0, "high": 2.0, "scale": "linear"}
+    assert plan["sampler"]["name"] == "qmc" and "commit" in plan
+    assert not list(tmp_path.glob("cartpole/rung-*"))
+
+
+def test_a_stopped_or_killed_tune_goes_on_bit_for_bit(tuned, tmp_path, monkeypatch):
+    whole, _, _ = tuned
+    # Stopped after its first rung, then killed while recording its second (its survivors'
+    # state written, its scores not): the rung in flight is all that is lost.
+    tune("cartpole", ARMS, output=tmp_path, rungs=1, **SMALL)
+    real = tuning.write_json
+
+    def killed(path, value):
+        if path.name == "scores.json" and path.parent.name == "rung-1":
+            raise KeyboardInterrupt
+        real(path, value)
+
+    monkeypatch.setattr(tuning, "write_json", killed)
+    with pytest.raises(KeyboardInterrupt):
+        tune("cartpole", ARMS, output=tmp_path, **SMALL)
+    assert (tmp_path / "cartpole/rung-1/state.npz").exists()
+    monkeypatch.setattr(tuning, "write_json", real)
+    result = tune("cartpole", ARMS, output=tmp_path, **SMALL)
+    assert result.finished
+    assert seed_scores(tmp_path) == seed_scores(whole)
+    assert json.loads((tmp_path / "results.json").read_text()) == json.loads(
+        (whole / "results.json").read_text()
+    )
+
+
+def test_a_changed_plan_is_refused_naming_the_change(tuned, tmp_path):
+    output, _, _ = tuned
+    copy = tmp_path / "tune"
+    shutil.copytree(output, copy)
+    with pytest.raises(InvalidInput, match="trials = 4, not 8"):
+        tune("cartpole", ARMS, output=copy, **{**SMALL, "trials": 8})
+    with pytest.raises(InvalidInput, match="variants"):
+        tune("cartpole", ["ppo", "spo"], output=copy, **SMALL)
+
+
+def test_a_study_tests_the_chosen_settings_on_fresh_seeds(tuned, tmp_path):
+    output, result, _ = tuned
+    found = study(
+        "cartpole",
+        "fppo-lp",
+        "ppo",
+        output=tmp_path / "study",
+        tuned=output,
+        max_seeds=2,
+        group_size=2,
+        total_steps=8 * 128,
+        progress=False,
+        **TINY,
+    )
+    plan = found.plan["tuned"]
+    assert plan["settings"]["cartpole"] == {
+        arm: result.chosen("cartpole", arm) for arm in ["fppo-lp", "ppo"]
+    }
+    assert plan["plan_digest"] == tuning.plan_digest(output)
+    trained = found.results["cartpole"]
+    assert trained.seeds == [0, 1]
+    for setting in trained.settings:
+        expected = result.chosen("cartpole", setting["variant"])
+        assert {k: v for k, v in setting.items() if k != "variant"} == pytest.approx(expected)
+    report = (tmp_path / "study/report.md").read_text()
+    assert "setting a tune chose" in report
+
+
+def test_a_study_refuses_the_tunes_seeds_and_another_protocol(tuned, tmp_path):
+    output, _, _ = tuned
+    copy = tmp_path / "tune"
+    shutil.copytree(output, copy)
+    plan = json.loads((copy / "tune.json").read_text())
+    plan["seeds"] = [1, 2]
+    (copy / "tune.json").write_text(json.dumps(plan))
+    arguments = dict(max_seeds=4, group_size=2, total_steps=8 * 128, progress=False, **TINY)
+    with pytest.raises(InvalidInput, match=r"used seeds \[1, 2\] that this study would test on"):
+        study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", tuned=copy, **arguments)
+    with pytest.raises(InvalidInput, match="num_envs = 4"):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "s",
+            tuned=output,
+            **{**arguments, "num_envs": 8},
+        )
+    with pytest.raises(InvalidInput, match="did not tune spo"):
+        study("cartpole", "spo", "ppo", output=tmp_path / "s", tuned=output, **arguments)
+    with pytest.raises(InvalidInput, match="learning_rate cannot be given"):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "s",
+            tuned=output,
+            learning_rate=1e-3,
+            **arguments,
+        )
+
+
+def test_a_tune_not_finished_is_no_source_of_settings(tmp_path):
+    tune("cartpole", ARMS, output=tmp_path / "tune", rungs=0, **SMALL)
+    with pytest.raises(InvalidInput, match="not finished"):
+        study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", tuned=tmp_path / "tune")
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        ({"eta": 1}, "eta .* at least 2"),
+        ({"trials": 0}, "trials must be a positive integer"),
+        ({"sampler": "tpe"}, "sampler must be one of qmc, random"),
+        ({"learning_rate": 1e-3}, "not learning_rate: the hyperparameters are its search space"),
+        (
+            {"space": {"gamma": (0.9, 1.5)}},
+            "of gamma leaves its range: gamma must be in \\(0, 1\\]",
+        ),
+        ({"space": {"learning_rate": (0, 1e-3, "log")}}, "log scale needs low > 0"),
+        ({"space": {"momentum": (0, 1)}}, "no axis 'momentum'"),
+        ({"space": {"fppo-lp": {"alpha": (0.5, 1.5)}}}, "of alpha leaves its range"),
+        ({"space": {"fppo-lp": {"k": (0, 1)}}}, "fppo-lp 'k', which it does not take"),
+        ({"total_steps": 128}, "too short for 3 rungs"),
+        ({"seeds": [0, 0]}, "seeds must be distinct"),
+    ],
+)
+def test_bad_input_is_refused_before_any_plan(tmp_path, arguments, message):
+    with pytest.raises(InvalidInput, match=message):
+        tune("cartpole", ARMS, output=tmp_path / "tune", **{**SMALL, **arguments})
+    assert not (tmp_path / "tune").exists()
+
+
+def c_scaled(ratio, advantage, c):
+    return jnp.minimum(ratio * advantage, jnp.clip(ratio, 0.8, 1.2) * advantage) * c
+
+
+def test_a_surrogate_without_a_search_interval_is_refused_by_name(tmp_path):
+    mine = fppo_jax.surrogate("c-scaled", c_scaled, c=1.0)
+    with pytest.raises(InvalidInput, match="c-scaled has no search interval for c"):
+        tune("cartpole", ["ppo", mine], output=tmp_path, **SMALL)
+    searched = fppo_jax.surrogate("c-scaled", c_scaled, c=1.0, search={"c": (0.5, 2.0, "log")})
+    tune("cartpole", ["ppo", searched], output=tmp_path, rungs=0, **SMALL)
+    plan = json.loads((tmp_path / "tune.json").read_text())
+    assert plan["space"]["c-scaled"]["c"] == {"low": 0.5, "high": 2.0, "scale": "log"}
+    with pytest.raises(InvalidInput, match="search names 'd', which it does not take"):
+        fppo_jax.surrogate("c-scaled", c_scaled, c=1.0, search={"d": (0.5, 2.0)})
+
+
+def test_a_trial_that_diverges_scores_below_every_other_and_stops(tmp_path):
+    # Learning rates up to 1e30: the largest drawn make the parameters infinite at once.
+    space = {"learning_rate": (1e-4, 1e30, "log")}
+    result = tune("cartpole", ARMS, output=tmp_path, space=space, **SMALL)  # the shapes above
+    assert result.finished
+    first = rung_scores(tmp_path)[0]["ppo"]
+    diverged = [row["trial"] for row in first["trials"] if row["diverged"]]
+    assert diverged and 0 not in diverged
+    assert not set(diverged) & set(first["survivors"])
+    found = result.results["cartpole"]["ppo"]
+    assert found["diverged_trials"] == diverged
+    assert found["chosen"]["trial"] not in diverged
+    studied = tuning._optuna().load_study(
+        study_name="cartpole/ppo", storage=f"sqlite:///{tmp_path}/optuna.db"
+    )
+    assert [t.number for t in studied.trials if t.state.name == "FAIL"] == diverged
+    assert "| ppo | " in (tmp_path / "report.md").read_text()

@@ -2,6 +2,7 @@
 arm, a resume bit for bit, a changed plan refused, and the chosen settings tested by a study
 on seeds the tune never used."""
 
+import itertools
 import json
 import shutil
 
@@ -70,7 +71,7 @@ def test_a_tune_halves_each_arm_in_one_program_per_rung(tuned):
     for arm in ARMS:
         assert [len(rung[arm]["trials"]) for rung in scores] == [4, 2, 1]
         # The survivors of a rung are the live trials of the next.
-        for rung, following in zip(scores, scores[1:], strict=False):
+        for rung, following in itertools.pairwise(scores):
             assert [row["trial"] for row in following[arm]["trials"]] == rung[arm]["survivors"]
     # Every arm's live trials × seeds in one program per rung, none compiled twice.
     assert compiled == [2 * 4 * 2, 2 * 2 * 2, 2 * 1 * 2]
@@ -78,7 +79,7 @@ def test_a_tune_halves_each_arm_in_one_program_per_rung(tuned):
 
 
 def test_every_arm_spends_the_planned_env_steps(tuned):
-    output, result, _ = tuned
+    _output, result, _ = tuned
     planned = result.plan["budget"]["cartpole"]["env_steps_per_arm"]
     assert planned == 2 * (4 * 2 + 2 * 2 + 1 * 4) * 128
     assert [result.results["cartpole"][arm]["env_steps"] for arm in ARMS] == [planned] * 2

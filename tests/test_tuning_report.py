@@ -1,0 +1,95 @@
+"""The tune's results and report, from rung scores made by hand."""
+
+from fppo_jax.tuning import Rungs
+from fppo_jax.tuning_report import arm_results, write_report
+
+
+def row(trial, score, diverged=False):
+    return {"trial": trial, "score": score, "seed_scores": [score], "diverged": diverged}
+
+
+RUNGS = Rungs(trials=(4, 2, 1), ends=(2, 4, 8))
+SCORES = [
+    {
+        "ppo": {
+            "trials": [row(0, 10.0), row(1, 12.0), row(2, 8.0), row(3, 11.0)],
+            "survivors": [1, 3],
+        },
+        "spo": {
+            "trials": [row(0, 9.0), row(1, None, True), row(2, 15.0), row(3, 10.5)],
+            "survivors": [2, 3],
+        },
+    },
+    {
+        "ppo": {"trials": [row(1, 20.0), row(3, 21.0)], "survivors": [3]},
+        "spo": {"trials": [row(2, 25.0), row(3, 19.0)], "survivors": [2]},
+    },
+    {
+        "ppo": {"trials": [row(3, 30.0)], "survivors": [3]},
+        "spo": {"trials": [row(2, 35.0)], "survivors": [2]},
+    },
+]
+SETTINGS = {
+    arm: [{"learning_rate": lr} for lr in (1e-4, 2e-4, 3e-4, 4e-4)] for arm in ("ppo", "spo")
+}
+
+
+def test_an_arms_results_say_what_the_rungs_measured():
+    found = arm_results("spo", "ppo", SCORES, SETTINGS, RUNGS, seeds=2, samples_per_update=100)
+    assert found["chosen"] == {"trial": 2, "score": 35.0, "setting": {"learning_rate": 3e-4}}
+    assert found["default"]["first_rung_score"] == 9.0
+    assert found["default"]["last_rung_reached"] == 0
+    # Above PPO's default (10.0): trials 2 and 3 of the three sampled; trial 1 diverged.
+    assert found["beat_baseline_default"] == {
+        "baseline": "ppo",
+        "baseline_default_score": 10.0,
+        "sampled": 3,
+        "beat": 2,
+    }
+    assert found["diverged_trials"] == [1]
+    steps = [(4 * 2 * 2) * 100, (4 * 2 * 2 + 2 * 2 * 2) * 100, (16 + 8 + 1 * 2 * 4) * 100]
+    assert [point["env_steps"] for point in found["curve"]] == steps
+    assert [point["best"] for point in found["curve"]] == [15.0, 25.0, 35.0]
+    assert found["first_rung_spread"]["median"] == 10.5
+
+
+def test_the_report_gives_each_arm_its_row_and_the_checklist(tmp_path):
+    plan = {
+        "variants": ["ppo", "spo"],
+        "tasks": ["cartpole"],
+        "trials": 4,
+        "seeds": [1000000, 1000001],
+        "eta": 2,
+        "baseline": "ppo",
+        "score": "s",
+        "selection": "best",
+        "commit": "abc",
+        "budget": {
+            "cartpole": {
+                "env_steps_per_arm": 3200,
+                "rungs": [
+                    {"trials": 4, "env_steps_per_run": 200},
+                    {"trials": 2, "env_steps_per_run": 400},
+                    {"trials": 1, "env_steps_per_run": 800},
+                ],
+            }
+        },
+        "space": {
+            "ppo": {"learning_rate": {"low": 1e-5, "high": 1e-3, "scale": "log"}},
+            "spo": {"learning_rate": {"low": 1e-5, "high": 1e-3, "scale": "log"}},
+        },
+        "sampler": {"name": "qmc", "seed": 0, "package": "optuna 5.0.0"},
+    }
+    results = {
+        "cartpole": {
+            arm: arm_results(arm, "ppo", SCORES, SETTINGS, RUNGS, 2, 100) for arm in ("ppo", "spo")
+        }
+    }
+    write_report(tmp_path, plan, results)
+    report = (tmp_path / "report.md").read_text()
+    assert "| spo | 9.0 | 15.0 | 9.8 / 10.5 / 12.8 | 2 | 35.0 | 2 of 3 | 1 | 3,200 |" in report
+    assert "| ppo | 10.0 | 12.0 |" in report
+    assert "- spo: learning_rate = 0.0003" in report
+    assert "Search space: learning_rate [1e-05, 0.001] log." in report
+    assert "Tuning seeds: 1000000 … 1000001." in report
+    assert (tmp_path / "tuning_curves.png").stat().st_size > 0

@@ -287,3 +287,23 @@ def test_a_trial_that_diverges_scores_below_every_other_and_stops(tmp_path):
     )
     assert [t.number for t in studied.trials if t.state.name == "FAIL"] == diverged
     assert "| ppo | " in (tmp_path / "report.md").read_text()
+
+
+def test_the_command_line_plans_tunes_and_refuses_in_one_line(tuned, tmp_path, capsys):
+    from fppo_jax.cli import main
+
+    flags = ["tune", "--variants", "ppo,fppo-lp", "--tasks", "cartpole", "--trials", "4"]
+    flags += ["--eta", "2", "--steps", "1024", "--num-envs", "4", "--num-steps", "32"]
+    flags += ["--minibatches", "4", "--epochs", "2", "--quiet"]
+    assert main([*flags, "--output", str(tmp_path / "a"), "--rungs", "0"]) == 0
+    assert "the same command goes on" in capsys.readouterr().out
+    plan = json.loads((tmp_path / "a/tune.json").read_text())
+    output, _, _ = tuned
+    recorded = json.loads((output / "tune.json").read_text())
+    assert {k: v for k, v in plan.items() if k != "settings"} == {
+        k: v for k, v in recorded.items() if k != "settings"
+    }
+    assert main([*flags, "--output", str(tmp_path / "b"), "--eta", "1"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "fppo-jax: error: eta (the halving rate) must be an integer of at least 2, got 1"
+    )

@@ -74,6 +74,7 @@ from fppo_jax.search_space import (
 from fppo_jax.study import check_plan, commit
 from fppo_jax.surrogates import Surrogate
 from fppo_jax.trainer import TrainState
+from fppo_jax.tuning_report import ranked
 
 # Tuning seeds come from their own stream, far from the 0, 1, 2, … that studies and sweeps
 # count from, so that a test on fresh seeds never meets them.
@@ -87,8 +88,9 @@ PLAN_FILE, RESULTS_FILE, REPORT_FILE, STORAGE_FILE = (
 )
 SCORE = (
     "a run's training return at the end of the rung (the mean of its last 100 episodes); a "
-    "trial's score is the mean over its tuning seeds; a trial with a run that diverged (or "
-    "with no episode finished) scores below every other and stops"
+    "trial's score is the mean over its tuning seeds; a trial with a run that finished no "
+    "episode ranks below every trial with a score (ties by trial number), and one with a run "
+    "that diverged stops"
 )
 SELECTION = "per task and arm: the trial with the best score at the last rung (the full budget)"
 _STATE, _SCORES = "state.npz", "scores.json"
@@ -547,30 +549,62 @@ class _Task:
         for arm in self.live:
             study = self.optuna.load_study(study_name=f"{self.task}/{arm}", storage=self.storage)
             by_number = {t.number: t for t in study.get_trials(deepcopy=False)}
-            for trial, score in zip(self.live[arm], scores[arm]["trials"], strict=True):
+            arms = scores["arms"]
+            for trial, score in zip(self.live[arm], arms[arm]["trials"], strict=True):
                 frozen = by_number[trial]
                 step = self.rungs.ends[rung]
                 if frozen.state.is_finished():
                     continue
+                value = math.nan if score["score"] is None else score["score"]
                 if step not in frozen.intermediate_values:
-                    self.optuna.trial.Trial(study, frozen._trial_id).report(score["score"], step)
+                    self.optuna.trial.Trial(study, frozen._trial_id).report(value, step)
                 states = self.optuna.trial.TrialState
                 if score["diverged"]:
                     study.tell(trial, state=states.FAIL)
-                elif last and trial in scores[arm]["survivors"]:
-                    study.tell(trial, score["score"])
-                elif trial not in scores[arm]["survivors"]:
+                elif last and score["score"] is None:
+                    study.tell(trial, state=states.FAIL)  # no episode finished: no score
+                elif last and trial in arms[arm]["survivors"]:
+                    study.tell(trial, value)
+                elif trial not in arms[arm]["survivors"]:
                     study.tell(trial, state=states.PRUNED)
-            self.live[arm] = list(scores[arm]["survivors"])
+            self.live[arm] = list(arms[arm]["survivors"])
 
     def _train_rung(self, rung: int) -> None:
-        run, rungs = self.run_, self.rungs
+        """Trains rung `rung`'s live trials × seeds as one program, then records the rung: its
+        scores, and the state its survivors go on from."""
         order = [
-            (arm, trial, seed)
-            for arm in self.live
-            for trial in self.live[arm]
+            (arm, t, seed)
+            for arm, trials in self.live.items()
+            for t in trials
             for seed in self.seeds
         ]
+        began = time.perf_counter()
+        state, last, compile_seconds = self._train(order, rung) if order else (None, None, 0.0)
+        diverged = np.zeros(len(order), bool) if state is None else fetch_diverged(state)
+        arms = self._scores(order, last, diverged, rung)
+        where = self.directory / f"rung-{rung}"
+        where.mkdir(exist_ok=True)
+        if state is not None and rung + 1 < len(self.rungs.trials):
+            keep = [i for i, (arm, t, _) in enumerate(order) if t in arms[arm]["survivors"]]
+            _save_state(where / _STATE, jax.tree.map(lambda x: x[np.asarray(keep, int)], state))
+        seconds = time.perf_counter() - began - compile_seconds
+        scores = {"arms": arms, "seconds": seconds, "compile_seconds": compile_seconds}
+        write_json(where / _SCORES, scores)
+        self._recorded(scores)
+        best = ", ".join(
+            f"{arm} {found[0]['score']:.1f}"
+            if found and found[0]["score"] is not None
+            else f"{arm} —"
+            for arm, found in ((arm, ranked(v["trials"])) for arm, v in arms.items())
+        )
+        self._say(f"{self.task}: rung {rung + 1} done in {seconds:.1f} s; best: {best}")
+
+    def _train(
+        self, order: list[tuple[str, int, int]], rung: int
+    ) -> tuple[TrainState, np.ndarray, float]:
+        """The runs of `order` (arm, trial, seed) trained through `rung`, from the recorded
+        state of the rung before: their state, each run's score and the seconds compiling."""
+        rungs, trainer = self.rungs, self.run_.trainer
         surrogates = {arm.name: arm for arm in self.arms}
         hps = stack_hyperparameters(
             [
@@ -579,7 +613,6 @@ class _Task:
             ]
         )
         keys = run_keys([seed for _, _, seed in order])
-        trainer = run.trainer
         check_host_memory(trainer, len(order))
         start = 0 if rung == 0 else rungs.ends[rung - 1]
         live = ", ".join(f"{len(t)} {arm}" for arm, t in self.live.items())
@@ -589,8 +622,6 @@ class _Task:
             f" of {trainer.config.num_updates}; compiling…"
         )
         program = compile_program(trainer, keys, hps, jax.vmap, rungs.updates_per_call)
-        self.compiles += program.compile_seconds > 0
-        began = time.perf_counter()
         if rung == 0:
             state = program.init(keys, hps)
         else:
@@ -599,35 +630,21 @@ class _Task:
             if resets_itself(trainer.env):  # their state lived outside JAX, in another batch
                 state = jax.jit(jax.vmap(trainer.restart_envs))(state)
         budgeted = with_budget(hps, trainer.config.num_updates)
-        last: np.ndarray | None = None
+        last = np.full(len(order), np.nan)
         for _ in range(-(-(rungs.ends[rung] - start) // rungs.updates_per_call)):
             state, metrics = program.run(state, budgeted)
             returns, steps = jax.device_get((metrics.average_return, metrics.env_steps))
             ran = steps[0] >= 0
             if ran.any():
                 last = returns[:, ran][:, -1]
-        assert last is not None
-        diverged = np.asarray(jax.device_get(state.nonfinite_update)) >= 0
-        scores = self._scores(order, last, diverged, rung)
-        keep = [i for i, (arm, trial, _) in enumerate(order) if trial in scores[arm]["survivors"]]
-        if rung + 1 < len(rungs.trials):
-            kept = jax.tree.map(lambda x: x[np.asarray(keep)], state)
-            _save_state(self.directory / f"rung-{rung}" / _STATE, kept)
-        else:
-            (self.directory / f"rung-{rung}").mkdir(exist_ok=True)
-        scores["seconds"] = time.perf_counter() - began
-        scores["compile_seconds"] = program.compile_seconds
-        write_json(self.directory / f"rung-{rung}" / _SCORES, scores)
-        self._recorded(scores)
-        best = ", ".join(
-            f"{arm} {max((s['score'] for s in v['trials']), default=math.nan):.1f}"
-            for arm, v in scores.items()
-            if isinstance(v, dict)
-        )
-        self._say(f"{self.task}: rung {rung + 1} done in {scores['seconds']:.1f} s; best: {best}")
+        return state, last, program.compile_seconds
 
     def _scores(
-        self, order: list[tuple[str, int, int]], last: np.ndarray, diverged: np.ndarray, rung: int
+        self,
+        order: list[tuple[str, int, int]],
+        last: np.ndarray | None,
+        diverged: np.ndarray,
+        rung: int,
     ) -> dict[str, Any]:
         """Each arm's live trials' scores at the end of `rung`, and those that go on."""
         scores: dict[str, Any] = {}
@@ -636,7 +653,7 @@ class _Task:
             rows: list[dict[str, Any]] = []
             for trial in trials:
                 runs = [i for i, (a, t, _) in enumerate(order) if a == arm and t == trial]
-                values = last[runs].astype(float)
+                values = np.asarray(last)[runs].astype(float)
                 bad = bool(diverged[runs].any())
                 mean = float(np.mean(values))
                 rows.append(
@@ -647,13 +664,9 @@ class _Task:
                         "diverged": bad,
                     }
                 )
-            ranked = sorted(
-                (r for r in rows if r["score"] is not None and not r["diverged"]),
-                key=lambda r: (-r["score"], r["trial"]),
-            )
             scores[arm] = {
                 "trials": rows,
-                "survivors": sorted(r["trial"] for r in ranked[:going_on]),
+                "survivors": sorted(r["trial"] for r in ranked(rows)[:going_on]),
             }
         return scores
 
@@ -677,6 +690,11 @@ class _Task:
     def _say(self, line: str) -> None:
         if self.progress:
             print(line, file=sys.stderr, flush=True)
+
+
+def fetch_diverged(state: TrainState) -> np.ndarray:
+    """Whether each run's loss or parameters stopped being finite."""
+    return np.asarray(jax.device_get(state.nonfinite_update)) >= 0
 
 
 def _save_state(path: Path, state: TrainState) -> None:

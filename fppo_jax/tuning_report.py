@@ -17,6 +17,13 @@ import numpy as np
 from fppo_jax.files import write_atomically
 
 
+def ranked(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """A rung's trials best first, those that diverged left out: by score, then those without
+    one (no episode finished), ties by trial number."""
+    alive = [row for row in rows if not row["diverged"]]
+    return sorted(alive, key=lambda r: (r["score"] is None, -(r["score"] or 0.0), r["trial"]))
+
+
 def _score(rows: list[dict[str, Any]], trial: int) -> float | None:
     found = [row for row in rows if row["trial"] == trial]
     return found[0]["score"] if found else None
@@ -32,9 +39,9 @@ def arm_results(
     samples_per_update: int,
 ) -> dict[str, Any]:
     """What ``results.json`` holds of `arm` on one task (see the module)."""
-    first = rungs_scores[0][arm]["trials"]
+    first = rungs_scores[0]["arms"][arm]["trials"]
     finite = np.array([row["score"] for row in first if row["score"] is not None], float)
-    base = _score(rungs_scores[0][baseline]["trials"], 0)
+    base = _score(rungs_scores[0]["arms"][baseline]["trials"], 0)
     sampled = [row for row in first if row["trial"] != 0]
     beat = [
         row
@@ -44,23 +51,19 @@ def arm_results(
     curve, reached, spent = [], {"rung": 0, "score": _score(first, 0)}, 0
     starts = (0, *rungs.ends[:-1])
     for r, scores in enumerate(rungs_scores):
-        rows = scores[arm]["trials"]
+        rows = scores["arms"][arm]["trials"]
         spent += len(rows) * seeds * (rungs.ends[r] - starts[r]) * samples_per_update
         best = max((row["score"] for row in rows if row["score"] is not None), default=None)
         curve.append({"rung": r, "env_steps": spent, "best": best, "trials": len(rows)})
         if _score(rows, 0) is not None:
             reached = {"rung": r, "score": _score(rows, 0)}
-    last = rungs_scores[-1][arm]
-    ranked = sorted(
-        (row for row in last["trials"] if row["trial"] in last["survivors"]),
-        key=lambda row: (-row["score"], row["trial"]),
-    )
+    best = ranked(rungs_scores[-1]["arms"][arm]["trials"])
     chosen = None
-    if ranked:
-        trial = ranked[0]["trial"]
-        chosen = {"trial": trial, "score": ranked[0]["score"], "setting": settings[arm][trial]}
+    if best:
+        trial = best[0]["trial"]
+        chosen = {"trial": trial, "score": best[0]["score"], "setting": settings[arm][trial]}
     diverged = sorted(
-        {row["trial"] for s in rungs_scores for row in s[arm]["trials"] if row["diverged"]}
+        {row["trial"] for s in rungs_scores for row in s["arms"][arm]["trials"] if row["diverged"]}
     )
     return {
         "chosen": chosen,

@@ -7,9 +7,17 @@ from nbclient import NotebookClient
 NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
 
 
-def test_the_six_notebooks_are_there():
+def test_the_seven_notebooks_are_there():
     names = {path.stem for path in NOTEBOOKS}
-    assert names == {"quickstart", "objectives", "sweeps", "escape_speed", "own_surrogate", "study"}
+    assert names == {
+        "quickstart",
+        "objectives",
+        "sweeps",
+        "escape_speed",
+        "own_surrogate",
+        "study",
+        "tuned",
+    }
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.stem)

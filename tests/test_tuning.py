@@ -29,7 +29,7 @@ def rung_scores(directory, task="cartpole"):
 
 def seed_scores(directory):
     return [
-        {arm: [row["seed_scores"] for row in rung[arm]["trials"]] for arm in ARMS}
+        {arm: [row["seed_scores"] for row in rung["arms"][arm]["trials"]] for arm in ARMS}
         for rung in rung_scores(directory)
     ]
 
@@ -69,10 +69,12 @@ def test_a_tune_halves_each_arm_in_one_program_per_rung(tuned):
     assert result.finished
     scores = rung_scores(output)
     for arm in ARMS:
-        assert [len(rung[arm]["trials"]) for rung in scores] == [4, 2, 1]
+        assert [len(rung["arms"][arm]["trials"]) for rung in scores] == [4, 2, 1]
         # The survivors of a rung are the live trials of the next.
         for rung, following in itertools.pairwise(scores):
-            assert [row["trial"] for row in following[arm]["trials"]] == rung[arm]["survivors"]
+            assert [row["trial"] for row in following["arms"][arm]["trials"]] == rung["arms"][arm][
+                "survivors"
+            ]
     # Every arm's live trials × seeds in one program per rung, none compiled twice.
     assert compiled == [2 * 4 * 2, 2 * 2 * 2, 2 * 1 * 2]
     assert all(seed == TUNING_SEED_START + i for i, seed in enumerate(result.plan["seeds"]))
@@ -275,7 +277,7 @@ def test_a_trial_that_diverges_scores_below_every_other_and_stops(tmp_path):
     space = {"learning_rate": (1e-4, 1e30, "log")}
     result = tune("cartpole", ARMS, output=tmp_path, space=space, **SMALL)  # the shapes above
     assert result.finished
-    first = rung_scores(tmp_path)[0]["ppo"]
+    first = rung_scores(tmp_path)[0]["arms"]["ppo"]
     diverged = [row["trial"] for row in first["trials"] if row["diverged"]]
     assert diverged and 0 not in diverged
     assert not set(diverged) & set(first["survivors"])

@@ -1,7 +1,7 @@
 """The tune's results and report, from rung scores made by hand."""
 
 from fppo_jax.tuning import Rungs
-from fppo_jax.tuning_report import arm_results, write_report
+from fppo_jax.tuning_report import arm_results, ranked, write_report
 
 
 def row(trial, score, diverged=False):
@@ -9,7 +9,7 @@ def row(trial, score, diverged=False):
 
 
 RUNGS = Rungs(trials=(4, 2, 1), ends=(2, 4, 8))
-SCORES = [
+ARMS = [
     {
         "ppo": {
             "trials": [row(0, 10.0), row(1, 12.0), row(2, 8.0), row(3, 11.0)],
@@ -29,6 +29,7 @@ SCORES = [
         "spo": {"trials": [row(2, 35.0)], "survivors": [2]},
     },
 ]
+SCORES = [{"arms": arms} for arms in ARMS]
 SETTINGS = {
     arm: [{"learning_rate": lr} for lr in (1e-4, 2e-4, 3e-4, 4e-4)] for arm in ("ppo", "spo")
 }
@@ -51,6 +52,11 @@ def test_an_arms_results_say_what_the_rungs_measured():
     assert [point["env_steps"] for point in found["curve"]] == steps
     assert [point["best"] for point in found["curve"]] == [15.0, 25.0, 35.0]
     assert found["first_rung_spread"]["median"] == 10.5
+
+
+def test_a_trial_without_an_episode_ranks_below_scored_ones_and_a_diverged_one_not_at_all():
+    rows = [row(0, None), row(1, 5.0), row(2, 7.0, True), row(3, None), row(4, 5.0)]
+    assert [r["trial"] for r in ranked(rows)] == [1, 4, 0, 3]
 
 
 def test_the_report_gives_each_arm_its_row_and_the_checklist(tmp_path):

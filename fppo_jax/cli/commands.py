@@ -213,11 +213,12 @@ def _tune(args: argparse.Namespace) -> int:
     for task, arms in result.results.items():
         for arm, found in arms.items():
             chosen = found["chosen"]
-            what = (
-                "every trial diverged"
-                if chosen is None
-                else f"trial {chosen['trial']}, score {chosen['score']:.1f}"
-            )
+            if chosen is None:
+                what = "every trial diverged"
+            elif chosen["score"] is None:
+                what = f"trial {chosen['trial']}, no episode finished"
+            else:
+                what = f"trial {chosen['trial']}, score {chosen['score']:.1f}"
             print(f"{task}: {arm}: {what}")
     print(f"wrote {args.output}/tune.json, results.json, report.md")
     return 0

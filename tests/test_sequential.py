@@ -314,3 +314,20 @@ def test_identical_settings_are_decided_equivalent_within_fifty_seeds_nine_times
     assert found["seeds"] == pytest.approx(40.0, abs=0.05)
     assert found["false_decision_rate"] <= 0.05 + 3 * np.sqrt(0.05 * 0.95 / 2000)
     assert found["false_equivalence_rate"] == 0  # P = 1/2 is within the margin
+
+
+def test_the_equivalence_experiment_s_smoke_run_writes_its_table_into_a_temporary_directory(
+    tmp_path, monkeypatch
+):
+    experiments = Path(__file__).resolve().parent.parent / "experiments"
+    script = experiments / "studies" / "equivalence_rule.py"
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    done = run_script(script, "--smoke", cwd=experiments)
+    assert done.returncode == 0, done.stdout + done.stderr
+    written = Path(done.stdout.split("wrote ")[-1].strip())
+    assert written.parent.name.startswith("fppo-equivalence-rule-smoke-")
+    table = written.read_text()
+    assert "- 200 simulated studies per row" in table
+    rows = [line.split(" | ") for line in table.splitlines() if line.startswith("| 5 to 30")]
+    # Equivalence reachable from 25 seeds for one comparison, from 30 at Holm's α/4 for four.
+    assert [row[-1] for row in rows] == ["25 |"] * 3 + ["30 |"] * 3

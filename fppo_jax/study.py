@@ -3,11 +3,11 @@ baseline on a list of tasks, trained in groups of seeds until :mod:`fppo_jax.seq
 rule decides each comparison or the seeds run out.
 
 The study's directory holds ``plan.json`` (written before any run: the preregistration of the
-comparisons, the endpoints, the test and its level, the seed schedule, the settings and the
-code's commit), each group of each task as one sweep (``<task>/group-<k>/``, recorded by the
-sweep itself when it ends), ``decisions.json`` after every look and ``report.md``
-(:mod:`fppo_jax.study_report`). The same call again goes on from the groups recorded; a study
-whose plan differs is refused, naming the field.
+comparisons, the endpoints, the test and its level, the equivalence margin where one is given,
+the seed schedule, the settings and the code's commit), each group of each task as one sweep
+(``<task>/group-<k>/``, recorded by the sweep itself when it ends), ``decisions.json`` after
+every look and ``report.md`` (:mod:`fppo_jax.study_report`). The same call again goes on from
+the groups recorded; a study whose plan differs is refused, naming the field.
 
 Each look trains, per task, one sweep of the next group's seeds for the candidates still
 undecided, and the baseline while any of them is. Runs reused from recorded sweeps (a seed

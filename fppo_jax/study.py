@@ -3,11 +3,11 @@ baseline on a list of tasks, trained in groups of seeds until :mod:`fppo_jax.seq
 rule decides each comparison or the seeds run out.
 
 The study's directory holds ``plan.json`` (written before any run: the preregistration of the
-comparisons, the endpoints, the test and its level, the seed schedule, the settings and the
-code's commit), each group of each task as one sweep (``<task>/group-<k>/``, recorded by the
-sweep itself when it ends), ``decisions.json`` after every look and ``report.md``
-(:mod:`fppo_jax.study_report`). The same call again goes on from the groups recorded; a study
-whose plan differs is refused, naming the field.
+comparisons, the endpoints, the test and its level, the equivalence margin where one is given,
+the seed schedule, the settings and the code's commit), each group of each task as one sweep
+(``<task>/group-<k>/``, recorded by the sweep itself when it ends), ``decisions.json`` after
+every look and ``report.md`` (:mod:`fppo_jax.study_report`). The same call again goes on from
+the groups recorded; a study whose plan differs is refused, naming the field.
 
 Each look trains, per task, one sweep of the next group's seeds for the candidates still
 undecided, and the baseline while any of them is. Runs reused from recorded sweeps (a seed
@@ -69,6 +69,12 @@ TEST = (
     "Lan–DeMets O'Brien–Fleming-type alpha-spending over the looks, Holm's procedure across "
     "the comparisons (fppo_jax.sequential)"
 )
+EQUIVALENCE_TEST = (
+    "equivalent when P(candidate > baseline) is within 1/2 ± margin: two one-sided "
+    "group-sequential tests (the repeated confidence interval of P, placement standard error, "
+    "inside the margin), Lan–DeMets O'Brien–Fleming-type one-sided alpha-spending, Holm's "
+    "procedure across the comparisons (fppo_jax.sequential)"
+)
 PLAN_FILE, DECISIONS_FILE, REPORT_FILE = "plan.json", "decisions.json", "report.md"
 
 
@@ -93,6 +99,7 @@ def study(
     max_seeds: int = 30,
     group_size: int = 5,
     level: float = 0.05,
+    margin: float | None = None,
     endpoint: str = "final",
     groups: int | None = None,
     total_steps: int | None = None,
@@ -109,6 +116,10 @@ def study(
     comparison, at family-wise error `level`, or `max_seeds` is reached (see the module).
 
     `level` is the test's α (not the hyperparameter ``alpha``, which `settings` may fix).
+    `margin` δ, in (0, ½), lets a comparison be decided ``equivalent``: P(candidate >
+    baseline) shown within ½ ± δ, the chance of a false ``equivalent`` in the family at most
+    `level` (:mod:`fppo_jax.sequential`); None (the default) decides only ``better`` or
+    ``worse``, and the plan records no margin.
     Variants are as :func:`~fppo_jax.sweep` takes them. `endpoint` (``final``, ``auc``, or
     ``eval`` with ``eval_every``) is decided on; the others and ``max`` are reported beside it.
     `groups` limits the looks this call trains (0 writes the plan alone). `reuse` names
@@ -121,7 +132,7 @@ def study(
     """
     tasks = _names_of_tasks(tasks)
     candidates, baseline = _variants(candidates, baseline)
-    design = Design(group_size, max_seeds, level)
+    design = Design(group_size, max_seeds, level, margin)
     _check_arguments(endpoint, groups, chunk, part, settings)
     sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
     shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
@@ -435,6 +446,7 @@ def make_plan(
                 ],
                 "test": TEST,
                 "level": design.level,
+                **_equivalence_plan(design),
                 "group_size": design.group_size,
                 "max_seeds": design.max_seeds,
                 "looks": list(design.looks),
@@ -448,6 +460,14 @@ def make_plan(
             }
         ),
     )
+
+
+def _equivalence_plan(design: Design) -> dict[str, Any]:
+    """What the plan records of the equivalence test: nothing without a margin (a plan
+    recorded before margins existed is one without), else the margin and the test."""
+    if design.margin is None:
+        return {}
+    return {"margin": design.margin, "equivalence_test": EQUIVALENCE_TEST}
 
 
 def _fractions(design: Design) -> tuple[float, ...]:
@@ -639,7 +659,7 @@ def _run(
         trained += [entry for group in found if (entry := _gather(group, source, recorded))]
         decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
         if source.part is None:  # an array task writes no decision: the job after the array does
-            _write_decisions(output, decisions, baseline, trained)  # a killed study keeps them
+            _write_decisions(output, decisions, baseline, trained, plan)  # a killed one keeps them
     return _finish(output, plan, recorded, decisions, baseline, trained, source.part)
 
 
@@ -695,7 +715,7 @@ def _finish(
     if part is not None:
         rows = _rows(decisions, baseline)
         return StudyResult(plan, rows, results, all(row["final"] for row in rows))
-    rows = _write_decisions(output, decisions, baseline, trained)
+    rows = _write_decisions(output, decisions, baseline, trained, plan)
     scores = {task: _task_scores(result, plan) for task, result in results.items()}
     finished = all(row["final"] for row in rows)
     write_report(output / REPORT_FILE, plan, rows, scores, finished)
@@ -775,6 +795,8 @@ def _rows(decisions: dict[tuple[str, str], Decision], baseline: Surrogate) -> li
             "z": decision.z if np.isfinite(decision.z) else None,
             "boundary": decision.boundary if np.isfinite(decision.boundary) else None,
             "reason": decision.reason,
+            # with a margin: the repeated CI of P that the equivalence test held against it
+            **({} if decision.interval is None else {"interval": list(decision.interval)}),
         }
         for (task, candidate), decision in decisions.items()
     ]
@@ -785,10 +807,11 @@ def _write_decisions(
     decisions: dict[tuple[str, str], Decision],
     baseline: Surrogate,
     trained: list[dict[str, Any]],
+    plan: dict[str, Any],
 ) -> list[dict[str, Any]]:
-    """``decisions.json``: a row per comparison (returned), and every group trained with the
-    commit it ran at, or with the recorded sweeps its runs were taken from, earlier calls'
-    groups kept."""
+    """``decisions.json``: the plan's margin where it has one, a row per comparison
+    (returned), and every group trained with the commit it ran at, or with the recorded sweeps
+    its runs were taken from, earlier calls' groups kept."""
     path = output / DECISIONS_FILE
     earlier = json.loads(path.read_text()).get("groups", []) if path.exists() else []
     by_group = {(g["task"], g["group"]): g for g in earlier}
@@ -799,6 +822,7 @@ def _write_decisions(
     rows = _rows(decisions, baseline)
     record = {
         "finished": all(row["final"] for row in rows),
+        **({"margin": plan["margin"]} if "margin" in plan else {}),
         "comparisons": rows,
         "groups": sorted(groups, key=lambda g: (g["group"], g["task"])),
     }

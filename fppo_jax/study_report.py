@@ -165,6 +165,18 @@ def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[st
             "here); plan.json lists the settings."
         )
     planned = "before any run it trained" if plan.get("reuse") else "before any run"
+    equivalence = (
+        f" Equivalence margin {plan['margin']:g}: `equivalent` means P(candidate > "
+        f"{plan['baseline']}) shown within 1/2 ± {plan['margin']:g}: its repeated confidence "
+        "interval at the test's level, 1 − 2α/m while none is decided (in the reason: a normal "
+        "interval, narrower than the table's bootstrap one at 1 − α/m), inside that range "
+        f"(test: {plan['equivalence_test']}); the "
+        "chance of any false `equivalent` (a comparison whose P is at or beyond the margin) in "
+        f"the family is at most {plan['level']:g}, as is that of any false `better` or `worse` "
+        "where the settings score alike."
+        if "margin" in plan
+        else ""
+    )
     return [
         f"# {', '.join(plan['candidates'])} against {plan['baseline']}",
         "",
@@ -173,7 +185,7 @@ def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[st
         f"reported beside it: {', '.join([*plan['secondary_endpoints'], 'max'])}. Test: "
         f"{plan['test']}; family-wise error at most {plan['level']:g} over the {comparisons} "
         f"comparison{'s' if comparisons > 1 else ''}. Seeds per setting at the looks: "
-        f"{looks}.{reused}",
+        f"{looks}.{equivalence}{reused}",
         "",
         status,
         "",
@@ -250,7 +262,7 @@ def _table(
         head = f"Primary endpoint, {endpoint}: tested; the decision column is the test's."
         columns = ["candidate", "decision", "seeds", "why it stopped"]
         columns.append(f"P(candidate > {baseline}), repeated CI")
-        design = Design(plan["group_size"], plan["max_seeds"], plan["level"])
+        design = Design(plan["group_size"], plan["max_seeds"], plan["level"], plan.get("margin"))
     elif endpoint == "max":
         head = (
             "Each run's best, max: reported, not tested, and biased upward (the best of a "

@@ -3,11 +3,12 @@ a comparison that is clearly decided, resuming after a stop without training aga
 refusing a changed plan; all in temporary directories."""
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
-from own_surrogates import frozen
+from own_surrogates import frozen, my_ppo
 from scipy import stats
 
 import fppo_jax
@@ -16,7 +17,7 @@ from fppo_jax.cli import main
 from fppo_jax.results import PART_FIELDS, SweepResult, merge
 from fppo_jax.reuse import Pool
 from fppo_jax.sequential import Design, decide
-from fppo_jax.study import recorded_group, run_scores
+from fppo_jax.study import check_plan, recorded_group, run_scores
 
 # PPO learns CartPole in this budget (its final return 57–106 over 8 seeds against 20–24 for
 # `frozen`, which never moves its policy): 8 seeds a side are enough to decide at the first look.
@@ -329,7 +330,8 @@ def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tm
     assert json.loads((output / "decisions.json").read_text())["comparisons"] == joined.decisions
 
 
-RECORDED = Path(__file__).resolve().parent.parent / "experiments" / "results" / "study"
+REPOSITORY = Path(__file__).resolve().parent.parent
+RECORDED = REPOSITORY / "experiments" / "results" / "study"
 
 
 def test_the_report_aggregates_over_tasks_the_recorded_seed_study_unchanged(tmp_path):
@@ -426,3 +428,84 @@ def test_across_tasks_the_report_normalises_only_where_every_task_can_be(tmp_pat
     write_report(tmp_path / "flat.md", plan, rows, {"a": scores["a"], "b": flat}, True)
     flat_report = (tmp_path / "flat.md").read_text()
     assert "Normalised scores: not reported" in flat_report and "| ppo | – | – |" in flat_report
+
+
+def test_a_study_of_identical_settings_is_decided_equivalent_within_its_margin(tmp_path, tiny):
+    # my-ppo is PPO's objective written again: the same runs, P(my-ppo > ppo) = 1/2. One look
+    # of 16 seeds a side, margin 0.2: the interval 1/2 ± 1.645·se (se = 0.105 at its floor)
+    # fits within 1/2 ± 0.2.
+    output = tmp_path / "study"
+    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 16}
+    done = fppo_jax.study("cartpole", my_ppo, "ppo", margin=0.2, **settings)
+    assert done.finished
+    (row,) = done.decisions
+    assert (row["decision"], row["seeds"]) == ("equivalent", 16)
+    low, high = row["interval"]
+    assert 0.3 <= low < 0.5 < high <= 0.7 and "within 1/2 ± 0.2 at look 1" in row["reason"]
+    plan = json.loads((output / "plan.json").read_text())
+    assert plan["margin"] == 0.2 and "two one-sided" in plan["equivalence_test"]
+    recorded = json.loads((output / "decisions.json").read_text())
+    assert recorded["margin"] == 0.2 and recorded["comparisons"] == done.decisions
+    report = (output / "report.md").read_text()
+    assert "| my-ppo | equivalent | 16 | P = 0.50, its repeated CI" in report
+    assert "Equivalence margin 0.2: `equivalent` means P(candidate > ppo) shown within" in report
+    # Without the margin, another plan: refused, naming it.
+    plain = {k: v for k, v in settings.items() if k != "output"}
+    with pytest.raises(ValueError, match=r"planned with margin = 0\.2, not none"):
+        fppo_jax.study("cartpole", my_ppo, "ppo", output=output, **plain)
+
+
+def test_the_command_states_what_each_look_can_decide_and_records_the_margin(tmp_path, capsys):
+    output = tmp_path / "study"
+    common = ["study", "--candidates", "spo,dpo", "--tasks", "cartpole", "--output", str(output)]
+    assert main([*common, "--margin", "0.2", "--groups", "0"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("plan: 6 looks; better or worse when |z| reaches the look's")
+    assert "(level 0.025 while no comparison is decided)" in out[0]
+    assert out[1] == (
+        "  look 1, 5 seeds per setting: ±6.01 (warning: cannot decide, |z| is at most 2.61 "
+        "with 5 seeds)"
+    )
+    assert out[2].endswith("±4.17 (warning: cannot decide, |z| is at most 3.78 with 10 seeds)")
+    assert out[3] == "  look 3, 15 seeds per setting: ±3.35"
+    assert out[6] == "  look 6, 30 seeds per setting: ±2.31"
+    assert out[7] == (
+        "  equivalent (P(candidate > baseline) within 1/2 ± 0.2): reachable from 25 seeds per "
+        "setting"
+    )
+    assert json.loads((output / "plan.json").read_text())["margin"] == 0.2
+    assert json.loads((output / "decisions.json").read_text())["margin"] == 0.2
+    assert main([*common, "--groups", "0"]) == 2
+    assert "planned with margin = 0.2, not none" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([*common, "--margin", "0.5"])
+    assert "a margin in (0, 0.5) such as 0.2, got 0.5" in capsys.readouterr().err
+
+
+def test_a_study_recorded_before_margins_reads_and_decides_as_it_did(tmp_path, monkeypatch):
+    # The library's study of the seed study's classic tasks, recorded with a plan that has no
+    # margin: asked again (nothing trained), it accepts its plan and writes the same decisions;
+    # the plan's absent margin is no margin, and a margin now is another plan.
+    recorded = REPOSITORY / "experiments" / "results" / "study-command" / "classic"
+    output = tmp_path / "classic"
+    shutil.copytree(recorded, output)
+    monkeypatch.chdir(REPOSITORY)  # the plan names the parts' folder from here
+    tasks = ["cartpole", "acrobot", "mountaincar"]
+    done = fppo_jax.study(
+        tasks,
+        ["fppo-lp", "fppo-qp"],
+        "ppo",
+        output=output,
+        reuse="experiments/results/study",
+        groups=0,
+        max_seeds=50,
+        group_size=50,
+        progress=False,
+    )
+    assert done.finished
+    for name in ("plan.json", "decisions.json"):
+        assert (output / name).read_bytes() == (recorded / name).read_bytes()
+    assert "Equivalence margin" not in (output / "report.md").read_text()
+    plan = json.loads((recorded / "plan.json").read_text())
+    with pytest.raises(ValueError, match=r"planned with margin = none, not 0\.2"):
+        check_plan(output, {**plan, "margin": 0.2, "equivalence_test": "two one-sided tests"})

@@ -1,6 +1,6 @@
 """The decision rule of a study that adds seeds (fppo_jax.sequential): its boundaries against
-published ones, its statistic against SciPy's, its replay of the looks, Holm's recycling, and
-its error rates by simulation on synthetic scores (no training)."""
+published ones, its statistic against SciPy's, its replay of the looks, Holm's recycling, its
+equivalence test, and its error rates by simulation on synthetic scores (no training)."""
 
 import tempfile
 from pathlib import Path
@@ -15,8 +15,14 @@ from fppo_jax.sequential import (
     Design,
     boundaries,
     decide,
+    equivalence_reachable,
+    improvement_estimate,
+    largest_z,
     mann_whitney_z,
+    narrowest_half_width,
+    plan_lines,
     repeated_confidence,
+    shift_for,
     simulate,
 )
 
@@ -30,6 +36,20 @@ def test_boundaries_are_the_published_obrien_fleming_type_ones():
     assert boundaries(0.05, (1.0,)) == pytest.approx((stats.norm.isf(0.025),), abs=1e-6)
     with pytest.raises(ValueError, match="must increase from above 0"):
         boundaries(0.05, (0.5, 0.5))
+
+
+def test_one_sided_boundaries_are_the_published_ones():
+    # gsDesign's sfLDOF, one-sided 0.025, five looks: the two-sided 0.05 values to 4 decimals
+    # (no path crosses both); one look is the fixed one-sided test.
+    five = (0.2, 0.4, 0.6, 0.8, 1.0)
+    np.testing.assert_allclose(
+        boundaries(0.025, five, sides=1), [4.8769, 3.3570, 2.6803, 2.2898, 2.0310], atol=2e-4
+    )
+    assert boundaries(0.05, (1.0,), sides=1) == pytest.approx((stats.norm.isf(0.05),), abs=1e-6)
+    # One-sided at a is one side of the two-sided at 2a, less the paths crossing both sides.
+    np.testing.assert_allclose(boundaries(0.05, five, sides=1), boundaries(0.1, five), atol=1e-6)
+    with pytest.raises(ValueError, match="a boundary has 1 or 2 sides, got 3"):
+        boundaries(0.05, five, sides=3)
 
 
 def test_a_repeated_confidence_interval_s_level_is_set_by_the_boundary_of_its_look():
@@ -157,3 +177,157 @@ def test_the_experiments_smoke_run_writes_its_table_into_a_temporary_directory(
     results = str(experiments / "results")
     refused = run_script(script, "--smoke", "--results", results, cwd=experiments)
     assert refused.returncode != 0 and "never writes into the recorded results" in refused.stderr
+
+
+def test_the_improvement_estimate_is_u_over_nm_with_a_placement_error_floored_at_the_null_one():
+    rng = np.random.default_rng(4)
+    x, y = rng.normal(0.3, 1, 12).round(1), rng.normal(0, 2, 9).round(1)
+    theta, error = improvement_estimate(x, y)
+    assert theta == pytest.approx(statistics.probability_of_improvement(x, y))
+    # DeLong's placements, written out: each run's share of wins over the other setting's.
+    v = [np.mean([(a > b) + 0.5 * (a == b) for b in y]) for a in x]
+    w = [np.mean([(a > b) + 0.5 * (a == b) for a in x]) for b in y]
+    placement = np.var(v, ddof=1) / 12 + np.var(w, ddof=1) / 9
+    null = (12 + 9 + 1) / (12 * 12 * 9)
+    assert placement > null and error == pytest.approx(np.sqrt(placement))
+    # Every score tied (every run failed): P = 1/2, its error the null one, not 0.
+    failed = np.full(6, -np.inf)
+    assert improvement_estimate(failed, failed) == pytest.approx((0.5, np.sqrt(13 / 432)))
+
+
+def test_identical_arms_are_decided_equivalent_and_without_a_margin_undecided():
+    rng = np.random.default_rng(5)
+    baseline = rng.normal(0, 1, 40)
+    design = Design(group_size=10, max_seeds=40, margin=0.2)
+    (same,) = decide([(baseline.copy(), baseline)], design)
+    assert (same.decision, same.seeds) == ("equivalent", 30)
+    low, high = same.interval
+    assert 0.3 <= low < 0.5 < high <= 0.7 and same.z >= same.boundary
+    assert f"repeated CI [{low:.2f}, {high:.2f}]" in same.reason
+    assert "within 1/2 ± 0.2 at look 3 (30 seeds, level 0.05 a side)" in same.reason
+    # Its interval is θ̂ ± c'·se at the look's one-sided boundary.
+    theta, error = improvement_estimate(baseline[:30], baseline[:30])
+    critical = boundaries(0.05, (0.25, 0.5, 0.75, 1.0), sides=1)[2]
+    np.testing.assert_allclose(same.interval, (theta - critical * error, theta + critical * error))
+    # Today's rule without a margin: the same scores are undecided at the maximum.
+    (plain,) = decide([(baseline.copy(), baseline)], Design(group_size=10, max_seeds=40))
+    assert (plain.decision, plain.seeds, plain.interval) == ("undecided", 40, None)
+    assert "P's repeated CI" not in plain.reason
+    # A clear difference is still decided by its direction, and a null one whose interval
+    # crosses the margin stays undecided, saying where its interval ended.
+    far, other = decide([(baseline + 3, baseline), (baseline[::-1] + 0.3, baseline)], design)
+    assert far.decision == "better"
+    assert other.decision == "undecided" and "is not within 1/2 ± 0.2" in other.reason
+    assert other.interval[1] > 0.7
+
+
+def test_an_equivalent_comparison_passes_its_share_only_to_the_equivalence_tests():
+    rng = np.random.default_rng(6)
+    baseline = rng.normal(0, 1, 40)
+    design = Design(group_size=10, max_seeds=40, margin=0.2)
+    # Holm within the equivalence tests: the first decided at α/2 passes its share on, and the
+    # second is tested again at α at the same look.
+    first, second = decide([(baseline.copy(), baseline), (baseline[::-1] + 0.25, baseline)], design)
+    assert first.decision == second.decision == "equivalent"
+    assert "at look 3 (30 seeds, level 0.025 a side)" in first.reason
+    assert "at look 3 (30 seeds, level 0.05 a side)" in second.reason
+    # Not to better or worse: alone, this comparison is decided worse at look 2 (level α);
+    # beside one decided equivalent its level for better or worse stays α/2, which it never
+    # crosses, and it is decided equivalent at α instead, at the last look.
+    wide = Design(group_size=10, max_seeds=40, margin=0.25)
+    lower = baseline[::-1] - 0.4
+    (alone,) = decide([(lower, baseline)], wide)
+    assert alone.decision == "worse" and "at look 2 (20 seeds, level 0.05)" in alone.reason
+    _, beside = decide([(baseline.copy(), baseline), (lower, baseline)], wide)
+    assert (
+        beside.decision == "equivalent" and "look 4 (40 seeds, level 0.05 a side)" in beside.reason
+    )
+    halved = boundaries(0.025, (0.25, 0.5, 0.75, 1.0))
+    assert all(
+        abs(mann_whitney_z(lower[:n], baseline[:n])) < halved[k] for k, n in enumerate(wide.looks)
+    )
+
+
+@pytest.mark.parametrize(
+    "margin, level, message",
+    [
+        (0.5, 0.05, "margin is a distance from 1/2 .* in \\(0, 0.5\\), got 0.5"),
+        (0.0, 0.05, "in \\(0, 0.5\\), got 0.0"),
+        (True, 0.05, "got True"),
+        (0.2, 0.5, "an equivalence margin needs an error level below 0.5"),
+    ],
+)
+def test_a_margin_outside_its_range_is_refused(margin, level, message):
+    with pytest.raises(ValueError, match=message):
+        Design(5, 30, level, margin)
+
+
+def test_what_each_look_can_decide_is_stated_before_any_run():
+    assert largest_z(5) == pytest.approx(np.sqrt(75 / 11))  # 2.61: all of one above the other
+    x, y = np.arange(5.0), np.arange(5.0) + 10
+    assert abs(mann_whitney_z(x, y)) == pytest.approx(largest_z(5))
+    design = Design(group_size=5, max_seeds=30, margin=0.2)
+    lines = plan_lines(design, 1)
+    assert lines[1] == (
+        "  look 1, 5 seeds per setting: ±5.37 (warning: cannot decide, |z| is at most 2.61 with "
+        "5 seeds)"
+    )
+    assert lines[2] == "  look 2, 10 seeds per setting: ±3.71" and len(lines) == 8
+    # Equivalence needs the look's narrowest interval, at P = 1/2 and se at its floor, within
+    # the margin: not at 20 seeds, at 25.
+    critical = boundaries(0.05, tuple(n / 30 for n in design.looks), sides=1)
+    assert narrowest_half_width(20, critical[3]) > 0.2 >= narrowest_half_width(25, critical[4])
+    assert equivalence_reachable(design, 1) == 25
+    assert lines[-1] == (
+        "  equivalent (P(candidate > baseline) within 1/2 ± 0.2): reachable from 25 seeds per "
+        "setting"
+    )
+    # Too narrow a margin for the design: a warning with the seeds a last look would need.
+    narrow = plan_lines(Design(group_size=5, max_seeds=30, margin=0.05), 4)
+    assert narrow[-1].startswith("  warning: no look can decide equivalent (P(candidate")
+    needed = int(narrow[-1].split("needs about ")[1].split()[0])
+    last = boundaries(0.0125, tuple(n / 30 for n in design.looks), sides=1)[-1]
+    assert narrowest_half_width(needed, last) <= 0.05 < narrowest_half_width(needed - 1, last)
+    assert plan_lines(Design(5, 30), 1)[-1].startswith("  look 6, 30 seeds")  # no margin
+
+
+def test_a_false_equivalent_at_the_margin_is_at_most_the_level():
+    # P(candidate > baseline) exactly at 1/2 ± δ: any `equivalent` is false. Seeded.
+    design = Design(group_size=10, max_seeds=50, level=0.05, margin=0.2)
+    studies = 2000
+    bound = design.level + 3 * np.sqrt(design.level * (1 - design.level) / studies)
+    for shift, seed in ((shift_for(0.7), 1), (shift_for(0.3), 2)):
+        found = simulate(design, [1], shift=shift, studies=studies, seed=seed)
+        assert found["false_equivalence_rate"] <= bound
+        assert found["false_equivalence_rate"] > design.level / 2  # near the level: a real test
+    family = simulate(design, [2, 2], shift=shift_for(0.7), studies=1000, seed=3)
+    assert family["false_equivalence_rate"] <= design.level + 3 * np.sqrt(0.05 * 0.95 / 1000)
+
+
+def test_identical_settings_are_decided_equivalent_within_fifty_seeds_nine_times_in_ten():
+    # m = 0.2, level 0.05, groups of 10 seeds up to 50 per setting, one comparison: with no
+    # difference the study decides `equivalent` in 91% of 2,000 studies, with 40 seeds per
+    # setting on average; better or worse stays at most the level.
+    design = Design(group_size=10, max_seeds=50, level=0.05, margin=0.2)
+    found = simulate(design, [1], shift=0.0, studies=2000, seed=3)
+    assert found["equivalent"] == pytest.approx(0.9085, abs=1e-9)
+    assert found["seeds"] == pytest.approx(40.0, abs=0.05)
+    assert found["false_decision_rate"] <= 0.05 + 3 * np.sqrt(0.05 * 0.95 / 2000)
+    assert found["false_equivalence_rate"] == 0  # P = 1/2 is within the margin
+
+
+def test_the_equivalence_experiment_s_smoke_run_writes_its_table_into_a_temporary_directory(
+    tmp_path, monkeypatch
+):
+    experiments = Path(__file__).resolve().parent.parent / "experiments"
+    script = experiments / "studies" / "equivalence_rule.py"
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    done = run_script(script, "--smoke", cwd=experiments)
+    assert done.returncode == 0, done.stdout + done.stderr
+    written = Path(done.stdout.split("wrote ")[-1].strip())
+    assert written.parent.name.startswith("fppo-equivalence-rule-smoke-")
+    table = written.read_text()
+    assert "- 200 simulated studies per row" in table
+    rows = [line.split(" | ") for line in table.splitlines() if line.startswith("| 5 to 30")]
+    # Equivalence reachable from 25 seeds for one comparison, from 30 at Holm's α/4 for four.
+    assert [row[-1] for row in rows] == ["25 |"] * 3 + ["30 |"] * 3

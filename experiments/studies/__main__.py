@@ -20,6 +20,7 @@ SMOKE = {
     "planned_verdict.py": "plans/spo-dpo.json --output {tmp}/spo-dpo.md",
     "dose_response.py": "--output {tmp}/dose_response.md",
     "sequential_rule.py": "--smoke",
+    "equivalence_rule.py": "--smoke",
 }
 
 if __name__ == "__main__":

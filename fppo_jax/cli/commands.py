@@ -37,6 +37,7 @@ from fppo_jax.saved_policy import (
     load_policy,
     read_policy,
 )
+from fppo_jax.sequential import Design, plan_lines
 from fppo_jax.statistics import CONFIDENCE, STATISTICS, sample_std
 from fppo_jax.study import study
 from fppo_jax.sweep import sweep
@@ -149,6 +150,9 @@ def _evaluation(args: argparse.Namespace) -> dict[str, Any]:
 
 def _study(args: argparse.Namespace) -> int:
     part = array_part() if args.part == "auto" else args.part
+    design = Design(args.group_size, args.max_seeds, args.level, args.margin)
+    for line in plan_lines(design, len(args.tasks) * len(args.candidates)):
+        print(line)
     result = study(
         args.tasks,
         args.candidates,
@@ -157,6 +161,7 @@ def _study(args: argparse.Namespace) -> int:
         max_seeds=args.max_seeds,
         group_size=args.group_size,
         level=args.level,
+        margin=args.margin,
         endpoint=args.endpoint,
         groups=args.groups,
         chunk=args.chunk,

@@ -146,6 +146,18 @@ def level(text: str) -> float:
 
 
 @_argument
+def margin(text: str) -> float:
+    """An equivalence margin on P(candidate > baseline), in (0, 0.5), such as 0.2."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value < 0.5:
+        raise InvalidInput(f"a margin in (0, 0.5) such as 0.2, got {text}")
+    return value
+
+
+@_argument
 def names(text: str) -> list[str]:
     """A comma list of names: ``hopper,walker2d``."""
     listed = [name.strip() for name in text.split(",")]

@@ -21,6 +21,7 @@ from fppo_jax.cli.flags import (
     float_value,
     level,
     looks,
+    margin,
     names,
     part,
     path,
@@ -158,7 +159,8 @@ def _add_study(
         "--output gets plan.json (the comparisons, endpoints, test, error level, seed schedule "
         "and commit); then seeds are trained in groups (one sweep per task and group) until a "
         "group-sequential Mann-Whitney test (O'Brien-Fleming-type alpha-spending, Holm across "
-        "comparisons) decides each comparison better or worse, or --max-seeds is reached. A "
+        "comparisons) decides each comparison better or worse (or, with --margin, "
+        "equivalent), or --max-seeds is reached. A "
         "decided comparison stops training; the baseline trains while a candidate on its task "
         "is undecided. decisions.json and report.md say what was decided, with how many seeds "
         "and why. The same command again goes on where the study stopped; a changed plan is "
@@ -198,6 +200,14 @@ def _add_study_design(studied: Parser) -> None:
         default=0.05,
         help="the chance of any wrong decision in the family when candidates and baseline "
         "score alike, at most",
+    )
+    studied.add_argument(
+        "--margin",
+        type=margin,
+        metavar="M",
+        help="decide a comparison equivalent when P(candidate > baseline) is shown within "
+        "1/2 ± M (its repeated confidence interval inside that range; the chance of a false "
+        "equivalent in the family at most --level); default: no margin, no equivalent decision",
     )
     studied.add_argument(
         "--endpoint",

@@ -278,7 +278,15 @@ def _checked_ranges(
 ) -> dict[str, Range]:
     """`ranges`, each a :class:`Range`, once it and `clip_range` are found to name only
     hyperparameters that the surrogate takes."""
-    checked = {key: r if isinstance(r, Range) else Range(r) for key, r in (ranges or {}).items()}
+    given = {} if ranges is None else ranges
+    if not isinstance(given, Mapping) or not all(
+        isinstance(r, str | Range) for r in given.values()
+    ):
+        raise InvalidInput(
+            f"surrogate {name!r}: ranges must map hyperparameters to a range's text, such as "
+            f"{{'eps_high': '> 0'}}, got {ranges!r}"
+        )
+    checked = {key: r if isinstance(r, Range) else Range(r) for key, r in given.items()}
     stray = sorted(set(checked) - set(defaults))
     if clip_range is not None:
         if not (isinstance(clip_range, tuple | list) and len(clip_range) == 2):

@@ -87,6 +87,16 @@ def _takes_an_unknown_input(ratio, advantage, beta_typo):
         ),
         (
             ("mine", my_clip_higher.function),
+            {"eps_low": 0.2, "eps_high": 0.3, "ranges": {"eps_high": 5}},
+            r"ranges must map hyperparameters to a range's text, such as \{'eps_high': '> 0'\}",
+        ),
+        (
+            ("mine", my_clip_higher.function),
+            {"eps_low": 0.2, "eps_high": 0.3, "ranges": ["eps_high"]},
+            r"ranges must map .*, got \['eps_high'\]",
+        ),
+        (
+            ("mine", my_clip_higher.function),
             {"eps_low": 0.2, "eps_high": 0.3, "clip_range": ("eps_low", "high")},
             "surrogate 'mine' has no hyperparameter 'high'",
         ),

@@ -50,6 +50,7 @@ from fppo_jax.surrogates import Surrogate, real_number
 # times the seeds), so more is a mistyped grid, refused before its settings are built.
 MAX_SETTINGS = 10_000
 
+
 def expand_grid(grid: Mapping[str, Any], task: str | None = None) -> list[dict[str, Any]]:
     """The distinct settings of a grid, in order: every combination of its values.
 

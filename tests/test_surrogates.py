@@ -4,6 +4,9 @@ apart."""
 
 import inspect
 import json
+import os
+import re
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -215,3 +218,55 @@ def test_one_default_variant_everywhere():
     assert fppo_jax.expand_grid({}) == [{"variant": DEFAULT_VARIANT}]
     assert build_parser().parse_args(["train"]).variant.name == DEFAULT_VARIANT
     assert [s.name for s in build_parser().parse_args(["sweep"]).variant] == [DEFAULT_VARIANT]
+
+
+@pytest.fixture
+def module_here(tmp_path, monkeypatch):
+    """Writes a module in a new current directory that is not on Python's path (as under the
+    installed command); the module is forgotten afterwards."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", os.getcwd())])
+
+    def write(name, text):
+        (tmp_path / f"{name}.py").write_text(text)
+        monkeypatch.delitem(sys.modules, name, raising=False)
+
+    return write
+
+
+def test_a_surrogate_module_is_imported_from_the_current_directory(module_here):
+    module_here(
+        "here_mine",
+        "import fppo_jax\n"
+        "mine = fppo_jax.surrogate('here-mine', lambda ratio, advantage: ratio * advantage)\n",
+    )
+    assert fppo_jax.objectives.resolve("here_mine:mine").name == "here-mine"
+    assert os.getcwd() not in sys.path  # the directory is on the path only while importing
+    with pytest.raises(
+        ValueError,
+        match=re.escape(
+            f"no module 'here_absent' in the current directory or on Python's path (looked in "
+            f"{os.getcwd()}, "
+        ),
+    ):
+        fppo_jax.objectives.resolve("here_absent:mine")
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("import sys\nsys.exit(0)\n", r"importing here_bad called sys.exit\(0\); a module"),
+        (
+            "raise RuntimeError('no GPU here')\n",
+            "importing here_bad raised RuntimeError: no GPU here",
+        ),
+        ("x = 1\ndef f(:\n", r"here_bad does not parse: .*here_bad.py:2: SyntaxError: "),
+    ],
+)
+def test_a_surrogate_module_that_fails_to_import_is_one_line_naming_it(
+    module_here, capsys, text, match
+):
+    module_here("here_bad", text)
+    assert main(["train", "--variant", "here_bad:mine"]) == 2
+    err = capsys.readouterr().err
+    assert re.fullmatch(f"fppo-jax: error: variant 'here_bad:mine': {match}.*\n", err), err

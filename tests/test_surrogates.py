@@ -270,3 +270,18 @@ def test_a_surrogate_module_that_fails_to_import_is_one_line_naming_it(
     assert main(["train", "--variant", "here_bad:mine"]) == 2
     err = capsys.readouterr().err
     assert re.fullmatch(f"fppo-jax: error: variant 'here_bad:mine': {match}.*\n", err), err
+
+
+def test_an_abbreviated_variant_flag_is_refused_rather_than_losing_its_surrogates_flags(
+    module_here, capsys
+):
+    module_here(
+        "here_scaled",
+        "import fppo_jax\n"
+        "mine = fppo_jax.surrogate('here-scaled', lambda ratio, advantage, c: c * ratio * advantage,"
+        " c=1.0)\n",
+    )
+    with pytest.raises(SystemExit) as exited:
+        main(["train", "--vari", "here_scaled:mine", "--c", "0.5"])
+    assert exited.value.code == 2
+    assert "unrecognized arguments: --vari here_scaled:mine --c 0.5" in capsys.readouterr().err

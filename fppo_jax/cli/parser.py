@@ -45,6 +45,7 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
         ") with a fully jitted JAX trainer, and compare them.",
         epilog="Compiled programs are cached in ~/.cache/fppo-jax (under $XDG_CACHE_HOME if "
         "set): FPPO_JAX_CACHE_DIR=DIR moves the cache, FPPO_JAX_CACHE_DIR=off turns it off.",
+        allow_abbrev=False,
     )
     parser.add_argument("--version", action="version", version=f"fppo-jax {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=Parser)

@@ -27,6 +27,7 @@ them (``1 - ε`` and ``1 + ε`` when it names none).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import inspect
 import math
@@ -225,8 +226,32 @@ def surrogate(
             f"(built-ins: {', '.join(BUILTINS)})"
         )
     declared = declare(name, function, ranges, needs_kl, clip_range, defaults)
+    taken = [f"{key} is {what}" for key in defaults if (what := _taken_names().get(key))]
+    if taken:
+        raise InvalidInput(
+            f"surrogate {name!r}: a hyperparameter of its own cannot take another setting's name "
+            f"({'; '.join(taken)}), whose value it would take or shadow: rename it"
+        )
     probe(declared, declared.defaults)
     return declared
+
+
+@functools.cache
+def _taken_names() -> dict[str, str]:
+    """What a surrogate's hyperparameter may not be named, each with what it is: an
+    optimisation setting, a field of the run's shape or any name of the command line, where a
+    hyperparameter becomes a flag and a setting of ``--config FILE``. The built-ins'
+    hyperparameters are shared, as ``alpha`` is."""
+    from fppo_jax.cli.parser import command_line_names
+    from fppo_jax.config import CONFIG_FIELDS, HYPERPARAMETER_DEFAULTS
+    from fppo_jax.objectives import BUILTINS
+
+    shared = {key for s in BUILTINS.values() for key in s.defaults}
+    return {
+        **{key: "a name of the command line" for key in command_line_names() - shared},
+        **{key: "a TrainConfig field" for key in CONFIG_FIELDS},
+        **{key: "an optimisation setting" for key in HYPERPARAMETER_DEFAULTS},
+    }
 
 
 def declare(

@@ -113,6 +113,32 @@ def test_a_bad_surrogate_gets_one_clear_error(args, kwargs, match):
         surrogate(*args, **kwargs)
 
 
+@pytest.mark.parametrize(
+    "hyperparameter, what",
+    [
+        ("learning_rate", "an optimisation setting"),
+        ("gamma", "an optimisation setting"),
+        ("num_envs", "a TrainConfig field"),
+        ("steps", "a name of the command line"),
+        ("output", "a name of the command line"),
+        ("seed", "a name of the command line"),
+        ("level", "a name of the command line"),
+        ("variant", "a name of the command line"),
+        ("command", "a name of the command line"),
+    ],
+)
+def test_a_hyperparameter_cannot_take_a_settings_or_a_flags_name(hyperparameter, what):
+    function = eval(f"lambda ratio, advantage, {hyperparameter}: ratio * advantage")
+    with pytest.raises(
+        ValueError,
+        match=f"surrogate 'mine': a hyperparameter of its own cannot take another setting's "
+        f"name \\({hyperparameter} is {what}\\), whose value it would take or shadow: rename it",
+    ):
+        surrogate("mine", function, **{hyperparameter: 0.001})
+    # The built-ins' hyperparameters are shared, as a grid axis is.
+    assert surrogate("mine", lambda ratio, advantage, alpha: alpha * ratio * advantage, alpha=1.0)
+
+
 def test_a_user_surrogates_hyperparameters_are_checked_before_compiling():
     with pytest.raises(ValueError, match=r"eps_high must be > 0 for my-clip-higher, got -1\.0"):
         train("cartpole", my_clip_higher, eps_high=-1.0)
@@ -278,8 +304,9 @@ def test_an_abbreviated_variant_flag_is_refused_rather_than_losing_its_surrogate
     module_here(
         "here_scaled",
         "import fppo_jax\n"
-        "mine = fppo_jax.surrogate('here-scaled', lambda ratio, advantage, c: c * ratio * advantage,"
-        " c=1.0)\n",
+        "def scaled(ratio, advantage, c):\n"
+        "    return c * ratio * advantage\n"
+        "mine = fppo_jax.surrogate('here-scaled', scaled, c=1.0)\n",
     )
     with pytest.raises(SystemExit) as exited:
         main(["train", "--vari", "here_scaled:mine", "--c", "0.5"])

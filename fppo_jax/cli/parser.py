@@ -60,6 +60,19 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     return parser
 
 
+def command_line_names() -> set[str]:
+    """Every name the command line gives a value: its commands' flags (``--num-envs`` as
+    num_envs), their destinations and the other defaults (what ``--config FILE`` may set)."""
+    parser = build_parser()
+    names: set[str] = set()
+    for command in (parser, *parser.get_default("commands").values()):
+        names.update(command._defaults)
+        for action in command._actions:
+            names.add(action.dest)
+            names.update(flag.lstrip("-").replace("-", "_") for flag in action.option_strings)
+    return names
+
+
 def _add_train(
     commands: argparse._SubParsersAction[Parser], surrogates: Sequence[Surrogate]
 ) -> None:

@@ -43,6 +43,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.errors import InvalidInput
+from fppo_jax.files import first_line
 
 # The arguments every surrogate function may take by name, besides its own hyperparameters.
 INPUTS = ("ratio", "advantage", "kl", "epsilon")
@@ -215,8 +216,9 @@ def surrogate(
     surrogate gates on the KL divergence (so calling its objective without one is refused);
     `clip_range` names the two hyperparameters that are its distances below and above 1 (for
     the R± diagnostics; ε's otherwise). Everything is checked here, and the function is tried
-    on a grid of ratios and advantages: a value that is not finite, of the wrong shape or not
-    a float is refused, naming the surrogate.
+    on a grid of ratios and advantages under ``jax.jit`` and ``jax.grad``, as training runs it:
+    one that cannot be traced, or a value that is not finite, of the wrong shape or not a float,
+    is refused, naming the surrogate.
     """
     from fppo_jax.objectives import BUILTINS  # the built-ins are declared with this function
 
@@ -361,10 +363,33 @@ def _check_signature(
         )
 
 
+# What a function that runs on arrays does wrong under tracing, as training traces it, and how
+# to write it instead; the most specific first (a bool conversion is a concretization).
+_TRACING_ERRORS: tuple[tuple[type[Exception], str], ...] = (
+    (
+        jax.errors.TracerBoolConversionError,
+        "uses Python control flow (if, while, and, or) on traced values; use jnp.where",
+    ),
+    (
+        jax.errors.TracerArrayConversionError,
+        "turns a traced value into a NumPy array (NumPy where jax.numpy is needed); use jax.numpy",
+    ),
+    (
+        jax.errors.TracerIntegerConversionError,
+        "needs a traced value as a Python integer; keep it an array and use jax.numpy",
+    ),
+    (
+        jax.errors.ConcretizationTypeError,
+        "needs a traced value as a Python number (float(), int(), a shape from values); keep it "
+        "an array and use jax.numpy",
+    ),
+)
+
+
 def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2) -> None:
     """Try `declared` with `values` on ratios 0.25 … 4 and advantages of both signs (a KL of
-    0 and 0.1): its value must be a finite float array of the ratio's shape, and its slope in
-    the ratio finite."""
+    0 and 0.1), under ``jax.jit`` and ``jax.grad`` as training runs it: its value must be a
+    finite float array of the ratio's shape, and its slope in the ratio finite."""
     ratio: np.ndarray | jax.Array
     advantage: np.ndarray | jax.Array
     ratio, advantage = np.meshgrid(np.geomspace(0.25, 4.0, 17), [-2.0, -0.5, 0.0, 0.5, 2.0])
@@ -375,24 +400,24 @@ def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2
     kl = jnp.tile(jnp.asarray([0.0, 0.1], jnp.float32), ratio.size // 2 + 1)[: ratio.size]
     arrays = {key: jnp.asarray(value, jnp.float32) for key, value in values.items()}
     eps = jnp.asarray(epsilon, jnp.float32)
-
-    def value(r: jax.Array) -> jax.Array:
-        return declared(r, advantage, kl, eps, arrays)
+    inputs = (ratio, advantage, kl, eps, arrays)
 
     where = f"surrogate {declared.name!r}"
     try:
-        out = value(ratio)
+        shape = jax.eval_shape(declared, *inputs)
     except Exception as error:
-        raise InvalidInput(f"{where} failed when tried: {type(error).__name__}: {error}") from None
-    if not isinstance(out, jax.Array | np.ndarray) or np.shape(out) != ratio.shape:
+        raise _failed(where, error) from None
+    if not hasattr(shape, "shape") or shape.shape != ratio.shape:
         raise InvalidInput(
             f"{where} must return one value per sample (an array of the ratio's shape "
-            f"{ratio.shape}), got {_described(out)}"
+            f"{ratio.shape}), got {_described(shape)}"
         )
-    if not jnp.issubdtype(out.dtype, jnp.floating):
-        raise InvalidInput(f"{where} must return floats, got {out.dtype}")
-    # Per sample: the surrogate is element-wise, so the slope of the sum is each one's slope.
-    slope = jax.grad(lambda r: jnp.sum(value(r)))(ratio)
+    if not jnp.issubdtype(shape.dtype, jnp.floating):
+        raise InvalidInput(f"{where} must return floats, got {shape.dtype}")
+    try:
+        out, slope = _value_and_slope(declared, *inputs)
+    except Exception as error:
+        raise _failed(where, error) from None
     for what, array in (("value", out), ("slope in the ratio", slope)):
         bad = ~np.isfinite(np.asarray(array))
         if bad.any():
@@ -402,6 +427,35 @@ def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2
                 f"ratio {float(ratio[i]):.3g}, advantage {float(advantage[i]):g} with "
                 + ", ".join(f"{k} = {v:g}" for k, v in {"epsilon": epsilon, **values}.items())
             )
+
+
+def _failed(where: str, error: Exception) -> InvalidInput:
+    """Why the surrogate `where` names failed when tried, in one line."""
+    cause = next((why for kind, why in _TRACING_ERRORS if isinstance(error, kind)), None)
+    if cause is not None:
+        return InvalidInput(f"{where} {cause}")
+    return InvalidInput(f"{where} failed when tried: {type(error).__name__}: {first_line(error)}")
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _value_and_slope(
+    declared: Surrogate,
+    ratio: jax.Array,
+    advantage: jax.Array,
+    kl: jax.Array,
+    epsilon: jax.Array,
+    values: Mapping[str, jax.Array],
+) -> tuple[jax.Array, jax.Array]:
+    """`declared`'s value per sample and its slope in the ratio, compiled as training compiles
+    it (once per surrogate). Per sample: the surrogate is element-wise, so the slope of the sum
+    is each one's slope."""
+
+    def summed(r: jax.Array) -> tuple[jax.Array, jax.Array]:
+        out = declared(r, advantage, kl, epsilon, values)
+        return jnp.sum(out), out
+
+    (_, out), slope = jax.value_and_grad(summed, has_aux=True)(ratio)
+    return out, slope
 
 
 def _described(out: object) -> str:

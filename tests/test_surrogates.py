@@ -64,6 +64,22 @@ def _not_finite_below_one(ratio, advantage):
     return jnp.log(ratio - 1.0) * advantage
 
 
+def _branches_in_python(ratio, advantage):
+    return ratio * advantage if ratio.mean() > 1 else -ratio * advantage
+
+
+def _uses_numpy(ratio, advantage):
+    return np.minimum(ratio, 1.2) * advantage
+
+
+def _takes_a_float(ratio, advantage):
+    return ratio * advantage * float(ratio.max())
+
+
+def _has_no_slope(ratio, advantage):
+    return jax.pure_callback(lambda r: r, ratio, ratio) * advantage  # a callback has no gradient
+
+
 def _takes_an_unknown_input(ratio, advantage, beta_typo):
     return ratio * advantage
 
@@ -106,6 +122,19 @@ def _takes_an_unknown_input(ratio, advantage, beta_typo):
         (("mine", _returns_a_scalar), {}, "must return one value per sample"),
         (("mine", _returns_integers), {}, "must return floats, got int32"),
         (("mine", _not_finite_below_one), {}, "has a value that is not finite"),
+        (
+            ("mine", _branches_in_python),
+            {},
+            r"^surrogate 'mine' uses Python control flow \(if, while, and, or\) on traced values; "
+            "use jnp.where$",
+        ),
+        (("mine", _uses_numpy), {}, r"^surrogate 'mine' turns a traced value into a NumPy array"),
+        (
+            ("mine", _takes_a_float),
+            {},
+            r"^surrogate 'mine' needs a traced value as a Python number",
+        ),
+        (("mine", _has_no_slope), {}, r"^surrogate 'mine' failed when tried: \w+: [^\n]*\Z"),
     ],
 )
 def test_a_bad_surrogate_gets_one_clear_error(args, kwargs, match):

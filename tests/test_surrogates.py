@@ -2,6 +2,7 @@
 compiled program as the built-ins, and recorded so that two functions under one name are told
 apart."""
 
+import functools
 import inspect
 import json
 import os
@@ -341,3 +342,58 @@ def test_an_abbreviated_variant_flag_is_refused_rather_than_losing_its_surrogate
         main(["train", "--vari", "here_scaled:mine", "--c", "0.5"])
     assert exited.value.code == 2
     assert "unrecognized arguments: --vari here_scaled:mine --c 0.5" in capsys.readouterr().err
+
+
+SCALE = 1.0  # read by _scaled: part of its surrogate's identity
+
+
+def _scaled(ratio, advantage):
+    return SCALE * ratio * advantage
+
+
+def _scaled_by(scale):
+    def scaled(ratio, advantage):
+        return scale * ratio * advantage
+
+    return scaled
+
+
+def _scaled_with(scale, ratio, advantage):
+    return scale * ratio * advantage
+
+
+class _Scaled:
+    def __init__(self, scale):
+        self.scale = scale
+
+    def __call__(self, ratio, advantage):
+        return self.scale * ratio * advantage
+
+
+WEIGHTS = jnp.ones(3)
+
+
+def _weighted(ratio, advantage):
+    return WEIGHTS.sum() * ratio * advantage
+
+
+def test_a_surrogates_identity_covers_the_values_its_function_reads(monkeypatch):
+    def digest(function):
+        return surrogate("scaled", function).identity()["digest"]
+
+    # A module's constant: a rerun, a resumed run or a merge of another value is refused.
+    first = digest(_scaled)
+    assert digest(_scaled) == first
+    monkeypatch.setattr(sys.modules[__name__], "SCALE", 2.0)
+    assert digest(_scaled) != first
+    # A closure's variable, a partial's bound arguments and a callable instance's attributes:
+    # the same made twice is the same surrogate, and another value another.
+    for make in (_scaled_by, functools.partial(functools.partial, _scaled_with), _Scaled):
+        assert digest(make(1.0)) == digest(make(1.0)) != digest(make(2.0))
+    with pytest.raises(
+        ValueError,
+        match=r"^surrogate 'weighted' reads WEIGHTS, of type ArrayImpl, which its record cannot "
+        "identify .*: make it a hyperparameter, or a number, string, bool, None, or a tuple, "
+        "list or dict of them$",
+    ):
+        surrogate("weighted", _weighted)

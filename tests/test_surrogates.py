@@ -397,3 +397,20 @@ def test_a_surrogates_identity_covers_the_values_its_function_reads(monkeypatch)
         "list or dict of them$",
     ):
         surrogate("weighted", _weighted)
+
+
+def test_a_rerun_from_a_record_refuses_a_surrogate_changed_since(tmp_path, capsys):
+    from fppo_jax.cli.settings import settings_file
+
+    record = {"variant": "my-ppo", "surrogates": {"my-ppo": my_ppo.identity()}}
+    (tmp_path / "config.json").write_text(json.dumps(record))
+    assert settings_file(tmp_path / "config.json")["variant"] == "own_surrogates:my_ppo"
+    record["surrogates"]["my-ppo"]["digest"] = "0123456789abcdef"  # a function edited since
+    (tmp_path / "config.json").write_text(json.dumps(record))
+    assert main(["train", "--config", str(tmp_path / "config.json")]) == 2
+    assert capsys.readouterr().err == (
+        f"fppo-jax: error: {tmp_path / 'config.json'} records another surrogate 'my-ppo' than "
+        "own_surrogates:my_ppo is now (recorded digest '0123456789abcdef', now "
+        f"{my_ppo.identity()['digest']!r}): restore the one it trained to rerun the run, or "
+        "train this one without --config\n"
+    )

@@ -414,3 +414,20 @@ def test_a_rerun_from_a_record_refuses_a_surrogate_changed_since(tmp_path, capsy
         f"{my_ppo.identity()['digest']!r}): restore the one it trained to rerun the run, or "
         "train this one without --config\n"
     )
+
+
+def _not_finite_past_the_tried_advantages(ratio, advantage):
+    # Finite where its declaration tries it (|A| ≤ 2); NaN in value and slope beyond, where
+    # training's advantages go at once.
+    return ratio * advantage * jnp.where(jnp.abs(advantage) > 2.5, jnp.nan, 1.0)
+
+
+def test_a_run_that_diverges_names_its_own_surrogate_as_a_cause(tiny):
+    mine = surrogate("nan-past-the-trial", _not_finite_past_the_tried_advantages)
+    with pytest.raises(
+        fppo_jax.TrainingDiverged,
+        match=r"Lower the learning rate, check the environment's observations and rewards, or "
+        r"check the surrogate 'nan-past-the-trial': its value or slope may not be finite at "
+        r"ratios or advantages that training reaches beyond those its declaration tried\.$",
+    ):
+        train("cartpole", mine, total_steps=TINY_STEPS, **IN_CHUNKS, **tiny)

@@ -165,8 +165,14 @@ def test_a_hyperparameter_cannot_take_a_settings_or_a_flags_name(hyperparameter,
         f"name \\({hyperparameter} is {what}\\), whose value it would take or shadow: rename it",
     ):
         surrogate("mine", function, **{hyperparameter: 0.001})
-    # The built-ins' hyperparameters are shared, as a grid axis is.
-    assert surrogate("mine", lambda ratio, advantage, alpha: alpha * ratio * advantage, alpha=1.0)
+
+
+def test_a_hyperparameter_may_share_a_builtins_name_as_a_grid_axis_does():
+    mine = surrogate("mine", lambda ratio, advantage, alpha: alpha * ratio * advantage, alpha=1.0)
+    assert fppo_jax.expand_grid({"variant": ["fppo-lp", mine], "alpha": [1.1]}) == [
+        {"variant": "fppo-lp", "alpha": 1.1},
+        {"variant": "mine", "alpha": 1.1},
+    ]
 
 
 def test_a_user_surrogates_hyperparameters_are_checked_before_compiling():

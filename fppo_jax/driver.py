@@ -75,15 +75,27 @@ from fppo_jax.trainer import Trainer, TrainState
 class TrainingDiverged(FppoError, FloatingPointError):
     """The loss or the parameters became NaN or infinite."""
 
-    def __init__(self, update: int, env_steps: int, checkpoint: str | None = None):
+    def __init__(
+        self,
+        update: int,
+        env_steps: int,
+        checkpoint: str | None = None,
+        surrogate: str | None = None,
+    ):
         """`update` counts from 1, as the progress lines do; `checkpoint` says where the last
-        good checkpoint is, if any."""
+        good checkpoint is, if any; `surrogate` names the run's surrogate if it is one's own."""
         self.update, self.env_steps = update, env_steps
         kept = f" {checkpoint}." if checkpoint else ""
+        advice = "Lower the learning rate, or check the environment's observations and rewards"
+        if surrogate:  # its declaration tried it on ratios 0.25 … 4 only: training reaches others
+            advice = (
+                "Lower the learning rate, check the environment's observations and rewards, or "
+                f"check the surrogate {surrogate!r}: its value or slope may not be finite at "
+                "ratios or advantages that training reaches beyond those its declaration tried"
+            )
         super().__init__(
             f"training diverged at update {update} (after {env_steps:,} env steps): the loss or "
-            f"the parameters became NaN or infinite.{kept} Lower the learning rate, or check the "
-            "environment's observations and rewards."
+            f"the parameters became NaN or infinite.{kept} {advice}."
         )
 
 
@@ -513,7 +525,9 @@ class _Training:
                 if saved
                 else "No checkpoint was written before it"
             )
-        raise TrainingDiverged(nonfinite + 1, (nonfinite + 1) * self.samples, where)
+        variant = self.plan.record.get("variant")
+        own = variant if variant in (self.plan.record.get("surrogates") or {}) else None
+        raise TrainingDiverged(nonfinite + 1, (nonfinite + 1) * self.samples, where, own)
 
 
 def _logged_runs(restored: Restored | None, plan: Plan, size: int) -> list[LoggedRuns]:

@@ -39,6 +39,8 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import os
+import sys
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, cast
 
@@ -46,7 +48,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.errors import InvalidInput
+from fppo_jax.errors import FppoError, InvalidInput
+from fppo_jax.files import first_line
 from fppo_jax.surrogates import (
     Range,
     Surrogate,
@@ -255,10 +258,7 @@ def _imported(path: str) -> Surrogate:
     module_name, _, attribute = path.partition(":")
     if not module_name or module_name.startswith(".") or not attribute:
         raise InvalidInput(f"variant {path!r}: expected module:attribute, such as my_pkg.mod:ppo_x")
-    try:
-        found: Any = importlib.import_module(module_name)
-    except ImportError as error:
-        raise InvalidInput(f"variant {path!r}: cannot import {module_name!r} ({error})") from None
+    found: Any = _import(path, module_name)
     for name in attribute.split("."):
         if not hasattr(found, name):
             raise InvalidInput(f"variant {path!r}: {module_name} has no {attribute!r}")
@@ -269,6 +269,45 @@ def _imported(path: str) -> Surrogate:
             "fppo_jax.surrogate(name, function, **defaults)"
         )
     return found
+
+
+def _import(path: str, module_name: str) -> Any:
+    """The module `module_name`, imported as ``python -m`` would (the current directory first
+    on the path), or one line saying why not: a module that raises, or exits, while it is
+    imported is refused naming it. An error of the package's own passes as it is."""
+    here = os.getcwd()
+    looked = [here, *(p for p in sys.path if p not in ("", here))]
+    sys.path.insert(0, here)
+    try:
+        return importlib.import_module(module_name)
+    except FppoError:
+        raise
+    except ModuleNotFoundError as error:
+        if error.name is None or not (module_name + ".").startswith(error.name + "."):
+            raise InvalidInput(
+                f"variant {path!r}: importing {module_name} failed: {error}"
+            ) from None
+        raise InvalidInput(
+            f"variant {path!r}: no module {error.name!r} in the current directory or on "
+            f"Python's path (looked in {', '.join(looked)})"
+        ) from None
+    except SyntaxError as error:
+        raise InvalidInput(
+            f"variant {path!r}: {module_name} does not parse: {error.filename}:{error.lineno}: "
+            f"SyntaxError: {error.msg}"
+        ) from None
+    except SystemExit as error:
+        raise InvalidInput(
+            f"variant {path!r}: importing {module_name} called sys.exit({error.code!r}); "
+            "a module that declares surrogates must not exit when imported"
+        ) from None
+    except Exception as error:
+        raise InvalidInput(
+            f"variant {path!r}: importing {module_name} raised {type(error).__name__}: "
+            f"{first_line(error)}"
+        ) from None
+    finally:
+        sys.path.remove(here)
 
 
 def union(surrogates: Sequence[Surrogate]) -> tuple[Surrogate, ...]:

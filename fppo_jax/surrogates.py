@@ -26,13 +26,17 @@ them (``1 - ε`` and ``1 + ε`` when it names none).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import dis
+import functools
 import hashlib
 import inspect
 import math
 import numbers
 import re
 import sys
+import types
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import Any, cast
@@ -42,6 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.errors import InvalidInput
+from fppo_jax.files import first_line
 
 # The arguments every surrogate function may take by name, besides its own hyperparameters.
 INPUTS = ("ratio", "advantage", "kl", "epsilon")
@@ -174,11 +179,12 @@ class Surrogate:
 
     def identity(self) -> dict[str, Any]:
         """What records keep of a surrogate of one's own, so that two functions under one name
-        are told apart: its name, its defaults and a digest of its function's source."""
+        are told apart: its name, its defaults and a digest of its function's source and of the
+        values it reads (:func:`function_digest`)."""
         return {
             "name": self.name,
             "hyperparameters": dict(self.defaults),
-            "digest": source_digest(self.function),
+            "digest": function_digest(self.function, f"surrogate {self.name!r}"),
             "import": self.location(),
         }
 
@@ -219,8 +225,9 @@ def surrogate(
     the R± diagnostics; ε's otherwise); `search` gives the interval a tune searches each of
     them over, as ``(low, high)`` or ``(low, high, scale)`` with scale ``linear``, ``log`` or
     ``log1m`` (see :mod:`fppo_jax.search_space`). Everything is checked here, and the function
-    is tried on a grid of ratios and advantages: a value that is not finite, of the wrong shape
-    or not a float is refused, naming the surrogate.
+    is tried on a grid of ratios and advantages under ``jax.jit`` and ``jax.grad``, as training
+    runs it: one that cannot be traced, or a value that is not finite, of the wrong shape or not
+    a float, is refused, naming the surrogate.
     """
     from fppo_jax.objectives import BUILTINS  # the built-ins are declared with this function
 
@@ -230,6 +237,13 @@ def surrogate(
             f"(built-ins: {', '.join(BUILTINS)})"
         )
     declared = declare(name, function, ranges, needs_kl, clip_range, defaults)
+    taken = [f"{key} is {what}" for key in defaults if (what := _taken_names().get(key))]
+    if taken:
+        raise InvalidInput(
+            f"surrogate {name!r}: a hyperparameter of its own cannot take another setting's name "
+            f"({'; '.join(taken)}), whose value it would take or shadow: rename it"
+        )
+    function_digest(function, f"surrogate {name!r}")  # what cannot be identified is refused
     probe(declared, declared.defaults)
     if search is None:
         return declared
@@ -248,6 +262,24 @@ def surrogate(
     where = f"surrogate {name!r}'s search"
     intervals = {key: interval(key, value, where) for key, value in search.items()}
     return dataclasses.replace(declared, search=MappingProxyType(intervals))
+
+
+@functools.cache
+def _taken_names() -> dict[str, str]:
+    """What a surrogate's hyperparameter may not be named, each with what it is: an
+    optimisation setting, a field of the run's shape or any name of the command line, where a
+    hyperparameter becomes a flag and a setting of ``--config FILE``. The built-ins'
+    hyperparameters are shared, as ``alpha`` is."""
+    from fppo_jax.cli.parser import command_line_names
+    from fppo_jax.config import CONFIG_FIELDS, HYPERPARAMETER_DEFAULTS
+    from fppo_jax.objectives import BUILTINS
+
+    shared = {key for s in BUILTINS.values() for key in s.defaults}
+    return {
+        **{key: "a name of the command line" for key in command_line_names() - shared},
+        **{key: "a TrainConfig field" for key in CONFIG_FIELDS},
+        **{key: "an optimisation setting" for key in HYPERPARAMETER_DEFAULTS},
+    }
 
 
 def declare(
@@ -299,7 +331,15 @@ def _checked_ranges(
 ) -> dict[str, Range]:
     """`ranges`, each a :class:`Range`, once it and `clip_range` are found to name only
     hyperparameters that the surrogate takes."""
-    checked = {key: r if isinstance(r, Range) else Range(r) for key, r in (ranges or {}).items()}
+    given = {} if ranges is None else ranges
+    if not isinstance(given, Mapping) or not all(
+        isinstance(r, str | Range) for r in given.values()
+    ):
+        raise InvalidInput(
+            f"surrogate {name!r}: ranges must map hyperparameters to a range's text, such as "
+            f"{{'eps_high': '> 0'}}, got {ranges!r}"
+        )
+    checked = {key: r if isinstance(r, Range) else Range(r) for key, r in given.items()}
     stray = sorted(set(checked) - set(defaults))
     if clip_range is not None:
         if not (isinstance(clip_range, tuple | list) and len(clip_range) == 2):
@@ -349,10 +389,33 @@ def _check_signature(
         )
 
 
+# What a function that runs on arrays does wrong under tracing, as training traces it, and how
+# to write it instead; the most specific first (a bool conversion is a concretization).
+_TRACING_ERRORS: tuple[tuple[type[Exception], str], ...] = (
+    (
+        jax.errors.TracerBoolConversionError,
+        "uses Python control flow (if, while, and, or) on traced values; use jnp.where",
+    ),
+    (
+        jax.errors.TracerArrayConversionError,
+        "turns a traced value into a NumPy array (NumPy where jax.numpy is needed); use jax.numpy",
+    ),
+    (
+        jax.errors.TracerIntegerConversionError,
+        "needs a traced value as a Python integer; keep it an array and use jax.numpy",
+    ),
+    (
+        jax.errors.ConcretizationTypeError,
+        "needs a traced value as a Python number (float(), int(), a shape from values); keep it "
+        "an array and use jax.numpy",
+    ),
+)
+
+
 def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2) -> None:
     """Try `declared` with `values` on ratios 0.25 … 4 and advantages of both signs (a KL of
-    0 and 0.1): its value must be a finite float array of the ratio's shape, and its slope in
-    the ratio finite."""
+    0 and 0.1), under ``jax.jit`` and ``jax.grad`` as training runs it: its value must be a
+    finite float array of the ratio's shape, and its slope in the ratio finite."""
     ratio: np.ndarray | jax.Array
     advantage: np.ndarray | jax.Array
     ratio, advantage = np.meshgrid(np.geomspace(0.25, 4.0, 17), [-2.0, -0.5, 0.0, 0.5, 2.0])
@@ -363,24 +426,24 @@ def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2
     kl = jnp.tile(jnp.asarray([0.0, 0.1], jnp.float32), ratio.size // 2 + 1)[: ratio.size]
     arrays = {key: jnp.asarray(value, jnp.float32) for key, value in values.items()}
     eps = jnp.asarray(epsilon, jnp.float32)
-
-    def value(r: jax.Array) -> jax.Array:
-        return declared(r, advantage, kl, eps, arrays)
+    inputs = (ratio, advantage, kl, eps, arrays)
 
     where = f"surrogate {declared.name!r}"
     try:
-        out = value(ratio)
+        shape = jax.eval_shape(declared, *inputs)
     except Exception as error:
-        raise InvalidInput(f"{where} failed when tried: {type(error).__name__}: {error}") from None
-    if not isinstance(out, jax.Array | np.ndarray) or np.shape(out) != ratio.shape:
+        raise _failed(where, error) from None
+    if not hasattr(shape, "shape") or shape.shape != ratio.shape:
         raise InvalidInput(
             f"{where} must return one value per sample (an array of the ratio's shape "
-            f"{ratio.shape}), got {_described(out)}"
+            f"{ratio.shape}), got {_described(shape)}"
         )
-    if not jnp.issubdtype(out.dtype, jnp.floating):
-        raise InvalidInput(f"{where} must return floats, got {out.dtype}")
-    # Per sample: the surrogate is element-wise, so the slope of the sum is each one's slope.
-    slope = jax.grad(lambda r: jnp.sum(value(r)))(ratio)
+    if not jnp.issubdtype(shape.dtype, jnp.floating):
+        raise InvalidInput(f"{where} must return floats, got {shape.dtype}")
+    try:
+        out, slope = _value_and_slope(declared, *inputs)
+    except Exception as error:
+        raise _failed(where, error) from None
     for what, array in (("value", out), ("slope in the ratio", slope)):
         bad = ~np.isfinite(np.asarray(array))
         if bad.any():
@@ -392,21 +455,144 @@ def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2
             )
 
 
+def _failed(where: str, error: Exception) -> InvalidInput:
+    """Why the surrogate `where` names failed when tried, in one line."""
+    cause = next((why for kind, why in _TRACING_ERRORS if isinstance(error, kind)), None)
+    if cause is not None:
+        return InvalidInput(f"{where} {cause}")
+    return InvalidInput(f"{where} failed when tried: {type(error).__name__}: {first_line(error)}")
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _value_and_slope(
+    declared: Surrogate,
+    ratio: jax.Array,
+    advantage: jax.Array,
+    kl: jax.Array,
+    epsilon: jax.Array,
+    values: Mapping[str, jax.Array],
+) -> tuple[jax.Array, jax.Array]:
+    """`declared`'s value per sample and its slope in the ratio, compiled as training compiles
+    it (once per surrogate). Per sample: the surrogate is element-wise, so the slope of the sum
+    is each one's slope."""
+
+    def summed(r: jax.Array) -> tuple[jax.Array, jax.Array]:
+        out = declared(r, advantage, kl, epsilon, values)
+        return jnp.sum(out), out
+
+    (_, out), slope = jax.value_and_grad(summed, has_aux=True)(ratio)
+    return out, slope
+
+
 def _described(out: object) -> str:
     shape = getattr(out, "shape", None)
     return f"shape {shape}" if shape is not None else type(out).__name__
 
 
-def source_digest(function: Callable[..., Any]) -> str:
-    """A short digest of `function`'s source (of its compiled code where the source is not at
-    hand), so that a record tells two functions apart."""
-    try:
-        text = inspect.getsource(function).encode()
-    except (OSError, TypeError):
-        code = getattr(function, "__code__", None)
-        text = (
-            repr(function).encode()
-            if code is None
-            else code.co_code + repr(code.co_consts).encode()
+def function_digest(function: Callable[..., Any], where: str) -> str:
+    """A short digest of what `function` computes with, so that a record tells two functions
+    apart: its source (its compiled code where the source is not at hand) and the values it
+    reads beyond its arguments (:func:`_identified`). `where` names the surrogate in the error
+    that refuses a value that cannot be identified."""
+    return hashlib.sha256(_identified(function, where, set())).hexdigest()[:16]
+
+
+def _identified(function: Callable[..., Any], where: str, seen: set[int]) -> bytes:
+    """The text that tells `function` apart: a function's source, then each global or closure
+    variable it reads, as ``name=value``; a ``functools.partial``'s function, then its bound
+    arguments; a callable instance's class, then its attributes. Modules, and functions and
+    classes of other modules (named by the source), add nothing, so a function that reads
+    nothing else is its source alone; `seen` holds the functions already identified."""
+    function = inspect.unwrap(function)
+    seen.add(id(function))
+    if isinstance(function, functools.partial):
+        bound = {**{f"args[{i}]": v for i, v in enumerate(function.args)}, **function.keywords}
+        return _joined(
+            _identified(function.func, where, seen),
+            b"partial",
+            _values(bound, getattr(function.func, "__module__", None), where, seen),
         )
-    return hashlib.sha256(text).hexdigest()[:16]
+    if isinstance(function, types.FunctionType):
+        return _joined(
+            _source(function), _values(_reads(function), function.__module__, where, seen)
+        )
+    cls = type(function)
+    methods = [f for f in vars(cls).values() if isinstance(f, types.FunctionType)]
+    try:
+        text = inspect.getsource(cls).encode()
+    except (OSError, TypeError):
+        text = b"\n".join(_source(f) for f in methods)
+    read = {name: value for f in methods for name, value in _reads(f).items()}
+    return _joined(
+        text,
+        _values(read, cls.__module__, where, seen),
+        _values(getattr(function, "__dict__", {}), cls.__module__, where, seen),
+    )
+
+
+def _joined(*parts: bytes) -> bytes:
+    return b"\n".join(part for part in parts if part)
+
+
+def _source(function: types.FunctionType) -> bytes:
+    try:
+        return inspect.getsource(function).encode()
+    except (OSError, TypeError):
+        code = function.__code__
+        return code.co_code + repr(code.co_consts).encode()
+
+
+def _reads(function: types.FunctionType) -> dict[str, Any]:
+    """The globals and closure variables `function` reads, by name, with their values."""
+    read = {
+        name: function.__globals__[name]
+        for name in _global_names(function.__code__)
+        if name in function.__globals__
+    }
+    for name, cell in zip(function.__code__.co_freevars, function.__closure__ or (), strict=True):
+        with contextlib.suppress(ValueError):  # a cell not yet assigned holds nothing
+            read[name] = cell.cell_contents
+    return read
+
+
+def _global_names(code: types.CodeType) -> list[str]:
+    """The globals that `code` and the functions defined in it load, in order."""
+    names = [i.argval for i in dis.get_instructions(code) if i.opname == "LOAD_GLOBAL"]
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names += _global_names(const)
+    return list(dict.fromkeys(names))
+
+
+def _values(read: Mapping[Any, Any], module: str | None, where: str, seen: set[int]) -> bytes:
+    """`read`'s values as ``name=value`` lines, those that identify something (see
+    :func:`_identified`); one that cannot be identified is refused, naming it."""
+    lines = []
+    for name, value in read.items():
+        if _plain(value):
+            lines.append(f"{name}={value!r}".encode())
+        elif isinstance(value, functools.partial) or (
+            isinstance(value, types.FunctionType) and value.__module__ == module
+        ):
+            # A helper of the surrogate's own: what it computes with is the surrogate's too.
+            if id(value) not in seen:
+                lines.append(f"{name}=".encode() + _identified(value, where, seen))
+        elif not (isinstance(value, types.ModuleType) or hasattr(value, "__name__")):
+            raise InvalidInput(
+                f"{where} reads {name}, of type {type(value).__name__}, which its record cannot "
+                "identify (so a changed value would pass unseen): make it a hyperparameter, or "
+                "a number, string, bool, None, or a tuple, list or dict of them"
+            )
+    return b"\n".join(lines)
+
+
+def _plain(value: object) -> bool:
+    """Whether `value` is plain data, whose ``repr`` identifies it: a number, a string, a
+    bool, None, or a tuple, list or dict of them."""
+    if value is None or isinstance(value, str | numbers.Number | np.bool_):
+        return True
+    if isinstance(value, tuple | list):
+        return all(_plain(item) for item in value)
+    if isinstance(value, dict):
+        return all(_plain(key) and _plain(item) for key, item in value.items())
+    return False

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import math
 import sys
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
@@ -46,6 +47,10 @@ from fppo_jax.prepare import Prepared, prepare
 from fppo_jax.results import SweepResult, labels
 from fppo_jax.surrogates import Surrogate, real_number
 
+# The most combinations of values a grid may give: far more than a sweep trains (each of them
+# times the seeds), so more is a mistyped grid, refused before its settings are built.
+MAX_SETTINGS = 10_000
+
 
 def expand_grid(
     grid: Mapping[str, Any] | Sequence[Mapping[str, Any]], task: str | None = None
@@ -68,6 +73,12 @@ def expand_grid(
     if unknown:
         raise InvalidInput(f"cannot sweep {', '.join(unknown)}; sweepable: {', '.join(valid)}")
     values = {name: _as_list(name, v) for name, v in grid.items() if name != "variant"}
+    combinations = math.prod(map(len, values.values()), start=len(surrogates))
+    if combinations > MAX_SETTINGS:
+        raise InvalidInput(
+            f"the grid gives {combinations:,} combinations of values, more than {MAX_SETTINGS:,}"
+            " (each trained for every seed): give its axes fewer values, or split it into sweeps"
+        )
     for name in set(values) & set(specific):
         if not takers(name, surrogates):
             everyone = {**BUILTINS, **surrogates}

@@ -2,8 +2,12 @@
 compiled program as the built-ins, and recorded so that two functions under one name are told
 apart."""
 
+import functools
 import inspect
 import json
+import os
+import re
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -61,6 +65,22 @@ def _not_finite_below_one(ratio, advantage):
     return jnp.log(ratio - 1.0) * advantage
 
 
+def _branches_in_python(ratio, advantage):
+    return ratio * advantage if ratio.mean() > 1 else -ratio * advantage
+
+
+def _uses_numpy(ratio, advantage):
+    return np.minimum(ratio, 1.2) * advantage
+
+
+def _takes_a_float(ratio, advantage):
+    return ratio * advantage * float(ratio.max())
+
+
+def _has_no_slope(ratio, advantage):
+    return jax.pure_callback(lambda r: r, ratio, ratio) * advantage  # a callback has no gradient
+
+
 def _takes_an_unknown_input(ratio, advantage, beta_typo):
     return ratio * advantage
 
@@ -87,17 +107,72 @@ def _takes_an_unknown_input(ratio, advantage, beta_typo):
         ),
         (
             ("mine", my_clip_higher.function),
+            {"eps_low": 0.2, "eps_high": 0.3, "ranges": {"eps_high": 5}},
+            r"ranges must map hyperparameters to a range's text, such as \{'eps_high': '> 0'\}",
+        ),
+        (
+            ("mine", my_clip_higher.function),
+            {"eps_low": 0.2, "eps_high": 0.3, "ranges": ["eps_high"]},
+            r"ranges must map .*, got \['eps_high'\]",
+        ),
+        (
+            ("mine", my_clip_higher.function),
             {"eps_low": 0.2, "eps_high": 0.3, "clip_range": ("eps_low", "high")},
             "surrogate 'mine' has no hyperparameter 'high'",
         ),
         (("mine", _returns_a_scalar), {}, "must return one value per sample"),
         (("mine", _returns_integers), {}, "must return floats, got int32"),
         (("mine", _not_finite_below_one), {}, "has a value that is not finite"),
+        (
+            ("mine", _branches_in_python),
+            {},
+            r"^surrogate 'mine' uses Python control flow \(if, while, and, or\) on traced values; "
+            "use jnp.where$",
+        ),
+        (("mine", _uses_numpy), {}, r"^surrogate 'mine' turns a traced value into a NumPy array"),
+        (
+            ("mine", _takes_a_float),
+            {},
+            r"^surrogate 'mine' needs a traced value as a Python number",
+        ),
+        (("mine", _has_no_slope), {}, r"^surrogate 'mine' failed when tried: \w+: [^\n]*\Z"),
     ],
 )
 def test_a_bad_surrogate_gets_one_clear_error(args, kwargs, match):
     with pytest.raises(ValueError, match=match):
         surrogate(*args, **kwargs)
+
+
+@pytest.mark.parametrize(
+    "hyperparameter, what",
+    [
+        ("learning_rate", "an optimisation setting"),
+        ("gamma", "an optimisation setting"),
+        ("num_envs", "a TrainConfig field"),
+        ("steps", "a name of the command line"),
+        ("output", "a name of the command line"),
+        ("seed", "a name of the command line"),
+        ("level", "a name of the command line"),
+        ("variant", "a name of the command line"),
+        ("command", "a name of the command line"),
+    ],
+)
+def test_a_hyperparameter_cannot_take_a_settings_or_a_flags_name(hyperparameter, what):
+    function = eval(f"lambda ratio, advantage, {hyperparameter}: ratio * advantage")
+    with pytest.raises(
+        ValueError,
+        match=f"surrogate 'mine': a hyperparameter of its own cannot take another setting's "
+        f"name \\({hyperparameter} is {what}\\), whose value it would take or shadow: rename it",
+    ):
+        surrogate("mine", function, **{hyperparameter: 0.001})
+
+
+def test_a_hyperparameter_may_share_a_builtins_name_as_a_grid_axis_does():
+    mine = surrogate("mine", lambda ratio, advantage, alpha: alpha * ratio * advantage, alpha=1.0)
+    assert fppo_jax.expand_grid({"variant": ["fppo-lp", mine], "alpha": [1.1]}) == [
+        {"variant": "fppo-lp", "alpha": 1.1},
+        {"variant": "mine", "alpha": 1.1},
+    ]
 
 
 def test_a_user_surrogates_hyperparameters_are_checked_before_compiling():
@@ -205,3 +280,160 @@ def test_one_default_variant_everywhere():
     assert fppo_jax.expand_grid({}) == [{"variant": DEFAULT_VARIANT}]
     assert build_parser().parse_args(["train"]).variant.name == DEFAULT_VARIANT
     assert [s.name for s in build_parser().parse_args(["sweep"]).variant] == [DEFAULT_VARIANT]
+
+
+@pytest.fixture
+def module_here(tmp_path, monkeypatch):
+    """Writes a module in a new current directory that is not on Python's path (as under the
+    installed command); the module is forgotten afterwards."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", os.getcwd())])
+
+    def write(name, text):
+        (tmp_path / f"{name}.py").write_text(text)
+        monkeypatch.delitem(sys.modules, name, raising=False)
+
+    return write
+
+
+def test_a_surrogate_module_is_imported_from_the_current_directory(module_here):
+    module_here(
+        "here_mine",
+        "import fppo_jax\n"
+        "mine = fppo_jax.surrogate('here-mine', lambda ratio, advantage: ratio * advantage)\n",
+    )
+    assert fppo_jax.objectives.resolve("here_mine:mine").name == "here-mine"
+    assert os.getcwd() not in sys.path  # the directory is on the path only while importing
+    with pytest.raises(
+        ValueError,
+        match=re.escape(
+            f"no module 'here_absent' in the current directory or on Python's path (looked in "
+            f"{os.getcwd()}, "
+        ),
+    ):
+        fppo_jax.objectives.resolve("here_absent:mine")
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("import sys\nsys.exit(0)\n", r"importing here_bad called sys.exit\(0\); a module"),
+        (
+            "raise RuntimeError('no GPU here')\n",
+            "importing here_bad raised RuntimeError: no GPU here",
+        ),
+        ("x = 1\ndef f(:\n", r"here_bad does not parse: .*here_bad.py:2: SyntaxError: "),
+    ],
+)
+def test_a_surrogate_module_that_fails_to_import_is_one_line_naming_it(
+    module_here, capsys, text, match
+):
+    module_here("here_bad", text)
+    assert main(["train", "--variant", "here_bad:mine"]) == 2
+    err = capsys.readouterr().err
+    assert re.fullmatch(f"fppo-jax: error: variant 'here_bad:mine': {match}.*\n", err), err
+
+
+def test_an_abbreviated_variant_flag_is_refused_rather_than_losing_its_surrogates_flags(
+    module_here, capsys
+):
+    module_here(
+        "here_scaled",
+        "import fppo_jax\n"
+        "def scaled(ratio, advantage, c):\n"
+        "    return c * ratio * advantage\n"
+        "mine = fppo_jax.surrogate('here-scaled', scaled, c=1.0)\n",
+    )
+    with pytest.raises(SystemExit) as exited:
+        main(["train", "--vari", "here_scaled:mine", "--c", "0.5"])
+    assert exited.value.code == 2
+    assert "unrecognized arguments: --vari here_scaled:mine --c 0.5" in capsys.readouterr().err
+
+
+SCALE = 1.0  # read by _scaled: part of its surrogate's identity
+
+
+def _scaled(ratio, advantage):
+    return SCALE * ratio * advantage
+
+
+def _scaled_by(scale):
+    def scaled(ratio, advantage):
+        return scale * ratio * advantage
+
+    return scaled
+
+
+def _scaled_with(scale, ratio, advantage):
+    return scale * ratio * advantage
+
+
+class _Scaled:
+    def __init__(self, scale):
+        self.scale = scale
+
+    def __call__(self, ratio, advantage):
+        return self.scale * ratio * advantage
+
+
+WEIGHTS = jnp.ones(3)
+
+
+def _weighted(ratio, advantage):
+    return WEIGHTS.sum() * ratio * advantage
+
+
+def test_a_surrogates_identity_covers_the_values_its_function_reads(monkeypatch):
+    def digest(function):
+        return surrogate("scaled", function).identity()["digest"]
+
+    # A module's constant: a rerun, a resumed run or a merge of another value is refused.
+    first = digest(_scaled)
+    assert digest(_scaled) == first
+    monkeypatch.setattr(sys.modules[__name__], "SCALE", 2.0)
+    assert digest(_scaled) != first
+    # A closure's variable, a partial's bound arguments and a callable instance's attributes:
+    # the same made twice is the same surrogate, and another value another.
+    for make in (_scaled_by, functools.partial(functools.partial, _scaled_with), _Scaled):
+        assert digest(make(1.0)) == digest(make(1.0)) != digest(make(2.0))
+    with pytest.raises(
+        ValueError,
+        match=r"^surrogate 'weighted' reads WEIGHTS, of type ArrayImpl, which its record cannot "
+        "identify .*: make it a hyperparameter, or a number, string, bool, None, or a tuple, "
+        "list or dict of them$",
+    ):
+        surrogate("weighted", _weighted)
+
+
+def test_a_rerun_from_a_record_refuses_a_surrogate_changed_since(tmp_path, capsys):
+    from fppo_jax.cli.settings import settings_file
+
+    record = {"variant": "my-ppo", "surrogates": {"my-ppo": my_ppo.identity()}}
+    (tmp_path / "config.json").write_text(json.dumps(record))
+    assert settings_file(tmp_path / "config.json")["variant"] == "own_surrogates:my_ppo"
+    record["surrogates"]["my-ppo"]["digest"] = "0123456789abcdef"  # a function edited since
+    (tmp_path / "config.json").write_text(json.dumps(record))
+    assert main(["train", "--config", str(tmp_path / "config.json")]) == 2
+    assert capsys.readouterr().err == (
+        f"fppo-jax: error: {tmp_path / 'config.json'} records another surrogate 'my-ppo' than "
+        "own_surrogates:my_ppo is now (recorded digest '0123456789abcdef', now "
+        f"{my_ppo.identity()['digest']!r}): restore the one it trained to rerun the run, or "
+        "train this one without --config\n"
+    )
+
+
+def _not_finite_past_the_tried_advantages(ratio, advantage):
+    # Finite where its declaration tries it (|A| ≤ 2); NaN in value and slope beyond, where
+    # training's advantages go at once.
+    return ratio * advantage * jnp.where(jnp.abs(advantage) > 2.5, jnp.nan, 1.0)
+
+
+def test_a_run_that_diverges_names_its_own_surrogate_as_a_cause(tiny):
+    mine = surrogate("nan-past-the-trial", _not_finite_past_the_tried_advantages)
+    with pytest.raises(
+        fppo_jax.TrainingDiverged,
+        match=r"Lower the learning rate, check the environment's observations and rewards, or "
+        r"check the surrogate 'nan-past-the-trial': its value or slope may not be finite at "
+        r"ratios or advantages that training reaches beyond those its declaration tried\.$",
+    ):
+        train("cartpole", mine, total_steps=TINY_STEPS, **IN_CHUNKS, **tiny)

@@ -44,6 +44,10 @@ def test_grid_drops_values_a_variant_does_not_take():
         ({"lr": [1e-3]}, "cannot sweep lr; sweepable: variant, epsilon"),
         ({"variant": ["ppo", "sppo"]}, "unknown variant 'sppo'"),
         ({"alpha": []}, "the grid gives alpha no values"),
+        (
+            {"epsilon": [i / 200 for i in range(1, 101)], "learning_rate": [1e-4] * 101},
+            "the grid gives 10,100 combinations of values, more than 10,000",
+        ),
     ],
 )
 def test_bad_grids_are_named(grid, match):

@@ -455,7 +455,12 @@ def add_run_flags(command: argparse.ArgumentParser) -> None:
 
 
 class Parser(argparse.ArgumentParser):
-    """A command's parser whose errors are one line, pointing at --help, not the usage."""
+    """A command's parser whose errors are one line, pointing at --help, not the usage, and
+    which takes no abbreviated flag: ``--vari mod:attr`` would pass the variant flags unseen
+    (:func:`surrogates_named`), and its surrogate's flags with it."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **{**kwargs, "allow_abbrev": False})
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

@@ -46,6 +46,7 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
         ") with a fully jitted JAX trainer, and compare them.",
         epilog="Compiled programs are cached in ~/.cache/fppo-jax (under $XDG_CACHE_HOME if "
         "set): FPPO_JAX_CACHE_DIR=DIR moves the cache, FPPO_JAX_CACHE_DIR=off turns it off.",
+        allow_abbrev=False,
     )
     parser.add_argument("--version", action="version", version=f"fppo-jax {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
@@ -59,6 +60,19 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
 
     commands.add_parser("list", help="list the tasks and the variants")
     return parser
+
+
+def command_line_names() -> set[str]:
+    """Every name the command line gives a value: its commands' flags (``--num-envs`` as
+    num_envs), their destinations and the other defaults (what ``--config FILE`` may set)."""
+    parser = build_parser()
+    names: set[str] = set()
+    for command in (parser, *parser.get_default("commands").values()):
+        names.update(command._defaults)
+        for action in command._actions:
+            names.add(action.dest)
+            names.update(flag.lstrip("-").replace("-", "_") for flag in action.option_strings)
+    return names
 
 
 def _add_train(

@@ -10,6 +10,7 @@ from typing import Any, cast
 
 from fppo_jax.config import PRESETS
 from fppo_jax.errors import InvalidInput
+from fppo_jax.objectives import resolve
 
 # What a run's config.json records beside its settings (metric_log.environment_record).
 RECORD_ONLY = ("versions", "platform")
@@ -57,11 +58,25 @@ def _importable(path: Path, variant: Any, own: dict[str, Any]) -> Any:
         return ",".join(_importable(path, v, own) for v in variant)
     if variant not in own:
         return variant
-    found = own[variant].get("import")
+    recorded = own[variant]
+    found = recorded.get("import")
     if not found:
         raise InvalidInput(
             f"{path}: the surrogate {variant!r} was made in a script or a notebook, where no "
             "import finds it; put it in a module and pass --variant module:attribute"
+        )
+    # As a resumed run's: the function found now must be the one the run trained.
+    now = resolve(found).identity()
+    differing = [
+        f"{key} {recorded.get(key)!r}, now {now.get(key)!r}"
+        for key in sorted(set(recorded) | set(now))
+        if recorded.get(key) != now.get(key)
+    ]
+    if differing:
+        raise InvalidInput(
+            f"{path} records another surrogate {variant!r} than {found} is now (recorded "
+            f"{'; '.join(differing)}): restore the one it trained to rerun the run, or train "
+            "this one without --config"
         )
     return found
 

@@ -294,7 +294,8 @@ def test_a_study_takes_the_baseline_s_recorded_runs_instead_of_training_them(tmp
 
 def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tmp_path, tiny):
     output = tmp_path / "study"
-    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
+    # A part trains whole groups of the sweep's runs: 24 runs in groups of 12 make 2 parts.
+    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8, "chunk": 12}
     candidates = [frozen, "fppo-lp"]
 
     first = fppo_jax.study("cartpole", candidates, "ppo", part=(1, 2), **settings)

@@ -294,8 +294,7 @@ def test_a_study_takes_the_baseline_s_recorded_runs_instead_of_training_them(tmp
 
 def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tmp_path, tiny):
     output = tmp_path / "study"
-    # A part trains whole groups of the sweep's runs: 24 runs in groups of 12 make 2 parts.
-    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8, "chunk": 12}
+    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
     candidates = [frozen, "fppo-lp"]
 
     first = fppo_jax.study("cartpole", candidates, "ppo", part=(1, 2), **settings)
@@ -311,7 +310,8 @@ def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tm
 
     fppo_jax.study("cartpole", candidates, "ppo", part=(2, 2), groups=1, **settings)
     shares = [SweepResult.read(group_1 / f"part-{k}") for k in (1, 2)]
-    assert [len(s.runs) for s in shares] == [12, 12]  # 3 settings × 8 seeds, halved
+    # 3 settings × 8 seeds in the sweep's 3 groups of 8 runs (chunk): the first share takes 2.
+    assert [len(s.runs) for s in shares] == [16, 8]
     # The group's record of a run of it whole, cut short, beside the shares: they finish it.
     cut = merge(shares)
     cut = SweepResult(**{**cut.__dict__, "runs": cut.runs[:5], "diverged": cut.diverged[:5]})

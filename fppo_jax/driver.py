@@ -349,11 +349,9 @@ def part_runs(part: tuple[int, int], num_runs: int, size: int, across: int = 1) 
     if part[1] > groups:
         # The most runs per call that make N groups, a multiple of `across`.
         most = (-(-num_runs // (part[1] - 1)) - 1) // across * across
-        fix = (
-            f"give runs per call (chunk, --chunk) of at most {most}"
-            if 0 < most < size
-            else "split it into fewer parts"
-        )
+        fewer = f"split it into at most {groups} part{'s' * (groups > 1)}"
+        fix = f"give runs per call (chunk, --chunk) of at most {most}, or {fewer}"
+        fix = fix if 0 < most < size else fewer
         raise InvalidInput(
             f"part {part[0]} of {part[1]}: the sweep's {num_runs} runs train as {groups} "
             f"group{'s' * (groups > 1)} of {size} per compiled call, and a part trains whole "

@@ -209,11 +209,17 @@ def test_parts_share_the_sweep_s_groups_in_run_order():
     assert [part_runs((k, 3), 7, 2) for k in (1, 2, 3)] == [(0, 4), (4, 6), (6, 7)]
     assert [part_runs((k, 4), 7, 2) for k in (1, 2, 3, 4)] == [(0, 2), (2, 4), (4, 6), (6, 7)]
     assert part_runs((1, 1), 7, 7) == (0, 7)
-    with pytest.raises(ValueError, match=r"7 runs train as 3 groups of 3 .* at most 2$"):
+    with pytest.raises(
+        ValueError,
+        match=r"7 runs train as 3 groups of 3 .* at most 2, or split it into at most 3 parts$",
+    ):
         part_runs((1, 4), 7, 3)
-    with pytest.raises(ValueError, match=r"6 runs train as 2 groups of 4 .* at most 2$"):
+    with pytest.raises(
+        ValueError,
+        match=r"6 runs train as 2 groups of 4 .* at most 2, or split it into at most 2 parts$",
+    ):
         part_runs((2, 3), 6, 4, across=2)
-    with pytest.raises(ValueError, match=r"split it into fewer parts$"):
+    with pytest.raises(ValueError, match=r"bit for bit\): split it into at most 2 parts$"):
         part_runs((2, 3), 6, 4, across=4)
 
 
@@ -364,7 +370,10 @@ def test_a_split_into_more_parts_than_the_sweep_has_groups_is_refused():
     with pytest.raises(ValueError, match=r"part 1 of 3: the sweep's 6 runs train as 2 groups .*"):
         sweep("cartpole", grid, seeds=3, chunk=4, part=(1, 3), **TINY)
     # By default, a group is as many of the whole sweep's runs as fit, here all of them.
-    with pytest.raises(ValueError, match=r"4 runs train as 1 group of 4 .* at most 3$"):
+    with pytest.raises(
+        ValueError,
+        match=r"4 runs train as 1 group of 4 .* at most 3, or split it into at most 1 part$",
+    ):
         sweep("cartpole", grid, seeds=2, part=(2, 2), **TINY)
 
 

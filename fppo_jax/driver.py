@@ -199,7 +199,9 @@ def drive(plan: Plan, options: Options) -> Outcome:
             runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
             key, hp = jax.eval_shape(first_run, (plan.keys, plan.hps))
             size = runs_per_call(plan.trainer, key, hp, size, runs, data)
-        plan = _share(plan, size, mesh.shape["runs"] if mesh else 1)
+        if plan.share is not None:
+            plan = _share(plan, size, mesh.shape["runs"] if mesh else 1)
+            _check_runs(plan, options)
         restored = None
         if checkpointed is not None:
             like = jax.eval_shape(_init(plan), *_group(plan, 0, size))
@@ -235,10 +237,16 @@ def _devices(plan: Plan, options: Options) -> int | None:
                 "device: devices must be 1, in a single process"
             )
         devices = 1
-    check_runs = getattr(env, "check_runs", None)  # a vector environment instance's
+    if plan.share is None:  # a part's runs are known once their group size is
+        _check_runs(plan, options)
+    return devices
+
+
+def _check_runs(plan: Plan, options: Options) -> None:
+    """What a vector environment instance cannot serve (its `check_runs`) is refused."""
+    check_runs = getattr(plan.trainer.env, "check_runs", None)
     if check_runs is not None:
         check_runs(plan.num_runs, options.eval_every is not None)
-    return devices
 
 
 def _compile(plan: Plan, options: Options, mesh: Mesh | None, size: int, main: bool) -> Program:
@@ -306,11 +314,10 @@ def _group_size(
 
 
 def _share(plan: Plan, size: int, across: int) -> Plan:
-    """The plan of `plan`'s part, if it is one: its share of the whole sweep's groups of
+    """The plan of `plan`'s part: its share of the whole sweep's groups of
     `size` runs (:func:`part_runs`), whose groups are then the sweep's own (each starts at a
     multiple of `size`, and only the sweep's last is padded, by the sweep's last run)."""
-    if plan.share is None:
-        return plan
+    assert plan.share is not None
     start, stop = part_runs(plan.share, plan.num_runs, size, across)
     index = slice(start, stop)
     return dataclasses.replace(

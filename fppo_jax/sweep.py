@@ -137,9 +137,9 @@ def sweep(
     K-th (from 1) of N shares of the whole sweep's groups of `chunk` runs, in run order
     (settings × seeds), to split a sweep over a cluster's nodes; :func:`~fppo_jax.merge` joins
     the parts, naming any missing run, into the sweep trained unsplit with the same `chunk`,
-    bit for bit (XLA rounds a vmapped program by its batch size: a run's numbers depend on its
-    group's size and its place in it, which a split keeps). A split needs as many groups as
-    parts: give `chunk` when the sweep's runs fit in one call.
+    bit for bit (XLA rounds a vmapped program by its batch size, so a run's numbers depend on
+    its group's size; a split keeps each run's group, and its place in it). A split needs as
+    many groups as parts: give `chunk` when the sweep's runs fit in one call.
     """
     surrogates = grid_surrogates(grid)
     names = sweepable(surrogates.values())

@@ -6,7 +6,9 @@ directory, restores, compiles once, then calls the program in chunks of updates.
 chunk it stops a single run that diverged, evaluates, then hands the chunk to the hooks the
 options ask for (:mod:`fppo_jax.hooks`: checkpoint, output directory, logs, callback, progress),
 and stops on a signal. A sweep's runs train in groups of one size, so every group reuses the one
-compiled program.
+compiled program. The groups are the whole sweep's: a part of a split sweep trains whole groups
+of them, so that each run is computed by the same program, at the same place in its group, as
+in the unsplit sweep.
 """
 
 from __future__ import annotations
@@ -123,8 +125,10 @@ class Plan:
     """What to train: `keys`, a [run] array of keys, and `hps` alike (one run's for a "train"
     plan); `record` is the configuration that checkpoints and outputs record, and `runs` (a
     sweep's only) each run's setting and seed, which its logs name it by.
-    `runs_per_call` fixes a sweep's group size (None: as many as fit in memory), and
-    `data_parallel` the devices each run's environments are split over. `after_group`, if
+    `runs_per_call` fixes a sweep's group size (None: as many of its runs as fit in memory),
+    and `data_parallel` the devices each run's environments are split over. `share`, a
+    ``(K, N)`` part of a split sweep, trains the K-th of N shares of the whole sweep's groups
+    (:func:`part_runs`): `keys`, `hps` and `runs` are then the whole sweep's. `after_group`, if
     given, is called on the process that writes with the :class:`Outcome` of the runs finished
     so far, after each group (a sweep writes its curves with it)."""
 
@@ -139,6 +143,7 @@ class Plan:
     runs_per_call: int | None = None
     data_parallel: int | None = None
     after_group: Callable[[Outcome], None] | None = None
+    share: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         sweep = self.kind == "sweep"
@@ -146,6 +151,8 @@ class Plan:
             raise InvalidInput("a sweep's plan names each of its runs, and only a sweep's")
         if not sweep and self.num_runs != 1:
             raise InvalidInput(f"a train plan trains one run, not {self.num_runs}")
+        if self.share is not None and not sweep:
+            raise InvalidInput("only a sweep is split into parts")
 
     @property
     def num_runs(self) -> int:
@@ -198,7 +205,15 @@ def drive(plan: Plan, options: Options) -> Outcome:
             if options.resume:  # the run checkpointed, or this one if nothing was yet
                 resumed = plan.record if checkpointed is None else checkpointed["config"]
             outputs = prepare_log_dir(options.log_dir, resumed)
+        # The group size is the whole sweep's, chosen before a part takes its groups of it.
         size = _group_size(plan, mesh, checkpointed, options.checkpoint_dir)
+        if plan.runs_per_call is None and checkpointed is None:
+            runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
+            key, hp = jax.eval_shape(first_run, (plan.keys, plan.hps))
+            size = runs_per_call(plan.trainer, key, hp, size, runs, data)
+        if plan.share is not None:
+            plan = _share(plan, size, mesh.shape["runs"] if mesh else 1)
+            _check_runs(plan, options)
         restored = None
         if checkpointed is not None:
             like = jax.eval_shape(_init(plan), *_group(plan, 0, size))
@@ -206,10 +221,6 @@ def drive(plan: Plan, options: Options) -> Outcome:
         if options.progress is True and main:
             where = f" on {mesh.size} devices" if mesh else ""
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
-        if plan.runs_per_call is None and checkpointed is None:
-            runs, data = (mesh.shape["runs"], mesh.shape["data"]) if mesh else (1, 1)
-            key, hp = jax.eval_shape(first_run, (plan.keys, plan.hps))
-            size = runs_per_call(plan.trainer, key, hp, size, runs, data)
         program = _compile(plan, options, mesh, size, main)
         with (
             reporter(options.progress if main else False, plan.description) as report,
@@ -238,10 +249,16 @@ def _devices(plan: Plan, options: Options) -> int | None:
                 "device: devices must be 1, in a single process"
             )
         devices = 1
-    check_runs = getattr(env, "check_runs", None)  # a vector environment instance's
+    if plan.share is None:  # a part's runs are known once their group size is
+        _check_runs(plan, options)
+    return devices
+
+
+def _check_runs(plan: Plan, options: Options) -> None:
+    """What a vector environment instance cannot serve (its `check_runs`) is refused."""
+    check_runs = getattr(plan.trainer.env, "check_runs", None)
     if check_runs is not None:
         check_runs(plan.num_runs, options.eval_every is not None)
-    return devices
 
 
 def _compile(plan: Plan, options: Options, mesh: Mesh | None, size: int, main: bool) -> Program:
@@ -306,6 +323,62 @@ def _group_size(
             "that divide it"
         )
     return size
+
+
+def _share(plan: Plan, size: int, across: int) -> Plan:
+    """The plan of `plan`'s part: its share of the whole sweep's groups of
+    `size` runs (:func:`part_runs`), whose groups are then the sweep's own (each starts at a
+    multiple of `size`, and only the sweep's last is padded, by the sweep's last run)."""
+    assert plan.share is not None
+    start, stop = part_runs(plan.share, plan.num_runs, size, across)
+    index = slice(start, stop)
+    return dataclasses.replace(
+        plan,
+        keys=plan.keys[index],
+        hps=jax.tree.map(lambda x: x[index], plan.hps),
+        runs=cast(tuple[dict[str, Any], ...], plan.runs)[index],
+        share=None,
+    )
+
+
+def part_bounds(part: object, count: int) -> tuple[int, int]:
+    """Where the K-th (from 1) of N shares of `count` things starts and stops, for
+    ``part=(K, N)``: shares as equal as they can be, the first ones one longer."""
+    if (
+        not isinstance(part, tuple | list)
+        or len(part) != 2
+        or not all(isinstance(x, int | np.integer) and not isinstance(x, bool) for x in part)
+        or not 1 <= part[0] <= part[1]
+    ):
+        raise InvalidInput(f"part must be (K, N) with 1 <= K <= N, got {part!r}")
+    k, n = int(part[0]), int(part[1])
+    if n > count:
+        raise InvalidInput(f"part {k} of {n}: the sweep has only {count} runs to share")
+    size, extra = divmod(count, n)
+    start = (k - 1) * size + min(k - 1, extra)
+    return start, start + size + (k <= extra)
+
+
+def part_runs(part: tuple[int, int], num_runs: int, size: int, across: int = 1) -> tuple[int, int]:
+    """Where the runs of ``part=(K, N)`` start and stop among a sweep's `num_runs` runs trained
+    in groups of `size` (the sweep's runs per call, rounded to the `across` devices that share
+    a group's runs): the K-th of N shares of the groups (:func:`part_bounds`), so that a part
+    trains whole groups of the sweep, each as the unsplit sweep trains it."""
+    groups = -(-num_runs // size)
+    if part[1] > groups:
+        # The most runs per call that make N groups, a multiple of `across`.
+        most = (-(-num_runs // (part[1] - 1)) - 1) // across * across
+        fewer = f"split it into at most {groups} part{'s' * (groups > 1)}"
+        fix = f"give runs per call (chunk, --chunk) of at most {most}, or {fewer}"
+        fix = fix if 0 < most < size else fewer
+        raise InvalidInput(
+            f"part {part[0]} of {part[1]}: the sweep's {num_runs} runs train as {groups} "
+            f"group{'s' * (groups > 1)} of {size} per compiled call, and a part trains whole "
+            f"groups of the sweep (so that it merges into the sweep run unsplit, bit for bit): "
+            f"{fix}"
+        )
+    first, stop = part_bounds(part, groups)
+    return first * size, min(stop * size, num_runs)
 
 
 def _updates_per_call(options: Options, num_updates: int) -> int:

@@ -335,7 +335,8 @@ class SweepResult:
 
 
 # What may differ between parts of one study: which settings, seeds and share of its runs each
-# ran, how many runs per call, and which surrogates of one's own (one function per name).
+# ran, how many runs per call (but not between the shares of one split: merge checks it), and
+# which surrogates of one's own (one function per name).
 PART_FIELDS = ("grid", "seeds", "runs_per_call", "part", "surrogates")
 
 
@@ -345,8 +346,10 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
     run them all. The merged grid holds each axis's values from every part. An ``InvalidInput``
     names the configuration field on which two parts differ and a (setting, seed) run that two
     parts both hold; for the shares of one sweep (``sweep(..., part=(K, N))``), which share one
-    grid, it also names the runs, and the parts, still missing, and joins them in the order of
-    their part numbers. Metrics not in every part are left out."""
+    grid, it also names the runs, and the parts, still missing, joins them in the order of
+    their part numbers, and refuses shares trained in groups of different sizes (their
+    ``runs_per_call``): the shares of one group size join into the sweep trained unsplit with
+    it, bit for bit. Metrics not in every part are left out."""
     if not parts:
         raise InvalidInput("merge needs at least one sweep")
     first = parts[0]
@@ -356,6 +359,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         # The shares of one split in their sweep's run order, whatever order they were named in:
         # a shell lists part-10 before part-2, and the order of the runs is the order of curves.csv.
         parts = sorted(parts, key=lambda part: part.config["part"][0])
+        _check_one_group_size(parts)
     settings: list[dict[str, Any]] = []
     runs: list[dict[str, Any]] = []
     setting: dict[str, Any] | int  # a setting, then a setting's index
@@ -410,6 +414,22 @@ def _check_same_sweep(parts: Sequence[SweepResult]) -> None:
                 f"sweep {number} is not a part of the same sweep as sweep 1: its {field} is "
                 f"{other.get(field)!r}, sweep 1's {common.get(field)!r}"
             )
+
+
+def _check_one_group_size(parts: Sequence[SweepResult]) -> None:
+    """The shares of one split trained the whole sweep's groups of one size: shares of other
+    sizes computed other programs, and hold other runs than their part numbers say."""
+    sizes = [part.config.get("runs_per_call") for part in parts]
+    if len(set(map(repr, sizes))) > 1:
+        each = ", ".join(
+            f"part {part.config['part'][0]} of {part.config['part'][1]}: {size}"
+            for part, size in zip(parts, sizes, strict=True)
+        )
+        raise InvalidInput(
+            f"the sweeps are not shares of one split: their runs_per_call (the sweep's group "
+            f"size, runs per compiled call) differ ({each}); train every part with one chunk "
+            "(--chunk)"
+        )
 
 
 def _check_each_run_once(settings: list[dict[str, Any]], runs: list[dict[str, Any]]) -> None:

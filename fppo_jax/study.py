@@ -33,6 +33,7 @@ import numpy as np
 
 from fppo_jax import statistics
 from fppo_jax.config import positive_int, resolve_hyperparameters, sweepable
+from fppo_jax.driver import part_bounds, part_runs
 from fppo_jax.errors import InvalidInput
 from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
 from fppo_jax.objectives import BUILTINS, hyperparameter_names, identities, resolve, takers, union
@@ -50,7 +51,7 @@ from fppo_jax.study_report import (
     write_report,
 )
 from fppo_jax.surrogates import Surrogate
-from fppo_jax.sweep import expand_grid, part_bounds, sweep
+from fppo_jax.sweep import expand_grid, sweep
 
 ENDPOINTS = statistics.STUDY_ENDPOINTS  # decided on; those not chosen are reported beside it
 # Reported beside the plan's endpoints, never decided on: each run's best return over training
@@ -538,8 +539,7 @@ def recorded_group(
     refused: the plan did not make it."""
     runs = len(variants) * len(seeds)
     if part is not None:
-        start, stop = part_bounds(part, runs)
-        where, runs = where / f"part-{part[0]}", stop - start
+        where = where / f"part-{part[0]}"
     found = [SweepResult.read(where)] if (where / "sweep.json").exists() else []
     shares = sorted(where.glob("part-*/sweep.json"))
     if shares:
@@ -554,7 +554,14 @@ def recorded_group(
                 f"{where} holds a group of {', '.join(names)} on seeds {result.config['seeds']}, "
                 f"where the study's plan needs {', '.join(v.name for v in variants)} on {seeds}"
             )
-        if len(result.runs) == runs:
+        expected = runs
+        if part is not None:  # the share of the group's runs, by the groups they trained in
+            size = result.config.get("runs_per_call")
+            if not isinstance(size, int) or size < 1:
+                continue
+            start, stop = part_runs(part, runs, size)
+            expected = stop - start
+        if len(result.runs) == expected:
             return result
     return None
 

@@ -3,7 +3,9 @@
 
 Every run is the pure ``train_fn(key, hp)`` vmapped along a run axis, so variants, α, k, δ,
 ε, learning rates … and seeds all train side by side, and a bigger grid is the same program
-called on more runs. Runs are split into equal groups only when they do not fit in memory.
+called on more runs. Runs are split into equal groups only when they do not fit in memory, or
+when `chunk` says so; the groups are the whole sweep's, and a part of a split sweep trains whole
+groups of them, so that the parts merge into the unsplit sweep bit for bit.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from fppo_jax.config import (
     sweepable,
     table2,
 )
-from fppo_jax.driver import Outcome, Plan, drive
+from fppo_jax.driver import Outcome, Plan, drive, part_bounds, part_runs
 from fppo_jax.envs import Environment
 from fppo_jax.errors import InvalidInput
 from fppo_jax.execution import run_keys
@@ -171,7 +173,8 @@ def sweep(
     ``jax.random.key(seed)``, as ``train(..., seed=seed)`` does, and matches that run to float
     tolerance over its first updates, then drifts from it (vmapped kernels round differently).
     `preset`, `backend` and `settings` are as in :func:`~fppo_jax.train`. `chunk` is the number
-    of runs per compiled call (default: as many as fit in half the free memory). A run that
+    of runs per compiled call, the sweep's group size (default: as many of the sweep's runs as
+    fit in half the free memory); the result records it as ``runs_per_call``. A run that
     diverges is recorded in ``SweepResult.diverged``; the others go on.
 
     Options apply to every run. A checkpoint holds the group of runs in training and the
@@ -182,8 +185,12 @@ def sweep(
 
     `devices` (default: all JAX sees) share each group's runs, `data_parallel` (default 1) per
     run, splitting its environments (:mod:`fppo_jax.distributed`). ``part=(K, N)`` trains the
-    K-th (from 1) of N equal shares of the runs in run order (settings × seeds), to split a
-    sweep over a cluster's nodes; :func:`~fppo_jax.merge` joins the parts, naming any missing run.
+    K-th (from 1) of N shares of the whole sweep's groups of `chunk` runs, in run order
+    (settings × seeds), to split a sweep over a cluster's nodes; :func:`~fppo_jax.merge` joins
+    the parts, naming any missing run, into the sweep trained unsplit with the same `chunk`,
+    bit for bit (XLA rounds a vmapped program by its batch size, so a run's numbers depend on
+    its group's size; a split keeps each run's group, and its place in it). A split needs as
+    many groups as parts: give `chunk` when the sweep's runs fit in one call.
     """
     surrogates = grid_surrogates(grid)
     names = sweepable(surrogates.values())
@@ -194,12 +201,15 @@ def sweep(
     for name, value in {"chunk": chunk, "data_parallel": data_parallel}.items():
         if value is not None:
             positive_int(name, value)
+    if part is not None and chunk is not None:  # refused before anything starts
+        part_runs(part, len(runs), min(chunk, len(runs)))
     record = _record(run, grid, surrogates, seeds, part)
-    result_of = functools.partial(_result, settings, runs, record)
+    result_of = functools.partial(_result, settings, runs, record, part)
     log_dir = run.options.log_dir  # a finished group is written at once, lost by no later crash
     after_group = None if log_dir is None else lambda done: result_of(done).write(log_dir)
     how = {"runs_per_call": chunk, "data_parallel": data_parallel or 1, "after_group": after_group}
-    result = result_of(drive(_plan(run, settings, runs, hps, record, **how), run.options))
+    plan = _plan(run, settings, runs, hps, record, share=part, **how)
+    result = result_of(drive(plan, run.options))
     _warn_diverged(result)
     return result
 
@@ -224,9 +234,13 @@ def _result(
     settings: list[dict[str, Any]],
     runs: list[dict[str, int]],
     record: dict[str, Any],
+    part: tuple[int, int] | None,
     outcome: Outcome,
 ) -> SweepResult:
-    """The sweep's result: its runs done so far, from the driver's `outcome`."""
+    """The sweep's result (its `part`'s, if given, of the whole sweep's `runs`): its runs done
+    so far, from the driver's `outcome`."""
+    if part is not None:  # the share of the sweep's groups the driver trained
+        runs = runs[slice(*part_runs(part, len(runs), outcome.runs_per_call))]
     return SweepResult(
         settings=settings,
         seeds=list(dict.fromkeys(run["seed"] for run in runs)),
@@ -252,13 +266,13 @@ def _plan(
     seeds = len(record["seeds"])
     shape = f"{len(settings)} settings × {seeds} seeds = {len(settings) * seeds} runs"
     if "part" in record:
-        shape += f", part {record['part'][0]} of {record['part'][1]}: {len(runs)} of them"
+        shape += f", part {record['part'][0]} of {record['part'][1]}"
     return Plan(
         "sweep",
         run.trainer,
         run_keys([run["seed"] for run in runs]),
         # Every run in the program of all the sweep's surrogates, so that a part is the whole
-        # sweep's program on fewer runs.
+        # sweep's program on fewer groups (the driver takes the part's share of them).
         jax.tree.map(lambda x: x[jnp.asarray([run["setting"] for run in runs])], hps),
         record,
         f"sweep on {run.name}",
@@ -283,9 +297,12 @@ def _axes(grid: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> dict[str, An
 def _runs(
     num_settings: int, seeds: list[int], part: tuple[int, int] | None
 ) -> list[dict[str, int]]:
-    """The sweep's runs (settings × seeds, in that order), or those of its `part`."""
+    """The whole sweep's runs (settings × seeds, in that order), with its `part` checked (the
+    driver takes the part's share of the runs once it knows their group size)."""
     runs = [{"setting": i, "seed": seed} for i in range(num_settings) for seed in seeds]
-    return runs if part is None else runs[slice(*part_bounds(part, len(runs)))]
+    if part is not None:
+        part_bounds(part, len(runs))
+    return runs
 
 
 def _settings(
@@ -326,24 +343,6 @@ def _warn_diverged(result: SweepResult) -> None:
             f"{result.diverged[i]}; its state before that update was kept",
             file=sys.stderr,
         )
-
-
-def part_bounds(part: object, num_runs: int) -> tuple[int, int]:
-    """Where the runs of ``part=(K, N)`` start and stop among a sweep's `num_runs` runs: the
-    K-th (from 1) of N shares as equal as they can be, the first ones a run longer."""
-    if (
-        not isinstance(part, tuple | list)
-        or len(part) != 2
-        or not all(isinstance(x, int | np.integer) and not isinstance(x, bool) for x in part)
-        or not 1 <= part[0] <= part[1]
-    ):
-        raise InvalidInput(f"part must be (K, N) with 1 <= K <= N, got {part!r}")
-    k, n = int(part[0]), int(part[1])
-    if n > num_runs:
-        raise InvalidInput(f"part {k} of {n}: the sweep has only {num_runs} runs to share")
-    size, extra = divmod(num_runs, n)
-    start = (k - 1) * size + min(k - 1, extra)
-    return start, start + size + (k <= extra)
 
 
 def check_seeds(seeds: int | Sequence[int]) -> list[int]:

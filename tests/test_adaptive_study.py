@@ -311,7 +311,8 @@ def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tm
 
     fppo_jax.study("cartpole", candidates, "ppo", part=(2, 2), groups=1, **settings)
     shares = [SweepResult.read(group_1 / f"part-{k}") for k in (1, 2)]
-    assert [len(s.runs) for s in shares] == [12, 12]  # 3 settings × 8 seeds, halved
+    # 3 settings × 8 seeds in the sweep's 3 groups of 8 runs (chunk): the first share takes 2.
+    assert [len(s.runs) for s in shares] == [16, 8]
     # The group's record of a run of it whole, cut short, beside the shares: they finish it.
     cut = merge(shares)
     cut = SweepResult(**{**cut.__dict__, "runs": cut.runs[:5], "diverged": cut.diverged[:5]})

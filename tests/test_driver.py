@@ -290,6 +290,10 @@ def test_a_sweep_chooses_its_runs_per_call_once_before_compiling(monkeypatch):
     result = sweep("cartpole", grid, seeds=8, **shape)
     assert result.config["runs_per_call"] == 2 and len(compiled) == 1
     assert result.metrics["env_steps"].shape == (8, 2)
+    # A part's groups are the whole sweep's: of its 4 groups, part 2 of 3 trains the third.
+    part = sweep("cartpole", grid, seeds=8, part=(2, 3), **shape)
+    assert part.config["runs_per_call"] == 2 and part.runs == result.runs[4:6]
+    assert_bitwise_equal(part.metrics, {k: v[4:6] for k, v in result.metrics.items()})
 
 
 def test_a_run_that_cannot_fit_is_refused_before_compiling(monkeypatch):

@@ -146,13 +146,15 @@ def test_parts_that_ran_other_settings_merge_and_their_grids_join():
         merge(shares)
 
 
-def shares(whole: SweepResult, count: int) -> list[SweepResult]:
-    """`whole`'s runs split as ``sweep(..., part=(K, count))`` splits them, K = 1 … count."""
-    from fppo_jax.sweep import part_bounds
+def shares(whole: SweepResult, count: int, size: int = 1) -> list[SweepResult]:
+    """`whole`'s runs split as ``sweep(..., part=(K, count), chunk=size)`` splits them, K = 1 …
+    count: whole groups of `size` runs each."""
+    from fppo_jax.driver import part_runs
 
+    whole = dataclasses.replace(whole, config={**whole.config, "runs_per_call": size})
     made = []
     for k in range(1, count + 1):
-        kept = list(range(*part_bounds((k, count), len(whole.runs))))
+        kept = list(range(*part_runs((k, count), len(whole.runs), size)))
         runs = [whole.runs[i] for i in kept]
         made.append(
             dataclasses.replace(
@@ -182,6 +184,16 @@ def test_merge_orders_the_parts_of_a_split_by_their_number(tmp_path, capsys):
     assert main(["merge", *named[2:], "--output", str(tmp_path / "partial")]) == 2
     error = capsys.readouterr().err
     assert "parts 1, 10 of 11 (--part 1/11, --part 10/11) are missing" in error
+
+
+def test_merge_refuses_shares_of_a_split_trained_in_groups_of_other_sizes():
+    first, second = shares(two_settings(), 2, size=4)
+    other = dataclasses.replace(second, config={**second.config, "runs_per_call": 8})
+    with pytest.raises(
+        ValueError, match=r"runs_per_call .* differ \(part 1 of 2: 4, part 2 of 2: 8\)"
+    ):
+        merge([other, first])
+    assert merge([second, first]).config["runs_per_call"] == 4
 
 
 def test_merge_joins_settings_and_seeds_from_the_command_line(tmp_path, capsys):

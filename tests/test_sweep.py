@@ -198,8 +198,8 @@ def test_a_grid_that_is_not_a_mapping_is_refused_saying_what_one_is(grid):
         sweep("cartpole", grid)
 
 
-def test_parts_share_the_runs_in_run_order():
-    from fppo_jax.sweep import part_bounds
+def test_parts_share_the_sweep_s_groups_in_run_order():
+    from fppo_jax.driver import part_bounds, part_runs
 
     assert [part_bounds((k, 3), 7) for k in (1, 2, 3)] == [(0, 3), (3, 5), (5, 7)]
     assert part_bounds((1, 1), 4) == (0, 4)
@@ -209,6 +209,22 @@ def test_parts_share_the_runs_in_run_order():
             part_bounds(bad, 4)
     with pytest.raises(ValueError, match="only 2 runs to share"):
         part_bounds((1, 3), 2)
+    # 7 runs in groups of 2 are 4 groups (the last padded): a part takes whole groups of them.
+    assert [part_runs((k, 3), 7, 2) for k in (1, 2, 3)] == [(0, 4), (4, 6), (6, 7)]
+    assert [part_runs((k, 4), 7, 2) for k in (1, 2, 3, 4)] == [(0, 2), (2, 4), (4, 6), (6, 7)]
+    assert part_runs((1, 1), 7, 7) == (0, 7)
+    with pytest.raises(
+        ValueError,
+        match=r"7 runs train as 3 groups of 3 .* at most 2, or split it into at most 3 parts$",
+    ):
+        part_runs((1, 4), 7, 3)
+    with pytest.raises(
+        ValueError,
+        match=r"6 runs train as 2 groups of 4 .* at most 2, or split it into at most 2 parts$",
+    ):
+        part_runs((2, 3), 6, 4, across=2)
+    with pytest.raises(ValueError, match=r"bit for bit\): split it into at most 2 parts$"):
+        part_runs((2, 3), 6, 4, across=4)
 
 
 def slurm_array(task, first, last, step, count):
@@ -285,12 +301,14 @@ def test_a_sweep_is_split_over_a_slurm_array_only_when_asked(monkeypatch, capsys
     assert "SLURM_ARRAY_TASK_COUNT='1'" in capsys.readouterr().err and len(asked) == 3
 
 
-# Two processes at once, with -m slow; parts merging into the one-process sweep are
-# tests/test_results.py's in the default run, and --part's shares tests/test_adaptive_study.py's.
+# Two processes at once, with -m slow; parts merging into the unsplit sweep bit for bit are
+# test_a_split_sweep_merges_into_the_unsplit_sweep_bit_for_bit's in the default run, and
+# --part's shares tests/test_adaptive_study.py's.
 @pytest.mark.slow
 def test_two_parts_in_two_processes_merge_into_the_one_process_sweep(tmp_path, capsys):
     flags = ["--env", "cartpole", "--variant", "ppo,fppo-lp", "--seeds", "3", "--steps", "256"]
     flags += ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+    flags += ["--chunk", "3"]
     command = [sys.executable, "-m", "fppo_jax", "sweep", *flags]
     processes = [
         subprocess.Popen(
@@ -304,7 +322,7 @@ def test_two_parts_in_two_processes_merge_into_the_one_process_sweep(tmp_path, c
     outputs = [p.communicate(timeout=600)[0] for p in processes]
     assert [p.returncode for p in processes] == [0, 0], outputs
     assert "3 runs (part 1 of 2) on cartpole" in outputs[0]
-    assert "sweep on cartpole: 2 settings × 3 seeds = 6 runs, part 2 of 2: 3 of them" in outputs[1]
+    assert "sweep on cartpole: 2 settings × 3 seeds = 6 runs, part 2 of 2" in outputs[1]
     part2 = SweepResult.read(tmp_path / "part2")
     assert part2.config["part"] == [2, 2] and part2.seeds == [0, 1, 2]
     assert [(r["setting"], r["seed"]) for r in part2.runs] == [(1, 0), (1, 1), (1, 2)]
@@ -317,27 +335,61 @@ def test_two_parts_in_two_processes_merge_into_the_one_process_sweep(tmp_path, c
     merged = SweepResult.read(tmp_path / "whole")
     assert "part" not in merged.config
     whole = sweep(
-        "cartpole", {"variant": ["ppo", "fppo-lp"]}, seeds=3, total_steps=256, **TINY_SHAPE
+        "cartpole", {"variant": ["ppo", "fppo-lp"]}, seeds=3, chunk=3, total_steps=256, **TINY_SHAPE
     )
     assert merged.runs == whole.runs and merged.settings == whole.settings
-    for name in METRICS:  # to float tolerance over the first updates, as sweep against train
-        np.testing.assert_allclose(
-            merged.metrics[name][:, :2], whole.metrics[name][:, :2], rtol=1e-4, atol=1e-6
-        )
+    for name in METRICS:  # the one sweep's groups, bit for bit
+        np.testing.assert_array_equal(merged.metrics[name], whole.metrics[name], err_msg=name)
     other = dataclasses.replace(part2, config={**part2.config, "part": [2, 3]})
     with pytest.raises(ValueError, match="not shares of one split: their parts are 1 of 2, 2 of 3"):
         merge([SweepResult.read(tmp_path / "part1"), other])
 
 
+@pytest.mark.parametrize("chunk, splits", [(2, (2, 3)), (4, (2,))])
+def test_a_split_sweep_merges_into_the_unsplit_sweep_bit_for_bit(tmp_path, chunk, splits):
+    # 6 runs in groups of 2 (3 groups), or of 4 (2 groups, the last padded by repeating the
+    # sweep's last run): each part trains whole groups of the sweep, each as the unsplit sweep
+    # trains it, so the merged parts are the sweep's bytes, not merely close to them.
+    grid = {"variant": ["ppo", "fppo-lp"]}
+    whole = sweep("cartpole", grid, seeds=3, chunk=chunk, **TINY)
+    whole.write(tmp_path / "whole")
+    for count in splits:
+        parts = [
+            sweep("cartpole", grid, seeds=3, chunk=chunk, part=(k, count), **TINY)
+            for k in range(1, count + 1)
+        ]
+        assert [p.config["runs_per_call"] for p in parts] == [chunk] * count
+        merged = merge(parts[::-1])  # in any order
+        merged.write(tmp_path / f"merged-{count}")
+        assert merged.runs == whole.runs and merged.config["runs_per_call"] == chunk
+        assert sorted(merged.metrics) == sorted(whole.metrics)
+        for name, values in whole.metrics.items():
+            assert np.array_equal(merged.metrics[name], values, equal_nan=True), name
+        curves = (tmp_path / f"merged-{count}" / "curves.csv").read_bytes()
+        assert curves == (tmp_path / "whole" / "curves.csv").read_bytes()
+
+
+def test_a_split_into_more_parts_than_the_sweep_has_groups_is_refused():
+    grid = {"variant": ["ppo", "fppo-lp"]}
+    with pytest.raises(ValueError, match=r"part 1 of 3: the sweep's 6 runs train as 2 groups .*"):
+        sweep("cartpole", grid, seeds=3, chunk=4, part=(1, 3), **TINY)
+    # By default, a group is as many of the whole sweep's runs as fit, here all of them.
+    with pytest.raises(
+        ValueError,
+        match=r"4 runs train as 1 group of 4 .* at most 3, or split it into at most 1 part$",
+    ):
+        sweep("cartpole", grid, seeds=2, part=(2, 2), **TINY)
+
+
 def test_a_part_s_checkpoint_is_not_resumed_as_another_part(tmp_path):
-    shape = {**TINY, "checkpoint_dir": tmp_path}
-    sweep("cartpole", {"variant": "ppo"}, seeds=2, part=(1, 2), **shape)
+    shape = {**TINY, "checkpoint_dir": tmp_path, "chunk": 2}
+    sweep("cartpole", {"variant": "ppo"}, seeds=4, part=(1, 2), **shape)
     with pytest.raises(fppo_jax.ConfigMismatch, match="part"):
-        sweep("cartpole", {"variant": "ppo"}, seeds=2, part=(2, 2), resume=True, **shape)
+        sweep("cartpole", {"variant": "ppo"}, seeds=4, part=(2, 2), resume=True, **shape)
 
 
 def test_a_stopped_part_resumes_from_its_checkpoint_as_if_never_stopped(tmp_path):
-    grid, shape = {"variant": ["ppo", "fppo-lp"]}, {**TINY, "total_steps": 128 * 4}
+    grid, shape = {"variant": ["ppo", "fppo-lp"]}, {**TINY, "total_steps": 128 * 4, "chunk": 2}
     whole = sweep("cartpole", grid, seeds=2, part=(2, 2), **shape, **IN_CHUNKS)
     stopped = sweep(
         "cartpole",

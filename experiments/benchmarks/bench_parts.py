@@ -4,7 +4,8 @@ each, as a cluster's nodes would share it.
     python experiments/benchmarks/bench_parts.py \
         [--task hopper] [--seeds 2] [--steps 100000] [--repeats 2]
 
-The sweep is PPO and FPPO-LP × `--seeds` on native MuJoCo. Each arm runs
+The sweep is PPO and FPPO-LP × `--seeds` on native MuJoCo, in two groups of `--seeds` runs
+(``--chunk``: a part trains whole groups of the sweep). Each arm runs
 ``fppo-jax sweep --part K/2`` for K = 1 and 2 in fresh processes: (a) one after another, each
 free to use every core; (b) both at once, each held to a core of its own. The arms alternate
 `--repeats` times and the best wall time of each counts (start-up and compilation included);
@@ -81,7 +82,7 @@ def main() -> None:
     output = args.results / "bench_parts.md"
     refuse_to_replace([output], args.force)
     flags = ["--env", args.task, "--variant", "ppo,fppo-lp", "--seeds", str(args.seeds)]
-    flags += ["--steps", str(args.steps), "--backend", "native"]
+    flags += ["--steps", str(args.steps), "--backend", "native", "--chunk", str(args.seeds)]
 
     walls: dict[str, list[float]] = {"a": [], "b": []}
     parts: dict[str, list[SweepResult]] = {}

@@ -140,16 +140,21 @@ def _add_sweep(
         help="per setting: N (seeds 0 … N−1), a range 10:20 (seeds 10 … 19) or a list 0,3,7",
     )
     grid.add_argument(
-        "--chunk", type=count, help="runs per compiled call (default: what fits in memory)"
+        "--chunk",
+        type=count,
+        help="runs per compiled call, the sweep's group size, the same for every part "
+        "(default: as many of the whole sweep's runs as fit in memory)",
     )
     grid.add_argument(
         "--part",
         type=part,
         metavar="K/N",
-        help="train only the K-th of N equal shares of the sweep's runs (its run order), e.g. "
-        "one node's share; fppo-jax merge joins the parts. auto: a SLURM job array task's "
-        "share, the array being the split (K = (SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN) / "
-        "SLURM_ARRAY_TASK_STEP + 1, N = SLURM_ARRAY_TASK_COUNT); without --part, no split",
+        help="train only the K-th of N shares of the sweep's groups of --chunk runs (its run "
+        "order), e.g. one node's share; fppo-jax merge joins the parts into the sweep run "
+        "unsplit with that --chunk, bit for bit (give --chunk when the runs fit in one group). "
+        "auto: a SLURM job array task's share, the array being the split (K = "
+        "(SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN) / SLURM_ARRAY_TASK_STEP + 1, N = "
+        "SLURM_ARRAY_TASK_COUNT); without --part, no split",
     )
     grid.add_argument(
         "--data-parallel",
@@ -258,11 +263,15 @@ def _add_study_running(studied: Parser) -> None:
         type=part,
         metavar="K/N",
         help="train only the K-th of N shares of the next look's groups and stop, deciding "
-        "nothing (auto: a SLURM job array task's share); the same command without --part, "
-        "once every share is recorded, joins them and decides",
+        "nothing (auto: a SLURM job array task's share; each share is whole groups of --chunk "
+        "runs); the same command without --part, once every share is recorded, joins them and "
+        "decides",
     )
     studied.add_argument(
-        "--chunk", type=count, help="runs per compiled call (default: what fits in memory)"
+        "--chunk",
+        type=count,
+        help="runs per compiled call, the same for every share (default: as many of a look's "
+        "runs as fit in memory)",
     )
     studied.add_argument(
         "--tuned",

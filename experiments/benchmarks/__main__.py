@@ -21,6 +21,7 @@ SMOKE = {
     "bench_parts.py": "--seeds 1 --steps 2048 --repeats 1 --results {tmp}",
     "bench_logging.py": "--steps 4096 --repeats 1 --results {tmp}",
     "bench_startup.py": "--smoke",
+    "bench_tune.py": "--trials 4 --eta 2 --steps 1024 --tiny --results {tmp}",
 }
 
 if __name__ == "__main__":

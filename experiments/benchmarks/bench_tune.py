@@ -1,0 +1,237 @@
+"""Tuning as one program per rung, against tuning the usual way: one process per trial,
+pruned by Optuna's SuccessiveHalvingPruner, on the same trials.
+
+    python experiments/benchmarks/bench_tune.py [--env cartpole] [--trials 27] [--seeds 2] \
+        [--eta 3] [--steps 100000] [--backend auto]
+
+(a) ``fppo_jax.tune`` on PPO alone: the trials × seeds of a rung as one compiled program, the
+survivors going on from their state. (b) The usual way (RL Baselines3 Zoo's, Stoix's and
+CleanRL's tuners): an Optuna study with ``SuccessiveHalvingPruner(min_resource=<(a)'s first
+rung>, reduction_factor=eta)``, the very settings (a) drew enqueued, and each trial in a
+process of its own that trains the trial's seeds (``fppo_jax.sweep`` of them, the JAX way) and
+reports their mean return at every chunk of updates, stopping when pruned. Both start fresh
+processes; each arm's wall time, env steps trained, best score and peak memory (the largest
+resident set of its processes) are recorded, and the ratio of wall times. The pruner is
+asynchronous (a trial is pruned against those reported before it), so its budget is not (a)'s:
+the table gives both. Writes experiments/results/bench_tune_<env>.md.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
+from common import (
+    add_record_flags,
+    argument_parser,
+    header,
+    refuse_to_replace,
+    write_result,
+)
+
+# One trial of the usual way: its seeds as one sweep (the JAX way to train seeds), the mean
+# return written after every chunk of updates; it stops when told "stop" (the pruner's answer).
+TRIAL = """
+import json, sys
+import fppo_jax
+
+env, steps, backend, given = sys.argv[1:5]
+given = json.loads(given)
+
+def report(snapshot):
+    score = float(snapshot.metrics["average_return"][:, -1].mean())
+    print(json.dumps({"update": int(snapshot.update), "score": score}), flush=True)
+    return sys.stdin.readline().strip() != "stop"
+
+grid = {"variant": "ppo", **{k: [v] for k, v in given["setting"].items()}}
+fppo_jax.sweep(env, grid, seeds=given["seeds"], total_steps=int(steps), backend=backend,
+               callback=report, progress=False, **given["config"])
+"""
+
+
+def peak_of(process: subprocess.Popen[Any]) -> tuple[int, int]:
+    """Waits for `process`: its exit status and peak resident memory in KiB."""
+    _, status, usage = os.wait4(process.pid, 0)
+    process.returncode = os.waitstatus_to_exitcode(status)
+    return process.returncode, usage.ru_maxrss
+
+
+def run_tune(args: Any, where: Path, shape: dict[str, Any]) -> dict[str, Any]:
+    """Arm (a): the tune in a process of its own."""
+    flags = [
+        sys.executable,
+        "-m",
+        "fppo_jax",
+        "tune",
+        "--variants",
+        "ppo",
+        "--tasks",
+        args.env,
+        "--trials",
+        str(args.trials),
+        "--seeds-per-trial",
+        str(args.seeds),
+        "--eta",
+        str(args.eta),
+        "--steps",
+        str(args.steps),
+        "--backend",
+        args.backend,
+        "--output",
+        str(where),
+        "--quiet",
+        *shape["flags"],
+    ]
+    start = time.perf_counter()
+    process = subprocess.Popen(flags, stdout=subprocess.DEVNULL)
+    status, peak = peak_of(process)
+    seconds = time.perf_counter() - start
+    if status:
+        sys.exit(f"the tune failed ({status})")
+    results = json.loads((where / "results.json").read_text())[args.env]["ppo"]
+    return {
+        "seconds": seconds,
+        "steps": results["env_steps"],
+        "best": results["chosen"]["score"],
+        "peak": peak,
+    }
+
+
+def run_usual(args: Any, where: Path, tuned: Path, shape: dict[str, Any]) -> dict[str, Any]:
+    """Arm (b): one process per trial, pruned by Optuna's SuccessiveHalvingPruner."""
+    import optuna
+
+    plan = json.loads((tuned / "tune.json").read_text())
+    first = plan["budget"][args.env]["rungs"][0]["ends_at_update"]
+    drawn = optuna.load_study(study_name=f"{args.env}/ppo", storage=f"sqlite:///{tuned}/optuna.db")
+    storage = f"sqlite:///{where}/usual.db"  # the usual way's own study, its trials the same
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = optuna.create_study(
+        study_name="usual",
+        storage=storage,
+        direction="maximize",
+        pruner=optuna.pruners.SuccessiveHalvingPruner(
+            min_resource=first, reduction_factor=args.eta, min_early_stopping_rate=0
+        ),
+    )
+    from fppo_jax.tuning import setting_of
+
+    start, updates, peak, best = time.perf_counter(), 0, 0, None
+    last_update = plan["budget"][args.env]["rungs"][-1]["ends_at_update"]
+    for frozen in sorted(drawn.trials, key=lambda t: t.number):
+        study.enqueue_trial(frozen.params)
+        trial = study.ask()
+        for name, d in frozen.distributions.items():
+            trial.suggest_float(name, d.low, d.high, log=d.log)
+        given = {
+            "setting": setting_of(frozen.params),
+            "seeds": plan["seeds"],
+            "config": shape["config"],
+        }
+        process = subprocess.Popen(
+            [
+                sys.executable,
+                "-c",
+                TRIAL,
+                args.env,
+                str(args.steps),
+                args.backend,
+                json.dumps(given),
+            ],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        done, score = 0, None
+        for line in process.stdout:
+            reported = json.loads(line)
+            done, score = reported["update"], reported["score"]
+            trial.report(score, done)
+            process.stdin.write("stop\n" if trial.should_prune() else "go\n")
+            process.stdin.flush()
+        status, used = peak_of(process)
+        if status:
+            sys.exit(f"trial {trial.number} failed ({status})")
+        peak, updates = max(peak, used), updates + done
+        if done < last_update:
+            study.tell(trial, state=optuna.trial.TrialState.PRUNED)
+        else:
+            study.tell(trial, score)
+            best = score if best is None else max(best, score)
+    seconds = time.perf_counter() - start
+    samples = (
+        plan["budget"][args.env]["env_steps_per_full_run"]
+        // plan["budget"][args.env]["rungs"][-1]["ends_at_update"]
+    )
+    return {
+        "seconds": seconds,
+        "steps": updates * samples * len(plan["seeds"]),
+        "best": best,
+        "peak": peak,
+    }
+
+
+def _score(value: float | None) -> str:
+    return "—" if value is None else f"{value:.1f}"
+
+
+def main() -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--env", default="cartpole")
+    parser.add_argument("--trials", type=int, default=27)
+    parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument("--eta", type=int, default=3)
+    parser.add_argument("--steps", type=int, default=100_000)
+    parser.add_argument("--backend", default="auto")
+    parser.add_argument("--tiny", action="store_true", help="a tiny run shape (smoke runs)")
+    add_record_flags(parser)
+    args = parser.parse_args()
+    output = args.results / f"bench_tune_{args.env}.md"
+    refuse_to_replace([output], args.force)
+    tiny = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
+    shape = {
+        "config": tiny if args.tiny else {},
+        "flags": ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+        if args.tiny
+        else [],
+    }
+    with tempfile.TemporaryDirectory() as work:
+        tuned = run_tune(args, Path(work) / "tune", shape)
+        usual = run_usual(args, Path(work), Path(work) / "tune", shape)
+    rows = [
+        ("fppo-jax tune (one program per rung)", tuned),
+        ("one process per trial, SuccessiveHalvingPruner", usual),
+    ]
+    lines = [
+        *header(f"Tuning PPO on {args.env}: one program per rung against one process per trial"),
+        "",
+        f"{args.trials} trials × {args.seeds} seeds, η = {args.eta}, {args.steps:,} env steps "
+        f"per full run, backend {args.backend}; both arms start fresh processes and share the "
+        "compilation cache.",
+        "",
+        "| arm | wall s | env steps trained | best trial's score | peak memory (MiB) |",
+        "|---|---|---|---|---|",
+        *(
+            f"| {name} | {r['seconds']:.1f} | {r['steps']:,} | {_score(r['best'])} | "
+            f"{r['peak'] / 1024:.0f} |"
+            for name, r in rows
+        ),
+        "",
+        f"Wall time, one process per trial over one program per rung: "
+        f"**{usual['seconds'] / tuned['seconds']:.1f}×**; per env step trained: "
+        f"**{(usual['seconds'] / usual['steps']) / (tuned['seconds'] / tuned['steps']):.1f}×**.",
+    ]
+    write_result(output, lines)
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

@@ -56,6 +56,7 @@ from fppo_jax.errors import InvalidInput, MissingFile, MissingPackage, install_h
 from fppo_jax.execution import compile_program, run_keys
 from fppo_jax.files import (
     DirectoryLock,
+    first_line,
     json_value,
     writable_directory,
     write_atomically,
@@ -195,6 +196,12 @@ def tune(
         raise InvalidInput(f"eta (the halving rate) must be an integer of at least 2, got {eta!r}")
     if sampler not in SAMPLERS:
         raise InvalidInput(f"sampler must be one of {', '.join(SAMPLERS)}, got {sampler!r}")
+    if (
+        not isinstance(sampler_seed, int)
+        or isinstance(sampler_seed, bool)
+        or not (0 <= sampler_seed < 2**32)
+    ):
+        raise InvalidInput(f"sampler_seed must be an integer in [0, 2**32), got {sampler_seed!r}")
     if rungs is not None and (isinstance(rungs, bool) or not isinstance(rungs, int) or rungs < 0):
         raise InvalidInput(f"rungs must be a count of rungs (0 or more), got {rungs!r}")
     stray = sorted(set(settings) - set(CONFIG_FIELDS))
@@ -240,11 +247,11 @@ def tune(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
             plan = check_plan(output, plan, "a tune", PLAN_FILE)
-            storage = storage or f"sqlite:///{(output / STORAGE_FILE).absolute()}"
+            store = _storage(optuna, storage or f"sqlite:///{(output / STORAGE_FILE).absolute()}")
             left, results = math.inf if rungs is None else rungs, {}
             for task in tasks:
                 population = _population(
-                    optuna, storage, task, arms, spaces, trials, sampler, sampler_seed
+                    optuna, store, task, arms, spaces, trials, sampler, sampler_seed
                 )
                 tuned = _Task(
                     task,
@@ -255,7 +262,7 @@ def tune(
                     tuning_seeds,
                     output / task,
                     optuna,
-                    storage,
+                    store,
                     progress,
                 )
                 left -= tuned.run(left)
@@ -310,6 +317,14 @@ def _tuning_seeds(seeds: int | Sequence[int]) -> list[int]:
         count = positive_int("seeds", seeds)
         return list(range(TUNING_SEED_START, TUNING_SEED_START + count))
     return check_seeds(seeds)
+
+
+def _storage(optuna: Any, url: str) -> Any:
+    """Optuna's storage at `url`, opened (a SQLite file is made if need be)."""
+    try:
+        return optuna.storages.RDBStorage(url)
+    except Exception as error:  # SQLAlchemy's and the database driver's own errors
+        raise InvalidInput(f"cannot open Optuna's storage {url}: {first_line(error)}") from None
 
 
 def _optuna() -> Any:
@@ -376,7 +391,7 @@ def make_plan(
 
 def _population(
     optuna: Any,
-    storage: str,
+    storage: Any,
     task: str,
     arms: list[Surrogate],
     spaces: dict[str, SearchSpace],
@@ -419,7 +434,7 @@ def _population(
 
 def _draws(
     optuna: Any,
-    storage: str,
+    storage: Any,
     task: str,
     arms: list[Surrogate],
     spaces: dict[str, SearchSpace],
@@ -455,7 +470,7 @@ def _draws(
     return [dict(t.params) for t in done]
 
 
-def _complete_study(optuna: Any, storage: str, name: str, trials: int) -> Any:
+def _complete_study(optuna: Any, storage: Any, name: str, trials: int) -> Any:
     """Study `name`, if it holds its `trials` trials (each with its parameters); one cut short
     is deleted, to be made again."""
     try:
@@ -508,7 +523,7 @@ class _Task:
         seeds: list[int],
         directory: Path,
         optuna: Any,
-        storage: str,
+        storage: Any,
         progress: bool,
     ):
         self.task, self.run_, self.arms, self.rungs, self.seeds = task, run, arms, rungs, seeds

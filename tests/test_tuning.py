@@ -248,12 +248,18 @@ def test_a_tune_not_finished_is_no_source_of_settings(tmp_path):
         ({"space": {"fppo-lp": {"k": (0, 1)}}}, "fppo-lp 'k', which it does not take"),
         ({"total_steps": 128}, "too short for 3 rungs"),
         ({"seeds": [0, 0]}, "seeds must be distinct"),
+        ({"sampler_seed": -1}, r"sampler_seed must be an integer in \[0, 2\*\*32\)"),
     ],
 )
 def test_bad_input_is_refused_before_any_plan(tmp_path, arguments, message):
     with pytest.raises(InvalidInput, match=message):
         tune("cartpole", ARMS, output=tmp_path / "tune", **{**SMALL, **arguments})
     assert not (tmp_path / "tune").exists()
+
+
+def test_a_storage_that_cannot_be_opened_is_one_error(tmp_path):
+    with pytest.raises(InvalidInput, match="cannot open Optuna's storage nosuch://here"):
+        tune("cartpole", ARMS, output=tmp_path, storage="nosuch://here", **SMALL)
 
 
 def c_scaled(ratio, advantage, c):

@@ -38,7 +38,6 @@ def test_notebook_runs_top_to_bottom_with_a_small_budget(path, tmp_path, monkeyp
     notebook = nbformat.read(path, as_version=4)
     client = NotebookClient(
         notebook,
-        timeout=600,
         # On a loaded machine a figure's output can arrive after nbclient's default 4 s wait
         # for it, and be lost.
         iopub_timeout=60,

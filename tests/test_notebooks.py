@@ -1,15 +1,26 @@
+import re
+import shutil
 from pathlib import Path
 
 import nbformat
 import pytest
 from nbclient import NotebookClient
 
-NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
+ROOT = Path(__file__).parent.parent
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 
 
 def test_the_six_notebooks_are_there():
     names = {path.stem for path in NOTEBOOKS}
     assert names == {"quickstart", "objectives", "sweeps", "escape_speed", "own_surrogate", "study"}
+
+
+def test_the_jupyter_commands_the_docs_name_are_installed():
+    # With the dev extra, as the tests are: each `jupyter SUB` is a `jupyter-SUB` program.
+    docs = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    named = {sub for doc in docs for sub in re.findall(r"`jupyter ([a-z]+)", doc.read_text())}
+    assert named, "the docs name no command that runs a notebook"
+    assert not [sub for sub in named if shutil.which(f"jupyter-{sub}") is None]
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.stem)

@@ -430,6 +430,7 @@ class _Training:
             self.program.compile_seconds,
             first_group,
             resumed_from,
+            self.program.loaded,
         )
         self.hooks = self._hooks(self.counter, None if start is None else resumed_from)
         if self.report:

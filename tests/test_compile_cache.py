@@ -4,6 +4,7 @@ process of its own, as the cache is the process's (and this one's is the test se
 
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -94,6 +95,20 @@ def test_processes_writing_one_cache_at_once_both_succeed_and_a_third_loads(tmp_
     third = run(TRAIN, tmp_path, **shared)
     assert (third["loaded"], third["written"]) == (programs, 0)
     assert both[0]["return"] == both[1]["return"] == third["return"]
+
+
+def test_the_command_says_whether_it_compiled_or_loaded_its_program(tmp_path):
+    flags = ["train", "--env", "cartpole", "--variant", "ppo", "--steps", "256", "--num-envs"]
+    flags += ["4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+    said = []
+    for _ in range(2):  # the second process finds what the first wrote in the fresh cache
+        done = start(f"from fppo_jax.cli import main; main({flags!r})", tmp_path)
+        _, err = done.communicate()
+        assert done.returncode == 0, err.decode()[-3000:]
+        lines = err.decode().splitlines()
+        said.append(next(line for line in lines if line.startswith(("compiled", "loaded"))))
+    assert re.fullmatch(r"compiled in \d+\.\d s", said[0]), said
+    assert re.fullmatch(r"loaded from the compilation cache in \d+\.\d s", said[1]), said
 
 
 def test_off_by_the_environment_variable(tmp_path):

@@ -105,7 +105,7 @@ def test_a_stop_signal_before_training_stops_the_command_once_compiled(
     assert "updates   4 × 128 samples" in capsys.readouterr().out
 
 
-def test_signals_are_caught_only_while_a_checkpointed_run_trains(tmp_path, tiny):
+def test_signals_are_caught_only_for_a_checkpointed_run(tmp_path, tiny):
     seen = []
 
     def handlers(snapshot):

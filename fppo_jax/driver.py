@@ -13,13 +13,11 @@ in the unsplit sweep.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import signal
 import sys
-import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, cast
 
@@ -71,6 +69,7 @@ from fppo_jax.metric_log import LoggedRuns, open_logs, prepare_log_dir
 from fppo_jax.options import Options
 from fppo_jax.policy import make_policy
 from fppo_jax.progress import PROGRESS_LINES, Counter, Progress, reporter
+from fppo_jax.stop_signals import STOP_SIGNALS, caught
 from fppo_jax.trainer import Trainer, TrainState
 
 
@@ -101,23 +100,29 @@ class TrainingDiverged(FppoError, FloatingPointError):
         )
 
 
-# What a cluster sends a job it is about to stop: SIGTERM on preemption, at its time limit and
-# on scancel; SIGUSR1 when asked for ahead of the time limit (sbatch --signal=USR1@SECONDS).
-STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
 HOST_BYTES_SHOWN = 2**30  # host-stepped environments' memory, said before compiling from here
 
 
 class StoppedBySignal(Exception):
     """A checkpointed run stopped on SIGTERM or SIGUSR1 at the end of a chunk of updates, its
-    checkpoint written: resuming goes on from there."""
+    checkpoint written, or before training if the signal came while it started or compiled
+    (`trained` False), with nothing new checkpointed: resuming goes on from `update` (the
+    newest checkpoint's, 0 if none)."""
 
-    def __init__(self, signal_number: int, update: int, checkpoint_dir: str | Path):
+    def __init__(
+        self, signal_number: int, update: int, checkpoint_dir: str | Path, trained: bool = True
+    ):
         self.signal = signal.Signals(signal_number)
-        self.update = update
-        super().__init__(
-            f"stopped by {self.signal.name} after update {update}, checkpointed in "
-            f"{Path(checkpoint_dir).absolute()}; resume (--resume) to go on from there"
-        )
+        self.update, self.trained = update, trained
+        where = Path(checkpoint_dir).absolute()
+        if trained:
+            said = f"after update {update}, checkpointed in {where}; resume (--resume) to go on"
+            said += " from there"
+        else:
+            said = "before training (while starting or compiling), nothing new checkpointed; "
+            said += f"resume (--resume) to go on from the newest checkpoint in {where}, or from "
+            said += "the start if there is none"
+        super().__init__(f"stopped by {self.signal.name} {said}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -184,6 +189,19 @@ class Outcome:
 
 def drive(plan: Plan, options: Options) -> Outcome:
     """Train `plan` as `options` say; see the module's docstring."""
+    # Without checkpoints a signal's default (the end of the process) loses nothing more than
+    # stopping would. Joined processes would each see a signal at another chunk: there JAX's
+    # preemption service holds SIGTERM (from C, where Python cannot see it to put it back) and
+    # names the chunk at which all stop together (:func:`_preempted`). Caught from the start, a
+    # signal that comes while compiling stops the run once it has compiled rather than ending
+    # it there, so that the requeued run finds the program in the compilation cache (where
+    # it can be cached) instead of compiling again into the next time limit.
+    catch = options.checkpoint_dir is not None and not jax.distributed.is_initialized()
+    with caught(STOP_SIGNALS if catch else ()) as signalled:
+        return _drive(plan, options, signalled)
+
+
+def _drive(plan: Plan, options: Options, signalled: list[int]) -> Outcome:
     mesh = make_mesh(_devices(plan, options), plan.trainer.config.num_envs, plan.data_parallel)
     main = is_main_process()
     checkpoints: Checkpoints | None = None
@@ -222,13 +240,17 @@ def drive(plan: Plan, options: Options) -> Outcome:
             where = f" on {mesh.size} devices" if mesh else ""
             print(f"{plan.header}{where}; compiling…", file=sys.stderr, flush=True)
         program = _compile(plan, options, mesh, size, main)
+        if signalled:
+            update = 0 if restored is None else restored.point().update
+            directory = cast(str | Path, options.checkpoint_dir)  # else nothing is caught
+            raise StoppedBySignal(signalled[0], update, directory, trained=False)
         with (
             reporter(options.progress if main else False, plan.description) as report,
             _Training(
                 plan, options, program, size, checkpoints, outputs, restored, report, main
             ) as chunks,
         ):
-            outcome = chunks.train()
+            outcome = chunks.train(signalled)
         failed = False
         return outcome
     finally:
@@ -474,16 +496,10 @@ class _Training:
             hooks.append(ProgressReport(self.report, counter))
         return hooks
 
-    def train(self) -> Outcome:
-        # Without checkpoints a signal's default (the end of the process) loses nothing more
-        # than stopping would. Joined processes would each see a signal at another chunk: there
-        # JAX's preemption service holds SIGTERM (from C, where Python cannot see it to put it
-        # back) and names the chunk at which all stop together (:func:`_preempted`).
-        catch = self.options.checkpoint_dir is not None and not jax.distributed.is_initialized()
-        with _signals_caught(STOP_SIGNALS if catch else ()) as self.signalled:
-            return self._train_groups()
-
-    def _train_groups(self) -> Outcome:
+    def train(self, signalled: list[int]) -> Outcome:
+        """Every group from where it starts; `signalled` holds the stop signals caught, to which
+        those still to come are added."""
+        self.signalled = signalled
         first_group, start, resumed_from = 0, None, 0
         if self.restored is not None:
             point = self.restored.point()
@@ -499,6 +515,7 @@ class _Training:
             self.program.compile_seconds,
             first_group,
             resumed_from,
+            self.program.loaded,
         )
         self.hooks = self._hooks(self.counter, None if start is None else resumed_from)
         if self.report:
@@ -640,25 +657,6 @@ def _preempted(chunk: int) -> bool:
     from jax.experimental import multihost_utils
 
     return bool(multihost_utils.reached_preemption_sync_point(chunk))
-
-
-@contextlib.contextmanager
-def _signals_caught(numbers: tuple[int, ...]) -> Iterator[list[int]]:
-    """While the block runs, `numbers` are recorded in the list it is given instead of acting,
-    and their handlers are then restored. Python handles signals in the main thread alone; and
-    a signal whose handler was not installed from Python is left to it, as it could not be
-    restored."""
-    received: list[int] = []
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        for number in numbers:
-            if signal.getsignal(number) is not None:
-                previous[number] = signal.signal(number, lambda n, _: received.append(n))
-    try:
-        yield received
-    finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
 
 
 def _multiple(size: int, of: int) -> int:

@@ -12,6 +12,7 @@ the driver's (:mod:`fppo_jax.driver`).
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -26,6 +27,10 @@ from fppo_jax.distributed import fetch, input_sharding, place, state_shardings
 from fppo_jax.trainer import Trainer, TrainState
 
 PROGRAMS_KEPT = 8  # compiled programs kept for reuse, the most recently used first
+# What JAX reports of its persistent compilation cache (jax.monitoring): a program looked up
+# there, and one found there.
+LOOKED_UP = "/jax/compilation_cache/compile_requests_use_cache"
+FOUND = "/jax/compilation_cache/cache_hits"
 
 F = TypeVar("F", bound=Callable[..., Any])
 T = TypeVar("T")
@@ -82,6 +87,7 @@ class Program:
     runs: int
     updates_per_call: int
     compile_seconds: float  # spent compiling it for this run: 0 when reused
+    loaded: bool = False  # from the persistent compilation cache, every part of it
 
 
 class _Programs:
@@ -140,7 +146,7 @@ def compile_program(
     key = _Programs.key(trainer, (keys, hps), along_runs, updates_per_call, mesh)
     compiled = _PROGRAMS.get(key)
     if compiled is not None:
-        return dataclasses.replace(compiled, trainer=trainer, compile_seconds=0.0)
+        return dataclasses.replace(compiled, trainer=trainer, compile_seconds=0.0, loaded=False)
 
     def run(state: TrainState, hp: Hyperparameters) -> tuple[TrainState, Any]:
         return trainer.run(state, hp, updates_per_call)
@@ -150,17 +156,38 @@ def compile_program(
     # Both programs are compiled here, ahead of time, so that compilation is never counted as
     # training time.
     start = time.perf_counter()
-    if mesh is None:
-        state = jax.eval_shape(init, keys, hps)
-        compiled_init: Callable[..., Any] = jax.jit(init).lower(keys, hps).compile()
-        compiled_run: Callable[..., Any] = jax.jit(run).lower(state, budgeted).compile()
-    else:
-        compiled_init, compiled_run = _compile_on_mesh(init, run, keys, hps, budgeted, mesh)
+    with _cache_lookups() as heard:
+        if mesh is None:
+            state = jax.eval_shape(init, keys, hps)
+            compiled_init: Callable[..., Any] = jax.jit(init).lower(keys, hps).compile()
+            compiled_run: Callable[..., Any] = jax.jit(run).lower(state, budgeted).compile()
+        else:
+            compiled_init, compiled_run = _compile_on_mesh(init, run, keys, hps, budgeted, mesh)
     seconds = time.perf_counter() - start
+    loaded = 0 < heard[FOUND] == heard[LOOKED_UP]
     runs = keys.shape[0]
-    program = Program(trainer, compiled_init, compiled_run, runs, updates_per_call, seconds)
+    program = Program(trainer, compiled_init, compiled_run, runs, updates_per_call, seconds, loaded)
     _PROGRAMS.add(key, program)
     return program
+
+
+@contextlib.contextmanager
+def _cache_lookups() -> Iterator[collections.Counter[str]]:
+    """Counts JAX's lookups in its persistent compilation cache (`LOOKED_UP`), and those that
+    found the program (`FOUND`), while the block runs: a program whose every part was found
+    was loaded, not compiled. Nothing is looked up where the cache is off, or for a program
+    that calls back into Python."""
+    heard: collections.Counter[str] = collections.Counter()
+
+    def listen(event: str, **_: str | int) -> None:
+        if event in (LOOKED_UP, FOUND):
+            heard[event] += 1
+
+    jax.monitoring.register_event_listener(listen)
+    try:
+        yield heard
+    finally:
+        jax.monitoring.unregister_event_listener(listen)
 
 
 def _compile_on_mesh(

@@ -21,7 +21,8 @@ class Progress(NamedTuple):
 
     `env_steps` and `total_steps` count every run; `average_return` is the mean over runs of
     each run's latest average return; `steps_per_second` and `eta` (seconds left) are measured
-    over the updates run by this call.
+    over the updates run by this call. `loaded`: the program was loaded from the persistent
+    compilation cache in its `compile_seconds`, not compiled.
     """
 
     update: int
@@ -33,6 +34,7 @@ class Progress(NamedTuple):
     elapsed: float
     compile_seconds: float
     eta: float = math.nan
+    loaded: bool = False
 
 
 class Counter:
@@ -49,10 +51,11 @@ class Counter:
         compile_seconds: float,
         group: int = 0,
         update: int = 0,
+        loaded: bool = False,
     ):
         self.num_runs, self.group_size = num_runs, group_size
         self.num_updates, self.samples = num_updates, samples
-        self.compile_seconds = compile_seconds
+        self.compile_seconds, self.loaded = compile_seconds, loaded
         self.began = time.perf_counter()
         self.steps_before = self.steps(group, update)
 
@@ -88,6 +91,7 @@ class Counter:
             elapsed,
             self.compile_seconds,
             eta,
+            self.loaded,
         )
 
 
@@ -97,7 +101,8 @@ def print_progress(p: Progress) -> None:
         resumed = f"; resuming at update {p.update}" if p.update else ""
         compiled = "reusing the compiled program"
         if p.compile_seconds:
-            compiled = f"compiled in {p.compile_seconds:.1f} s"
+            done = "loaded from the compilation cache" if p.loaded else "compiled"
+            compiled = f"{done} in {p.compile_seconds:.1f} s"
         print(f"{compiled}{resumed}", file=sys.stderr, flush=True)
         return
     avg = "-" if math.isnan(p.average_return) else f"{p.average_return:.1f}"

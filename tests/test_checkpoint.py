@@ -62,10 +62,8 @@ def test_run_killed_with_sigkill_resumes_to_the_same_bits(tmp_path):
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
     )
-    deadline = time.monotonic() + 240
     while not (checkpoints.is_dir() and len(steps_on_disk(checkpoints)) >= 2):
         assert child.poll() is None, child.stderr.read().decode()[-2000:]
-        assert time.monotonic() < deadline, "no checkpoint was written"
         time.sleep(0.02)
     time.sleep(0.15)  # now somewhere in a chunk, a save or a sleep
     os.kill(child.pid, signal.SIGKILL)
@@ -256,7 +254,6 @@ def test_the_command_line_says_in_a_line_each_that_the_checkpoints_are_damaged(t
         capture_output=True,
         text=True,
         env={**os.environ, "PYTHONPATH": path},
-        timeout=240,
     )
     assert resumed.returncode == 2
     assert "Traceback" not in resumed.stderr and "Event loop is closed" not in resumed.stderr
@@ -290,9 +287,9 @@ def test_one_writer_per_checkpoint_directory_and_no_lock_outlives_its_process(tm
         [
             sys.executable,
             "-c",
-            "import sys, time; from fppo_jax.checkpoint import open_checkpoints; "
+            "import sys, threading; from fppo_jax.checkpoint import open_checkpoints; "
             "open_checkpoints(sys.argv[1], False, 3, 'train', {}); print('locked', flush=True); "
-            "time.sleep(600)",
+            "threading.Event().wait()",  # holds the lock until the test kills it
             str(tmp_path),
         ],
         stdout=subprocess.PIPE,
@@ -357,9 +354,7 @@ def test_checkpoints_leave_the_process_s_logging_and_hooks_as_they_were(tmp_path
         logging.getLogger("absl").warning("the user's own absl warning")
         """
     )
-    done = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, timeout=240
-    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert "the user's own absl warning" in done.stderr
     assert "orbax" not in done.stderr.lower(), done.stderr
@@ -423,9 +418,7 @@ def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(
             print(type(sys.unraisablehook).__name__)
             sys.exit(3)
     """)
-    done = subprocess.run(
-        [sys.executable, "-c", program], capture_output=True, text=True, timeout=300
-    )
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True)
     assert done.returncode == 3, done.stderr[-3000:]
     assert done.stdout == (
         f"could not write a checkpoint in {tmp_path} (File too large); the newest intact one is "

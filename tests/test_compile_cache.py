@@ -4,6 +4,7 @@ process of its own, as the cache is the process's (and this one's is the test se
 
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -37,16 +38,26 @@ TRAIN = textwrap.dedent(f"""
 """)
 
 
-def run(code: str, tmp_path: Path, **environ: str) -> dict:
-    """`code`'s last line of output, as JSON, from a fresh process whose environment has no
-    cache settings but `environ` and a cache home in `tmp_path`."""
+def start(code: str, tmp_path: Path, **environ: str) -> subprocess.Popen:
+    """A fresh process running `code`, whose environment has no cache settings but `environ`
+    and a cache home in `tmp_path`."""
     unset = ("FPPO_JAX_CACHE_DIR", "JAX_COMPILATION_CACHE_DIR")
     env = {k: v for k, v in os.environ.items() if k not in unset}
     env |= {"XDG_CACHE_HOME": str(tmp_path / "home-cache"), "PYTHONPATH": str(ROOT), **environ}
-    done = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    return subprocess.Popen(
+        [sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
-    return json.loads(done.stdout.splitlines()[-1])
+
+
+def result(process: subprocess.Popen) -> dict:
+    """The process's last line of output, as JSON, once it has ended well."""
+    out, err = process.communicate()
+    assert process.returncode == 0, err.decode()[-3000:]
+    return json.loads(out.decode().splitlines()[-1])
+
+
+def run(code: str, tmp_path: Path, **environ: str) -> dict:
+    return result(start(code, tmp_path, **environ))
 
 
 def entries(directory: Path) -> list[Path]:
@@ -72,6 +83,31 @@ def test_on_by_default_and_a_second_process_loads_what_the_first_compiled(tmp_pa
     again = run(TRAIN, tmp_path)
     assert again["loaded"] == first["written"]
     assert again["return"] == first["return"]  # the programs loaded compute the same
+
+
+def test_processes_writing_one_cache_at_once_both_succeed_and_a_third_loads(tmp_path):
+    # As a job array's tasks share it: FPPO_JAX_CACHE_DIR, under which JAX locks each entry.
+    shared = {"FPPO_JAX_CACHE_DIR": str(tmp_path / "shared")}
+    both = [result(p) for p in [start(TRAIN, tmp_path, **shared) for _ in range(2)]]
+    programs = len(entries(tmp_path / "shared" / VERSIONS))
+    assert programs >= 2  # at least the training program's two parts, whoever wrote them
+    third = run(TRAIN, tmp_path, **shared)
+    assert third["loaded"] == programs  # each one whole
+    assert both[0]["return"] == both[1]["return"] == third["return"]
+
+
+def test_the_command_says_whether_it_compiled_or_loaded_its_program(tmp_path):
+    flags = ["train", "--env", "cartpole", "--variant", "ppo", "--steps", "256", "--num-envs"]
+    flags += ["4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
+    said = []
+    for _ in range(2):  # the second process finds what the first wrote in the fresh cache
+        done = start(f"from fppo_jax.cli import main; main({flags!r})", tmp_path)
+        _, err = done.communicate()
+        assert done.returncode == 0, err.decode()[-3000:]
+        lines = err.decode().splitlines()
+        said.append(next(line for line in lines if line.startswith(("compiled", "loaded"))))
+    assert re.fullmatch(r"compiled in \d+\.\d s", said[0]), said
+    assert re.fullmatch(r"loaded from the compilation cache in \d+\.\d s", said[1]), said
 
 
 def test_off_by_the_environment_variable(tmp_path):

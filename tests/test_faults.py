@@ -83,7 +83,8 @@ CHILD = textwrap.dedent("""
 
     def park(where):
         print(f"parked {where}", flush=True)
-        time.sleep(600)
+        while True:  # until the test kills it
+            time.sleep(1)
 
     def callback(snapshot):
         print(f"chunk {snapshot.runs.start} {snapshot.update}", flush=True)
@@ -166,14 +167,11 @@ def first_chunk(log: Path) -> tuple[int, int] | None:
     return (int(found[1]), int(found[2])) if found else None
 
 
-def wait_until(process, marker: str, ready=lambda: True, what: str = "", timeout=240) -> None:
-    """Poll until the child has printed `marker` and `ready()`; fail if it ends first or it
-    takes too long."""
+def wait_until(process, marker: str, ready=lambda: True, what: str = "") -> None:
+    """Poll until the child has printed `marker` and `ready()`; fail if it ends first."""
     what = what or repr(marker)
-    deadline = time.monotonic() + timeout
     while not (marker in output(process) and ready()):
         assert process.poll() is None, f"the child ended before {what}:\n{output(process)[-3000:]}"
-        assert time.monotonic() < deadline, f"no {what} in {timeout} s:\n{output(process)[-3000:]}"
         time.sleep(0.01)
 
 
@@ -182,9 +180,9 @@ def kill(process) -> None:
     assert process.wait() == -signal.SIGKILL
 
 
-def results(process, timeout: float = 240) -> dict[str, np.ndarray]:
+def results(process) -> dict[str, np.ndarray]:
     """What the child's call returned, once it has ended well."""
-    assert process.wait(timeout) == 0, output(process)[-3000:]
+    assert process.wait() == 0, output(process)[-3000:]
     with np.load(process.log.with_suffix(".npz")) as arrays:
         return dict(arrays)
 

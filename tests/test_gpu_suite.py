@@ -31,7 +31,6 @@ def _suite(*args: str, tmp: Path | None = None) -> subprocess.CompletedProcess:
         [sys.executable, str(SUITE), *args],
         capture_output=True,
         text=True,
-        timeout=900,
         env={**os.environ, **({"TMPDIR": str(tmp)} if tmp else {})},
     )
 
@@ -97,7 +96,6 @@ def test_smoke_runs_never_write_into_the_record_and_scripts_refuse_to_replace_it
             [sys.executable, str(EXPERIMENTS / script), *args],
             capture_output=True,
             text=True,
-            timeout=300,
         )
         assert done.returncode != 0, script
         assert "is already recorded: pass --force to replace it, or --results DIR" in done.stderr

@@ -1,10 +1,13 @@
+import re
+import shutil
 from pathlib import Path
 
 import nbformat
 import pytest
 from nbclient import NotebookClient
 
-NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
+ROOT = Path(__file__).parent.parent
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 
 
 def test_the_seven_notebooks_are_there():
@@ -18,6 +21,14 @@ def test_the_seven_notebooks_are_there():
         "study",
         "tuned",
     }
+
+
+def test_the_jupyter_commands_the_docs_name_are_installed():
+    # With the dev extra, as the tests are: each `jupyter SUB` is a `jupyter-SUB` program.
+    docs = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    named = {sub for doc in docs for sub in re.findall(r"`jupyter ([a-z]+)", doc.read_text())}
+    assert named, "the docs name no command that runs a notebook"
+    assert not [sub for sub in named if shutil.which(f"jupyter-{sub}") is None]
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda path: path.stem)
@@ -46,7 +57,6 @@ def test_notebook_runs_top_to_bottom_with_a_small_budget(path, tmp_path, monkeyp
     notebook = nbformat.read(path, as_version=4)
     client = NotebookClient(
         notebook,
-        timeout=600,
         # On a loaded machine a figure's output can arrive after nbclient's default 4 s wait
         # for it, and be lost.
         iopub_timeout=60,

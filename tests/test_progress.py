@@ -84,13 +84,15 @@ def test_print_progress_writes_one_line_per_report_on_stderr(capsys):
     ]
 
 
-def test_the_first_report_says_compiled_reused_or_resumed(capsys):
+def test_the_first_report_says_compiled_loaded_reused_or_resumed(capsys):
     first = REPORT._replace(update=0, env_steps=0, elapsed=0.0, eta=math.nan)
     print_progress(first._replace(compile_seconds=12.34))
+    print_progress(first._replace(compile_seconds=2.6, loaded=True))
     print_progress(first._replace(compile_seconds=0.0))
     print_progress(first._replace(update=5, compile_seconds=3.0))
     assert capsys.readouterr().err.splitlines() == [
         "compiled in 12.3 s",
+        "loaded from the compilation cache in 2.6 s",
         "reusing the compiled program",
         "compiled in 3.0 s; resuming at update 5",
     ]

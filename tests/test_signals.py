@@ -3,6 +3,10 @@ checkpointed, and leaves the process's signal handlers as it found them."""
 
 import os
 import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -12,6 +16,7 @@ from fppo_jax import train
 from fppo_jax.cli import main
 from fppo_jax.saved_policy import read_policy
 
+ROOT = Path(__file__).resolve().parents[1]
 FLAGS = ["train", "--env", "cartpole", "--variant", "ppo", "--steps", "512", "--num-envs", "4"]
 FLAGS += ["--num-steps", "32", "--minibatches", "4", "--epochs", "2", "--checkpoint-every", "1"]
 
@@ -47,7 +52,60 @@ def test_a_stop_signal_checkpoints_the_chunk_and_exits_for_a_requeue(
     assert "updates   4 × 128 samples" in capsys.readouterr().out
 
 
-def test_signals_are_caught_only_while_a_checkpointed_run_trains(tmp_path, tiny):
+# The command in a process of its own, which sends itself the signal where it is told: as it
+# starts (in what the command does first, before it imports the trainer) or while it compiles.
+# Uncaught, the signal would end the process there.
+SIGNALLED_WHILE = textwrap.dedent("""
+    import importlib, os, sys
+    from fppo_jax.cli import entry_point
+
+    where, number, *flags = sys.argv[1:]
+    module, name = {
+        "starting": ("fppo_jax.compile_cache", "enable"),
+        "compiling": ("fppo_jax.driver", "compile_program"),
+    }[where]
+    module = importlib.import_module(module)
+    at = getattr(module, name)
+
+    def signalled(*args, **kwargs):
+        os.kill(os.getpid(), int(number))
+        return at(*args, **kwargs)
+
+    setattr(module, name, signalled)
+    sys.argv[1:] = flags
+    entry_point()
+""")
+
+
+@pytest.mark.parametrize(
+    "where, number, status",
+    [("starting", signal.SIGTERM, 143), ("compiling", signal.SIGUSR1, 138)],
+)
+def test_a_stop_signal_before_training_stops_the_command_once_compiled(
+    tmp_path, capsys, where, number, status
+):
+    flags = [*FLAGS, "--checkpoint-dir", str(tmp_path), "--resume"]
+    done = subprocess.run(
+        [sys.executable, "-c", SIGNALLED_WHILE, where, str(int(number)), *flags],
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == status, done.stderr[-3000:]
+    last = done.stderr.splitlines()[-1]
+    assert last == (
+        f"fppo-jax: stopped by {signal.Signals(number).name} before training (while starting "
+        "or compiling), nothing new checkpointed; resume (--resume) to go on from the newest "
+        f"checkpoint in {tmp_path}, or from the start if there is none"
+    )
+    assert "compiled in" not in done.stderr and not [
+        p for p in tmp_path.iterdir() if p.name.isdigit()
+    ]
+    assert main(flags) == 0  # the same command again trains the run
+    assert "updates   4 × 128 samples" in capsys.readouterr().out
+
+
+def test_signals_are_caught_only_for_a_checkpointed_run(tmp_path, tiny):
     seen = []
 
     def handlers(snapshot):

@@ -319,7 +319,7 @@ def test_two_parts_in_two_processes_merge_into_the_one_process_sweep(tmp_path, c
         )
         for k in (1, 2)
     ]
-    outputs = [p.communicate(timeout=600)[0] for p in processes]
+    outputs = [p.communicate()[0] for p in processes]
     assert [p.returncode for p in processes] == [0, 0], outputs
     assert "3 runs (part 1 of 2) on cartpole" in outputs[0]
     assert "sweep on cartpole: 2 settings × 3 seeds = 6 runs, part 2 of 2" in outputs[1]

@@ -21,6 +21,7 @@ from fppo_jax.cli.flags import own_surrogates, surrogates_named
 from fppo_jax.cli.parser import build_parser
 from fppo_jax.cli.settings import check_preset, check_settings, settings_file
 from fppo_jax.errors import FppoError
+from fppo_jax.stop_signals import STOP_SIGNALS, caught
 from fppo_jax.surrogates import Surrogate
 
 __all__ = ["build_parser", "entry_point", "main"]
@@ -52,6 +53,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         except (FppoError, FileNotFoundError) as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
+    # A checkpointed command, in one process, catches a cluster's stop signals from its start:
+    # one that comes while it imports or compiles stops it once compiled, in a line and with
+    # the exit status a signal stopping it in training gives (fppo_jax.driver). Joined
+    # processes leave SIGTERM to JAX's preemption service.
+    checkpointed = getattr(args, "checkpoint_dir", None) is not None
+    catch = checkpointed and not getattr(args, "distributed", False)
+    with caught(STOP_SIGNALS if catch else ()):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command `args` names, its expected errors each reported in a line."""
     # What the commands need (the trainer, checkpoints, JAX's devices) only now: --help and a
     # mistyped flag answer without waiting for it.
     from fppo_jax import compile_cache

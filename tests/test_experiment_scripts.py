@@ -77,6 +77,35 @@ def test_a_planned_verdict_tests_the_family_on_the_recorded_parts(tmp_path):
     assert all(h >= p for h, p in zip(holm, raw, strict=True))  # adjusted over the family
 
 
+def test_the_re_decided_verdicts_keep_each_original_family_at_its_level(monkeypatch):
+    # Each family of plans/redecided.json is one study per seed schedule, at its share of 0.05:
+    # Holm's first step is 0.05 over the whole family in each, as over the family at once.
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    monkeypatch.syspath_prepend(str(EXPERIMENTS / "studies"))
+    redecided = importlib.import_module("redecided")
+    plan = json.loads((EXPERIMENTS / "plans" / "redecided.json").read_text())
+    studies = redecided.studies_of(plan)
+    assert [s["name"] for s in studies] == [
+        "fppo-paper-mujoco",
+        "fppo-paper-classic",
+        "fppo-unnormalised-classic",
+        "spo-dpo-mujoco",
+        "spo-dpo-classic",
+    ]
+    for family, spec in plan["comparisons"].items():
+        members = [s for s in studies if s["family"] == family]
+        assert sum(s["level"] for s in members) == pytest.approx(redecided.LEVEL)
+        for study in members:
+            first = study["level"] / study["comparisons"]
+            assert first == pytest.approx(redecided.LEVEL / spec["count"])
+    # 20 seeds cannot decide equivalent within ±0.2, as the plan says; 50 can.
+    unreachable = redecided.unreachable(studies, plan["margin"])
+    assert [line.split(":")[0] for line in unreachable] == [
+        "- fppo-paper-mujoco",
+        "- spo-dpo-mujoco",
+    ]
+
+
 def test_the_dose_response_names_the_seed_and_update_where_a_control_parts(monkeypatch):
     # Recorded parts: Hopper's seed 6, where the controls train as PPO throughout, and
     # Walker2d's seed 5, where both part from it at one update.

@@ -12,8 +12,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: sh
 from common import folder_entry_point
 
 # In the order they run: the verdict reads the part the first one trains; the planned verdict
-# and the dose-response, which report nothing until every planned run is there, read the
-# recorded runs and write their reports into the temporary directory.
+# and the dose-response, which report nothing until every planned run is there, and the
+# re-decided verdicts (nothing trained) read the recorded runs and write their reports into the
+# temporary directory.
 SMOKE = {
     "study.py": "--task cartpole --seeds 0:2 --steps 4096 --variants ppo fppo-lp --results {tmp}",
     "verdict.py": "--results {tmp}",
@@ -21,6 +22,7 @@ SMOKE = {
     "dose_response.py": "--output {tmp}/dose_response.md",
     "sequential_rule.py": "--smoke",
     "equivalence_rule.py": "--smoke",
+    "redecided.py": "--studies {tmp}/redecided --output {tmp}/redecided.md",
 }
 
 if __name__ == "__main__":

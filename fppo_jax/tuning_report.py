@@ -83,7 +83,15 @@ def arm_results(
         },
         "first_rung_spread": _quartiles(finite),
         "diverged_trials": diverged,
+        "tied_rungs": [r for r, s in enumerate(rungs_scores[:-1]) if _tied(s["arms"][arm])],
     }
+
+
+def _tied(rung: dict[str, Any]) -> bool:
+    """Whether a rung kept some of its trials and scored them all alike, so that the trial
+    numbers chose its survivors."""
+    scores = {row["score"] for row in rung["trials"] if not row["diverged"]}
+    return len(rung["trials"]) > len(rung["survivors"]) and len(scores) == 1
 
 
 def _quartiles(x: np.ndarray) -> dict[str, float | None]:
@@ -136,6 +144,18 @@ def write_report(output: Path, plan: dict[str, Any], results: dict[str, Any]) ->
                 f"{beat['beat']} of {beat['sampled']} | {len(found['diverged_trials'])} | "
                 f"{found['env_steps']:,} |"
             )
+        tied = [
+            f"{arm} at rung {', '.join(str(r + 1) for r in found['tied_rungs'])}"
+            for arm, found in arms.items()
+            if found["tied_rungs"]
+        ]
+        if tied:
+            lines += [
+                "",
+                f"Tied: every trial scored alike ({'; '.join(tied)}), so the trials that went "
+                "on were the first by number, not the best: a rung that short cannot tell the "
+                "settings apart on this task.",
+            ]
         lines += ["", "Chosen settings:", ""]
         for arm, found in arms.items():
             chosen = found["chosen"]

@@ -59,6 +59,17 @@ def test_a_trial_without_an_episode_ranks_below_scored_ones_and_a_diverged_one_n
     assert [r["trial"] for r in ranked(rows)] == [1, 4, 0, 3]
 
 
+def test_a_rung_that_scored_every_trial_alike_is_reported_as_tied(tmp_path):
+    flat = [
+        {"arms": {"ppo": {"trials": [row(t, -200.0) for t in range(4)], "survivors": [0, 1]}}},
+        {"arms": {"ppo": {"trials": [row(0, -150.0), row(1, -120.0)], "survivors": [1]}}},
+        {"arms": {"ppo": {"trials": [row(1, -110.0)], "survivors": [1]}}},
+    ]
+    found = arm_results("ppo", "ppo", flat, SETTINGS, RUNGS, 2, 100)
+    assert found["tied_rungs"] == [0]
+    assert arm_results("spo", "ppo", SCORES, SETTINGS, RUNGS, 2, 100)["tied_rungs"] == []
+
+
 def test_the_report_gives_each_arm_its_row_and_the_checklist(tmp_path):
     plan = {
         "variants": ["ppo", "spo"],

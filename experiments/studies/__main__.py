@@ -23,6 +23,7 @@ SMOKE = {
     "sequential_rule.py": "--smoke",
     "equivalence_rule.py": "--smoke",
     "redecided.py": "--studies {tmp}/redecided --output {tmp}/redecided.md",
+    "tuned_verdict.py": "--output {tmp}/tuned.md",
 }
 
 if __name__ == "__main__":

@@ -1,0 +1,205 @@
+"""The tuned verdict's write-up (experiments/plans/tuned.json): each family's tune and study,
+read from their records, with what tuning gained over each arm's default.
+
+    python experiments/studies/tuned_verdict.py              # results/tuned.md
+    python experiments/studies/tuned_verdict.py --results /tmp/r --output /tmp/tuned.md
+
+Per family recorded under <results>/tuned/<family>/ (``tune/`` by ``fppo-jax tune``,
+``study/`` by ``fppo-jax study --tuned``): the budget every arm had, the study's decisions
+(better, worse, equivalent or undecided against tuned PPO) with the seeds each took and
+P(candidate > PPO) on the primary endpoint with a 95% percentile bootstrap interval over the
+runs the decision used; then each arm's tuned setting against its default on the test seeds, on
+the final training return (the defaults' runs are the seed study's, recorded at seeds 0–49 under
+<results>/study/<task>/paper/, which were not evaluated), and tuned PPO against the published
+tuned PPO. A family whose study is not finished is reported as far as it went, and says so.
+Nothing is trained.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from fppo_jax import SweepResult, merge, statistics
+from fppo_jax.study import run_scores
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
+from common import RESULTS, argument_parser, header, write_result
+
+# RL Baselines3 Zoo's tuned PPO (benchmark.md: one run, deterministic evaluation), with the
+# budget it trained; CartPole-v1 there ends episodes at 500 steps, this project's at 200.
+PUBLISHED = {
+    "cartpole": "500.0 (CartPole-v1, capped at 500, 100k steps)",
+    "acrobot": "−73.5 (1M steps)",
+    "mountaincar": "−110.4 (1M steps)",
+}
+
+
+def interval(point: tuple[float, float, float], digits: int = 2) -> str:
+    return f"{point[0]:.{digits}f} [{point[1]:.{digits}f}, {point[2]:.{digits}f}]"
+
+
+def recorded_defaults(results: Path, task: str) -> SweepResult | None:
+    parts = sorted((results / "study" / task / "paper").glob("*/sweep.json"))
+    return merge([SweepResult.read(p.parent) for p in parts]) if parts else None
+
+
+def study_runs(study: Path, task: str) -> SweepResult:
+    groups = sorted((study / task).glob("group-*/sweep.json"))
+    return merge([SweepResult.read(p.parent) for p in groups])
+
+
+def family_lines(results: Path, family: str) -> list[str]:
+    where = results / "tuned" / family
+    tune_plan = json.loads((where / "tune" / "tune.json").read_text())
+    tuned = json.loads((where / "tune" / "results.json").read_text())
+    lines = [f"## {family.capitalize()} tasks", ""]
+    budget = ", ".join(
+        f"{task} {b['env_steps_per_arm']:,}" for task, b in tune_plan["budget"].items()
+    )
+    lines += [
+        f"Tune ([report](tuned/{family}/tune/report.md), at {tune_plan['commit'][:7]}): "
+        f"{tune_plan['trials']} trials per arm and task, {len(tune_plan['seeds'])} tuning seeds "
+        f"per trial, η = {tune_plan['eta']}; every arm trained the same env steps per task "
+        f"({budget}).",
+        "",
+    ]
+    study = where / "study"
+    if not (study / "decisions.json").exists():
+        return [*lines, "The study on fresh seeds has not run yet.", ""]
+    plan = json.loads((study / "plan.json").read_text())
+    decided = json.loads((study / "decisions.json").read_text())
+    endpoint = plan["primary_endpoint"]
+    state = "finished" if decided["finished"] else "**not finished** (some comparisons await seeds)"
+    lines += [
+        f"Study on test seeds ([report](tuned/{family}/study/report.md), at "
+        f"{plan['commit'][:7]}): {state}; primary endpoint {endpoint}, margin "
+        f"{plan.get('margin')}, family-wise level {plan['level']} over "
+        f"{len(plan['comparisons'])} comparisons.",
+        "",
+        "| task | candidate | decision against tuned PPO | seeds | "
+        f"P(candidate > PPO), {endpoint} |",
+        "|---|---|---|---|---|",
+    ]
+    runs = {task: study_runs(study, task) for task in plan["tasks"]}
+    for row in decided["comparisons"]:
+        task, seeds = row["task"], row["seeds"]
+        candidate = run_scores(runs[task], row["candidate"], endpoint)[:seeds]
+        baseline = run_scores(runs[task], row["baseline"], endpoint)[:seeds]
+        p = statistics.compare(candidate, baseline)["probability_of_improvement"]
+        lines.append(
+            f"| {task} | {row['candidate']} | {row['decision']} | {seeds} | {interval(p)} |"
+        )
+    lines += [
+        "",
+        "What tuning gained, on the final training return at the test seeds (IQM with its 95% "
+        "interval; the default's runs are the seed study's, at seeds 0–49):",
+        "",
+        "| task | arm | tuned trial | tuned IQM | default IQM | P(tuned > default) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for task in plan["tasks"]:
+        defaults = recorded_defaults(results, task)
+        for arm in [plan["baseline"], *plan["candidates"]]:
+            tuned_final = run_scores(runs[task], arm, "final")
+            tuned_final = tuned_final[np.isfinite(tuned_final)]
+            chosen = tuned[task][arm]["chosen"]["trial"]
+            cells = ["not recorded", "—"]
+            names = [] if defaults is None else [s["variant"] for s in defaults.settings]
+            if defaults is not None and arm in names:
+                default_final = run_scores(defaults, arm, "final")
+                default_final = default_final[np.isfinite(default_final)]
+                compared = statistics.compare(tuned_final, default_final)
+                cells = [
+                    interval(statistics.interval(default_final, "iqm"), 1),
+                    interval(compared["probability_of_improvement"]),
+                ]
+            lines.append(
+                f"| {task} | {arm} | {chosen} | "
+                f"{interval(statistics.interval(tuned_final, 'iqm'), 1)} | {' | '.join(cells)} |"
+            )
+    lines += [
+        "",
+        "Tuned PPO beside the published tuned PPO (RL Baselines3 Zoo `benchmark.md`, one run "
+        "each, its own budgets and task versions; not a comparison at equal budget):",
+        "",
+        "| task | tuned PPO here, IQM of the final return | RL Zoo's tuned PPO |",
+        "|---|---|---|",
+    ]
+    for task in plan["tasks"]:
+        final = run_scores(runs[task], plan["baseline"], "final")
+        final = final[np.isfinite(final)]
+        iqm = interval(statistics.interval(final, "iqm"), 1)
+        lines.append(f"| {task} | {iqm} | {PUBLISHED.get(task, '—')} |")
+    return [*lines, ""]
+
+
+def mujoco_lines(results: Path) -> list[str]:
+    """The MuJoCo family's parts so far: each task's tune (its own part) and what is left."""
+    lines = ["## MuJoCo tasks", ""]
+    tunes = sorted((results / "tuned" / "mujoco").glob("tune-*/results.json"))
+    for path in tunes:
+        task = path.parent.name.removeprefix("tune-")
+        found = json.loads(path.read_text())[task]
+        plan = json.loads((path.parent / "tune.json").read_text())
+        scores = ", ".join(
+            f"{arm} {arm_found['chosen']['score']:.1f} (trial {arm_found['chosen']['trial']}, "
+            f"default {arm_found['default']['first_rung_score']:.1f} at the first rung)"
+            for arm, arm_found in found.items()
+            if arm_found["chosen"] and arm_found["chosen"]["score"] is not None
+        )
+        lines += [
+            f"- {task}: tuned ([report](tuned/mujoco/{path.parent.name}/report.md), at "
+            f"{plan['commit'][:7]}), every arm "
+            f"{plan['budget'][task]['env_steps_per_arm']:,} env steps; best trial per arm on the "
+            f"tuning seeds at the full budget: {scores}. Its study on fresh seeds has not run.",
+        ]
+    done = {path.parent.name.removeprefix("tune-") for path in tunes}
+    left = [task for task in ("hopper", "halfcheetah", "swimmer") if task not in done]
+    lines += [
+        "",
+        f"Not run yet: {', '.join(f'the tune of {t}' for t in left) or 'no tune'}"
+        f"{'; ' if left else ''}every MuJoCo study. The plan's estimate: each task's tune trains "
+        "6 arms × 4.65M env steps (about 15 minutes at native MuJoCo's ~30k env steps/s on 2 "
+        "cores), its study up to 50 seeds × 6 arms × 1M env steps (about 3 hours per task at "
+        "that rate).",
+        "",
+    ]
+    return lines
+
+
+def main() -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--results", type=Path, default=RESULTS, help="where the records are")
+    parser.add_argument("--output", type=Path, help="the write-up (default: <results>/tuned.md)")
+    args = parser.parse_args()
+    families = [
+        family
+        for family in ("classic", "mujoco")
+        if (args.results / "tuned" / family / "tune" / "results.json").exists()
+    ]
+    lines = [
+        *header("Tuned against tuned: does a variant beat PPO when every arm is tuned?"),
+        "",
+        "The plan: [experiments/plans/tuned.json](plans/tuned.json), committed before any of "
+        "its runs. Every arm, PPO included, tuned with the same budget by `fppo-jax tune`, then "
+        "each arm's chosen setting tested on seeds the tune never used by `fppo-jax study "
+        "--tuned`. Intervals here are 95% percentile bootstrap intervals over the runs; they "
+        "describe those runs and are not adjusted for stopping early or for the comparisons "
+        "(the decisions are; the studies' reports give the repeated intervals).",
+        "",
+    ]
+    for family in families:
+        lines += family_lines(args.results, family)
+    lines += mujoco_lines(args.results)
+    output = args.output or args.results / "tuned.md"
+    write_result(output, lines)
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

@@ -516,7 +516,7 @@ class _Task:
     def __init__(
         self,
         task: str,
-        run: Prepared,
+        prepared: Prepared,
         arms: list[Surrogate],
         population: dict[str, list[dict[str, float]]],
         rungs: Rungs,
@@ -526,7 +526,8 @@ class _Task:
         storage: Any,
         progress: bool,
     ):
-        self.task, self.run_, self.arms, self.rungs, self.seeds = task, run, arms, rungs, seeds
+        self.task, self.prepared, self.arms = task, prepared, arms
+        self.rungs, self.seeds = rungs, seeds
         self.settings = {arm: [setting_of(p) for p in params] for arm, params in population.items()}
         self.directory, self.optuna, self.storage, self.progress = (
             directory,
@@ -536,7 +537,6 @@ class _Task:
         )
         self.live = {arm.name: list(range(len(self.settings[arm.name]))) for arm in arms}
         self.scores: list[dict[str, Any]] = []  # each recorded rung's
-        self.compiles = 0
 
     @property
     def finished(self) -> bool:
@@ -619,7 +619,7 @@ class _Task:
     ) -> tuple[TrainState, np.ndarray, float]:
         """The runs of `order` (arm, trial, seed) trained through `rung`, from the recorded
         state of the rung before: their state, each run's score and the seconds compiling."""
-        rungs, trainer = self.rungs, self.run_.trainer
+        rungs, trainer = self.rungs, self.prepared.trainer
         surrogates = {arm.name: arm for arm in self.arms}
         hps = stack_hyperparameters(
             [
@@ -697,7 +697,7 @@ class _Task:
                 self.settings,
                 self.rungs,
                 len(self.seeds),
-                self.run_.config.samples_per_update,
+                self.prepared.config.samples_per_update,
             )
             for arm in self.arms
         }

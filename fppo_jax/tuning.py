@@ -95,6 +95,7 @@ SCORE = (
 )
 SELECTION = "per task and arm: the trial with the best score at the last rung (the full budget)"
 _STATE, _SCORES = "state.npz", "scores.json"
+CALLS_A_RUNG = 10  # compiled calls the first rung is split into, at least, for progress
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,7 +108,15 @@ class Rungs:
 
     @property
     def updates_per_call(self) -> int:
-        return self.ends[0]
+        """The largest divisor of the first rung's length that is at most a
+        :data:`CALLS_A_RUNG`-th of it (1 for a shorter rung): every rung but the last, whose end
+        the run's length stops, is then whole calls, and progress is told between them."""
+        first = self.ends[0]
+        return (
+            max(d for d in range(1, first // CALLS_A_RUNG + 1) if first % d == 0)
+            if (first >= CALLS_A_RUNG)
+            else 1
+        )
 
     def to_json(self, samples_per_update: int) -> list[dict[str, int]]:
         return [
@@ -644,14 +653,24 @@ class _Task:
             state = _load_state(self.directory / f"rung-{rung - 1}" / _STATE, like)
             if resets_itself(trainer.env):  # their state lived outside JAX, in another batch
                 state = jax.jit(jax.vmap(trainer.restart_envs))(state)
+        self._say(f"{self.task}: rung {rung + 1} compiled in {program.compile_seconds:.1f} s")
         budgeted = with_budget(hps, trainer.config.num_updates)
         last = np.full(len(order), np.nan)
-        for _ in range(-(-(rungs.ends[rung] - start) // rungs.updates_per_call)):
+        calls = -(-(rungs.ends[rung] - start) // rungs.updates_per_call)
+        began = time.perf_counter()
+        for call in range(calls):
             state, metrics = program.run(state, budgeted)
             returns, steps = jax.device_get((metrics.average_return, metrics.env_steps))
             ran = steps[0] >= 0
             if ran.any():
                 last = returns[:, ran][:, -1]
+            if (call + 1) % -(-calls // CALLS_A_RUNG) == 0 and call + 1 < calls:
+                done = min(start + (call + 1) * rungs.updates_per_call, rungs.ends[rung])
+                rate = (done - start) * trainer.config.samples_per_update * len(order)
+                self._say(
+                    f"{self.task}: rung {rung + 1}: update {done} of {rungs.ends[rung]}, "
+                    f"{rate / (time.perf_counter() - began):,.0f} env steps/s"
+                )
         return state, last, program.compile_seconds
 
     def _scores(

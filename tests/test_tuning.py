@@ -60,6 +60,9 @@ def test_schedule_halves_the_trials_and_ends_at_the_full_budget():
     # Every trial trains the first rung; the survivors each rung's further updates.
     assert rungs.updates_per_arm(seeds=2) == 2 * (27 * 3 + 9 * 6 + 3 * 18 + 1 * 54)
     assert schedule(1, 3, 5).ends == (5,)
+    # Progress between calls: the first rung (3 updates here, 54 on MuJoCo) in whole calls.
+    assert rungs.updates_per_call == 1
+    assert schedule(9, 3, 488).updates_per_call == 3
     with pytest.raises(InvalidInput, match="too short for 4 rungs"):
         schedule(27, 3, 20)
 

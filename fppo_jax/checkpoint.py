@@ -201,15 +201,18 @@ class Checkpoints:
         keep = positive_int("keep (checkpoints kept)", keep)
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
-        # The process's unraisable hook, while this object's writes have theirs in its place.
-        self._process_hook: Callable[[Any], object] | None = None
-        _ORBAX_CHATTER.install()
         if os.path.lexists(self.directory) and not self.directory.is_dir():
             raise InvalidInput(
                 f"checkpoint directory {self.directory} is not a directory (a file, or a link "
                 "that leads to none)"
             )
-        self._manager = _manager(self.directory, keep)
+        _QUIET.open()
+        try:
+            self._manager = _manager(self.directory, keep)
+        except BaseException:
+            _QUIET.close()
+            raise
+        self._open = True
         self._writes = _Writes(self._manager, self.directory)
 
     def steps(self) -> list[int]:
@@ -315,7 +318,6 @@ class Checkpoints:
         items = {name: ocp.args.StandardSave(value) for name, value in arrays.items()}
         args = _args(**items, record=ocp.args.JsonSave(json_value(record)))
         self.wait()  # the one before, on disk: orbax would wait for it here anyway
-        self._process_hook = self._process_hook or _ReadsLeftBehind.quieten()
         self._writes.start(step, args)
 
     def policy(self) -> tuple[Policy, dict[str, Any]]:
@@ -345,9 +347,11 @@ class Checkpoints:
         raise MissingFile(f"no readable checkpoint in {self.directory}")
 
     def _read(self, step: int, **items: Any) -> Any:
-        _ReadsLeftBehind.quieten()
-        self._process_hook = None  # a read's reports come up to the process's end: kept
-        return self._manager.restore(step, args=_args(**items))
+        try:
+            return self._manager.restore(step, args=_args(**items))
+        except Exception:
+            _QUIET.failed = True  # its reads left behind report up to the process's exit
+            raise
 
     def wait(self) -> None:
         """Block until the checkpoint being written is complete; :class:`CheckpointNotWritten`
@@ -374,12 +378,9 @@ class Checkpoints:
             if not quiet:
                 raise
         finally:
-            # Every write is done: the user's hook again, unless one failed, whose reports come
-            # up to the interpreter's exit, as a read's do.
-            ours = isinstance(sys.unraisablehook, _ReadsLeftBehind)
-            if self._process_hook is not None and ours and not self._writes.failed:
-                sys.unraisablehook = self._process_hook
-            self._process_hook = None
+            if self._open:
+                self._open = False
+                _QUIET.close()
             if self._lock is not None:
                 self._lock.release()
                 self._lock = None
@@ -401,7 +402,6 @@ class _Writes:
     def __init__(self, manager: ocp.CheckpointManager, directory: Path):
         self.manager, self.directory = manager, directory
         self.pending: int | None = None  # the step being written, until it is on disk
-        self.failed = False  # whether a write failed (its leftovers report up to the exit)
 
     def start(self, step: int, args: ocp.args.Composite) -> None:
         if not self._written(lambda: self.manager.save(step, args=args)):
@@ -435,7 +435,7 @@ class _Writes:
                 raise self._not_written(f"step {step} is not on disk after writing it")
 
     def _not_written(self, why: str) -> CheckpointNotWritten:
-        self.failed = True
+        _QUIET.failed = True  # its leftovers report up to the process's exit
         _FAILED_WRITE_TASKS.install()
         kept = _steps(self.manager)
         before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
@@ -466,14 +466,6 @@ class _OrbaxChatter(logging.Filter):
         unwritten = failure is not None and _storage_failure(failure)
         unwritten |= "_SignalingThread.run() raised an exception" in str(record.msg)
         return record.levelno >= logging.ERROR and not damaged and not unwritten
-
-    def install(self) -> None:
-        logger = logging.getLogger("absl")
-        if self not in logger.filters:
-            logger.addFilter(self)
-
-
-_ORBAX_CHATTER = _OrbaxChatter()
 
 
 class _FailedWriteTasks(logging.Filter):
@@ -521,18 +513,41 @@ class _ReadsLeftBehind:
         if not left_behind:
             self.previous(unraisable)
 
-    @classmethod
-    def quieten(cls) -> Callable[[Any], object] | None:
-        """Install the hook, unless it is the one installed, and return the hook it replaced
-        (None if none): before the process first reads a checkpoint, for good, as a read's
-        reports come up to the interpreter's exit; while a :class:`Checkpoints` writes, whose
-        write's reports come before it closes (it puts the process's hook back, unless a write
-        failed: then they too come up to the exit)."""
-        if isinstance(sys.unraisablehook, cls):
-            return None
-        previous = sys.unraisablehook
-        sys.unraisablehook = cls(previous)
-        return previous
+
+class _Quieting:
+    """Orbax kept quiet while checkpoints are open: :class:`_OrbaxChatter` on absl's logger
+    and :class:`_ReadsLeftBehind` as the unraisable hook, from the first :class:`Checkpoints`
+    opened to the last one closed, when the process's logger and hook are as they were found.
+    Once orbax has failed (a damaged checkpoint read, a write storage refused: `failed`), its
+    leftovers report up to the process's exit, so the quieting stays."""
+
+    def __init__(self) -> None:
+        self.users = 0
+        self.failed = False
+        self.chatter = _OrbaxChatter()
+        self.hook: _ReadsLeftBehind | None = None
+
+    def open(self) -> None:
+        if self.users == 0:
+            logger = logging.getLogger("absl")
+            if self.chatter not in logger.filters:
+                logger.addFilter(self.chatter)
+            if not isinstance(sys.unraisablehook, _ReadsLeftBehind):
+                self.hook = _ReadsLeftBehind(sys.unraisablehook)
+                sys.unraisablehook = self.hook
+        self.users += 1
+
+    def close(self) -> None:
+        self.users -= 1
+        if self.users > 0 or self.failed:
+            return
+        logging.getLogger("absl").removeFilter(self.chatter)
+        if self.hook is not None and sys.unraisablehook is self.hook:
+            sys.unraisablehook = self.hook.previous
+        self.hook = None
+
+
+_QUIET = _Quieting()
 
 
 def _manager(directory: Path, keep: int) -> ocp.CheckpointManager:

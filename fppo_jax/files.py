@@ -6,7 +6,6 @@ half-written file."""
 from __future__ import annotations
 
 import fcntl
-import hashlib
 import json
 import os
 import tempfile
@@ -18,6 +17,7 @@ import jax
 import numpy as np
 
 from fppo_jax.errors import InvalidInput
+from fppo_jax.numpy_policy import digest
 
 
 def writable_directory(path: str | Path) -> Path:
@@ -152,13 +152,10 @@ def _plain(value: Any) -> Any:
 
 def tree_digest(arrays: Any) -> str:
     """The SHA-256 of a tree of arrays: each leaf's path, dtype and shape, then its bytes, in
-    the tree's order (what checkpoints and saved policies record of their arrays)."""
-    sha = hashlib.sha256()
-    for path, leaf in jax.tree_util.tree_flatten_with_path(arrays)[0]:
-        leaf = np.ascontiguousarray(leaf)
-        sha.update(f"{jax.tree_util.keystr(path)} {leaf.dtype} {leaf.shape}".encode())
-        sha.update(leaf.tobytes())
-    return sha.hexdigest()
+    the tree's order (what checkpoints and saved policies record of their arrays):
+    :func:`fppo_jax.numpy_policy.digest`, each leaf labelled by its path."""
+    leaves = jax.tree_util.tree_flatten_with_path(arrays)[0]
+    return digest((jax.tree_util.keystr(path), leaf) for path, leaf in leaves)
 
 
 def first_line(error: Exception) -> str:

@@ -21,7 +21,7 @@ import dataclasses
 import hashlib
 import json
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, cast
 
@@ -85,7 +85,8 @@ class NumpyPolicy:
                 f"reads format {FORMAT}: use the numpy_policy.py of the fppo-jax that saved it"
             )
         arrays = _read(directory / ARRAYS_FILE, _arrays)
-        if digest(arrays) != description["digest"]:
+        named = ((f"[{name!r}]", arrays[name]) for name in sorted(arrays))
+        if digest(named) != description["digest"]:
             raise ValueError(
                 f"{directory / ARRAYS_FILE} does not match the digest in {POLICY_FILE}: damaged "
                 "or edited"
@@ -122,12 +123,17 @@ def _arrays(path: Path) -> dict[str, np.ndarray]:
         return dict(npz)
 
 
-def digest(arrays: dict[str, np.ndarray]) -> str:
-    """The SHA-256 digest that ``policy.json`` records of the arrays of ``policy.npz``: each
-    array in the order of its name, its name, dtype and shape, then its bytes."""
+def digest(arrays: Iterable[tuple[str | None, Any]]) -> str:
+    """The SHA-256 digest fppo-jax records of arrays, each a (label, array) pair in the order
+    given: the label, dtype and shape (``"<label> <dtype> <shape>"``; nothing for a label of
+    None), then the array's bytes in C order. The one digest of the package: ``policy.json``
+    records it of ``policy.npz``'s arrays labelled ``['<name>']`` in the order of their names,
+    a checkpoint of each item's arrays labelled by their paths in the tree's order
+    (``fppo_jax.files.tree_digest``), ``sweep.json`` of each run's values unlabelled."""
     sha = hashlib.sha256()
-    for name in sorted(arrays):
-        leaf = np.ascontiguousarray(arrays[name])
-        sha.update(f"[{name!r}] {leaf.dtype} {leaf.shape}".encode())
-        sha.update(leaf.tobytes())
+    for label, array in arrays:
+        array = np.ascontiguousarray(array)
+        if label is not None:
+            sha.update(f"{label} {array.dtype} {array.shape}".encode())
+        sha.update(array.tobytes())
     return sha.hexdigest()

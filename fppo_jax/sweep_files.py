@@ -20,6 +20,7 @@ import numpy as np
 
 from fppo_jax.errors import InvalidInput, MissingFile
 from fppo_jax.files import check_format, write_atomically, write_json
+from fppo_jax.numpy_policy import digest
 from fppo_jax.trainer import METRICS
 
 # The layout of sweep.json and curves.csv (files.check_format; a record without one is in the
@@ -284,8 +285,9 @@ def _check_cells(
 
 
 def _run_digest(values: np.ndarray) -> str:
-    """The SHA-256 of one run's values, [update, column], as float64."""
-    return hashlib.sha256(np.ascontiguousarray(values, np.float64).tobytes()).hexdigest()
+    """The SHA-256 of one run's values, [update, column], as float64: their bytes alone
+    (:func:`~fppo_jax.numpy_policy.digest`, unlabelled)."""
+    return digest([(None, np.asarray(values, np.float64))])
 
 
 def _check_run_digests(

@@ -339,22 +339,78 @@ def test_checkpoints_whose_every_file_is_garbage_are_set_aside_never_a_fresh_sta
     assert sorted(p.name for p in (tmp_path / "damaged").iterdir()) == ["2", "3", "4"]
 
 
-def test_checkpoints_leave_the_process_s_logging_and_hooks_as_they_were(tmp_path):
-    # In a process of its own: the library sets no log level and installs no hook for a run
-    # that writes checkpoints, and orbax's chatter does not reach the user's screen.
-    script = textwrap.dedent(
-        f"""
-        import logging, sys
-        import fppo_jax
-        hook, level = sys.unraisablehook, logging.getLogger("absl").level
-        fppo_jax.train("cartpole", "ppo", total_steps=512, num_envs=4, num_steps=32,
-                       num_minibatches=4, num_epochs=2, progress=False,
-                       checkpoint_dir={str(tmp_path)!r}, checkpoint_every=2)
-        assert sys.unraisablehook is hook and logging.getLogger("absl").level == level
+def test_training_checkpointing_resuming_and_reading_leave_the_process_as_they_found_it(tmp_path):
+    # In a process of its own, so that this one's logging, hooks and warning filters do not
+    # interfere: the loggers that existed before (the root's, absl's, asyncio's, jax's,
+    # orbax's...: level, filters, handlers), the unraisable hook and the warning filters are
+    # as they were after a run that checkpoints, its resume, load_policy and a checkpointed
+    # sweep read back; and orbax's chatter does not reach the user's screen. The libraries
+    # the run uses set up their own on import (urllib3 and botocore add warning filters, absl
+    # and jax loggers): the process imports them first, as a first process running the same
+    # calls did (`modules`), so that what is compared is what the calls do.
+    def calls(where: Path) -> str:
+        return textwrap.dedent(
+            f"""
+            import fppo_jax
+            from fppo_jax import SweepResult
+            shape = dict(num_envs=4, num_steps=32, num_minibatches=4, num_epochs=2,
+                         progress=False)
+            run = dict(env="cartpole", variant="ppo", checkpoint_dir={str(where / "run")!r},
+                       checkpoint_every=2, **shape)
+            fppo_jax.train(total_steps=512, **run)
+            fppo_jax.train(total_steps=768, resume=True, **run)
+            fppo_jax.load_policy({str(where / "run")!r})
+            fppo_jax.sweep("cartpole", {{"variant": "ppo"}}, seeds=2, chunk=2, total_steps=256,
+                           checkpoint_dir={str(where / "sweep-checkpoints")!r},
+                           log_dir={str(where / "sweep")!r}, **shape)
+            SweepResult.read({str(where / "sweep")!r})
+            """
+        )
+
+    def python(code: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+
+    listed = python(
+        calls(tmp_path / "first")
+        + "\nimport json, sys\nprint(json.dumps([m for m in sys.modules if 'fppo_jax' not in m]))"
+    )
+    assert listed.returncode == 0, listed.stderr
+    modules = json.loads(listed.stdout.splitlines()[-1])
+    snapshot = textwrap.dedent(
+        """
+        import importlib, logging, sys, warnings
+
+        def snapshot():
+            loggers = {"": logging.getLogger()}
+            for name, logger in logging.root.manager.loggerDict.items():
+                if isinstance(logger, logging.Logger):
+                    loggers[name] = logger
+            state = {
+                name: [logger.level, logger.propagate, logger.disabled,
+                       [id(f) for f in logger.filters], [id(h) for h in logger.handlers]]
+                for name, logger in loggers.items()
+            }
+            return state, logging.root.manager.disable, sys.unraisablehook, list(warnings.filters)
+
+        for module in MODULES:
+            try:
+                importlib.import_module(module)
+            except Exception:  # one that only its package may import
+                pass
+        before = snapshot()
+        assert {"absl", "asyncio", "jax"} <= set(before[0]), sorted(before[0])
+        """
+    ).replace("MODULES", repr(modules))
+    compare = textwrap.dedent(
+        """
+        after = snapshot()
+        changed = {n: (v, after[0].get(n)) for n, v in before[0].items() if after[0].get(n) != v}
+        assert not changed, changed
+        assert after[1:] == before[1:], (before[1:], after[1:])
         logging.getLogger("absl").warning("the user's own absl warning")
         """
     )
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    done = python(snapshot + calls(tmp_path / "second") + compare)
     assert done.returncode == 0, done.stderr
     assert "the user's own absl warning" in done.stderr
     assert "orbax" not in done.stderr.lower(), done.stderr

@@ -203,6 +203,12 @@ def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[st
     ]
 
 
+def profile_label(endpoint: str, baseline: str) -> str:
+    """The x-axis label of ``profiles.png``: in words, with no symbol (τ) that a user's
+    hyperparameter of that name (``tau``) could be taken for."""
+    return f"threshold on the normalised {endpoint} (1 = {baseline}'s IQM on the task)"
+
+
 def write_figures(
     output: Path,
     plan: dict[str, Any],
@@ -242,7 +248,7 @@ def write_figures(
     if normalised:
         charts["profiles.png"] = plot_profiles(
             {v: np.concatenate(x) for v, x in normalised.items()},
-            xlabel=f"normalised {endpoint} τ (1 = {plan['baseline']}'s IQM on the task)",
+            xlabel=profile_label(endpoint, plan["baseline"]),
         )
     paths = []
     for name, chart in charts.items():

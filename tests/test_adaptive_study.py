@@ -26,7 +26,9 @@ BUDGET = {"total_steps": 4096, "learning_rate": 0.003, "chunk": 8}
 FLAGS = ["--steps", "4096", "--learning-rate", "0.003", "--chunk", "8", "--quiet"]
 
 
-def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(tmp_path, tiny):
+def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(
+    tmp_path, tiny, capsys
+):
     output = tmp_path / "study"
     settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
     candidates = [frozen, "fppo-lp"]
@@ -70,6 +72,8 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
     assert level > 0.99 and repeat[2] - repeat[1] > plain[2] - plain[1]  # fppo-lp's is wider
     for figure in ("curves.png", "improvement.png"):  # beside the report, drawn
         assert (output / figure).read_bytes().startswith(b"\x89PNG")
+    # The task's runs so far as one sweep beside its groups.
+    assert (output / "cartpole" / "curves.csv").read_bytes() == curves
 
     with pytest.raises(ValueError, match="planned with max_seeds = 16, not 24"):
         fppo_jax.study("cartpole", candidates, "ppo", **{**settings, "max_seeds": 24})
@@ -78,8 +82,26 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
 
     planned_at = "0" * 40  # as if the plan had been made by an earlier commit
     (output / "plan.json").write_text(json.dumps({**plan, "commit": planned_at}))
-    resumed = fppo_jax.study("cartpole", candidates, "ppo", **settings)
+    capsys.readouterr()
+    resumed = fppo_jax.study("cartpole", candidates, "ppo", progress=True, **settings)
     assert resumed.finished
+    # With progress: the plan, then each look's task and seeds, and each decision as it is made.
+    said = [line for line in capsys.readouterr().err.splitlines() if line.startswith("study: ")]
+    assert said[0] == (
+        "study: plan: 2 looks; better or worse when |z| reaches the look's boundary (level "
+        "0.025 while no comparison is decided):"
+    )
+    assert said[1:3] == [
+        "study:   look 1, 8 seeds per setting: ±3.34",  # 8 a side reach |z| = 3.36
+        "study:   look 2, 16 seeds per setting: ±2.25",
+    ]
+    assert said[3:] == [
+        "study: look 1 of 2, cartpole: seeds 0–7 of frozen, fppo-lp, ppo recorded already",
+        f"study: cartpole: frozen against ppo: worse with 8 seeds ({frozen_row['reason']})",
+        "study: look 2 of 2, cartpole: training seeds 8–15 of fppo-lp, ppo",
+        f"study: cartpole: fppo-lp against ppo: {resumed.decisions[1]['decision']} with 16 "
+        f"seeds ({resumed.decisions[1]['reason']})",
+    ]
     assert f"before any run (commit {planned_at})" in (output / "report.md").read_text()
     assert (group_1 / "curves.csv").read_bytes() == curves  # the first group was not trained again
     group_2 = SweepResult.read(output / "cartpole" / "group-2")
@@ -100,9 +122,24 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
     assert recorded["finished"] and recorded["comparisons"] == resumed.decisions
     assert [(g["group"], g["seeds"][0]) for g in recorded["groups"]] == [(1, 0), (2, 8)]
 
+    # One curves.csv for the task, merged over its groups: its runs numbered once, not again
+    # from 0 in each group's.
+    whole = SweepResult.read(output / "cartpole")
+    assert len(whole.runs) == 24 + 16 and whole.seeds == list(range(16))
+    groups = [SweepResult.read(output / "cartpole" / f"group-{k}") for k in (1, 2)]
+    np.testing.assert_array_equal(whole.metrics["average_return"], merged.metrics["average_return"])
+    assert whole.runs == merge(groups).runs
+    merged_curves = (output / "cartpole" / "curves.csv").read_bytes()
+
     again = fppo_jax.study("cartpole", candidates, "ppo", **settings)  # nothing left to train
     assert again.decisions == resumed.decisions
-    assert sorted(p.name for p in (output / "cartpole").iterdir()) == ["group-1", "group-2"]
+    assert sorted(p.name for p in (output / "cartpole").iterdir()) == [
+        "curves.csv",
+        "group-1",
+        "group-2",
+        "sweep.json",
+    ]
+    assert (output / "cartpole" / "curves.csv").read_bytes() == merged_curves
     report = (output / "report.md").read_text()
     assert "Secondary endpoint, auc" in report and "of the baseline's IQM" in report
     assert "| frozen | 8 | 0 | not reached | 0 | not reached |" in report  # never learns
@@ -459,15 +496,26 @@ def test_a_study_of_identical_settings_is_decided_equivalent_within_its_margin(t
 def test_the_command_states_what_each_look_can_decide_and_records_the_margin(tmp_path, capsys):
     output = tmp_path / "study"
     common = ["study", "--candidates", "spo,dpo", "--tasks", "cartpole", "--output", str(output)]
+    # The study prints its plan on stderr with its progress; told to be quiet, the command
+    # prints it on stdout instead: once either way.
     assert main([*common, "--margin", "0.2", "--groups", "0"]) == 0
-    out = capsys.readouterr().out.splitlines()
+    captured = capsys.readouterr()
+    shown = [line[len("study: ") :] for line in captured.err.splitlines()]
+    assert "plan:" not in captured.out and shown[0].startswith("plan: 6 looks")
+    assert main([*common, "--margin", "0.2", "--groups", "0", "--quiet"]) == 0
+    captured = capsys.readouterr()
+    out = captured.out.splitlines()
+    assert out[: len(shown)] == shown and "plan:" not in captured.err
     assert out[0].startswith("plan: 6 looks; better or worse when |z| reaches the look's")
     assert "(level 0.025 while no comparison is decided)" in out[0]
     assert out[1] == (
         "  look 1, 5 seeds per setting: ±6.01 (warning: cannot decide, |z| is at most 2.61 "
-        "with 5 seeds)"
+        "with 5 seeds; reaching ±6.01 takes at least 25 seeds per setting)"
     )
-    assert out[2].endswith("±4.17 (warning: cannot decide, |z| is at most 3.78 with 10 seeds)")
+    assert out[2].endswith(
+        "±4.17 (warning: cannot decide, |z| is at most 3.78 with 10 seeds; reaching ±4.17 "
+        "takes at least 13 seeds per setting)"
+    )
     assert out[3] == "  look 3, 15 seeds per setting: ±3.35"
     assert out[6] == "  look 6, 30 seeds per setting: ±2.31"
     assert out[7] == (

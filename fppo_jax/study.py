@@ -5,8 +5,12 @@ rule decides each comparison or the seeds run out.
 The study's directory holds ``plan.json`` (written before any run: the preregistration of the
 comparisons, the endpoints, the test and its level, the equivalence margin where one is given,
 the seed schedule, the settings and the code's commit), each group of each task as one sweep
-(``<task>/group-<k>/``, recorded by the sweep itself when it ends), ``decisions.json`` after
-every look and ``report.md`` (:mod:`fppo_jax.study_report`). The same call again goes on from
+(``<task>/group-<k>/``, recorded by the sweep itself when it ends), each task's runs so far
+as one sweep merged over its groups (``<task>/curves.csv`` and ``sweep.json``, after every
+look), ``decisions.json`` after every look and ``report.md`` (:mod:`fppo_jax.study_report`).
+With ``progress=True`` the study prints on stderr its plan's boundaries
+(:func:`~fppo_jax.sequential.plan_lines`), each look's task and seeds, and each decision as it
+is made. The same call again goes on from
 the groups recorded; a study whose plan differs is refused, naming the field.
 
 Each look trains, per task, one sweep of the next group's seeds for the candidates still
@@ -683,10 +687,8 @@ def _run(
                 _say(_training_line(group, len(design.looks)))
             if entry := _gather(group, source, recorded):
                 trained.append(entry)
-        before, decisions = (
-            decisions,
-            _decide(recorded, tasks, candidates, baseline, design, endpoint),
-        )
+        before = decisions
+        decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
         if shown:
             for (task, name), decision in decisions.items():
                 if decision.decision is not None and before[task, name].decision is None:

@@ -2,7 +2,9 @@
 seeds it used and why it stopped, its probability of improvement and IQM difference with
 bootstrap intervals (:mod:`fppo_jax.statistics`), and the relative effects the interval
 rules out, on the primary endpoint (with its repeated confidence interval, adjusted for stopping
-early) and then on the secondary ones; and how soon each setting's runs reach shares of the
+early) and then on the secondary ones, with notes where a number could mislead (a ceiling:
+many runs at the task's best score; many ties on the primary endpoint; a boundary that Holm's
+procedure moved from the plan's); and how soon each setting's runs reach shares of the
 baseline's final IQM. Across the tasks (two or more): the probability of improvement averaged
 over them on each endpoint and the IQM of normalised scores, with stratified intervals. Its
 figures beside it: learning curves, probabilities of improvement and, across tasks, performance

@@ -169,11 +169,13 @@ def plot_profiles(
     scores: Mapping[str, np.ndarray],
     *,
     thresholds: np.ndarray | None = None,
-    xlabel: str = "normalised score τ",
+    xlabel: str = "threshold on the normalised score",
     ax: Axes | None = None,
 ) -> Figure:
     """Performance profiles (Agarwal et al. 2021): for each setting, the fraction of its runs
-    (pooled over tasks, on a normalised scale) whose score exceeds τ, against τ."""
+    (pooled over tasks, on a normalised scale) whose score exceeds a threshold, against the
+    threshold. The labels name no symbol (such as τ) that could be read as one of a user's
+    hyperparameters."""
     ax = _axes(ax, (5.5, 3.8))
     pooled = {name: np.asarray(x, float).ravel() for name, x in scores.items()}
     if thresholds is None:
@@ -182,7 +184,7 @@ def plot_profiles(
         thresholds = np.linspace(every.min(), every.max(), 201)
     for name, x in pooled.items():
         ax.plot(thresholds, statistics.performance_profile(x, thresholds), label=name)
-    ax.set(xlabel=xlabel, ylabel="fraction of runs with score > τ", ylim=(-0.02, 1.02))
+    ax.set(xlabel=xlabel, ylabel="fraction of runs above the threshold", ylim=(-0.02, 1.02))
     ax.legend(fontsize="small")
     ax.grid(alpha=0.3)
     return cast(Figure, ax.figure)

@@ -274,6 +274,29 @@ def largest_z(seeds: int) -> float:
     return float(np.sqrt(3 * n * n / (2 * n + 1)))
 
 
+def fewest_seeds(critical: float) -> int | None:
+    """The fewest seeds per setting whose :func:`largest_z` reaches `critical`: the smallest n
+    with 3n² ≥ c²(2n + 1); None for a boundary no seeds reach (infinite: a look that spends no
+    error)."""
+    if not np.isfinite(critical):
+        return None
+    c2 = float(critical) ** 2
+    n = max(1, int(np.ceil((c2 + np.sqrt(c2 * c2 + 3 * c2)) / 3)))
+    while n > 1 and largest_z(n - 1) >= critical:  # the root rounded up past the edge
+        n -= 1
+    while largest_z(n) < critical:
+        n += 1
+    return n
+
+
+def _reaching(critical: float) -> str:
+    """What it would take a look to reach `critical`, in words."""
+    needed = fewest_seeds(critical)
+    if needed is None:
+        return "it spends no error, so no seeds can"
+    return f"reaching ±{critical:.2f} takes at least {needed} seeds per setting"
+
+
 def narrowest_half_width(seeds: int, critical: float) -> float:
     """The narrowest half-width c·se of the equivalence test's interval with `seeds` scores of
     each setting at boundary `critical`: se at its floor √((2n + 1) / (12n²)) (:func:
@@ -303,9 +326,11 @@ def equivalence_reachable(design: Design, comparisons: int) -> int | None:
 def plan_lines(design: Design, comparisons: int) -> list[str]:
     """What a study's plan can decide, in a few lines for the command line: each look's
     boundary if no comparison is decided (level α / `comparisons`), with a warning where the
-    look's seeds cannot reach it (:func:`largest_z`); and, with a margin, the fewest seeds at
-    which ``equivalent`` becomes reachable (:func:`equivalence_reachable`), or a warning that
-    no look reaches it, with the seeds one last look of the same boundary would need."""
+    look's seeds cannot reach it (:func:`largest_z`) that names the fewest seeds per setting
+    that could (:func:`fewest_seeds`), and one more where no look can; and, with a margin,
+    the fewest seeds at which ``equivalent`` becomes reachable
+    (:func:`equivalence_reachable`), or a warning that no look reaches it, with the seeds one
+    last look of the same boundary would need."""
     positive_int("comparisons", comparisons)
     looks = design.looks
     fractions = tuple(n / design.max_seeds for n in looks)
@@ -318,8 +343,18 @@ def plan_lines(design: Design, comparisons: int) -> list[str]:
     for k, (n, c) in enumerate(zip(looks, critical, strict=True)):
         line = f"  look {k + 1}, {n} seeds per setting: ±{c:.2f}"
         if largest_z(n) < c:
-            line += f" (warning: cannot decide, |z| is at most {largest_z(n):.2f} with {n} seeds)"
+            line += (
+                f" (warning: cannot decide, |z| is at most {largest_z(n):.2f} with {n} seeds; "
+                f"{_reaching(c)})"
+            )
         lines.append(line)
+    if all(largest_z(n) < c for n, c in zip(looks, critical, strict=True)):
+        lines.append(
+            "  warning: no look of this design can decide better or worse, whatever the "
+            f"scores: its last look, {looks[-1]} seeds per setting, needs "
+            f"{fewest_seeds(critical[-1])} to reach ±{critical[-1]:.2f}; plan more seeds "
+            "(max_seeds) or fewer looks (a larger group_size)"
+        )
     if design.margin is None:
         return lines
     reachable = equivalence_reachable(design, comparisons)

@@ -5,8 +5,12 @@ rule decides each comparison or the seeds run out.
 The study's directory holds ``plan.json`` (written before any run: the preregistration of the
 comparisons, the endpoints, the test and its level, the equivalence margin where one is given,
 the seed schedule, the settings and the code's commit), each group of each task as one sweep
-(``<task>/group-<k>/``, recorded by the sweep itself when it ends), ``decisions.json`` after
-every look and ``report.md`` (:mod:`fppo_jax.study_report`). The same call again goes on from
+(``<task>/group-<k>/``, recorded by the sweep itself when it ends), each task's runs so far
+as one sweep merged over its groups (``<task>/curves.csv`` and ``sweep.json``, after every
+look), ``decisions.json`` after every look and ``report.md`` (:mod:`fppo_jax.study_report`).
+With ``progress=True`` the study prints on stderr its plan's boundaries
+(:func:`~fppo_jax.sequential.plan_lines`), each look's task and seeds, and each decision as it
+is made. The same call again goes on from
 the groups recorded; a study whose plan differs is refused, naming the field.
 
 Each look trains, per task, one sweep of the next group's seeds for the candidates still
@@ -25,6 +29,7 @@ import dataclasses
 import json
 import shutil
 import subprocess
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, cast
@@ -41,7 +46,7 @@ from fppo_jax.options import Options
 from fppo_jax.prepare import prepare
 from fppo_jax.results import SweepResult, merge
 from fppo_jax.reuse import Pool, Taken, protocol_differences
-from fppo_jax.sequential import Decision, Design, boundaries, decide
+from fppo_jax.sequential import Decision, Design, boundaries, decide, plan_lines
 from fppo_jax.study_report import (
     SHARES,
     START,
@@ -153,6 +158,9 @@ def study(
         plan = check_plan(output, plan)
         if part is not None:  # the array's tasks train their shares side by side
             lock.release()
+        if _shown_progress(settings):
+            lines = plan_lines(design, len(tasks) * len(candidates))
+            print("\n".join(f"study: {line}" for line in lines), file=sys.stderr)
         return _run(output, plan, tasks, candidates, baseline, design, groups, source)
     finally:
         lock.release()
@@ -235,6 +243,14 @@ class _Source:
         if taken is not None and self.settings.get("eval_every") is not None:
             return taken if "eval_return" in taken.result.metrics else None
         return taken
+
+
+def _shown_progress(settings: dict[str, Any]) -> bool:
+    """Whether the study prints its plan, each look's groups and each decision on stderr: where
+    its sweeps show progress as lines or a bar (``progress=True``), not where a callable takes
+    it."""
+    shown = settings.get("progress", False)
+    return isinstance(shown, bool | np.bool_) and bool(shown)
 
 
 def _check_arguments(
@@ -639,6 +655,7 @@ def _run(
     them trained, and the call returns there, writing no decision."""
     recorded: dict[str, list[SweepResult]] = {task: [] for task in tasks}
     trained: list[dict[str, Any]] = []
+    shown = _shown_progress(source.settings)
     endpoint = plan["primary_endpoint"]
     decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
     for look, seeds in enumerate(design.looks):
@@ -656,6 +673,8 @@ def _run(
         if source.part is not None and to_train:
             for group in to_train:
                 if recorded_group(group.where, group.variants, group.seeds, source.part) is None:
+                    if shown:
+                        _say(_training_line(group, len(design.looks), source.part))
                     source.train(group.task, group.variants, group.seeds, group.where)
             return StudyResult(plan, _rows(decisions, baseline), {}, False)
         for group in to_train if source.part is None else []:
@@ -663,11 +682,58 @@ def _run(
         looks_trained = len({entry["group"] for entry in trained if "commit" in entry})
         if to_train and groups is not None and looks_trained >= groups:
             break
-        trained += [entry for group in found if (entry := _gather(group, source, recorded))]
+        for group in found:
+            if shown:
+                _say(_training_line(group, len(design.looks)))
+            if entry := _gather(group, source, recorded):
+                trained.append(entry)
+        before = decisions
         decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
+        if shown:
+            for (task, name), decision in decisions.items():
+                if decision.decision is not None and before[task, name].decision is None:
+                    _say(_decision_line(task, name, baseline.name, decision))
         if source.part is None:  # an array task writes no decision: the job after the array does
             _write_decisions(output, decisions, baseline, trained, plan)  # a killed one keeps them
+            _write_merged(output, recorded, [group.task for group in found])
     return _finish(output, plan, recorded, decisions, baseline, trained, source.part)
+
+
+def _say(line: str) -> None:
+    """A line of the study's progress, on stderr."""
+    print(f"study: {line}", file=sys.stderr, flush=True)
+
+
+def _training_line(group: _Group, looks: int, part: tuple[int, int] | None = None) -> str:
+    """What a look does on a task: the seeds it trains, of which settings, and those taken."""
+    seeds = f"seeds {group.seeds[0]}–{group.seeds[-1]}"
+    said = []
+    if group.to_train:
+        share = "" if part is None else f" (part {part[0]} of {part[1]})"
+        said.append(f"training {seeds} of {', '.join(v.name for v in group.variants)}{share}")
+    elif group.variants:
+        said.append(f"{seeds} of {', '.join(v.name for v in group.variants)} recorded already")
+    if group.taken:
+        said.append(f"{seeds} of {', '.join(group.taken)} taken from recorded sweeps")
+    return f"look {group.look + 1} of {looks}, {group.task}: {'; '.join(said)}"
+
+
+def _decision_line(task: str, candidate: str, baseline: str, decision: Decision) -> str:
+    return (
+        f"{task}: {candidate} against {baseline}: {decision.decision} with {decision.seeds} "
+        f"seeds ({decision.reason})"
+    )
+
+
+def _write_merged(output: Path, recorded: dict[str, list[SweepResult]], tasks: list[str]) -> None:
+    """Each of `tasks`' runs so far as one sweep, ``<task>/curves.csv`` and ``sweep.json``
+    merged over its groups (:func:`~fppo_jax.merge`: one ``run`` numbering, where each group's
+    restarts), beside the groups; not for a task whose runs were all taken from recorded
+    sweeps (it has no directory in the study's)."""
+    for task in dict.fromkeys(tasks):
+        where = output / _directory_name(task)
+        if recorded[task] and where.is_dir():
+            merge(recorded[task]).write(where)
 
 
 def _group(

@@ -2,7 +2,9 @@
 seeds it used and why it stopped, its probability of improvement and IQM difference with
 bootstrap intervals (:mod:`fppo_jax.statistics`), and the relative effects the interval
 rules out, on the primary endpoint (with its repeated confidence interval, adjusted for stopping
-early) and then on the secondary ones; and how soon each setting's runs reach shares of the
+early) and then on the secondary ones, with notes where a number could mislead (a ceiling:
+many runs at the task's best score; many ties on the primary endpoint; a boundary that Holm's
+procedure moved from the plan's); and how soon each setting's runs reach shares of the
 baseline's final IQM. Across the tasks (two or more): the probability of improvement averaged
 over them on each endpoint and the IQM of normalised scores, with stratified intervals. Its
 figures beside it: learning curves, probabilities of improvement and, across tasks, performance
@@ -19,12 +21,18 @@ import numpy as np
 from fppo_jax import statistics
 from fppo_jax.files import write_atomically
 from fppo_jax.results import SweepResult
-from fppo_jax.sequential import Design, repeated_confidence
+from fppo_jax.sequential import Design, boundaries, repeated_confidence
 
 # A task's scores: variant → endpoint (or steps_name(share)) → one per run, in seed order.
 Scores = dict[str, dict[str, np.ndarray]]
 # Shares of the baseline's final IQM whose env steps to reach are reported (lower is faster).
 SHARES = (0.5, 0.8)
+# The share of a setting's runs at the best score recorded on a task from which the report
+# notes a ceiling (:func:`_ceiling`).
+CEILING_SHARE = 0.25
+# The share of a comparison's pairs of runs tied on the primary endpoint from which the report
+# notes its ties (:func:`_ties`).
+TIE_SHARE = 0.05
 # The key in :data:`Scores` of each run's first recorded average return (the untrained policy's).
 START = "start"
 
@@ -53,6 +61,10 @@ def write_report(
         for endpoint in (plan["primary_endpoint"], *plan["secondary_endpoints"], "max"):
             adjusted = plan if endpoint == plan["primary_endpoint"] else None
             lines += ["", *_table(scores[task], task_rows, endpoint, adjusted)]
+            lines += _ceiling(scores[task], plan, endpoint)
+            if adjusted is not None:
+                lines += _ties(scores[task], task_rows, endpoint)
+                lines += _moved_boundaries(task_rows, rows, plan)
         lines += ["", *_speed_table(scores[task], plan)]
     lines += _across_tasks(plan, rows, scores)
     write_atomically(path, ("\n".join(lines) + "\n").encode())
@@ -203,6 +215,12 @@ def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[st
     ]
 
 
+def profile_label(endpoint: str, baseline: str) -> str:
+    """The x-axis label of ``profiles.png``: in words, with no symbol (τ) that a user's
+    hyperparameter of that name (``tau``) could be taken for."""
+    return f"threshold on the normalised {endpoint} (1 = {baseline}'s IQM on the task)"
+
+
 def write_figures(
     output: Path,
     plan: dict[str, Any],
@@ -242,7 +260,7 @@ def write_figures(
     if normalised:
         charts["profiles.png"] = plot_profiles(
             {v: np.concatenate(x) for v, x in normalised.items()},
-            xlabel=f"normalised {endpoint} τ (1 = {plan['baseline']}'s IQM on the task)",
+            xlabel=profile_label(endpoint, plan["baseline"]),
         )
     paths = []
     for name, chart in charts.items():
@@ -320,6 +338,113 @@ def _repeated_interval(
     return _interval(repeated["probability_of_improvement"], ".2f")
 
 
+def _ceiling(scores: Scores, plan: dict[str, Any], endpoint: str) -> list[str]:
+    """A note where a large share (:data:`CEILING_SHARE`) of some setting's recorded runs on
+    the task sit at the best score any run recorded on `endpoint`: a task's maximum return
+    (CartPole's cap), where runs tie and a gain cannot show, so that what an interval rules out
+    above it is not read as informative. Nothing otherwise."""
+    variants = (*plan["candidates"], plan["baseline"])
+    every = np.concatenate([scores[v][endpoint] for v in variants if v in scores])
+    finite = every[np.isfinite(every)]
+    if not finite.size:
+        return []
+    top = float(finite.max())
+    at_top = {
+        v: (int(np.sum(scores[v][endpoint] == top)), scores[v][endpoint].size)
+        for v in variants
+        if v in scores and scores[v][endpoint].size
+    }
+    if not any(count >= CEILING_SHARE * runs for count, runs in at_top.values()):
+        return []
+    shares = _listed(
+        [
+            f"{count} of {runs} runs of {v} ({count / runs:.0%})"
+            for v, (count, runs) in at_top.items()
+            if count
+        ]
+    )
+    return [
+        "",
+        f"Ceiling on {endpoint}: {shares} sit at {top:.6g}, the best any run recorded on this "
+        "task, tied there: most likely the task's maximum (a cap on the return), which no gain "
+        "can pass. Where many runs of both settings reach it, the interval's narrow range says "
+        "that the runs tie at the cap, not that a gain is ruled out: what it 'rules out' above "
+        "the cap is no evidence of how the settings would differ on a harder task.",
+    ]
+
+
+def _ties(scores: Scores, rows: Sequence[dict[str, Any]], endpoint: str) -> list[str]:
+    """A note of the comparisons with many ties on `endpoint` over the runs each decision used
+    (at least :data:`TIE_SHARE` of the (candidate run, baseline run) pairs with the same score),
+    each tie counted ½ in the probability of improvement and the test. Nothing otherwise."""
+    said = []
+    for row in rows:
+        seeds = row["seeds"]
+        candidate = scores[row["candidate"]][endpoint][:seeds]
+        reference = scores[row["baseline"]][endpoint][:seeds]
+        tied = int(np.sum(candidate[:, None] == reference[None, :]))
+        pairs = candidate.size * reference.size
+        if pairs and tied >= TIE_SHARE * pairs:
+            said.append(f"{row['candidate']}, {tied} of {pairs} pairs ({tied / pairs:.0%})")
+    if not said:
+        return []
+    return [
+        "",
+        f"Ties on {endpoint}, the primary endpoint, among the pairs of runs (candidate, "
+        f"{rows[0]['baseline']}) each decision used: {'; '.join(said)}. A tie counts ½ in "
+        "P(candidate > baseline) and in the test: tied runs pull P towards ½ and lower the "
+        "largest |z| the test can reach, so they make a decision harder, and a P near ½ "
+        "partly a count of ties.",
+    ]
+
+
+def _moved_boundaries(
+    task_rows: Sequence[dict[str, Any]], rows: Sequence[dict[str, Any]], plan: dict[str, Any]
+) -> list[str]:
+    """Where a comparison's boundary (in its reason) is not plan.json's
+    ``boundaries_if_none_decided``: Holm's procedure tested it at a larger level once others
+    in the family (`rows`, every task's) were decided ``better`` or ``worse``, their share of α
+    passed on. The level and look are found by matching the boundary with those of α/(m − j),
+    j comparisons decided; a boundary that none matches, or the plan's own, is not noted."""
+    planned = plan.get("boundaries_if_none_decided")
+    if not planned:
+        return []
+    fractions = tuple(n / plan["max_seeds"] for n in plan["looks"])
+    comparisons, alpha = len(plan["comparisons"]), plan["level"]
+    said = []
+    for row in task_rows:
+        boundary = row.get("boundary")
+        if boundary is None or row["decision"] == "equivalent":
+            continue
+        found = [
+            (done, look)
+            for done in range(comparisons)
+            for look, critical in enumerate(boundaries(alpha / (comparisons - done), fractions))
+            if np.isclose(critical, boundary, rtol=0, atol=1e-9)
+        ]
+        if not found or found[0][0] == 0:
+            continue
+        done, look = found[0]
+        others = [
+            f"{other['candidate']} on {other['task']}, {other['decision']}"
+            for other in rows
+            if other is not row and other["decision"] in ("better", "worse")
+        ]
+        level = alpha / (comparisons - done)
+        said.append(
+            f"{row['candidate']}'s boundary, ±{boundary:.2f} at look {look + 1} "
+            f"({plan['looks'][look]} seeds), is not plan.json's ±{planned[look]:.2f} "
+            f"(boundaries_if_none_decided, level {alpha / comparisons:.3g} = α/{comparisons}): "
+            f"Holm's procedure passed on the share of α of {done} comparison"
+            f"{'s' if done > 1 else ''} decided better or worse (decided: "
+            f"{'; '.join(others)}), so it was tested at level {level:.3g} = "
+            f"α/{comparisons - done}, whose boundary is lower."
+        )
+    if not said:
+        return []
+    return ["", "Boundaries moved by Holm's procedure: " + " ".join(said)]
+
+
 def _speed_table(scores: Scores, plan: dict[str, Any]) -> list[str]:
     """Env steps until a run's curve first reaches 50% and 80% of the baseline's final IQM,
     per setting over all its recorded runs: how many did, and the median (reported, not
@@ -353,6 +478,11 @@ def _speed_table(scores: Scores, plan: dict[str, Any]) -> list[str]:
             ]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
+
+
+def _listed(items: Sequence[str]) -> str:
+    """`items` in words: "a", "a and b", "a, b and c"."""
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
 
 
 def _interval(values: tuple[float, float, float], form: str) -> str:

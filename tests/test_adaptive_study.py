@@ -26,7 +26,9 @@ BUDGET = {"total_steps": 4096, "learning_rate": 0.003, "chunk": 8}
 FLAGS = ["--steps", "4096", "--learning-rate", "0.003", "--chunk", "8", "--quiet"]
 
 
-def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(tmp_path, tiny):
+def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(
+    tmp_path, tiny, capsys
+):
     output = tmp_path / "study"
     settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
     candidates = [frozen, "fppo-lp"]
@@ -70,6 +72,8 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
     assert level > 0.99 and repeat[2] - repeat[1] > plain[2] - plain[1]  # fppo-lp's is wider
     for figure in ("curves.png", "improvement.png"):  # beside the report, drawn
         assert (output / figure).read_bytes().startswith(b"\x89PNG")
+    # The task's runs so far as one sweep beside its groups.
+    assert (output / "cartpole" / "curves.csv").read_bytes() == curves
 
     with pytest.raises(ValueError, match="planned with max_seeds = 16, not 24"):
         fppo_jax.study("cartpole", candidates, "ppo", **{**settings, "max_seeds": 24})
@@ -78,8 +82,26 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
 
     planned_at = "0" * 40  # as if the plan had been made by an earlier commit
     (output / "plan.json").write_text(json.dumps({**plan, "commit": planned_at}))
-    resumed = fppo_jax.study("cartpole", candidates, "ppo", **settings)
+    capsys.readouterr()
+    resumed = fppo_jax.study("cartpole", candidates, "ppo", progress=True, **settings)
     assert resumed.finished
+    # With progress: the plan, then each look's task and seeds, and each decision as it is made.
+    said = [line for line in capsys.readouterr().err.splitlines() if line.startswith("study: ")]
+    assert said[0] == (
+        "study: plan: 2 looks; better or worse when |z| reaches the look's boundary (level "
+        "0.025 while no comparison is decided):"
+    )
+    assert said[1:3] == [
+        "study:   look 1, 8 seeds per setting: ±3.34",  # 8 a side reach |z| = 3.36
+        "study:   look 2, 16 seeds per setting: ±2.25",
+    ]
+    assert said[3:] == [
+        "study: look 1 of 2, cartpole: seeds 0–7 of frozen, fppo-lp, ppo recorded already",
+        f"study: cartpole: frozen against ppo: worse with 8 seeds ({frozen_row['reason']})",
+        "study: look 2 of 2, cartpole: training seeds 8–15 of fppo-lp, ppo",
+        f"study: cartpole: fppo-lp against ppo: {resumed.decisions[1]['decision']} with 16 "
+        f"seeds ({resumed.decisions[1]['reason']})",
+    ]
     assert f"before any run (commit {planned_at})" in (output / "report.md").read_text()
     assert (group_1 / "curves.csv").read_bytes() == curves  # the first group was not trained again
     group_2 = SweepResult.read(output / "cartpole" / "group-2")
@@ -100,9 +122,24 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(t
     assert recorded["finished"] and recorded["comparisons"] == resumed.decisions
     assert [(g["group"], g["seeds"][0]) for g in recorded["groups"]] == [(1, 0), (2, 8)]
 
+    # One curves.csv for the task, merged over its groups: its runs numbered once, not again
+    # from 0 in each group's.
+    whole = SweepResult.read(output / "cartpole")
+    assert len(whole.runs) == 24 + 16 and whole.seeds == list(range(16))
+    groups = [SweepResult.read(output / "cartpole" / f"group-{k}") for k in (1, 2)]
+    np.testing.assert_array_equal(whole.metrics["average_return"], merged.metrics["average_return"])
+    assert whole.runs == merge(groups).runs
+    merged_curves = (output / "cartpole" / "curves.csv").read_bytes()
+
     again = fppo_jax.study("cartpole", candidates, "ppo", **settings)  # nothing left to train
     assert again.decisions == resumed.decisions
-    assert sorted(p.name for p in (output / "cartpole").iterdir()) == ["group-1", "group-2"]
+    assert sorted(p.name for p in (output / "cartpole").iterdir()) == [
+        "curves.csv",
+        "group-1",
+        "group-2",
+        "sweep.json",
+    ]
+    assert (output / "cartpole" / "curves.csv").read_bytes() == merged_curves
     report = (output / "report.md").read_text()
     assert "Secondary endpoint, auc" in report and "of the baseline's IQM" in report
     assert "| frozen | 8 | 0 | not reached | 0 | not reached |" in report  # never learns
@@ -459,15 +496,26 @@ def test_a_study_of_identical_settings_is_decided_equivalent_within_its_margin(t
 def test_the_command_states_what_each_look_can_decide_and_records_the_margin(tmp_path, capsys):
     output = tmp_path / "study"
     common = ["study", "--candidates", "spo,dpo", "--tasks", "cartpole", "--output", str(output)]
+    # The study prints its plan on stderr with its progress; told to be quiet, the command
+    # prints it on stdout instead: once either way.
     assert main([*common, "--margin", "0.2", "--groups", "0"]) == 0
-    out = capsys.readouterr().out.splitlines()
+    captured = capsys.readouterr()
+    shown = [line[len("study: ") :] for line in captured.err.splitlines()]
+    assert "plan:" not in captured.out and shown[0].startswith("plan: 6 looks")
+    assert main([*common, "--margin", "0.2", "--groups", "0", "--quiet"]) == 0
+    captured = capsys.readouterr()
+    out = captured.out.splitlines()
+    assert out[: len(shown)] == shown and "plan:" not in captured.err
     assert out[0].startswith("plan: 6 looks; better or worse when |z| reaches the look's")
     assert "(level 0.025 while no comparison is decided)" in out[0]
     assert out[1] == (
         "  look 1, 5 seeds per setting: ±6.01 (warning: cannot decide, |z| is at most 2.61 "
-        "with 5 seeds)"
+        "with 5 seeds; reaching ±6.01 takes at least 25 seeds per setting)"
     )
-    assert out[2].endswith("±4.17 (warning: cannot decide, |z| is at most 3.78 with 10 seeds)")
+    assert out[2].endswith(
+        "±4.17 (warning: cannot decide, |z| is at most 3.78 with 10 seeds; reaching ±4.17 "
+        "takes at least 13 seeds per setting)"
+    )
     assert out[3] == "  look 3, 15 seeds per setting: ±3.35"
     assert out[6] == "  look 6, 30 seeds per setting: ±2.31"
     assert out[7] == (
@@ -510,3 +558,85 @@ def test_a_study_recorded_before_margins_reads_and_decides_as_it_did(tmp_path, m
     plan = json.loads((recorded / "plan.json").read_text())
     with pytest.raises(ValueError, match=r"planned with margin = none, not 0\.2"):
         check_plan(output, {**plan, "margin": 0.2, "equivalence_test": "two one-sided tests"})
+
+
+def test_the_report_notes_ceilings_ties_and_boundaries_that_holm_moved(tmp_path):
+    # Task a decided worse at its first look; task b, CartPole-like, most runs tied at the
+    # return's cap of 200, then tested at the whole α that a's decision passed on.
+    from fppo_jax.sequential import boundaries
+    from fppo_jax.study_report import write_report
+
+    rng = np.random.default_rng(1)
+    fractions = (0.5, 1.0)
+    plan = {
+        "tasks": ["a", "b"],
+        "candidates": ["spo"],
+        "baseline": "ppo",
+        "primary_endpoint": "final",
+        "secondary_endpoints": ["auc"],
+        "looks": [10, 20],
+        "group_size": 10,
+        "max_seeds": 20,
+        "level": 0.05,
+        "boundaries_if_none_decided": list(boundaries(0.025, fractions)),
+        "comparisons": [{"task": t, "candidate": "spo", "baseline": "ppo"} for t in "ab"],
+        "test": "a test",
+        "commit": "0" * 40,
+    }
+    moved = boundaries(0.05, fractions)[1]
+    rows = [
+        {
+            "task": "a",
+            "candidate": "spo",
+            "baseline": "ppo",
+            "decision": "worse",
+            "final": True,
+            "seeds": 10,
+            "boundary": plan["boundaries_if_none_decided"][0],
+            "reason": "r",
+        },
+        {
+            "task": "b",
+            "candidate": "spo",
+            "baseline": "ppo",
+            "decision": "undecided",
+            "final": True,
+            "seeds": 20,
+            "boundary": moved,
+            "reason": f"z stayed within ±{moved:.2f}",
+        },
+    ]
+
+    def task(candidate: np.ndarray, baseline: np.ndarray) -> dict:
+        per = {"spo": candidate, "ppo": baseline}
+        return {
+            v: {"final": x, "auc": x, "max": x, "start": np.zeros(x.size)} for v, x in per.items()
+        }
+
+    capped = task(
+        np.concatenate([np.full(12, 200.0), rng.uniform(100, 190, 8)]),
+        np.concatenate([np.full(15, 200.0), rng.uniform(100, 190, 5)]),
+    )
+    plain = task(rng.normal(50, 5, 10), rng.normal(80, 5, 10))
+    write_report(tmp_path / "report.md", plan, rows, {"a": plain, "b": capped}, True)
+    report = (tmp_path / "report.md").read_text()
+    a, b = report.split("\n## a\n")[1].split("\n## b\n")
+    b = b.split("\n## Across")[0]
+    assert "Ceiling" not in a and "Ties" not in a and "Holm's procedure" not in a
+    ceiling = (
+        "Ceiling on final: 12 of 20 runs of spo (60%) and 15 of 20 runs of ppo (75%) sit at "
+        "200, the best any run recorded on this task, tied there"
+    )
+    assert ceiling in b and "Ceiling on auc: 12 of 20 runs" in b  # on each endpoint's table
+    assert "what it 'rules out' above the cap is no evidence" in b
+    # Ties: 12 × 15 of the 400 pairs, on the primary endpoint alone.
+    assert "Ties on final, the primary endpoint, among the pairs of runs (candidate, ppo) " in b
+    assert "each decision used: spo, 180 of 400 pairs (45%). A tie counts ½" in b
+    assert b.count("Ties on") == 1
+    assert f"{moved:.2f} {plan['boundaries_if_none_decided'][1]:.2f}" == "1.97 2.25"
+    assert (
+        "Boundaries moved by Holm's procedure: spo's boundary, ±1.97 at look 2 (20 seeds), is "
+        "not plan.json's ±2.25 (boundaries_if_none_decided, level 0.025 = α/2): Holm's "
+        "procedure passed on the share of α of 1 comparison decided better or worse (decided: spo "
+        "on a, worse), so it was tested at level 0.05 = α/1, whose boundary is lower."
+    ) in b

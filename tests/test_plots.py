@@ -146,6 +146,16 @@ def test_a_profile_falls_from_every_run_to_none():
     scores = {"ppo": np.array([0.0, 0.5, 1.0])}
     ax = plot_profiles(scores, thresholds=np.array([-1, 0.5, 2])).axes[0]
     np.testing.assert_array_equal(ax.lines[0].get_ydata(), [1.0, 1 / 3, 0.0])
+    # In words: no symbol a user's hyperparameter could be named (tau, shown as τ).
+    assert (ax.get_xlabel(), ax.get_ylabel()) == (
+        "threshold on the normalised score",
+        "fraction of runs above the threshold",
+    )
+    from fppo_jax.study_report import profile_label
+
+    label = profile_label("final", "ppo")
+    assert label == "threshold on the normalised final (1 = ppo's IQM on the task)"
+    assert "τ" not in label + ax.get_ylabel()
     ax = plot_improvement({"x": (0.7, 0.6, 0.8), "y": (0.3, 0.1, 0.5)}, "ppo").axes[0]
     ticks = dict(zip([t.get_text() for t in ax.get_yticklabels()], ax.get_yticks(), strict=True))
     assert ticks == {"x": 1, "y": 0}  # the first on top

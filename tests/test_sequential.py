@@ -16,6 +16,7 @@ from fppo_jax.sequential import (
     boundaries,
     decide,
     equivalence_reachable,
+    fewest_seeds,
     improvement_estimate,
     largest_z,
     mann_whitney_z,
@@ -270,8 +271,10 @@ def test_what_each_look_can_decide_is_stated_before_any_run():
     lines = plan_lines(design, 1)
     assert lines[1] == (
         "  look 1, 5 seeds per setting: ±5.37 (warning: cannot decide, |z| is at most 2.61 with "
-        "5 seeds)"
+        "5 seeds; reaching ±5.37 takes at least 20 seeds per setting)"
     )
+    assert largest_z(19) < 5.37 <= largest_z(20) and fewest_seeds(5.37) == 20
+    assert fewest_seeds(float("inf")) is None
     assert lines[2] == "  look 2, 10 seeds per setting: ±3.71" and len(lines) == 8
     # Equivalence needs the look's narrowest interval, at P = 1/2 and se at its floor, within
     # the margin: not at 20 seeds, at 25.
@@ -289,6 +292,15 @@ def test_what_each_look_can_decide_is_stated_before_any_run():
     last = boundaries(0.0125, tuple(n / 30 for n in design.looks), sides=1)[-1]
     assert narrowest_half_width(needed, last) <= 0.05 < narrowest_half_width(needed - 1, last)
     assert plan_lines(Design(5, 30), 1)[-1].startswith("  look 6, 30 seeds")  # no margin
+    # No look can decide: said once more, with the seeds the last look's boundary needs.
+    never = plan_lines(Design(group_size=1, max_seeds=2), 1)
+    assert never[2].endswith("with 2 seeds; reaching ±1.97 takes at least 4 seeds per setting)")
+    assert never[-1] == (
+        "  warning: no look of this design can decide better or worse, whatever the scores: its "
+        "last look, 2 seeds per setting, needs 4 to reach ±1.97; plan more seeds (max_seeds) or "
+        "fewer looks (a larger group_size)"
+    )
+    assert not any("no look" in line for line in plan_lines(Design(2, 4), 2))  # look 2 can
 
 
 def test_a_false_equivalent_at_the_margin_is_at_most_the_level():

@@ -151,8 +151,9 @@ def _evaluation(args: argparse.Namespace) -> dict[str, Any]:
 def _study(args: argparse.Namespace) -> int:
     part = array_part() if args.part == "auto" else args.part
     design = Design(args.group_size, args.max_seeds, args.level, args.margin)
-    for line in plan_lines(design, len(args.tasks) * len(args.candidates)):
-        print(line)
+    if args.quiet:  # else the study prints it on stderr with its progress
+        for line in plan_lines(design, len(args.tasks) * len(args.candidates)):
+            print(line)
     result = study(
         args.tasks,
         args.candidates,

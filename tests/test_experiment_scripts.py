@@ -208,3 +208,24 @@ def test_every_script_of_a_folder_runs_tiny_into_a_temporary_directory(folder):
     assert len(ran) == len(list((EXPERIMENTS / folder).glob("[!_]*.py"))), done.stdout
     after = sorted(path.stat().st_mtime_ns for path in (EXPERIMENTS / "results").rglob("*"))
     assert after == before  # nothing recorded was written
+
+
+def test_an_interval_is_at_the_edge_only_within_its_bounds_monte_carlo_error(monkeypatch):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    common = importlib.import_module("common")
+    seeds = []
+
+    def draw(seed):  # an upper bound that moves by 0.03 with the seed
+        seeds.append(seed)
+        return (0.3, 0.1, 0.51 + 0.03 * (seed % 2))
+
+    at_edge = common.edge((0.3, 0.1, 0.51), draw, 0.5)
+    assert at_edge is not None and at_edge.bound == "upper"
+    assert (at_edge.low, at_edge.high) == (0.51, 0.54) and seeds == list(range(1, 20))
+    assert common.outcome((0.3, 0.1, 0.51), at_edge) == "at the edge"
+    assert "upper bound runs 0.510 to 0.540 over 20 resampling seeds" in at_edge.text()
+    assert common.edge((0.3, 0.1, 0.6), draw, 0.5) is None  # clears it by more than 0.03
+    seeds.clear()
+    assert common.edge((0.2, 0.1, 0.3), draw, 0.5) is None and not seeds  # far: not drawn again
+    assert common.edge((0.5, 0.5, 0.5), lambda seed: (0.5, 0.5, 0.5), 0.5) is None  # all tied
+    assert common.outcome((0.3, 0.1, 0.45)) == "worse"

@@ -134,8 +134,8 @@ def test_a_dose_response_is_one_sweep_whose_controls_train_as_ppo_and_its_report
         )
         cells = row.split(" | ")
         assert cells[3].startswith(f"{rho:.2f} [") and cells[4:6] == [
-            f"{p_raw:.4f}",
-            f"{p_holm:.4f}",
+            f"{p_raw:.2f}",  # to the precision its Monte Carlo error allows
+            f"{p_holm:.2f}",
         ]
     assert text.count("| fppo-qp k=") == 5 and "| fppo-lp α=3 | 10 |" in text
     assert (tmp_path / "dose_response" / "dose_response.png").stat().st_size > 0

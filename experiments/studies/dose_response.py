@@ -44,10 +44,12 @@ from fppo_jax.study_report import ruled_out
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
 from common import (
+    EDGE_SEEDS,
     RESULTS,
     RUN_RECORD,
     add_force_flag,
     argument_parser,
+    edge,
     header,
     interval_text,
     refuse_to_replace,
@@ -60,6 +62,15 @@ FOLDER = "dose_response"  # study.py's folder of the plan's parts
 SEEDS = 10
 FAMILY_ERROR = 0.05
 THRESHOLDS = (0.5, 0.8)  # of the sweep's PPO IQM final return
+TREND_NAMES = {
+    "final": "final return",
+    "escape": "escape share",
+    "auc": "area under the curve",
+    0.5: "steps to 50% of PPO",
+    0.8: "steps to 80% of PPO",
+}
+PERMUTATIONS = 10_000  # statistics.trend_test's
+P_DECIMALS = 2  # what the permutation p's Monte Carlo error (0.003 to 0.005 here) allows
 DPI = 80
 # Why a control can part from PPO's run (tests/test_objectives.py shows the gradients).
 PARTED = (
@@ -82,8 +93,42 @@ def doses(plan: dict) -> dict[str, tuple[str, list[float]]]:
 
 def recorded(results: Path, task: str) -> SweepResult | None:
     """Every part of `task` recorded for the plan, merged."""
+    parts = recorded_parts(results, task)
+    return merge(parts) if parts else None
+
+
+def recorded_parts(results: Path, task: str) -> list[SweepResult]:
+    """Each part of `task` recorded for the plan: a sweep compiled and run on its own."""
     records = sorted((results / FOLDER / task / "paper").glob(f"*/{RUN_RECORD}"))
-    return merge([SweepResult.read(r.parent) for r in records]) if records else None
+    return [SweepResult.read(r.parent) for r in records]
+
+
+def seed_ranges(parts: list[SweepResult]) -> list[str]:
+    """Each part's seeds, in order: ``["0–1", "2–3", "6"]``."""
+    ranges = []
+    for part in parts:
+        seeds = sorted({run["seed"] for run in part.runs})
+        low, high = seeds[0], seeds[-1]
+        ranges.append(f"{low}" if low == high else f"{low}–{high}")
+    return sorted(ranges, key=lambda r: int(r.split("–")[0]))
+
+
+def compiled_parts(plan: dict, parts: dict[str, list[SweepResult]]) -> str:
+    """How the runs were compiled: the plan's one sweep per task, or the parts they ran in."""
+    per_task = "; ".join(
+        f"{task}, {len(of_task)} part{'s' if len(of_task) > 1 else ''} "
+        f"(seeds {', '.join(seed_ranges(of_task))})"
+        for task, of_task in parts.items()
+    )
+    return (
+        f'How the runs were compiled: the plan says "{plan["seeds"]}"; they ran instead in '
+        "parts, "
+        f"each a sweep of the task's settings at its own seeds, compiled and run on its own: "
+        f"{per_task}. A seed's settings are always in one part, so each control is checked "
+        "against the PPO run of its own program; runs of different parts come from programs "
+        "of different batch sizes, which may round differently, as the seed study's PPO does "
+        "against the sweep's (below)."
+    )
 
 
 def setting_index(result: SweepResult, variant: str, name: str | None, dose: float | None) -> int:
@@ -212,12 +257,25 @@ def analyse(plan: dict, result: SweepResult) -> dict:
             score: statistics.dose_trend(values, [r[score] for r in runs])
             for score in ("final", "escape", "auc", *THRESHOLDS)
         }
+        edges = {
+            score: edge(
+                interval,
+                lambda seed, score=score, values=values, runs=runs: statistics.dose_trend(
+                    values, [r[score] for r in runs], seed=seed
+                ),
+                0.0,
+            )
+            for score, interval in trend.items()
+        }
         variants[variant] = {
             "name": name,
             "doses": values,
             "runs": runs,
             "trend": trend,
-            "p": statistics.trend_test(values, [r["final"] for r in runs]),
+            "edges": edges,
+            "p": statistics.trend_test(
+                values, [r["final"] for r in runs], permutations=PERMUTATIONS
+            ),
         }
     return {"ppo": ppo, "ppo_iqm": ppo_iqm, "levels": levels, "variants": variants}
 
@@ -235,7 +293,11 @@ def trend_reading(row: dict) -> str:
 
 
 def report(
-    plan: dict, tasks: dict[str, dict], results: dict[str, SweepResult], checks: dict
+    plan: dict,
+    tasks: dict[str, dict],
+    results: dict[str, SweepResult],
+    checks: dict,
+    parts: dict[str, list[SweepResult]],
 ) -> list[str]:
     lines = [
         *header(f"{plan['question']} The planned dose-response"),
@@ -249,17 +311,11 @@ def report(
         "## The controls",
         "",
     ]
+    lines += [compiled_parts(plan, parts), ""]
     for task, lines_of_task in checks.items():
         lines += [f"{task}:", "", *lines_of_task, ""]
     if any("; apart: " in line for task_lines in checks.values() for line in task_lines):
         lines += [PARTED, ""]
-    lines += [
-        "## The planned test: the trend of final return with the dose",
-        "",
-        "| task | variant | doses | Spearman ρ, final [95% CI] | permutation p | Holm p "
-        "| reading |",
-        "|---|---|---|---|---|---|---|",
-    ]
     rows = [
         {"task": task, "variant": variant, **analysis}
         for task, outcome in tasks.items()
@@ -267,13 +323,33 @@ def report(
     ]
     for row, adjusted in zip(rows, statistics.holm([r["p"] for r in rows]), strict=True):
         row["holm"] = float(adjusted)
+    errors = [permutation_error(row["p"]) for row in rows]
+    lines += [
+        "## The planned test: the trend of final return with the dose",
+        "",
+        f"The permutation p is a Monte Carlo estimate: its standard error, "
+        f"√(p(1 − p)/{PERMUTATIONS:,}), is {min(errors):.3f} to {max(errors):.3f} here, so p "
+        f"and Holm's p are printed to {P_DECIMALS} decimals.",
+        "",
+        "| task | variant | doses | Spearman ρ, final [95% CI] | permutation p | Holm p "
+        "| reading |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for row in rows:
         lines.append(
             f"| {row['task']} | {row['variant']} | {SYMBOLS.get(row['name'], row['name'])} ∈ "
             f"{{{', '.join(f'{d:g}' for d in row['doses'])}}} "
-            f"| {interval_text(row['trend']['final'], '.2f')} | {row['p']:.4f} "
-            f"| {row['holm']:.4f} | {trend_reading(row)} |"
+            f"| {interval_text(row['trend']['final'], '.2f')} | {row['p']:.{P_DECIMALS}f} "
+            f"| {row['holm']:.{P_DECIMALS}f} | {trend_reading(row)} |"
         )
+    lines += edge_note(
+        [
+            f"{row['task']} {row['variant']}, final: {row['edges']['final'].text()}"
+            for row in rows
+            if row["edges"]["final"] is not None
+        ],
+        "0",
+    )
     lines += [
         "",
         "## The other trends (described, not tested)",
@@ -290,6 +366,15 @@ def report(
         trend = row["trend"]
         cells = [interval_text(trend[s], ".2f") for s in ("escape", "auc", *THRESHOLDS)]
         lines.append(f"| {row['task']} | {row['variant']} | {' | '.join(cells)} |")
+    lines += edge_note(
+        [
+            f"{row['task']} {row['variant']}, {TREND_NAMES[score]}: {at_edge.text()}"
+            for row in rows
+            for score, at_edge in row["edges"].items()
+            if score != "final" and at_edge is not None
+        ],
+        "0",
+    )
     for task, outcome in tasks.items():
         result, ppo = results[task], outcome["ppo"]
         total = float(result.metrics["env_steps"][0, -1])
@@ -311,11 +396,22 @@ def report(
             f"| {reached(ppo[0.5], total)} | {reached(ppo[0.8], total)} |",
         ]
         names = dict(zip(map(_key, result.settings), labels(result.settings), strict=True))
+        edges = []
         for variant, analysis in outcome["variants"].items():
             for dose, runs in zip(analysis["doses"], analysis["runs"], strict=True):
                 on_final = statistics.compare(runs["final"], ppo["final"])
                 on_area = statistics.compare(runs["auc"], ppo["auc"])
                 label = names[_key({"variant": variant, analysis["name"]: dose})]
+                for score, key, on in (("final", "final", on_final), ("AUC", "auc", on_area)):
+                    at_edge = edge(
+                        on["probability_of_improvement"],
+                        lambda seed, key=key, runs=runs, ppo=ppo: statistics.compare(
+                            runs[key], ppo[key], seed=seed
+                        )["probability_of_improvement"],
+                        0.5,
+                    )
+                    if at_edge is not None:
+                        edges.append(f"{label}'s P(> PPO), {score}: {at_edge.text()}")
                 lines.append(
                     f"| {label} | {runs['final'].size} "
                     f"| {interval_text(statistics.interval(runs['final']))} "
@@ -326,9 +422,29 @@ def report(
                     f"| {interval_text(statistics.interval(runs['escape']), '.3f')} "
                     f"| {reached(runs[0.5], total)} | {reached(runs[0.8], total)} |"
                 )
+        lines += edge_note(edges, "0.5")
         diverged = int(np.count_nonzero(result.diverged))
         lines += ["", f"Runs that diverged and are left out: {diverged}."]
     return lines
+
+
+def permutation_error(p: float) -> float:
+    """The Monte Carlo standard error of a permutation p from :data:`PERMUTATIONS` draws."""
+    return float(np.sqrt(p * (1 - p) / PERMUTATIONS))
+
+
+def edge_note(edges: list[str], value: str) -> list[str]:
+    """The sentence under a table that names its intervals at the edge of `value`."""
+    if not edges:
+        return []
+    return [
+        "",
+        f"At the edge: an interval whose bound lies within the bootstrap's Monte Carlo error of "
+        f"{value} (the range of that bound over {EDGE_SEEDS} resampling seeds), so that it "
+        f"neither holds nor excludes {value} to the resolution of the bootstrap: "
+        + "; ".join(edges)
+        + ".",
+    ]
 
 
 def _key(setting: dict) -> tuple:
@@ -374,7 +490,8 @@ def main() -> int:
     out = args.output or args.results / f"{FOLDER}.md"
     figure = out.parent / FOLDER / f"{FOLDER}.png"
     refuse_to_replace([out, figure], args.force, elsewhere="--results DIR or --output FILE")
-    merged = {task: recorded(args.results, task) for task in args.tasks or plan["tasks"]}
+    by_task = {task: recorded_parts(args.results, task) for task in args.tasks or plan["tasks"]}
+    merged = {task: merge(of_task) if of_task else None for task, of_task in by_task.items()}
     short = missing(plan, merged)
     if short:
         print(
@@ -393,7 +510,8 @@ def main() -> int:
         parts = [SweepResult.read(d) for d in sorted(study)]
         parts = [p for p in parts if any(s["variant"] == "ppo" for s in p.settings)]
         checks[task] = controls(result, merge(parts) if parts else None, plan)
-    write_result(out, report(plan, tasks, results, checks))
+    compiled = {task: of_task for task, of_task in by_task.items() if task in results}
+    write_result(out, report(plan, tasks, results, checks, compiled))
     draw(tasks, figure)
     print(f"wrote {out} and {figure}")
     return 0

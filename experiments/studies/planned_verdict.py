@@ -39,11 +39,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: sh
 
 from common import (
     CLASSIC_TASKS,
+    EDGE_SEEDS,
     RESULTS,
     RUN_RECORD,
     add_force_flag,
     argument_parser,
     by_variant,
+    edge,
     header,
     interval_text,
     outcome,
@@ -54,6 +56,7 @@ from common import (
 EXPERIMENTS = Path(__file__).resolve().parents[1]
 SEEDS = {**dict.fromkeys(CLASSIC_TASKS, 50), **dict.fromkeys(MUJOCO_TASKS, 20)}
 FAMILY_ERROR = 0.05
+SHAPE_FOLDER = "baseline_shape"  # plans/baseline-shape.json's parts, under the results
 HIGH_CLUSTER = {"halfcheetah": 3000.0}  # its final returns split there (plans/baseline-shape.json)
 
 
@@ -169,6 +172,99 @@ def _p(p: float) -> str:
     return f"{p:.1e}" if p < 0.001 else f"{p:.3f}"
 
 
+def seed_text(tasks: list[str]) -> str:
+    """The plan's seeds, for the kinds of task it has: ``seeds 0–19`` on MuJoCo only."""
+    kinds = {
+        "the classic tasks": [t for t in tasks if t in CLASSIC_TASKS],
+        "MuJoCo": [t for t in tasks if t in MUJOCO_TASKS],
+    }
+    kinds = {kind: of_kind for kind, of_kind in kinds.items() if of_kind}
+    if len(kinds) == 1:
+        return f"seeds 0–{SEEDS[next(iter(kinds.values()))[0]] - 1}"
+    return "seeds " + " and ".join(f"0–{SEEDS[t[0]] - 1} on {kind}" for kind, t in kinds.items())
+
+
+def ceiling(plan: dict, rows: list[dict], every: dict[str, dict[str, Arm]]) -> list[str]:
+    """A note on each *better* verdict whose candidate's IQM, interval and all, is the highest
+    final return any run of the task reaches: a ceiling, where the verdict says how often runs
+    end at the cap more than how well they learn."""
+    baseline, _ = arm_names(plan)
+    lines = []
+    for task in every:
+        top = max(float(np.max(a.final)) for a in every[task].values())
+        capped = [
+            r
+            for r in rows
+            if r["task"] == task
+            and decision(r) == "better"
+            and r["candidate_iqm"][1] == r["candidate_iqm"][2] == top
+        ]
+        if not capped:
+            continue
+        shares = ", ".join(
+            f"{name} {int(np.sum(a.final >= top))} of {a.final.size}"
+            for name, a in every[task].items()
+        )
+        names = " and ".join(f"{r['candidate']}'s" for r in capped)
+        verdicts = "verdicts are" if len(capped) > 1 else "verdict is"
+        lines += [
+            "",
+            f"{task}: {names} *better* {verdicts} a ceiling effect. Their IQM final return is "
+            f"{top:.1f}, interval and all, the highest final return any run of the task "
+            f"reaches (its cap), and {baseline}'s IQM {capped[0]['baseline_iqm']:.1f} is just "
+            f"below it; runs ending at the cap: {shares}. The {verdicts.split()[0]} "
+            f"{'say' if len(capped) > 1 else 'says'} that their runs end at the cap more often, "
+            "not that they learn more.",
+        ]
+    return lines
+
+
+def other_baseline(
+    plan: dict, rows: list[dict], every: dict[str, dict[str, Arm]], results: Path
+) -> list[str]:
+    """Each *better* verdict set beside PPO at OpenAI baselines' rollout shape (1 × 2,048,
+    recorded for plans/baseline-shape.json at the same seeds) where that shape was run:
+    descriptive, outside the family, since the recorded baseline is this project's 8 × 256."""
+    if "settings" in plan or plan["baseline"]["variant"] != "ppo":
+        return []
+    lines = []
+    for row in rows:
+        if decision(row) != "better":
+            continue
+        shaped = arm(
+            recorded(results / SHAPE_FOLDER, row["task"], {"ppo"}), "ppo", SEEDS[row["task"]]
+        )
+        if shaped is None:
+            continue
+        candidate = every[row["task"]][row["candidate"]]
+        probability = statistics.compare(candidate.final, shaped.final)[
+            "probability_of_improvement"
+        ]
+        at_edge = edge(
+            probability,
+            lambda seed, c=candidate, s=shaped: statistics.compare(c.final, s.final, seed=seed)[
+                "probability_of_improvement"
+            ],
+            0.5,
+        )
+        side = {
+            "better": "above it too",
+            "worse": "below it",
+            "at the edge": f"at the edge of below it ({at_edge.text() if at_edge else ''})",
+        }.get(outcome(probability, at_edge), "not told from it")
+        lines += [
+            "",
+            f"{row['task']}: {row['candidate']}'s *better* is against the recorded baseline, "
+            f"PPO at this project's 8 × 256. PPO at OpenAI baselines' 1 × 2,048 (the same "
+            f"seeds, recorded for [`plans/baseline-shape.json`](../plans/baseline-shape.json)) "
+            f"ends at IQM {interval_text(statistics.interval(shaped.final))}, against "
+            f"{row['candidate']}'s {interval_text(row['candidate_iqm'])}: P({row['candidate']} "
+            f"> ppo 1×2048) = {interval_text(probability, '.2f')}, {side}. Descriptive, not in "
+            "the family.",
+        ]
+    return lines
+
+
 def decision(row: dict) -> str:
     """The planned test's answer: better or worse where Holm's p is below the family's error."""
     if row["holm"] >= FAMILY_ERROR:
@@ -205,14 +301,16 @@ def high_cluster(plan: dict, every: dict[str, dict[str, Arm]]) -> list[str]:
     return lines
 
 
-def report(plan: dict, name: str, rows: list[dict], every: dict[str, dict[str, Arm]]) -> list[str]:
+def report(
+    plan: dict, name: str, rows: list[dict], every: dict[str, dict[str, Arm]], results: Path
+) -> list[str]:
     baseline, candidates = arm_names(plan)
     lines = [
         *header(f"{plan['question']} The planned verdict"),
         "",
         f"The plan ([`plans/{name}.json`](../plans/{name}.json), written {plan['written']}): "
         f"{' and '.join(candidates)} against {baseline}'s recorded runs on "
-        f"{len(plan['tasks'])} tasks, seeds 0–49 on the classic tasks and 0–19 on MuJoCo; "
+        f"{len(plan['tasks'])} tasks, {seed_text(plan['tasks'])}; "
         f"{plan['test']}. Endpoint: {plan['primary_endpoint']}. Intervals are 95% percentile "
         "bootstraps (2,000 resamples, seeded); P(X > Y) counts ties as ½.",
         "",
@@ -230,6 +328,7 @@ def report(plan: dict, name: str, rows: list[dict], every: dict[str, dict[str, A
             f"| {ruled_out(row['difference'], row['baseline_iqm'])} "
             f"| {interval_text(row['area'], '.2f')} |"
         )
+    lines += ceiling(plan, rows, every) + other_baseline(plan, rows, every, results)
     mujoco = [t for t in every if t in MUJOCO_TASKS]
     if len(mujoco) > 1:
         lines += [
@@ -241,10 +340,26 @@ def report(plan: dict, name: str, rows: list[dict], every: dict[str, dict[str, A
             f"| candidate | mean P(> {baseline}) [95% CI] | the interval says |",
             "|---|---|---|",
         ]
+        edges = []
         for candidate in candidates:
             pairs = [(every[t][candidate].final, every[t][baseline].final) for t in mujoco]
             value = statistics.aggregate_improvement(pairs)
-            lines.append(f"| {candidate} | {interval_text(value, '.2f')} | {outcome(value)} |")
+            at_edge = edge(
+                value,
+                lambda seed, pairs=pairs: statistics.aggregate_improvement(pairs, seed=seed),
+                0.5,
+            )
+            if at_edge is not None:
+                edges.append(f"{candidate}: {at_edge.text()}")
+            lines.append(
+                f"| {candidate} | {interval_text(value, '.2f')} | {outcome(value, at_edge)} |"
+            )
+        if edges:
+            lines += [
+                "",
+                "At the edge: a bound within the bootstrap's Monte Carlo error of 0.5 (the "
+                f"range of that bound over {EDGE_SEEDS} resampling seeds): " + "; ".join(edges),
+            ]
     return lines + high_cluster(plan, every)
 
 
@@ -274,7 +389,7 @@ def main() -> int:
         for task, by_name in every.items()
     }
     rows = comparisons(plan, complete)
-    write_result(out, report(plan, path.stem, rows, complete))
+    write_result(out, report(plan, path.stem, rows, complete, args.results))
     print(f"wrote {out}")
     return 0
 

@@ -41,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: sh
 
 from common import (
     CLASSIC_TASKS,
+    EDGE_SEEDS,
     ESCAPE_FRACTIONS,
     ESCAPE_VARIANTS,
     PAPER_VARIANTS,
@@ -49,6 +50,7 @@ from common import (
     TABLE1,
     argument_parser,
     by_variant,
+    edge,
     interval_text,
     outcome,
     read_fractions,
@@ -184,6 +186,7 @@ def task_section(
     paper_base = TABLE1[task][PAPER_VARIANTS.index(BASELINE)]
     curves = {v: result.setting_metrics(i)["average_return"] for v, i in index.items()}
     scale = abs(max_average_return(curves[BASELINE])[0])
+    edges: list[str] = []
     for variant, i in index.items():
         if i == base:
             continue
@@ -196,16 +199,39 @@ def task_section(
         paper_share = paper_gap / abs(paper_base)
         inside_share = "yes" if share[1] <= paper_share <= share[2] else "no"
         probability = on_final["probability_of_improvement"]
+        at_edge = edge(
+            probability,
+            lambda seed, i=i: statistics.compare(final[i], final[base], seed=seed)[
+                "probability_of_improvement"
+            ],
+            0.5,
+        )
+        if at_edge is not None:
+            edges.append(f"{names[i]}'s P(> {BASELINE}), final: {at_edge.text()}")
         holm = adjusted.get((task, variant))
         lines.append(
-            f"| {names[i]} | {interval_text(probability, '.2f')} | {outcome(probability)} "
+            f"| {names[i]} | {interval_text(probability, '.2f')} | {outcome(probability, at_edge)} "
             f"| {'–' if holm is None else f'{holm:.2f}'} "
             f"| {interval_text(on_area['probability_of_improvement'], '.2f')} "
             f"| {interval_text(on_final['iqm_difference'])} | {interval_text(gap)} "
             f"| {paper_gap:+.1f} | {inside} | {percent(share)} | {paper_share:+.0%} "
             f"| {inside_share} |"
         )
-    return [*lines, ""]
+    return [*lines, *edge_note(edges, "0.5"), ""]
+
+
+def edge_note(edges: list[str], value: str) -> list[str]:
+    """The sentence under a table that names its intervals at the edge of `value`."""
+    if not edges:
+        return []
+    return [
+        "",
+        f"At the edge: an interval whose bound lies within the bootstrap's Monte Carlo error of "
+        f"{value} (the range of that bound over {EDGE_SEEDS} resampling seeds), so that it "
+        f"neither holds nor excludes {value} to the resolution of the bootstrap: "
+        + "; ".join(edges)
+        + ".",
+    ]
 
 
 def percent(values: tuple[float, ...]) -> str:
@@ -263,14 +289,23 @@ def escape_section(path: Path, label: str) -> list[str]:
         "| task | seeds | FPPO-LP − PPO, points of % [95% CI] | FPPO-QP − PPO [95% CI] |",
         "|---|---|---|---|",
     ]
+    edges = []
     for task, values in read_fractions(path).items():  # [seed, point, variant, epoch]
         last = values[..., -1].mean(axis=1) * 100  # [seed, variant], in %
-        cells = [
-            interval_text(statistics.interval(last[:, v] - last[:, 0], "mean"), ".2f")
-            for v in (ESCAPE_VARIANTS.index("fppo-lp"), ESCAPE_VARIANTS.index("fppo-qp"))
-        ]
+        cells = []
+        for variant in ("fppo-lp", "fppo-qp"):
+            paired = last[:, ESCAPE_VARIANTS.index(variant)] - last[:, 0]
+            difference = statistics.interval(paired, "mean")
+            cells.append(interval_text(difference, ".2f"))
+            at_edge = edge(
+                difference,
+                lambda seed, paired=paired: statistics.interval(paired, "mean", seed=seed),
+                0.0,
+            )
+            if at_edge is not None:
+                edges.append(f"{task} {variant.upper()}: {at_edge.text()}")
         lines.append(f"| {task} | {len(last)} | {' | '.join(cells)} |")
-    return [*lines, ""]
+    return [*lines, *edge_note(edges, "0"), ""]
 
 
 def figures(results: dict[str, SweepResult], out: Path, protocol: str) -> Path:
@@ -323,7 +358,11 @@ def main() -> None:
         "percentile bootstrap CI (2,000 resamples, seeded); P(X > Y) + ½ P(X = Y) over all "
         "pairs of runs (probability of improvement) with a bootstrap CI that resamples both "
         "variants' runs; `outcome` is *better* or *worse* where that CI excludes 0.5, "
-        "*not resolved* otherwise, one comparison at a time.",
+        "*not resolved* where it holds 0.5, one comparison at a time, and *at the edge* where "
+        "the bound nearest 0.5 lies within the bootstrap's Monte Carlo error of it (the range "
+        f"of that bound over {EDGE_SEEDS} resampling seeds), so that the interval neither "
+        "holds nor excludes 0.5 to the bootstrap's resolution; the same for any interval "
+        "below said to hold or exclude 0.",
         "- The planned comparisons, FPPO-LP and FPPO-QP against PPO on each task's final "
         "returns, are tested as planned, as a family: Mann–Whitney's U test of P = ½, each p-value "
         "adjusted by Holm's step-down method over every planned comparison of its protocol "

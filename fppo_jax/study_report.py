@@ -363,6 +363,13 @@ def _ceiling(scores: Scores, plan: dict[str, Any], endpoint: str) -> list[str]:
             if count
         ]
     )
+    if float(finite.min()) == top:
+        return [
+            "",
+            f"Every run scored {top:.6g} on {endpoint}: the settings do not differ at all there "
+            "(a floor or a cap of the task's return), and nothing about them can be read from "
+            "this endpoint.",
+        ]
     return [
         "",
         f"Ceiling on {endpoint}: {shares} sit at {top:.6g}, the best any run recorded on this "

@@ -42,7 +42,6 @@ LONGEST_FIRST = (
     "test_compile_cache.py",
     "test_regression.py",
     "test_gpu_suite.py",
-    "test_rebuilt_reports.py",
     "test_plots.py",
     "test_envs.py",
     "test_objectives.py",

@@ -161,7 +161,8 @@ def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[st
     reused = (
         f" Runs recorded under {', '.join(plan['reuse'])} were taken instead of trained where "
         "they ran the same task, protocol and setting at a group's seeds (decisions.json names "
-        "each group's and its source); the code that trained them is theirs, which the "
+        "each group's and its source); they are not concurrent with runs trained here (another "
+        "compiled program, another time), and the code that trained them is theirs, which the "
         "regression pins say matches this one or not. Those runs were recorded before the plan "
         "was written, so for them the plan is no preregistration: its test is one chosen after "
         "their scores could be seen."

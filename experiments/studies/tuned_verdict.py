@@ -39,6 +39,10 @@ PUBLISHED = {
 }
 
 
+def _listed(names: list[str]) -> str:
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
 def interval(point: tuple[float, float, float], digits: int = 2) -> str:
     return f"{point[0]:.{digits}f} [{point[1]:.{digits}f}, {point[2]:.{digits}f}]"
 
@@ -68,6 +72,15 @@ def family_lines(results: Path, family: str) -> list[str]:
         f"({budget}).",
         "",
     ]
+    for task, arms in tuned.items():
+        tied = [arm for arm, found in arms.items() if found.get("tied_rungs")]
+        if tied:
+            lines += [
+                f"On {task} the first rung scored every trial of {_listed(tied)} alike, so the "
+                "trials that went on were the first by number, not the best: there the tune "
+                "chose among those alone.",
+                "",
+            ]
     study = where / "study"
     if not (study / "decisions.json").exists():
         return [*lines, "The study on fresh seeds has not run yet.", ""]

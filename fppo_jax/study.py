@@ -136,7 +136,7 @@ def study(
     that the tune used are refused. `total_steps`, `preset`, `backend`, `chunk` and `settings`
     are the sweeps'.
     """
-    tasks = _names_of_tasks(tasks)
+    tasks = names_of_tasks(tasks)
     candidates, baseline = _variants(candidates, baseline)
     design = Design(group_size, max_seeds, level, margin)
     _check_arguments(endpoint, groups, chunk, part, settings)
@@ -391,10 +391,11 @@ def _check_tuned_protocol(directory: str | Path, source: _Source) -> None:
             )
 
 
-def _names_of_tasks(tasks: str | Sequence[str]) -> list[str]:
+def names_of_tasks(tasks: str | Sequence[str], what: str = "a study") -> list[str]:
+    """`tasks`, one name or several, checked: named, and each once (`what` is whose they are)."""
     tasks = [tasks] if isinstance(tasks, str) else list(tasks)
     if not tasks or not all(isinstance(task, str) and task for task in tasks):
-        raise InvalidInput(f"a study's tasks are named tasks (fppo-jax list), got {tasks!r}")
+        raise InvalidInput(f"{what}'s tasks are named tasks (fppo-jax list), got {tasks!r}")
     if len(set(tasks)) < len(tasks):
         raise InvalidInput(f"a task is named twice among {', '.join(tasks)}")
     return tasks

@@ -72,7 +72,7 @@ from fppo_jax.search_space import (
     read_space_file,
     search_spaces,
 )
-from fppo_jax.study import check_plan, commit
+from fppo_jax.study import check_plan, commit, names_of_tasks
 from fppo_jax.surrogates import Surrogate
 from fppo_jax.trainer import TrainState
 from fppo_jax.tuning_report import ranked
@@ -198,7 +198,7 @@ def tune(
     trains (the same call later goes on). `total_steps`, `preset`, `backend` and `settings`
     (run-shape fields of :class:`~fppo_jax.config.TrainConfig`) are every run's.
     """
-    tasks = _names(tasks)
+    tasks = names_of_tasks(tasks, "a tune")
     arms = _arms(variants)
     trials = positive_int("trials", trials)
     if isinstance(eta, bool) or not isinstance(eta, int | np.integer) or eta < 2:
@@ -287,15 +287,6 @@ def tune(
         write_json(output / RESULTS_FILE, results)
         write_report(output, plan, results)
     return TuneResult(plan, results, finished, output)
-
-
-def _names(tasks: str | Sequence[str]) -> list[str]:
-    tasks = [tasks] if isinstance(tasks, str) else list(tasks)
-    if not tasks or not all(isinstance(task, str) and task for task in tasks):
-        raise InvalidInput(f"a tune's tasks are named tasks (fppo-jax list), got {tasks!r}")
-    if len(set(tasks)) < len(tasks):
-        raise InvalidInput(f"a task is named twice among {', '.join(tasks)}")
-    return tasks
 
 
 def _arms(variants: Any) -> list[Surrogate]:

@@ -1,5 +1,5 @@
 """What each ``fppo-jax`` command does with its parsed flags: ``train`` one policy, ``sweep``
-a grid, ``study`` candidates against a baseline, ``eval`` (and render) or ``export`` a trained
+a grid, ``study`` candidates against a baseline, ``tune`` every variant with the same budget, ``eval`` (and render) or ``export`` a trained
 policy, ``table``, ``compare``, ``merge`` and ``plot`` sweeps' results, ``list`` the tasks and
 variants."""
 

@@ -1,6 +1,7 @@
 """The ``fppo-jax`` command line: ``train`` one policy, ``sweep`` a grid, ``study`` candidates
-against a baseline, ``tune`` every variant with the same budget, ``eval`` (and render) or ``export`` a trained policy, ``table``,
-``compare``, ``merge`` and ``plot`` sweeps' results, ``list`` the tasks and variants.
+against a baseline, ``tune`` every variant with the same budget, ``eval`` (and render) or
+``export`` a trained policy, ``table``, ``compare``, ``merge`` and ``plot`` sweeps' results,
+``list`` the tasks and variants.
 
 :mod:`.flags` turns text into checked values and makes the flags of the fields that declare
 them; :mod:`.parser` assembles the commands; :mod:`.settings` reads ``--config FILE``;

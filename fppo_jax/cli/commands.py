@@ -1,7 +1,7 @@
 """What each ``fppo-jax`` command does with its parsed flags: ``train`` one policy, ``sweep``
-a grid, ``study`` candidates against a baseline, ``tune`` every variant with the same budget, ``eval`` (and render) or ``export`` a trained
-policy, ``table``, ``compare``, ``merge`` and ``plot`` sweeps' results, ``list`` the tasks and
-variants."""
+a grid, ``study`` candidates against a baseline, ``tune`` every variant with the same budget,
+``eval`` (and render) or ``export`` a trained policy, ``table``, ``compare``, ``merge`` and
+``plot`` sweeps' results, ``list`` the tasks and variants."""
 
 from __future__ import annotations
 

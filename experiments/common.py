@@ -437,6 +437,20 @@ class Edge:
         )
 
 
+def edge_note(edges: list[str], value: str) -> list[str]:
+    """The sentence under a table that names its intervals at the edge of `value`."""
+    if not edges:
+        return []
+    return [
+        "",
+        f"At the edge: an interval whose bound lies within the bootstrap's Monte Carlo error of "
+        f"{value} (the range of that bound over {EDGE_SEEDS} resampling seeds), so that it "
+        f"neither holds nor excludes {value} to the resolution of the bootstrap: "
+        + "; ".join(edges)
+        + ".",
+    ]
+
+
 def edge(
     interval: tuple[float, float, float], draw: Callable[[int], Any], value: float
 ) -> Edge | None:

@@ -44,12 +44,12 @@ from fppo_jax.study_report import ruled_out
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
 from common import (
-    EDGE_SEEDS,
     RESULTS,
     RUN_RECORD,
     add_force_flag,
     argument_parser,
     edge,
+    edge_note,
     header,
     interval_text,
     refuse_to_replace,
@@ -431,20 +431,6 @@ def report(
 def permutation_error(p: float) -> float:
     """The Monte Carlo standard error of a permutation p from :data:`PERMUTATIONS` draws."""
     return float(np.sqrt(p * (1 - p) / PERMUTATIONS))
-
-
-def edge_note(edges: list[str], value: str) -> list[str]:
-    """The sentence under a table that names its intervals at the edge of `value`."""
-    if not edges:
-        return []
-    return [
-        "",
-        f"At the edge: an interval whose bound lies within the bootstrap's Monte Carlo error of "
-        f"{value} (the range of that bound over {EDGE_SEEDS} resampling seeds), so that it "
-        f"neither holds nor excludes {value} to the resolution of the bootstrap: "
-        + "; ".join(edges)
-        + ".",
-    ]
 
 
 def _key(setting: dict) -> tuple:

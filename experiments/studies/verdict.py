@@ -51,6 +51,7 @@ from common import (
     argument_parser,
     by_variant,
     edge,
+    edge_note,
     interval_text,
     outcome,
     read_fractions,
@@ -218,20 +219,6 @@ def task_section(
             f"| {inside_share} |"
         )
     return [*lines, *edge_note(edges, "0.5"), ""]
-
-
-def edge_note(edges: list[str], value: str) -> list[str]:
-    """The sentence under a table that names its intervals at the edge of `value`."""
-    if not edges:
-        return []
-    return [
-        "",
-        f"At the edge: an interval whose bound lies within the bootstrap's Monte Carlo error of "
-        f"{value} (the range of that bound over {EDGE_SEEDS} resampling seeds), so that it "
-        f"neither holds nor excludes {value} to the resolution of the bootstrap: "
-        + "; ".join(edges)
-        + ".",
-    ]
 
 
 def percent(values: tuple[float, ...]) -> str:

@@ -38,7 +38,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
     from fppo_jax.envs import Environment
-    from fppo_jax.results import SweepResult
+    from fppo_jax.run.results import SweepResult
 
 RESULTS = Path(__file__).resolve().parent / "results"
 RUN_RECORD = "run.json"  # beside a sweep's curves: the machine, date, wall time, commit, command
@@ -495,9 +495,9 @@ def ablation_parts(directory: Path, task: str) -> list[str]:
 def draw_ablation(directory: Path, task: str, axes: Sequence[Axes]) -> None:
     """Each recorded ablation part of `task` on its own Axes: max average return against its
     hyperparameter, with Table 2's choice marked."""
-    from fppo_jax.config import table2
-    from fppo_jax.plots import plot_ablation
-    from fppo_jax.results import SweepResult
+    from fppo_jax.analysis.plots import plot_ablation
+    from fppo_jax.core.config import table2
+    from fppo_jax.run.results import SweepResult
 
     for ax, part in zip(axes, ablation_parts(directory, task), strict=False):
         plot_ablation(SweepResult.read(directory / task / part), axes=[ax])

@@ -7,7 +7,7 @@ from typing import Any
 from gymnax.environments.classic_control import CartPole
 
 from fppo_jax import TrainConfig, hyperparameters
-from fppo_jax.config import Hyperparameters
+from fppo_jax.core.config import Hyperparameters
 from fppo_jax.envs import GymnaxEnvironment
 
 WORKLOADS: dict[str, dict[str, Any]] = {

@@ -6,20 +6,19 @@ training run is one compiled function of its key and hyperparameters (:func:`mak
 seeds, variants and their hyperparameters vmap into one program. :func:`train` runs one
 policy, checkpointed and resumable; :func:`sweep` runs a grid of settings × seeds as one
 program; :func:`load_policy` reads a trained policy back, saved or from its checkpoints;
-:func:`merge` joins sweeps of other seeds into one, and :mod:`fppo_jax.statistics` compares
+:func:`merge` joins sweeps of other seeds into one, and :mod:`fppo_jax.stats.statistics` compares
 settings with interval estimates; :func:`study` compares candidates with a baseline, adding
 seeds until a preregistered test decides; :func:`tune` tunes every arm with the same budget
 (successive halving over a population, each rung one program) for a study on fresh seeds.
 
 Each public name is imported from its module on first use (PEP 562), so that importing the
-package, or a light part of it such as :mod:`fppo_jax.numpy_policy` or the command line's
+package, or a light part of it such as :mod:`fppo_jax.store.numpy_policy` or the command line's
 ``--help``, does not wait for JAX, Flax, orbax and SciPy.
 """
 
 import importlib
 import os
 import sys
-import types
 from typing import Any
 
 __version__ = "0.1.0"
@@ -31,20 +30,20 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
 
 # Where each public name is defined.
 _MODULES = {
-    "fppo_jax.api": ("train",),
-    "fppo_jax.checkpoint": (
+    "fppo_jax.run.api": ("train",),
+    "fppo_jax.store.checkpoint": (
         "CheckpointNotWritten",
         "CheckpointsUnavailable",
         "ConfigMismatch",
         "DamagedCheckpoint",
     ),
-    "fppo_jax.config": (
+    "fppo_jax.core.config": (
         "Hyperparameters",
         "TrainConfig",
         "hyperparameters",
         "stack_hyperparameters",
     ),
-    "fppo_jax.driver": ("StoppedBySignal", "TrainingDiverged"),
+    "fppo_jax.run.driver": ("StoppedBySignal", "TrainingDiverged"),
     "fppo_jax.envs": ("TASKS", "Environment", "make_env"),
     "fppo_jax.errors": (
         "FppoError",
@@ -53,19 +52,19 @@ _MODULES = {
         "MissingPackage",
         "NotEnoughMemory",
     ),
-    "fppo_jax.evaluation": ("evaluate",),
-    "fppo_jax.files": ("IncompatibleFormat",),
-    "fppo_jax.objectives": ("VARIANTS", "Objective", "negative_regions", "objective", "stack"),
-    "fppo_jax.options": ("Snapshot",),
-    "fppo_jax.policy": ("Policy",),
-    "fppo_jax.progress": ("Progress",),
-    "fppo_jax.results": ("SweepResult", "TrainResult", "merge"),
-    "fppo_jax.saved_policy": ("load_policy",),
-    "fppo_jax.study": ("study",),
-    "fppo_jax.surrogates": ("Surrogate", "surrogate"),
-    "fppo_jax.sweep": ("expand_grid", "sweep"),
-    "fppo_jax.trainer": ("METRICS", "Metrics", "Trainer", "TrainState", "make_train"),
-    "fppo_jax.tuning": ("TuneResult", "tune"),
+    "fppo_jax.run.evaluation": ("evaluate",),
+    "fppo_jax.store.files": ("IncompatibleFormat",),
+    "fppo_jax.core.objectives": ("VARIANTS", "Objective", "negative_regions", "objective", "stack"),
+    "fppo_jax.run.options": ("Snapshot",),
+    "fppo_jax.core.policy": ("Policy",),
+    "fppo_jax.run.progress": ("Progress",),
+    "fppo_jax.run.results": ("SweepResult", "TrainResult", "merge"),
+    "fppo_jax.store.saved_policy": ("load_policy",),
+    "fppo_jax.analysis.studies": ("study",),
+    "fppo_jax.core.surrogates": ("Surrogate", "surrogate"),
+    "fppo_jax.run.sweeps": ("expand_grid", "sweep"),
+    "fppo_jax.core.trainer": ("METRICS", "Metrics", "Trainer", "TrainState", "make_train"),
+    "fppo_jax.analysis.tuning": ("TuneResult", "tune"),
 }
 _MODULE_OF = {name: module for module, names in _MODULES.items() for name in names}
 
@@ -122,7 +121,7 @@ def __getattr__(name: str) -> Any:
     if name in _MODULE_OF:
         value = getattr(importlib.import_module(_MODULE_OF[name]), name)
     else:
-        # A submodule as an attribute (fppo_jax.statistics), as when the package imported it.
+        # A layer as an attribute (fppo_jax.stats), as when the package imported it.
         try:
             value = importlib.import_module(f"{__name__}.{name}")
         except ModuleNotFoundError as error:
@@ -135,15 +134,3 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted({*globals(), *__all__})
-
-
-class _Package(types.ModuleType):
-    def __setattr__(self, name: str, value: Any) -> None:
-        # Importing the submodule fppo_jax.sweep binds it here, under the name that is the
-        # function's: the name stays the function's, as when the package imported it itself.
-        if name in _MODULE_OF and isinstance(value, types.ModuleType):
-            return
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package

@@ -36,3 +36,9 @@ def install_hint(extra: str) -> str:
     install from the package index and from a clone of the repository alike: what a
     :class:`MissingPackage` tells the user to run."""
     return f"pip install 'fppo-jax[{extra}]' (from a clone: pip install -e '.[{extra}]')"
+
+
+def first_line(error: Exception) -> str:
+    """An error's message, its first line, for a report of what could not be read."""
+    text = str(error).strip()
+    return text.splitlines()[0][:200] if text else "no message"

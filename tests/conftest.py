@@ -74,7 +74,7 @@ def pytest_unconfigure(config) -> None:
 def session_compile_cache() -> None:
     """The session's cache also for the programs tests compile without ``train`` (``train``
     and ``sweep`` turn it on themselves)."""
-    from fppo_jax import compile_cache
+    from fppo_jax.run import compile_cache
 
     compile_cache.enable()
 
@@ -95,11 +95,11 @@ def saved_policies(tmp_path_factory) -> dict:
     import jax
     import jax.numpy as jnp
 
+    from fppo_jax.core.networks import make_networks
+    from fppo_jax.core.normalization import RunningStats
+    from fppo_jax.core.policy import Policy
     from fppo_jax.envs import Box, Discrete
-    from fppo_jax.networks import make_networks
-    from fppo_jax.normalization import RunningStats
-    from fppo_jax.policy import Policy
-    from fppo_jax.saved_policy import save_policy
+    from fppo_jax.store.saved_policy import save_policy
 
     def policy(space, size: int, stats: bool, seed: int) -> Policy:
         key, mean_key, var_key = jax.random.split(jax.random.key(seed), 3)

@@ -67,7 +67,7 @@ def process(out: str) -> None:
     KILL_AT set too, kill this process (SIGKILL) once that update is done; with TERM_AT, send
     process 1 SIGTERM once that update is done (as a cluster does to preempt a job), and save
     the update at which training stopped."""
-    from fppo_jax import distributed
+    from fppo_jax.run import distributed
 
     distributed.initialize()
     import jax

@@ -12,12 +12,12 @@ from own_surrogates import frozen, my_ppo
 from scipy import stats
 
 import fppo_jax
-from fppo_jax import statistics
+from fppo_jax.analysis.reuse import Pool
+from fppo_jax.analysis.studies import check_plan, recorded_group, run_scores
 from fppo_jax.cli import main
-from fppo_jax.results import PART_FIELDS, SweepResult, merge
-from fppo_jax.reuse import Pool
-from fppo_jax.sequential import Design, decide
-from fppo_jax.study import check_plan, recorded_group, run_scores
+from fppo_jax.run.results import PART_FIELDS, SweepResult, merge
+from fppo_jax.stats import statistics
+from fppo_jax.stats.sequential import Design, decide
 
 # PPO learns CartPole in this budget (its final return 57–106 over 8 seeds against 20–24 for
 # `frozen`, which never moves its policy): 8 seeds a side are enough to decide at the first look.
@@ -149,7 +149,7 @@ def test_a_group_cut_short_is_not_taken_for_a_recorded_one(tmp_path, tiny):
     where = tmp_path / "group"
     fppo_jax.sweep("cartpole", {"variant": ["ppo"]}, [0, 1], total_steps=512, log_dir=where, **tiny)
     whole = SweepResult.read(where)
-    ppo = fppo_jax.objectives.resolve("ppo")
+    ppo = fppo_jax.core.objectives.resolve("ppo")
     assert recorded_group(where, [ppo], [0, 1]) is not None
     cut = SweepResult(**{**whole.__dict__, "runs": whole.runs[:1], "diverged": whole.diverged[:1]})
     cut.metrics = {name: values[:1] for name, values in whole.metrics.items()}
@@ -414,7 +414,7 @@ def _scores(rng, start: float, shift: float) -> dict:
 
 
 def test_across_tasks_the_report_normalises_only_where_every_task_can_be(tmp_path):
-    from fppo_jax.study_report import normalised_scores, write_report
+    from fppo_jax.analysis.study_report import normalised_scores, write_report
 
     rng = np.random.default_rng(0)
     plan = {
@@ -563,8 +563,8 @@ def test_a_study_recorded_before_margins_reads_and_decides_as_it_did(tmp_path, m
 def test_the_report_notes_ceilings_ties_and_boundaries_that_holm_moved(tmp_path):
     # Task a decided worse at its first look; task b, CartPole-like, most runs tied at the
     # return's cap of 200, then tested at the whole α that a's decision passed on.
-    from fppo_jax.sequential import boundaries
-    from fppo_jax.study_report import write_report
+    from fppo_jax.analysis.study_report import write_report
+    from fppo_jax.stats.sequential import boundaries
 
     rng = np.random.default_rng(1)
     fractions = (0.5, 1.0)

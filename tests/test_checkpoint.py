@@ -27,9 +27,9 @@ from fppo_jax import (
     load_policy,
     train,
 )
-from fppo_jax.checkpoint import Checkpoints
 from fppo_jax.cli import main
-from fppo_jax.trainer import METRICS
+from fppo_jax.core.trainer import METRICS
+from fppo_jax.store.checkpoint import Checkpoints
 
 RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 20, **TINY}
 
@@ -274,7 +274,7 @@ def test_the_command_line_says_in_a_line_each_that_the_checkpoints_are_damaged(t
 
 
 def test_one_writer_per_checkpoint_directory_and_no_lock_outlives_its_process(tmp_path):
-    from fppo_jax.checkpoint import open_checkpoints
+    from fppo_jax.store.checkpoint import open_checkpoints
 
     held, _ = open_checkpoints(tmp_path, False, 3, "train", {})
     try:
@@ -287,7 +287,7 @@ def test_one_writer_per_checkpoint_directory_and_no_lock_outlives_its_process(tm
         [
             sys.executable,
             "-c",
-            "import sys, threading; from fppo_jax.checkpoint import open_checkpoints; "
+            "import sys, threading; from fppo_jax.store.checkpoint import open_checkpoints; "
             "open_checkpoints(sys.argv[1], False, 3, 'train', {}); print('locked', flush=True); "
             "threading.Event().wait()",  # holds the lock until the test kills it
             str(tmp_path),

@@ -12,9 +12,9 @@ import pytest
 from helpers import sweep_by_hand
 
 import fppo_jax.cli.commands
-import fppo_jax.driver
-import fppo_jax.files
-import fppo_jax.metric_log
+import fppo_jax.run.driver
+import fppo_jax.store.files
+import fppo_jax.store.metric_log
 from fppo_jax import SweepResult
 from fppo_jax.cli import build_parser, main
 from fppo_jax.errors import InvalidInput, MissingFile, MissingPackage, NotEnoughMemory
@@ -211,7 +211,7 @@ def test_console_entry_point_lists_tasks_and_variants():
 def test_render_needs_a_picture_format_and_a_mujoco_task_before_training(
     tmp_path, capsys, monkeypatch
 ):
-    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    monkeypatch.setattr(fppo_jax.run.driver, "compile_program", lambda *_: pytest.fail("compiled"))
     args = ["train", "--env", "cartpole", "--steps", "2048", "--quiet"]
     assert main([*args, "--render", str(tmp_path / "x.webm")]) == 2
     assert "a .gif (animation) or an .mp4 (video)" in capsys.readouterr().err
@@ -222,7 +222,7 @@ def test_render_needs_a_picture_format_and_a_mujoco_task_before_training(
 
 
 def test_outputs_that_cannot_be_written_are_refused_before_training(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    monkeypatch.setattr(fppo_jax.run.driver, "compile_program", lambda *_: pytest.fail("compiled"))
     (tmp_path / "file").write_text("")
     under_a_file = tmp_path / "file" / "sub"
     for flag, path in [
@@ -242,7 +242,7 @@ def test_outputs_that_cannot_be_written_are_refused_before_training(tmp_path, ca
         raise OSError(errno.EROFS, os.strerror(errno.EROFS), dir)
 
     with monkeypatch.context() as m:  # as root, a directory's permissions refuse nothing
-        m.setattr(fppo_jax.files.tempfile, "TemporaryFile", refused)
+        m.setattr(fppo_jax.store.files.tempfile, "TemporaryFile", refused)
         for flag in ("--checkpoint-dir", "--output"):
             assert main(["train", "--quiet", flag, str(read_only)]) == 2
             error = capsys.readouterr().err
@@ -253,7 +253,7 @@ def test_a_disk_that_fills_while_writing_is_one_line_naming_the_file(tmp_path, c
     def full(path, value):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
-    monkeypatch.setattr(fppo_jax.metric_log, "write_json", full)
+    monkeypatch.setattr(fppo_jax.store.metric_log, "write_json", full)
     assert main(["train", "--quiet", *TINY_FLAGS, "--output", str(tmp_path)]) == 2
     error = capsys.readouterr().err
     assert error == f"fppo-jax: error: {tmp_path / 'config.json'}: No space left on device\n"

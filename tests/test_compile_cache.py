@@ -14,8 +14,8 @@ import jax
 import jaxlib
 from conftest import TINY
 
-from fppo_jax import compile_cache
 from fppo_jax.cli import build_parser
+from fppo_jax.run import compile_cache
 
 ROOT = Path(__file__).resolve().parents[1]
 VERSIONS = f"jax-{jax.__version__}-jaxlib-{jaxlib.__version__}"
@@ -137,7 +137,7 @@ def test_a_cache_directory_given_to_jax_is_kept(tmp_path):
     # What train does first (compile_cache.enable), without a training run to compile.
     check = textwrap.dedent("""
         import json, jax
-        from fppo_jax import compile_cache
+        from fppo_jax.run import compile_cache
         compile_cache.enable()
         print(json.dumps({"min_seconds": jax.config.jax_persistent_cache_min_compile_time_secs,
                           "dir": jax.config.jax_compilation_cache_dir}))
@@ -151,7 +151,7 @@ def test_a_change_of_the_variable_moves_or_turns_off_only_the_cache_it_set(tmp_p
     a, b, c, user = (str(tmp_path / name) for name in ("a", "b", "c", "user"))
     code = textwrap.dedent(f"""
         import json, os, jax
-        from fppo_jax import compile_cache
+        from fppo_jax.run import compile_cache
         def enabled(value):
             os.environ["FPPO_JAX_CACHE_DIR"] = value
             compile_cache.enable()

@@ -1,4 +1,4 @@
-"""fppo_jax.config: the checks of a run's settings, their messages, presets and Table 2."""
+"""fppo_jax.core.config: the checks of a run's settings, their messages, presets and Table 2."""
 
 import dataclasses
 import math
@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fppo_jax.config import (
+from fppo_jax.core.config import (
     HYPERPARAMETER_DEFAULTS,
     MAX_STEPS,
     PRESETS,

@@ -2,7 +2,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.distributions import Categorical, DiagonalGaussian
+from fppo_jax.core.distributions import Categorical, DiagonalGaussian
 
 
 def test_categorical_log_prob_entropy_and_kl():

@@ -16,7 +16,7 @@ from conftest import IN_CHUNKS, TINY
 from helpers import assert_bitwise_equal
 
 import fppo_jax
-import fppo_jax.driver
+import fppo_jax.run.driver
 from fppo_jax import ConfigMismatch, evaluate, make_env, sweep, train
 from fppo_jax.cli import main
 from fppo_jax.envs import native
@@ -242,7 +242,7 @@ def test_weights_and_biases_missing_is_a_clear_error(monkeypatch):
     ],
 )
 def test_bad_driver_options_are_refused_before_compiling(options, message, monkeypatch):
-    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    monkeypatch.setattr(fppo_jax.run.driver, "compile_program", lambda *_: pytest.fail("compiled"))
     with pytest.raises(ValueError, match=message):
         train(**{**RUN, **options})
 
@@ -274,7 +274,7 @@ def test_a_finished_sweep_resumed_reports_its_results_again(tmp_path):
 
 
 def test_a_sweep_chooses_its_runs_per_call_once_before_compiling(monkeypatch):
-    from fppo_jax import driver, memory
+    from fppo_jax.run import driver, memory
 
     trainer = fppo_jax.make_train(
         fppo_jax.TrainConfig(total_steps=128 * 2, **TINY), make_env("cartpole")
@@ -297,7 +297,7 @@ def test_a_sweep_chooses_its_runs_per_call_once_before_compiling(monkeypatch):
 
 
 def test_a_run_that_cannot_fit_is_refused_before_compiling(monkeypatch):
-    from fppo_jax import driver, memory
+    from fppo_jax.run import driver, memory
 
     monkeypatch.setattr(memory, "free_bytes", lambda: 1024.0)
     monkeypatch.setattr(driver, "compile_program", lambda *a, **k: pytest.fail("compiled"))
@@ -314,7 +314,7 @@ def test_a_log_dir_that_cannot_be_written_is_refused_before_compiling(tmp_path, 
     loop.symlink_to(loop)
     with pytest.raises(ValueError, match=r"is not a directory .*a link that leads to none"):
         train(**RUN, checkpoint_dir=loop)
-    monkeypatch.setattr(fppo_jax.driver, "compile_program", compiled)
+    monkeypatch.setattr(fppo_jax.run.driver, "compile_program", compiled)
     file = tmp_path / "file"
     file.write_text("")
     loop = tmp_path / "loop"
@@ -337,7 +337,7 @@ def test_a_log_dir_holding_a_run_is_refused_unless_that_run_is_resumed(tmp_path,
     train(**RUN, **driven, checkpoint_dir=checkpoints, callback=lambda s: s.update < 6)
     written = {p.name: p.read_bytes() for p in logs.iterdir() if p.is_file()}
     with monkeypatch.context() as m:
-        m.setattr(fppo_jax.driver, "compile_program", compiled)
+        m.setattr(fppo_jax.run.driver, "compile_program", compiled)
         with pytest.raises(ValueError, match=r"already holds a run's outputs \(config.json, "):
             train(**RUN, log_dir=logs)
         with pytest.raises(ValueError, match="outputs of another run than the one resumed"):
@@ -442,7 +442,7 @@ class _Compilations:
 
 
 def test_a_repeated_train_or_sweep_with_the_same_shapes_compiles_nothing(monkeypatch):
-    from fppo_jax import execution
+    from fppo_jax.run import execution
 
     # An empty store of compiled programs: the first call here prepares its own whatever ran
     # before it in this process (loading it from the session's cache where a test compiled it).
@@ -472,9 +472,10 @@ def test_another_step_budget_reuses_the_program_and_anneals_over_its_own_length(
     """The budget is traced: a run of another length compiles nothing, ends where its own
     budget ends, and its learning rate anneals over its own length, bit for bit as the
     trainer compiled for that budget alone."""
-    from fppo_jax import execution, hyperparameters, make_env, make_train
-    from fppo_jax.config import TrainConfig
-    from fppo_jax.trainer import METRICS
+    from fppo_jax import hyperparameters, make_env, make_train
+    from fppo_jax.core.config import TrainConfig
+    from fppo_jax.core.trainer import METRICS
+    from fppo_jax.run import execution
 
     monkeypatch.setattr(execution, "_PROGRAMS", execution._Programs())
     longer = train(**RUN, **IN_CHUNKS)  # 12 updates
@@ -498,7 +499,7 @@ def test_another_step_budget_reuses_the_program_and_anneals_over_its_own_length(
 
 
 def test_one_writer_per_output_directory_from_the_first_moment(tmp_path):
-    from fppo_jax.files import DirectoryLock
+    from fppo_jax.store.files import DirectoryLock
 
     held = DirectoryLock(tmp_path, "a run's outputs")  # as another sweep starting on it would
     with pytest.raises(ValueError, match=rf"another process \(pid {os.getpid()}\) is writing"):

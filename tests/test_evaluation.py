@@ -1,4 +1,4 @@
-"""fppo_jax.evaluation: the undiscounted return of whole episodes, run side by side, and the
+"""fppo_jax.run.evaluation: the undiscounted return of whole episodes, run side by side, and the
 command line's report of it."""
 
 from typing import NamedTuple
@@ -11,11 +11,11 @@ import pytest
 import fppo_jax
 from fppo_jax import train
 from fppo_jax.cli import main
+from fppo_jax.core.networks import make_networks
+from fppo_jax.core.policy import Policy
 from fppo_jax.envs import Discrete, Step
 from fppo_jax.errors import InvalidInput
-from fppo_jax.evaluation import evaluate, make_evaluator
-from fppo_jax.networks import make_networks
-from fppo_jax.policy import Policy
+from fppo_jax.run.evaluation import evaluate, make_evaluator
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 20, **TINY}
@@ -74,7 +74,7 @@ def test_evaluate_counts_each_episode_until_it_ends():
 
 
 def make_cartpole_params():
-    from fppo_jax.networks import make_networks
+    from fppo_jax.core.networks import make_networks
 
     networks = make_networks(fppo_jax.make_env("cartpole").action_space, (4,))
     params = networks.init(jax.random.key(0), 4)["policy"]

@@ -1,10 +1,10 @@
-"""fppo_jax.execution: the runs' keys, chunks of a run's metrics joined along updates, and
+"""fppo_jax.run.execution: the runs' keys, chunks of a run's metrics joined along updates, and
 groups of runs joined along runs."""
 
 import jax
 import numpy as np
 
-from fppo_jax.execution import concatenate, run_keys, updates_per_call
+from fppo_jax.run.execution import concatenate, run_keys, updates_per_call
 
 
 def test_run_keys_are_jax_keys_of_the_seeds_and_an_unsigned_seed_that_of_its_signed_equal():

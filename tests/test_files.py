@@ -1,4 +1,4 @@
-"""fppo_jax.files: writable directories, one writer per directory, whole-or-nothing writes,
+"""fppo_jax.store.files: writable directories, one writer per directory, whole-or-nothing writes,
 JSON as written, array digests and one-line error messages."""
 
 import hashlib
@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fppo_jax.files import (
+from fppo_jax.store.files import (
     DirectoryBusy,
     DirectoryLock,
     DirectoryLost,

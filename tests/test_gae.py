@@ -1,6 +1,6 @@
 import numpy as np
 
-from fppo_jax.gae import gae
+from fppo_jax.core.gae import gae
 
 
 def gae_loop(rewards, values, next_values, terminated, truncated, gamma, lam):

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from conftest import TINY
 
-import fppo_jax.driver
-import fppo_jax.memory
+import fppo_jax.run.driver
+import fppo_jax.run.memory
 from fppo_jax import make_env, sweep, train
 from fppo_jax.envs import Discrete, Step, as_environment, draw_resets
 from fppo_jax.envs.gymnasium import gymnasium_environment
@@ -197,7 +197,7 @@ MISBEHAVING = {
 def test_an_environment_that_breaks_the_api_is_named_with_its_fault_before_compiling(
     env, message, monkeypatch
 ):
-    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    monkeypatch.setattr(fppo_jax.run.driver, "compile_program", lambda *_: pytest.fail("compiled"))
     with pytest.raises(ValueError, match=message):
         train(env, "ppo", total_steps=256, **TINY)
 
@@ -323,7 +323,7 @@ def test_a_run_takes_vector_environments_whole_and_an_instance_serves_one_batch_
 def test_environments_a_vector_environment_cannot_serve_are_refused_before_compiling(
     monkeypatch,
 ):
-    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    monkeypatch.setattr(fppo_jax.run.driver, "compile_program", lambda *_: pytest.fail("compiled"))
     pairs = gymnasium_environment(lambda: gymnasium.vector.SyncVectorEnv([Corridor, Corridor]))
     with pytest.raises(ValueError, match="2 sub-environments, which cannot serve 3 "):
         train(pairs, "ppo", total_steps=512, **{**TINY, "num_envs": 3})
@@ -341,15 +341,15 @@ def test_environments_that_would_not_fit_in_host_memory_are_refused_before_compi
 ):
     env = as_environment(Corridor)
     assert 1000 < env.host_bytes < 100_000  # a Python object of a few KiB
-    monkeypatch.setattr(fppo_jax.driver, "compile_program", lambda *_: pytest.fail("compiled"))
-    monkeypatch.setattr(fppo_jax.memory, "host_available_bytes", lambda: 2 * 7 * env.host_bytes)
+    monkeypatch.setattr(fppo_jax.run.driver, "compile_program", lambda *_: pytest.fail("compiled"))
+    monkeypatch.setattr(fppo_jax.run.memory, "host_available_bytes", lambda: 2 * 7 * env.host_bytes)
     with pytest.raises(MemoryError, match=r"Corridor: 1 run\(s\) of 8 environments, each a Py"):
         train(Corridor, "ppo", total_steps=512, **{**TINY, "num_envs": 8})
     with pytest.raises(MemoryError, match=r"2 run\(s\) of 4 .*lower num_envs, or the runs per"):
         sweep(Corridor, {"variant": "ppo"}, seeds=2, total_steps=512, chunk=2, **TINY)
     # Without a chunk given, a sweep takes as many runs per call as fit: one here.
-    monkeypatch.setattr(fppo_jax.memory, "host_available_bytes", lambda: 2 * 5 * env.host_bytes)
-    monkeypatch.setattr(fppo_jax.driver, "HOST_BYTES_SHOWN", 4 * env.host_bytes)
+    monkeypatch.setattr(fppo_jax.run.memory, "host_available_bytes", lambda: 2 * 5 * env.host_bytes)
+    monkeypatch.setattr(fppo_jax.run.driver, "HOST_BYTES_SHOWN", 4 * env.host_bytes)
     with pytest.raises(pytest.fail.Exception, match="compiled"):
         sweep(Corridor, {"variant": "ppo"}, seeds=2, total_steps=512, progress=True, **TINY)
     shown = capsys.readouterr().err

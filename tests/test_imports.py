@@ -3,6 +3,7 @@
 every public name is still there."""
 
 import json
+import pkgutil
 import subprocess
 import sys
 import textwrap
@@ -57,12 +58,17 @@ def test_every_public_name_is_importable_and_listed():
     for name in fppo_jax.__all__:
         assert getattr(fppo_jax, name) is not None
     assert set(fppo_jax.__all__) <= set(dir(fppo_jax))
-    # A submodule is an attribute, but the name of both sweep() and its module is the function's.
-    from fppo_jax import statistics, sweep
-    from fppo_jax.sweep import expand_grid
+    # A layer is an attribute; no module or folder of the package bears a public name, which
+    # importing it would bind in the name's place.
+    from fppo_jax import sweep
+    from fppo_jax.run.sweeps import expand_grid
+    from fppo_jax.stats import statistics
 
-    assert fppo_jax.statistics is statistics
-    assert fppo_jax.sweep is sweep is sys.modules["fppo_jax.sweep"].sweep
+    assert fppo_jax.stats.statistics is statistics
+    assert fppo_jax.sweep is sweep is sys.modules["fppo_jax.run.sweeps"].sweep
+    assert not {module.name for module in pkgutil.iter_modules(fppo_jax.__path__)} & set(
+        fppo_jax.__all__
+    )
     assert fppo_jax.expand_grid is expand_grid
     with pytest.raises(AttributeError, match="no_such_name"):
         fppo_jax.no_such_name  # noqa: B018

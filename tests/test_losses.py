@@ -1,4 +1,4 @@
-"""fppo_jax.losses: the PPO-family loss of a minibatch, term by term, against a direct
+"""fppo_jax.core.losses: the PPO-family loss of a minibatch, term by term, against a direct
 computation from its definition."""
 
 import functools
@@ -8,12 +8,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fppo_jax.config import hyperparameters
-from fppo_jax.distributions import Categorical
+from fppo_jax.core.config import hyperparameters
+from fppo_jax.core.distributions import Categorical
+from fppo_jax.core.losses import Batch
+from fppo_jax.core.losses import ppo_loss as eager_ppo_loss
+from fppo_jax.core.networks import make_networks
 from fppo_jax.envs import Discrete
-from fppo_jax.losses import Batch
-from fppo_jax.losses import ppo_loss as eager_ppo_loss
-from fppo_jax.networks import make_networks
 
 N = 64
 # Compiled whole: many times faster than op by op.

@@ -1,4 +1,4 @@
-"""fppo_jax.memory: how much memory a run needs, estimated from shapes, and how many runs fit in
+"""fppo_jax.run.memory: how much memory a run needs, estimated from shapes, and how many runs fit in
 one compiled call."""
 
 import os
@@ -8,9 +8,9 @@ import jax
 import pytest
 
 import fppo_jax
-from fppo_jax import memory
-from fppo_jax.config import preset_config
+from fppo_jax.core.config import preset_config
 from fppo_jax.envs import make_env
+from fppo_jax.run import memory
 
 MiB, GiB = 2**20, 2**30
 

@@ -1,5 +1,5 @@
-"""fppo_jax.metric_log: config.json, metrics.csv, TensorBoard and W&B logs, written as training
-goes, each update once, and a log directory never shared or overwritten unasked."""
+"""fppo_jax.store.metric_log: config.json, metrics.csv, TensorBoard and W&B logs, written as
+training goes, each update once, and a log directory never shared or overwritten unasked."""
 
 import csv
 import json
@@ -13,8 +13,9 @@ import pytest
 from tensorboardX.proto.event_pb2 import Event
 
 from fppo_jax import train
+from fppo_jax.core.trainer import METRICS
 from fppo_jax.errors import FppoError
-from fppo_jax.metric_log import (
+from fppo_jax.store.metric_log import (
     MetricLog,
     WandbLog,
     environment_record,
@@ -22,7 +23,6 @@ from fppo_jax.metric_log import (
     prepare_log_dir,
     require_wandb,
 )
-from fppo_jax.trainer import METRICS
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 20, **TINY}

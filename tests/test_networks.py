@@ -2,8 +2,8 @@ import flax.linen as nn
 import jax
 import numpy as np
 
+from fppo_jax.core.networks import make_networks, orthogonal, policy_layers
 from fppo_jax.envs import Box, Discrete
-from fppo_jax.networks import make_networks, orthogonal, policy_layers
 
 
 def test_orthogonal_matches_flax_and_stays_unbatched_under_vmap():

@@ -1,6 +1,6 @@
 import numpy as np
 
-from fppo_jax.normalization import RunningStats
+from fppo_jax.core.normalization import RunningStats
 
 
 def test_running_stats_match_the_whole_data():

@@ -1,4 +1,4 @@
-"""fppo_jax/numpy_policy.py: a saved policy run by numpy alone gives Policy's actions."""
+"""fppo_jax/store/numpy_policy.py: a saved policy run by numpy alone gives Policy's actions."""
 
 import subprocess
 import sys
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fppo_jax import load_policy
-from fppo_jax.numpy_policy import NumpyPolicy
+from fppo_jax.store.numpy_policy import NumpyPolicy
 
 MODULE = Path(__file__).resolve().parent.parent / "fppo_jax" / "numpy_policy.py"
 

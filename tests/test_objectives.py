@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fppo_jax import VARIANTS, negative_regions, objective, stack
-from fppo_jax.objectives import PAPERS, resolve
+from fppo_jax.core.objectives import PAPERS, resolve
 
 EPS = 0.2
 LO, HI = 1 - EPS, 1 + EPS

@@ -1,4 +1,4 @@
-"""fppo_jax/onnx_export.py and `fppo-jax export --onnx`: the exported model's actions are the
+"""fppo_jax/export/onnx_export.py and `fppo-jax export --onnx`: the exported model's actions are the
 policy's, run by onnxruntime."""
 
 import sys
@@ -8,7 +8,7 @@ import pytest
 
 from fppo_jax import load_policy
 from fppo_jax.cli import main
-from fppo_jax.onnx_export import export_onnx
+from fppo_jax.export.onnx_export import export_onnx
 
 onnxruntime = pytest.importorskip("onnxruntime")
 

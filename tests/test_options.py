@@ -1,4 +1,4 @@
-"""fppo_jax.options: each option declared once (its default, its check, its flag), and what a
+"""fppo_jax.run.options: each option declared once (its default, its check, its flag), and what a
 callback's answer means."""
 
 import dataclasses
@@ -9,7 +9,7 @@ import pytest
 
 from fppo_jax.cli import build_parser
 from fppo_jax.cli.flags import _type_of, options
-from fppo_jax.options import Options, callback_stops
+from fppo_jax.run.options import Options, callback_stops
 
 
 @pytest.mark.parametrize(

@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from fppo_jax.permutation import permutation, rounds
+from fppo_jax.core.permutation import permutation, rounds
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 7, 64, 511, 512, 513, 2048])

@@ -12,7 +12,7 @@ from helpers import sweep_by_hand
 from matplotlib.figure import Figure
 
 from fppo_jax import VARIANTS
-from fppo_jax.plots import (
+from fppo_jax.analysis.plots import (
     plot_ablation,
     plot_curves,
     plot_escape_speed,
@@ -22,8 +22,8 @@ from fppo_jax.plots import (
     plot_profiles,
     plot_sweep,
 )
-from fppo_jax.results import SweepResult
-from fppo_jax.trainer import METRICS
+from fppo_jax.core.trainer import METRICS
+from fppo_jax.run.results import SweepResult
 
 REPO = Path(__file__).resolve().parent.parent
 ESCAPE = np.random.default_rng(1).uniform(0, 0.05, size=(2, 3, 4))  # [state, variant, epoch]
@@ -151,7 +151,7 @@ def test_a_profile_falls_from_every_run_to_none():
         "threshold on the normalised score",
         "fraction of runs above the threshold",
     )
-    from fppo_jax.study_report import profile_label
+    from fppo_jax.analysis.study_report import profile_label
 
     label = profile_label("final", "ppo")
     assert label == "threshold on the normalised final (1 = ppo's IQM on the task)"
@@ -175,7 +175,7 @@ def test_runs_that_diverged_are_left_out_of_the_ablation_chart(result):
 
 
 def test_importing_plots_leaves_the_backend_alone():
-    code = "import matplotlib, fppo_jax.plots; print(matplotlib.get_backend())"
+    code = "import matplotlib, fppo_jax.analysis.plots; print(matplotlib.get_backend())"
     env = {**os.environ, "MPLBACKEND": "svg"}
     out = subprocess.run(
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True

@@ -1,4 +1,4 @@
-"""fppo_jax.policy: a trained policy on its own: the most likely or a sampled action for raw
+"""fppo_jax.core.policy: a trained policy on its own: the most likely or a sampled action for raw
 observations, normalised as in training, continuous actions clipped to their bounds."""
 
 import functools
@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from helpers import assert_bitwise_equal
 
-from fppo_jax.distributions import Categorical
+from fppo_jax.core.distributions import Categorical
+from fppo_jax.core.networks import make_networks
+from fppo_jax.core.normalization import RunningStats
+from fppo_jax.core.policy import Policy, make_policy
 from fppo_jax.envs import Box, Discrete
-from fppo_jax.networks import make_networks
-from fppo_jax.normalization import RunningStats
-from fppo_jax.policy import Policy, make_policy
 
 BOX = Box((-1.0, -2.0), (1.0, 2.0))
 
@@ -32,7 +32,7 @@ def test_a_continuous_policy_round_trips_through_its_description():
 
 
 def make_gaussian_params():
-    from fppo_jax.networks import make_networks
+    from fppo_jax.core.networks import make_networks
 
     networks = make_networks(Box((-1.0, -2.0), (1.0, 2.0)), (8,))
     params = networks.init(jax.random.key(0), 3)["policy"]

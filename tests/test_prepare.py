@@ -1,14 +1,14 @@
-"""fppo_jax.prepare: train's and sweep's settings split, checked and resolved once, before an
+"""fppo_jax.run.prepare: train's and sweep's settings split, checked and resolved once, before an
 environment is built or anything compiles."""
 
 import dataclasses
 
 import pytest
 
-import fppo_jax.prepare
-from fppo_jax.config import HYPERPARAMETER_DEFAULTS, TrainConfig
-from fppo_jax.options import Options
-from fppo_jax.prepare import prepare
+import fppo_jax.run.prepare
+from fppo_jax.core.config import HYPERPARAMETER_DEFAULTS, TrainConfig
+from fppo_jax.run.options import Options
+from fppo_jax.run.prepare import prepare
 
 SHAPE = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 
@@ -33,7 +33,7 @@ def test_settings_are_split_into_shape_hyperparameters_and_options():
 
 
 def test_an_unknown_setting_is_refused_listing_every_valid_one_before_building(monkeypatch):
-    monkeypatch.setattr(fppo_jax.prepare, "make_env", lambda *_: pytest.fail("built"))
+    monkeypatch.setattr(fppo_jax.run.prepare, "make_env", lambda *_: pytest.fail("built"))
     with pytest.raises(ValueError, match="unknown setting num_env; valid: total_steps") as error:
         prepared(num_env=4)
     assert "learning_rate" in str(error.value) and "checkpoint_dir" in str(error.value)
@@ -43,8 +43,8 @@ def test_an_unknown_setting_is_refused_listing_every_valid_one_before_building(m
 
 def test_the_environment_is_built_once_on_first_use(monkeypatch):
     built = []
-    real = fppo_jax.prepare.make_env
-    monkeypatch.setattr(fppo_jax.prepare, "make_env", lambda *a: built.append(a) or real(*a))
+    real = fppo_jax.run.prepare.make_env
+    monkeypatch.setattr(fppo_jax.run.prepare, "make_env", lambda *a: built.append(a) or real(*a))
     run = prepared(**SHAPE)
     assert built == []
     assert run.trainer.env is run.environment and run.name == "cartpole"

@@ -1,4 +1,4 @@
-"""fppo_jax.progress: what a progress report holds, its lines, its bar and its ETA."""
+"""fppo_jax.run.progress: what a progress report holds, its lines, its bar and its ETA."""
 
 import math
 import sys
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fppo_jax import train
-from fppo_jax.progress import Progress, ProgressBar, format_seconds, print_progress, reporter
+from fppo_jax.run.progress import Progress, ProgressBar, format_seconds, print_progress, reporter
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 20, **TINY}
@@ -27,7 +27,7 @@ REPORT = Progress(
 
 
 def test_progress_reports_an_eta_and_a_bar_only_on_a_terminal(monkeypatch):
-    from fppo_jax.progress import ProgressBar, format_seconds, print_progress, reporter
+    from fppo_jax.run.progress import ProgressBar, format_seconds, print_progress, reporter
 
     assert [format_seconds(s) for s in (4.4, 185, 7620, float("nan"))] == [
         "4 s",
@@ -117,7 +117,7 @@ def test_the_bar_shows_steps_speed_return_and_eta(capsys, monkeypatch):
 
 
 def test_the_counter_counts_env_steps_of_groups_of_runs_done_one_after_another():
-    from fppo_jax.progress import Counter
+    from fppo_jax.run.progress import Counter
 
     # 5 runs of 10 updates of 128 steps, 2 at a time: groups of runs 0-1, 2-3 and 4.
     counter = Counter(5, 2, 10, 128, compile_seconds=3.0)
@@ -135,7 +135,7 @@ def test_the_counter_counts_env_steps_of_groups_of_runs_done_one_after_another()
 
 
 def test_the_counter_measures_speed_and_eta_over_the_steps_this_call_ran():
-    from fppo_jax.progress import Counter
+    from fppo_jax.run.progress import Counter
 
     counter = Counter(5, 2, 10, 128, compile_seconds=0.0, group=1, update=5)
     counter.began -= 1000.0  # as if it had run 1000 s, for 2 × 5 updates of 128 steps

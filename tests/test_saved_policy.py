@@ -1,4 +1,4 @@
-"""fppo_jax.saved_policy: a trained policy saved on its own (policy.json and policy.npz),
+"""fppo_jax.store.saved_policy: a trained policy saved on its own (policy.json and policy.npz),
 loaded back bit for bit, never overwritten unasked, and damage reported by directory."""
 
 import json
@@ -14,10 +14,10 @@ from test_policy import gaussian_policy
 
 from fppo_jax import IncompatibleFormat, load_policy, train
 from fppo_jax.cli import main
-from fppo_jax.files import tree_digest
-from fppo_jax.numpy_policy import NumpyPolicy
-from fppo_jax.policy import Policy
-from fppo_jax.saved_policy import FORMAT, check_no_saved_policy, read_policy, save_policy
+from fppo_jax.core.policy import Policy
+from fppo_jax.store.files import tree_digest
+from fppo_jax.store.numpy_policy import NumpyPolicy
+from fppo_jax.store.saved_policy import FORMAT, check_no_saved_policy, read_policy, save_policy
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 20, **TINY}

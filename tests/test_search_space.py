@@ -5,9 +5,8 @@ import json
 
 import pytest
 
-from fppo_jax.errors import InvalidInput
-from fppo_jax.objectives import BUILTINS
-from fppo_jax.search_space import (
+from fppo_jax.core.objectives import BUILTINS
+from fppo_jax.core.search_space import (
     OWN,
     SHARED,
     Interval,
@@ -16,6 +15,7 @@ from fppo_jax.search_space import (
     read_space_file,
     search_spaces,
 )
+from fppo_jax.errors import InvalidInput
 
 
 @pytest.mark.parametrize("variant", list(BUILTINS))

@@ -1,4 +1,4 @@
-"""The decision rule of a study that adds seeds (fppo_jax.sequential): its boundaries against
+"""The decision rule of a study that adds seeds (fppo_jax.stats.sequential): its boundaries against
 published ones, its statistic against SciPy's, its replay of the looks, Holm's recycling, its
 equivalence test, and its error rates by simulation on synthetic scores (no training)."""
 
@@ -10,8 +10,8 @@ import pytest
 from helpers import run_script
 from scipy import stats
 
-from fppo_jax import statistics
-from fppo_jax.sequential import (
+from fppo_jax.stats import statistics
+from fppo_jax.stats.sequential import (
     Design,
     boundaries,
     decide,

@@ -11,10 +11,10 @@ from pathlib import Path
 import pytest
 
 import fppo_jax
-import fppo_jax.driver as driver
+import fppo_jax.run.driver as driver
 from fppo_jax import train
 from fppo_jax.cli import main
-from fppo_jax.saved_policy import read_policy
+from fppo_jax.store.saved_policy import read_policy
 
 ROOT = Path(__file__).resolve().parents[1]
 FLAGS = ["train", "--env", "cartpole", "--variant", "ppo", "--steps", "512", "--num-envs", "4"]
@@ -61,8 +61,8 @@ SIGNALLED_WHILE = textwrap.dedent("""
 
     where, number, *flags = sys.argv[1:]
     module, name = {
-        "starting": ("fppo_jax.compile_cache", "enable"),
-        "compiling": ("fppo_jax.driver", "compile_program"),
+        "starting": ("fppo_jax.run.compile_cache", "enable"),
+        "compiling": ("fppo_jax.run.driver", "compile_program"),
     }[where]
     module = importlib.import_module(module)
     at = getattr(module, name)

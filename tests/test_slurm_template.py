@@ -107,7 +107,7 @@ def test_the_program_is_one_the_command_line_takes_with_the_cache_shared_safely(
         Path("runs/hopper/part-8"),
         Path("runs/hopper/ckpt-8"),
     )
-    # The package's own variable, under which JAX locks each entry (fppo_jax/compile_cache.py);
+    # The package's own variable, under which JAX locks each entry (fppo_jax/run/compile_cache.py);
     # JAX's own would leave JAX unbounded and unlocked.
     assert env["FPPO_JAX_CACHE_DIR"] == str(tmp_path / "fppo-jax-cache")
     assert "JAX_COMPILATION_CACHE_DIR" not in env

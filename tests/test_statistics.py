@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from fppo_jax import statistics
+from fppo_jax.stats import statistics
 
 
 def test_endpoints_of_a_curve_with_updates_before_any_episode():

@@ -19,7 +19,7 @@ from own_surrogates import clipped, my_clip_higher, my_ppo
 import fppo_jax
 from fppo_jax import objective, surrogate, sweep, train
 from fppo_jax.cli import main
-from fppo_jax.surrogates import Range
+from fppo_jax.core.surrogates import Range
 
 TINY_STEPS = 512
 
@@ -41,7 +41,7 @@ def test_a_surrogate_is_accepted_where_a_variants_name_is():
     # Its declared clip range bounds the R± diagnostics.
     below, above = o.clip_range()
     assert float(below) == pytest.approx(0.2) and float(above) == pytest.approx(0.3)
-    assert fppo_jax.objectives.resolve("own_surrogates:my_ppo") is my_ppo
+    assert fppo_jax.core.objectives.resolve("own_surrogates:my_ppo") is my_ppo
 
 
 def test_a_user_surrogate_computes_what_its_function_does():
@@ -204,7 +204,7 @@ def test_a_sweep_mixing_builtins_and_own_surrogates_is_one_program(tiny, monkeyp
     compiled = []
     jit = jax.jit
     monkeypatch.setattr(
-        fppo_jax.execution.jax, "jit", lambda f, **k: compiled.append(f) or jit(f, **k)
+        fppo_jax.run.execution.jax, "jit", lambda f, **k: compiled.append(f) or jit(f, **k)
     )
     grid = {"variant": ["ppo", my_ppo, "fppo-qp", my_clip_higher], "eps_high": [0.25, 0.4]}
     # A learning rate high enough that ratios pass 1.25, so that the two ε_high differ.
@@ -273,7 +273,7 @@ def test_a_resumed_run_refuses_another_function_under_the_same_name(tiny, tmp_pa
 
 def test_one_default_variant_everywhere():
     from fppo_jax.cli.parser import build_parser
-    from fppo_jax.objectives import DEFAULT_VARIANT
+    from fppo_jax.core.objectives import DEFAULT_VARIANT
 
     assert fppo_jax.hyperparameters().objective.name == DEFAULT_VARIANT
     assert inspect.signature(train).parameters["variant"].default == DEFAULT_VARIANT
@@ -302,7 +302,7 @@ def test_a_surrogate_module_is_imported_from_the_current_directory(module_here):
         "import fppo_jax\n"
         "mine = fppo_jax.surrogate('here-mine', lambda ratio, advantage: ratio * advantage)\n",
     )
-    assert fppo_jax.objectives.resolve("here_mine:mine").name == "here-mine"
+    assert fppo_jax.core.objectives.resolve("here_mine:mine").name == "here-mine"
     assert os.getcwd() not in sys.path  # the directory is on the path only while importing
     with pytest.raises(
         ValueError,
@@ -311,7 +311,7 @@ def test_a_surrogate_module_is_imported_from_the_current_directory(module_here):
             f"{os.getcwd()}, "
         ),
     ):
-        fppo_jax.objectives.resolve("here_absent:mine")
+        fppo_jax.core.objectives.resolve("here_absent:mine")
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,4 @@
-"""fppo_jax.sweep_files: a sweep's curves.csv and sweep.json read back whole, in any order of
+"""fppo_jax.store.sweep_files: a sweep's curves.csv and sweep.json read back whole, in any order of
 rows and columns, and every flaw refused with its file named."""
 
 import csv

@@ -18,9 +18,9 @@ from fppo_jax import (
     make_train,
     train,
 )
-from fppo_jax.config import describe, preset_config, resolve_config
+from fppo_jax.core.config import describe, preset_config, resolve_config
+from fppo_jax.core.trainer import RETURN_WINDOW, _average_return, _push_returns
 from fppo_jax.envs import Discrete, Step
-from fppo_jax.trainer import RETURN_WINDOW, _average_return, _push_returns
 
 
 def test_same_seed_gives_identical_metrics(tiny):
@@ -165,8 +165,8 @@ def test_bad_settings_fail_before_compiling():
 
 def test_task_defaults_follow_table_2():
     # The one resolution that train and sweep share (a run's config records its result).
-    from fppo_jax.config import resolve_hyperparameters
-    from fppo_jax.sweep import expand_grid
+    from fppo_jax.core.config import resolve_hyperparameters
+    from fppo_jax.run.sweeps import expand_grid
 
     assert resolve_hyperparameters("fppo-lp", "cartpole")[1]["alpha"] == 1.3
     assert resolve_hyperparameters("fppo-qp", "hopper")[1]["k"] == 0.2

@@ -11,10 +11,10 @@ import pytest
 from conftest import TINY
 
 import fppo_jax
-from fppo_jax import tuning
+from fppo_jax.analysis import tuning
+from fppo_jax.analysis.studies import study
+from fppo_jax.analysis.tuning import TUNING_SEED_START, schedule, tune
 from fppo_jax.errors import InvalidInput
-from fppo_jax.study import study
-from fppo_jax.tuning import TUNING_SEED_START, schedule, tune
 
 # Four trials per arm halved by 2 over 8 updates: rungs of 4, 2 and 1 trials ending at updates
 # 2, 4 and 8.

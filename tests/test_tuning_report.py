@@ -1,7 +1,7 @@
 """The tune's results and report, from rung scores made by hand."""
 
-from fppo_jax.tuning import Rungs
-from fppo_jax.tuning_report import arm_results, ranked, write_report
+from fppo_jax.analysis.tuning import Rungs
+from fppo_jax.analysis.tuning_report import arm_results, ranked, write_report
 
 
 def row(trial, score, diverged=False):

@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from fppo_jax import make_train
-from fppo_jax.execution import one_run
+from fppo_jax.run.execution import one_run
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

@@ -21,7 +21,7 @@ import jax
 import numpy as np
 
 import fppo_jax
-from fppo_jax.progress import print_progress
+from fppo_jax.run.progress import print_progress
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

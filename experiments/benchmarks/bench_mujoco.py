@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 
 import fppo_jax
-from fppo_jax.config import describe_update, preset_config
+from fppo_jax.core.config import describe_update, preset_config
 from fppo_jax.envs import make_env
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules

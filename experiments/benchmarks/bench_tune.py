@@ -122,7 +122,7 @@ def run_usual(args: Any, where: Path, tuned: Path, shape: dict[str, Any]) -> dic
             min_resource=first, reduction_factor=args.eta, min_early_stopping_rate=0
         ),
     )
-    from fppo_jax.tuning import setting_of
+    from fppo_jax.analysis.tuning import setting_of
 
     start, updates, peak, best = time.perf_counter(), 0, 0, None
     last_update = plan["budget"][args.env]["rungs"][-1]["ends_at_update"]

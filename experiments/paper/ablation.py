@@ -22,9 +22,9 @@ from pathlib import Path
 
 import matplotlib
 
-from fppo_jax.config import table2
+from fppo_jax.core.config import table2
 from fppo_jax.envs import TASKS
-from fppo_jax.results import SweepResult
+from fppo_jax.run.results import SweepResult
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

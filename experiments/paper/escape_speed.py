@@ -30,9 +30,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax import make_env, make_train
-from fppo_jax.config import describe, resolve_config, resolve_hyperparameters
+from fppo_jax.core.config import describe, resolve_config, resolve_hyperparameters
 from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, choose_backend
-from fppo_jax.statistics import sample_std
+from fppo_jax.stats.statistics import sample_std
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

@@ -30,8 +30,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
 
-from fppo_jax.plots import plot_curves, plot_escape_speed, plot_objectives
-from fppo_jax.results import SweepResult
+from fppo_jax.analysis.plots import plot_curves, plot_escape_speed, plot_objectives
+from fppo_jax.run.results import SweepResult
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

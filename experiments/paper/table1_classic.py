@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from fppo_jax import TrainConfig, sweep
-from fppo_jax.results import max_average_return
+from fppo_jax.run.results import max_average_return
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

@@ -24,9 +24,9 @@ from pathlib import Path
 
 import matplotlib
 
-from fppo_jax.config import describe, preset_config, task_preset
+from fppo_jax.core.config import describe, preset_config, task_preset
 from fppo_jax.envs import MUJOCO_TASKS
-from fppo_jax.results import SweepResult
+from fppo_jax.run.results import SweepResult
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
@@ -52,7 +52,7 @@ def run_task(task: str, args: argparse.Namespace, directory: Path) -> None:
 
 def figure(result: SweepResult, path: Path) -> None:
     matplotlib.use("Agg")
-    from fppo_jax.plots import plot_curves
+    from fppo_jax.analysis.plots import plot_curves
 
     fig = plot_curves(result)
     fig.savefig(path, dpi=110, bbox_inches="tight")

@@ -30,9 +30,9 @@ import jax
 import jax.numpy as jnp
 
 from fppo_jax import hyperparameters, make_train
-from fppo_jax.config import describe_update, preset_config
+from fppo_jax.core.config import describe_update, preset_config
+from fppo_jax.core.trainer import METRICS, Metrics, Trainer
 from fppo_jax.envs import make_env
-from fppo_jax.trainer import METRICS, Metrics, Trainer
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

@@ -26,9 +26,9 @@ import jax
 import jax.numpy as jnp
 
 from fppo_jax import make_train
-from fppo_jax.config import Hyperparameters
-from fppo_jax.losses import Batch
-from fppo_jax.trainer import Trainer, TrainState
+from fppo_jax.core.config import Hyperparameters
+from fppo_jax.core.losses import Batch
+from fppo_jax.core.trainer import Trainer, TrainState
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

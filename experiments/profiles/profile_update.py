@@ -61,7 +61,7 @@ def main() -> None:
     update = jax.jit(trainer.update)
 
     # The batch the epochs consume, built the way `update` builds it.
-    from fppo_jax.losses import Batch
+    from fppo_jax.core.losses import Batch
 
     flat = lambda x: x.reshape((config.samples_per_update, *x.shape[2:]))  # noqa: E731
     n = traj.reward.shape

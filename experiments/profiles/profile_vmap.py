@@ -9,7 +9,7 @@ vmapped seeds, the whole run one compiled call. The arms, each compiled apart an
 interleaved (best of `--repeats`):
 - as is;
 - with `jax.random.permutation` shuffling the minibatches (as PureJaxRL does) in place of
-  `fppo_jax.permutation`'s packed-key sort;
+  `fppo_jax.core.permutation`'s packed-key sort;
 - without the escape-speed pass (the policy over the whole batch after the last epoch);
 - with PPO's surrogate alone in the loss (no select over six, and so no per-minibatch KL);
 - without the non-finite guard (the select of the old state after a non-finite update);
@@ -31,10 +31,10 @@ from unittest import mock
 import jax
 import jax.numpy as jnp
 
-import fppo_jax.objectives as objectives
-import fppo_jax.trainer as trainer_module
+import fppo_jax.core.objectives as objectives
+import fppo_jax.core.trainer as trainer_module
 from fppo_jax import make_train
-from fppo_jax.trainer import Trainer
+from fppo_jax.core.trainer import Trainer
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

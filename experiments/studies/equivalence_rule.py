@@ -7,7 +7,7 @@ studies on synthetic scores.
 No training: each simulated study draws every score from a normal distribution with sd 1,
 each candidate's mean shifted so that P(candidate > baseline) is ½ + δ, ½ − δ (at the margin:
 any `equivalent` is false) or ½ (identical settings), and applies
-`fppo_jax.sequential.decide` with margin δ = 0.2 and family-wise level 0.05, for the default
+`fppo_jax.stats.sequential.decide` with margin δ = 0.2 and family-wise level 0.05, for the default
 schedule (groups of 5 seeds up to 30) and a longer one (groups of 10 up to 50). At the margin
 the table gives the share of studies with any comparison decided `equivalent` (the family-wise
 false-equivalence rate); with identical settings, the share of comparisons decided
@@ -22,7 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-from fppo_jax.sequential import Design, equivalence_reachable, shift_for, simulate
+from fppo_jax.stats.sequential import Design, equivalence_reachable, shift_for, simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

@@ -37,9 +37,9 @@ import numpy as np
 from study import PROTOCOLS
 
 import fppo_jax
-from fppo_jax import statistics
-from fppo_jax.sequential import boundaries, improvement_estimate, narrowest_half_width
-from fppo_jax.study import run_scores
+from fppo_jax.analysis.studies import run_scores
+from fppo_jax.stats import statistics
+from fppo_jax.stats.sequential import boundaries, improvement_estimate, narrowest_half_width
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

@@ -5,7 +5,7 @@
 
 No training: each simulated study draws every score from a normal distribution with sd 1,
 each candidate's mean `shift` sd above its task's baseline, and applies
-`fppo_jax.sequential.decide` (groups of 5 seeds up to 30, family-wise level 0.05). With no
+`fppo_jax.stats.sequential.decide` (groups of 5 seeds up to 30, family-wise level 0.05). With no
 shift, any decision is a false one: their rate is the family-wise error. With a shift, the
 table gives the share of comparisons decided `better` (the power), the mean seeds a comparison
 used and the runs a study trained, beside the fixed design (one look, Holm across the same
@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from fppo_jax.sequential import Design, simulate
+from fppo_jax.stats.sequential import Design, simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

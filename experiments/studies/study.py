@@ -38,9 +38,9 @@ from pathlib import Path
 from typing import Any
 
 from fppo_jax import sweep
-from fppo_jax.config import parse_seeds
+from fppo_jax.core.config import parse_seeds
+from fppo_jax.core.objectives import VARIANTS
 from fppo_jax.envs import MUJOCO_TASKS
-from fppo_jax.objectives import VARIANTS
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

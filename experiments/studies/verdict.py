@@ -33,9 +33,9 @@ from study import PROTOCOLS as PROTOCOL_SETTINGS
 
 import fppo_jax
 from fppo_jax import SweepResult, merge, statistics
+from fppo_jax.analysis.plots import plot_curves
 from fppo_jax.envs import MUJOCO_TASKS
-from fppo_jax.plots import plot_curves
-from fppo_jax.results import labels, max_average_return
+from fppo_jax.run.results import labels, max_average_return
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
@@ -341,7 +341,7 @@ def main() -> None:
         "curve** (secondary: the average return averaged over updates). The paper's max "
         "average return (the maximum over updates of the seed-mean curve) is shown beside "
         "them; it is biased upward, by an amount that differs between variants.",
-        "- Statistics (`fppo_jax.statistics`, after Agarwal et al. 2021): IQM with a 95% "
+        "- Statistics (`fppo_jax.stats.statistics`, after Agarwal et al. 2021): IQM with a 95% "
         "percentile bootstrap CI (2,000 resamples, seeded); P(X > Y) + ½ P(X = Y) over all "
         "pairs of runs (probability of improvement) with a bootstrap CI that resamples both "
         "variants' runs; `outcome` is *better* or *worse* where that CI excludes 0.5, "

@@ -21,9 +21,9 @@ from typing import Any, NoReturn
 from fppo_jax.cli.flags import own_surrogates, surrogates_named
 from fppo_jax.cli.parser import build_parser
 from fppo_jax.cli.settings import check_preset, check_settings, settings_file
+from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import FppoError
-from fppo_jax.stop_signals import STOP_SIGNALS, caught
-from fppo_jax.surrogates import Surrogate
+from fppo_jax.run.stop_signals import STOP_SIGNALS, caught
 
 __all__ = ["build_parser", "entry_point", "main"]
 
@@ -56,7 +56,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
     # A checkpointed command, in one process, catches a cluster's stop signals from its start:
     # one that comes while it imports or compiles stops it once compiled, in a line and with
-    # the exit status a signal stopping it in training gives (fppo_jax.driver). Joined
+    # the exit status a signal stopping it in training gives (fppo_jax.run.driver). Joined
     # processes leave SIGTERM to JAX's preemption service.
     checkpointed = getattr(args, "checkpoint_dir", None) is not None
     catch = checkpointed and not getattr(args, "distributed", False)
@@ -68,10 +68,10 @@ def _run(args: argparse.Namespace) -> int:
     """The command `args` names, its expected errors each reported in a line."""
     # What the commands need (the trainer, checkpoints, JAX's devices) only now: --help and a
     # mistyped flag answer without waiting for it.
-    from fppo_jax import compile_cache
     from fppo_jax.cli.commands import COMMANDS
-    from fppo_jax.distributed import initialize
-    from fppo_jax.driver import StoppedBySignal
+    from fppo_jax.run import compile_cache
+    from fppo_jax.run.distributed import initialize
+    from fppo_jax.run.driver import StoppedBySignal
 
     with _warnings_as_lines():
         try:
@@ -138,7 +138,7 @@ def _variants(variant: object) -> Sequence[object]:
 def _warnings_as_lines() -> Iterator[None]:
     """A damaged checkpoint reported in a line of the command's own, as its errors are; any
     other warning as before."""
-    from fppo_jax.checkpoint import DamagedCheckpoint
+    from fppo_jax.store.checkpoint import DamagedCheckpoint
 
     with warnings.catch_warnings():
         show = warnings.showwarning

@@ -14,38 +14,38 @@ from typing import Any, cast
 
 import numpy as np
 
-from fppo_jax.api import train
-from fppo_jax.checkpoint import Checkpoints
+from fppo_jax.analysis.studies import study
 from fppo_jax.cli.flags import config_overrides, hyperparameters_given, options
 from fppo_jax.cli.slurm import array_part
-from fppo_jax.config import (
+from fppo_jax.core.config import (
     PRESETS,
     TABLE2,
     describe_update,
     preset_config,
 )
-from fppo_jax.distributed import is_main_process
+from fppo_jax.core.objectives import BUILTINS, EPSILON
 from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
 from fppo_jax.errors import InvalidInput
-from fppo_jax.files import DirectoryLock, writable_directory
-from fppo_jax.objectives import BUILTINS, EPSILON
-from fppo_jax.results import SweepResult, labels, merge
-from fppo_jax.saved_policy import (
+from fppo_jax.run.api import train
+from fppo_jax.run.distributed import is_main_process
+from fppo_jax.run.results import SweepResult, labels, merge
+from fppo_jax.run.sweeps import sweep
+from fppo_jax.stats.sequential import Design, plan_lines
+from fppo_jax.stats.statistics import CONFIDENCE, STATISTICS, sample_std
+from fppo_jax.store.checkpoint import Checkpoints
+from fppo_jax.store.files import DirectoryLock, writable_directory
+from fppo_jax.store.saved_policy import (
     ARRAYS_FILE,
     POLICY_FILE,
     check_no_saved_policy,
     load_policy,
     read_policy,
 )
-from fppo_jax.sequential import Design, plan_lines
-from fppo_jax.statistics import CONFIDENCE, STATISTICS, sample_std
-from fppo_jax.study import study
-from fppo_jax.sweep import sweep
 
 
 def _train(args: argparse.Namespace) -> int:
     if args.render:  # refused now rather than after training
-        from fppo_jax.render import check_render_path, check_renderable
+        from fppo_jax.export.render import check_render_path, check_renderable
 
         check_render_path(args.render)
         check_renderable(args.env)
@@ -74,7 +74,7 @@ def _train(args: argparse.Namespace) -> int:
     elif args.save_policy:
         print(f"wrote {result.save(args.save_policy)}/policy.json, policy.npz")
     if args.render:
-        from fppo_jax.render import RenderingUnavailable
+        from fppo_jax.export.render import RenderingUnavailable
 
         try:
             print(f"wrote {result.render(args.render)}")
@@ -194,7 +194,7 @@ def _study(args: argparse.Namespace) -> int:
 
 
 def _tune(args: argparse.Namespace) -> int:
-    from fppo_jax.tuning import tune
+    from fppo_jax.analysis.tuning import tune
 
     result = tune(
         args.tasks,
@@ -231,10 +231,10 @@ def _tune(args: argparse.Namespace) -> int:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from fppo_jax.evaluation import evaluate
+    from fppo_jax.run.evaluation import evaluate
 
     if args.render:
-        from fppo_jax.render import check_render_path
+        from fppo_jax.export.render import check_render_path
 
         check_render_path(args.render)
     policy, record = read_policy(args.checkpoint)
@@ -245,7 +245,7 @@ def _eval(args: argparse.Namespace) -> int:
             "policy with fppo_jax.load_policy and evaluate it on your environment"
         )
     if args.render:
-        from fppo_jax.render import check_renderable
+        from fppo_jax.export.render import check_renderable
 
         check_renderable(config["env"])
     env = make_env(config["env"], args.backend or config.get("backend", "auto"))
@@ -264,7 +264,7 @@ def _eval(args: argparse.Namespace) -> int:
             shown += f"min {returns.min():.1f}, max {returns.max():.1f})"
         print(f"  {name:<13} return {shown}")
     if args.render:
-        from fppo_jax.render import RenderingUnavailable, drawable, render_policy
+        from fppo_jax.export.render import RenderingUnavailable, drawable, render_policy
 
         try:
             path = render_policy(drawable(env, config["env"]), policy, args.render, seed=args.seed)
@@ -334,7 +334,7 @@ def _merge(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from fppo_jax.plots import plot_sweep
+    from fppo_jax.analysis.plots import plot_sweep
 
     for path in plot_sweep(SweepResult.read(args.directory), args.directory):
         print(f"wrote {path}")
@@ -367,7 +367,7 @@ def _list() -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from fppo_jax.onnx_export import export_onnx
+    from fppo_jax.export.onnx_export import export_onnx
 
     if os.path.lexists(args.onnx):
         raise InvalidInput(f"{args.onnx} already exists; remove it or choose another path")

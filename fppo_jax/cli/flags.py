@@ -1,6 +1,6 @@
 """The command line's flags: argument types that turn text into checked values, and the flags
-generated from the fields that declare them once (:class:`~fppo_jax.config.TrainConfig`'s run
-shape, :class:`~fppo_jax.options.Options`' way of driving a run), read back as keyword
+generated from the fields that declare them once (:class:`~fppo_jax.core.config.TrainConfig`'s run
+shape, :class:`~fppo_jax.run.options.Options`' way of driving a run), read back as keyword
 arguments of ``train`` and ``sweep``."""
 
 from __future__ import annotations
@@ -13,19 +13,19 @@ from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any, NoReturn
 
-from fppo_jax.config import (
+from fppo_jax.core.config import (
     HYPERPARAMETER_DEFAULTS,
     PRESETS,
     TrainConfig,
     parse_seeds,
     positive_int,
 )
+from fppo_jax.core.objectives import BUILTINS, EPSILON, hyperparameter_names, resolve
+from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.envs import BACKENDS
 from fppo_jax.errors import InvalidInput
-from fppo_jax.objectives import BUILTINS, EPSILON, hyperparameter_names, resolve
-from fppo_jax.options import Options
-from fppo_jax.statistics import CONFIDENCE, ENDPOINTS
-from fppo_jax.surrogates import Surrogate
+from fppo_jax.run.options import Options
+from fppo_jax.stats.statistics import CONFIDENCE, ENDPOINTS
 
 
 def _argument(parse: Callable[[str], Any]) -> Callable[[str], Any]:

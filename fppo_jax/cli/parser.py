@@ -30,11 +30,11 @@ from fppo_jax.cli.flags import (
     variant,
     variants,
 )
+from fppo_jax.core.objectives import DEFAULT_VARIANT, VARIANTS
+from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import install_hint
-from fppo_jax.objectives import DEFAULT_VARIANT, VARIANTS
-from fppo_jax.options import Options
-from fppo_jax.statistics import ENDPOINTS, STATISTICS, STUDY_ENDPOINTS
-from fppo_jax.surrogates import Surrogate
+from fppo_jax.run.options import Options
+from fppo_jax.stats.statistics import ENDPOINTS, STATISTICS, STUDY_ENDPOINTS
 
 
 def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParser:
@@ -432,7 +432,8 @@ def _add_policy_commands(commands: argparse._SubParsersAction[Parser]) -> None:
         help="write a trained policy as an ONNX model",
         description="Write the deterministic policy saved in DIR (or that of the newest "
         "checkpoint in DIR) as an ONNX model: input `observation` [batch, size] float32, output "
-        f"`action` (see fppo_jax.onnx_export). Needs the onnx extra: {install_hint('onnx')}.",
+        "`action` (see fppo_jax.export.onnx_export). Needs the onnx extra: "
+        f"{install_hint('onnx')}.",
         formatter_class=formatter,
     )
     add_policy_flag(export, "--policy")

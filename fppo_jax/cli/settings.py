@@ -8,9 +8,9 @@ import json
 from pathlib import Path
 from typing import Any, cast
 
-from fppo_jax.config import PRESETS
+from fppo_jax.core.config import PRESETS
+from fppo_jax.core.objectives import resolve
 from fppo_jax.errors import InvalidInput
-from fppo_jax.objectives import resolve
 
 # What a run's config.json records beside its settings (metric_log.environment_record).
 RECORD_ONLY = ("versions", "platform")

@@ -69,8 +69,7 @@ import numpy as np
 
 from fppo_jax.envs.core import Box, Discrete, HostState, OnHost, Step, seeds_of
 from fppo_jax.envs.gymnasium_api import CheckedApi
-from fppo_jax.errors import InvalidInput, MissingPackage, install_hint
-from fppo_jax.files import first_line
+from fppo_jax.errors import InvalidInput, MissingPackage, first_line, install_hint
 
 if TYPE_CHECKING:
     import jax
@@ -359,7 +358,7 @@ def _probed(make: Callable[[], Any], name: str, instance: bool = False) -> Gymna
 def _bytes_per_environment(api: CheckedApi, make: Callable[[], Any]) -> int:
     """The Python memory one more environment takes, made and reset, as tracemalloc counts it
     (what a C library allocates itself, such as a simulator's state, is not counted): a run's
-    pool holds num_envs of them, which :mod:`fppo_jax.memory` checks. Measured on a second one,
+    pool holds num_envs of them, which :mod:`fppo_jax.run.memory` checks. Measured on a second one,
     since the first also imported the environment's modules."""
     tracing = tracemalloc.is_tracing()
     if not tracing:

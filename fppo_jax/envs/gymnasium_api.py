@@ -13,8 +13,7 @@ from typing import Any, cast
 import numpy as np
 
 from fppo_jax.envs.core import Box, Discrete
-from fppo_jax.errors import InvalidInput
-from fppo_jax.files import first_line
+from fppo_jax.errors import InvalidInput, first_line
 
 # What one environment's step gives as its reward, and as terminated and truncated, mostly.
 SCALARS = (float, int, np.float32, np.float64, np.int64)

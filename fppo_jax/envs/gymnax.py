@@ -1,7 +1,7 @@
 """gymnax environments: the adapter, one made by id, and a check that needs no gymnax import.
 
 gymnax is imported only when needed: importing it runs JAX computations, which would start
-JAX's backends before a multi-process run can join (fppo_jax.distributed).
+JAX's backends before a multi-process run can join (fppo_jax.run.distributed).
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ environment resets itself (:attr:`resets_itself`), so the trainer draws no reset
 Each environment is seeded from its own key, so a run's environments are the same whether it
 trains alone or in a sweep. The state behind the slots lives outside JAX and no checkpoint
 holds it: a restored run starts new episodes in fresh environments (see
-:meth:`~fppo_jax.trainer.Trainer.restart_envs`).
+:meth:`~fppo_jax.core.trainer.Trainer.restart_envs`).
 """
 
 from __future__ import annotations

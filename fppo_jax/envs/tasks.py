@@ -272,7 +272,7 @@ def make_env(name: str, backend: str = "auto") -> Environment:
     """The registered or namespaced task `name` (see :func:`lookup`) on `backend` (see
     :data:`BACKENDS` and :func:`choose_backend`). Environments hold no state of their own, so
     one object is made per task and backend and shared: a later run on it reuses the training
-    program compiled for it (:mod:`fppo_jax.execution`)."""
+    program compiled for it (:mod:`fppo_jax.run.execution`)."""
     if not isinstance(name, str):
         raise InvalidInput(f"make_env takes a task's name, such as 'cartpole'; got {name!r}")
     lookup(name)

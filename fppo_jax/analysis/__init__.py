@@ -1,0 +1,1 @@
+"""Questions asked of many runs: study, tune and their reports and figures."""

@@ -1,0 +1,119 @@
+"""Runs recorded elsewhere that a study takes instead of training them again: a pool of recorded
+sweeps (every ``sweep.json`` under the directories given), searched for one setting's runs at
+given seeds.
+
+A recorded run is taken for the study's own only when its sweep ran the same task under the
+same protocol (every field :meth:`~fppo_jax.run.prepare.Prepared.record` records: the environment,
+its backend, the preset, the budget and the run's shape), its setting is the one the study
+trains (the variant and every hyperparameter it sets), and, for a surrogate of one's own, the
+function is the same (its digest). What this cannot see is the training code that made the
+runs: a pool is only as good as that code, which the regression pins (``tests/test_regression.py``)
+say is unchanged or not. So the study's plan names the pool, and its ``decisions.json`` every
+run taken from it, with the sweep it came from.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fppo_jax.errors import MissingFile
+from fppo_jax.run.results import PART_FIELDS, SweepResult, merge
+
+
+@dataclasses.dataclass(frozen=True)
+class Taken:
+    """One setting's runs taken from a pool: merged into one sweep of that setting alone, and
+    the recorded sweeps they came from."""
+
+    result: SweepResult
+    sources: list[Path]
+
+
+@dataclasses.dataclass(frozen=True)
+class Pool:
+    """Recorded sweeps, each with the directory it was read from."""
+
+    sweeps: list[tuple[Path, SweepResult]]
+
+    @classmethod
+    def read(cls, directories: Sequence[str | Path]) -> Pool:
+        """Every sweep recorded under `directories` (each ``sweep.json`` and its curves, their
+        digests checked as :meth:`SweepResult.read` checks them)."""
+        missing = [str(d) for d in directories if not Path(d).is_dir()]
+        if missing:
+            raise MissingFile(f"no directory of recorded sweeps to reuse at {', '.join(missing)}")
+        found = sorted({p.parent for d in directories for p in Path(d).rglob("sweep.json")})
+        return cls([(where, SweepResult.read(where)) for where in found])
+
+    def take(
+        self,
+        protocol: dict[str, Any],
+        setting: dict[str, Any],
+        identity: dict[str, Any] | None,
+        seeds: Sequence[int],
+    ) -> Taken | None:
+        """`setting`'s runs at every one of `seeds`, from the sweeps of `protocol` (a record's
+        configuration, its part fields aside) that ran `setting` with the surrogate `identity`
+        (None: a built-in's); a seed found in several sweeps is taken from the first. None
+        unless every seed is found: a group is reused whole or trained."""
+        chosen: dict[int, tuple[Path, SweepResult, int]] = {}
+        for where, recorded in self.sweeps:
+            if _protocol(recorded.config) != protocol or setting not in recorded.settings:
+                continue
+            if (recorded.config.get("surrogates") or {}).get(setting["variant"]) != identity:
+                continue
+            index = recorded.settings.index(setting)
+            for run, entry in enumerate(recorded.runs):
+                if entry["setting"] == index and entry["seed"] in seeds:
+                    chosen.setdefault(entry["seed"], (where, recorded, run))
+        if set(chosen) != set(seeds):
+            return None
+        by_sweep: dict[Path, tuple[SweepResult, list[int]]] = {}
+        for seed in sorted(seeds):
+            where, recorded, run = chosen[seed]
+            by_sweep.setdefault(where, (recorded, []))[1].append(run)
+        parts = [_runs(recorded, runs) for recorded, runs in by_sweep.values()]
+        return Taken(merge(parts), list(by_sweep))
+
+
+def protocol_differences(config: dict[str, Any], protocol: dict[str, Any]) -> list[str]:
+    """Where a recorded sweep's `config` and `protocol` differ, field by field, each as
+    ``name: <recorded>, not <protocol's>`` (the part fields aside)."""
+    recorded = _protocol(config)
+    return [
+        f"{name}: {json.dumps(recorded.get(name))}, not {json.dumps(protocol.get(name))}"
+        for name in sorted(set(recorded) | set(protocol))
+        if recorded.get(name) != protocol.get(name)
+    ]
+
+
+def _protocol(config: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in config.items() if k not in PART_FIELDS}
+
+
+def _runs(recorded: SweepResult, runs: list[int]) -> SweepResult:
+    """The sweep of `recorded`'s `runs` alone, all of one setting."""
+    setting = recorded.settings[recorded.runs[runs[0]]["setting"]]
+    seeds = [recorded.runs[run]["seed"] for run in runs]
+    own = (recorded.config.get("surrogates") or {}).get(setting["variant"])
+    config = {k: v for k, v in recorded.config.items() if k not in ("grid", "surrogates")}
+    return SweepResult(
+        settings=[setting],
+        seeds=seeds,
+        runs=[{"setting": 0, "seed": seed} for seed in seeds],
+        metrics={name: values[runs] for name, values in recorded.metrics.items()},
+        diverged=np.asarray(recorded.diverged)[runs],
+        config={
+            **config,
+            "seeds": seeds,
+            **({"surrogates": {setting["variant"]: own}} if own else {}),
+        },
+        compile_seconds=0.0,
+        train_seconds=0.0,
+    )

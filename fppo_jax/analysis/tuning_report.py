@@ -1,0 +1,231 @@
+"""A tune's results and ``report.md`` (:mod:`fppo_jax.analysis.tuning`): per task and arm the chosen
+setting and its score, trial 0's (the default's), the tuning curve (the best score at each
+rung against the env steps spent), the share of sampled settings that beat the baseline's
+default (Jordan et al., "Evaluating the Performance of Reinforcement Learning Algorithms",
+ICML 2020), the spread of the first rung's scores over the space (how sensitive the arm is to
+its setting), the trials that diverged, and Eimer et al.'s reporting checklist (space, budget,
+seeds, selection, test) filled in from the plan. ``tuning_curves.png`` draws the curves."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fppo_jax.store.files import write_atomically
+
+
+def ranked(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """A rung's trials best first, those that diverged left out: by score, then those without
+    one (no episode finished), ties by trial number."""
+    alive = [row for row in rows if not row["diverged"]]
+    return sorted(alive, key=lambda r: (r["score"] is None, -(r["score"] or 0.0), r["trial"]))
+
+
+def _score(rows: list[dict[str, Any]], trial: int) -> float | None:
+    found = [row for row in rows if row["trial"] == trial]
+    return found[0]["score"] if found else None
+
+
+def arm_results(
+    arm: str,
+    baseline: str,
+    rungs_scores: list[dict[str, Any]],
+    settings: dict[str, list[dict[str, float]]],
+    rungs: Any,
+    seeds: int,
+    samples_per_update: int,
+) -> dict[str, Any]:
+    """What ``results.json`` holds of `arm` on one task (see the module)."""
+    first = rungs_scores[0]["arms"][arm]["trials"]
+    finite = np.array([row["score"] for row in first if row["score"] is not None], float)
+    base = _score(rungs_scores[0]["arms"][baseline]["trials"], 0)
+    sampled = [row for row in first if row["trial"] != 0]
+    beat = [
+        row
+        for row in sampled
+        if row["score"] is not None and base is not None and row["score"] > base
+    ]
+    curve, reached, spent = [], {"rung": 0, "score": _score(first, 0)}, 0
+    starts = (0, *rungs.ends[:-1])
+    for r, scores in enumerate(rungs_scores):
+        rows = scores["arms"][arm]["trials"]
+        spent += len(rows) * seeds * (rungs.ends[r] - starts[r]) * samples_per_update
+        best = max((row["score"] for row in rows if row["score"] is not None), default=None)
+        curve.append({"rung": r, "env_steps": spent, "best": best, "trials": len(rows)})
+        if _score(rows, 0) is not None:
+            reached = {"rung": r, "score": _score(rows, 0)}
+    best = ranked(rungs_scores[-1]["arms"][arm]["trials"])
+    chosen = None
+    if best:
+        trial = best[0]["trial"]
+        chosen = {"trial": trial, "score": best[0]["score"], "setting": settings[arm][trial]}
+    diverged = sorted(
+        {row["trial"] for s in rungs_scores for row in s["arms"][arm]["trials"] if row["diverged"]}
+    )
+    return {
+        "chosen": chosen,
+        "default": {
+            "setting": settings[arm][0],
+            "first_rung_score": _score(first, 0),
+            "last_rung_reached": reached["rung"],
+            "score_there": reached["score"],
+        },
+        "curve": curve,
+        "env_steps": spent,
+        "beat_baseline_default": {
+            "baseline": baseline,
+            "baseline_default_score": base,
+            "sampled": len(sampled),
+            "beat": len(beat),
+        },
+        "first_rung_spread": _quartiles(finite),
+        "diverged_trials": diverged,
+        "tied_rungs": [r for r, s in enumerate(rungs_scores[:-1]) if _tied(s["arms"][arm])],
+    }
+
+
+def _tied(rung: dict[str, Any]) -> bool:
+    """Whether a rung kept some of its trials and scored them all alike, so that the trial
+    numbers chose its survivors."""
+    scores = {row["score"] for row in rung["trials"] if not row["diverged"]}
+    return len(rung["trials"]) > len(rung["survivors"]) and len(scores) == 1
+
+
+def _quartiles(x: np.ndarray) -> dict[str, float | None]:
+    if not x.size:
+        return {name: None for name in ("min", "q1", "median", "q3", "max")}
+    q = np.percentile(x, [0, 25, 50, 75, 100])
+    return dict(zip(("min", "q1", "median", "q3", "max"), map(float, q), strict=True))
+
+
+def _number(x: float | None) -> str:
+    return "—" if x is None or not math.isfinite(x) else f"{x:.1f}"
+
+
+def write_report(output: Path, plan: dict[str, Any], results: dict[str, Any]) -> None:
+    """``report.md`` and ``tuning_curves.png`` in `output`."""
+    lines = [
+        "# Tune",
+        "",
+        f"Variants {', '.join(plan['variants'])} on {', '.join(plan['tasks'])}: {plan['trials']} "
+        f"trials each (trial 0 the default), {len(plan['seeds'])} tuning seeds per trial "
+        f"({_seed_text(plan['seeds'])}), successive halving with η = {plan['eta']}. "
+        f"Score: {plan['score']}. Selection: {plan['selection']}. Code at {plan['commit']}.",
+    ]
+    for task, arms in results.items():
+        budget = plan["budget"][task]
+        ends = ", ".join(f"{rung['env_steps_per_run']:,}" for rung in budget["rungs"])
+        lines += [
+            "",
+            f"## {task}",
+            "",
+            f"Every arm trained {budget['env_steps_per_arm']:,} env steps "
+            f"({' → '.join(str(r['trials']) for r in budget['rungs'])} trials over rungs "
+            f"ending at {ends} "
+            "env steps per run).",
+            "",
+            "| arm | default, rung 1 | best, rung 1 | first-rung quartiles | chosen trial | "
+            f"chosen score | sampled settings above {plan['baseline']}'s default | diverged "
+            "| env steps |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for arm, found in arms.items():
+            spread, chosen = found["first_rung_spread"], found["chosen"]
+            beat = found["beat_baseline_default"]
+            lines.append(
+                f"| {arm} | {_number(found['default']['first_rung_score'])} | "
+                f"{_number(found['curve'][0]['best'])} | {_number(spread['q1'])} / "
+                f"{_number(spread['median'])} / {_number(spread['q3'])} | "
+                f"{'—' if chosen is None else chosen['trial']} | "
+                f"{'—' if chosen is None else _number(chosen['score'])} | "
+                f"{beat['beat']} of {beat['sampled']} | {len(found['diverged_trials'])} | "
+                f"{found['env_steps']:,} |"
+            )
+        tied = [
+            f"{arm} at rung {', '.join(str(r + 1) for r in found['tied_rungs'])}"
+            for arm, found in arms.items()
+            if found["tied_rungs"]
+        ]
+        if tied:
+            lines += [
+                "",
+                f"Tied: every trial scored alike ({'; '.join(tied)}), so the trials that went "
+                "on were the first by number, not the best: a rung that short cannot tell the "
+                "settings apart on this task.",
+            ]
+        lines += ["", "Chosen settings:", ""]
+        for arm, found in arms.items():
+            chosen = found["chosen"]
+            shown = (
+                "none (every trial diverged)"
+                if chosen is None
+                else ", ".join(f"{k} = {v:.4g}" for k, v in chosen["setting"].items())
+            )
+            lines.append(f"- {arm}: {shown}")
+    lines += [
+        "",
+        "Scores here are on the tuning seeds, which chose the settings: they are biased upward "
+        "as estimates of how well the chosen settings train. The test is a study on fresh "
+        "seeds (`fppo-jax study --tuned`).",
+        "",
+        "## Checklist (Eimer, Lindauer and Raileanu, ICML 2023)",
+        "",
+        f"- Search space: {_space_text(plan)}.",
+        f"- Budget: {plan['trials']} trials per arm and task, η = {plan['eta']}; env steps per "
+        "arm: "
+        + ", ".join(f"{t} {b['env_steps_per_arm']:,}" for t, b in plan["budget"].items())
+        + ".",
+        f"- Tuning seeds: {_seed_text(plan['seeds'])}.",
+        f"- Sampler: {plan['sampler']['name']} ({plan['sampler']['package']}), seed "
+        f"{plan['sampler']['seed']}.",
+        f"- Selection: {plan['selection']}.",
+        "- Test: on seeds disjoint from the tuning seeds (`fppo-jax study --tuned`, which "
+        "refuses an overlap).",
+    ]
+    write_atomically(output / "report.md", ("\n".join(lines) + "\n").encode())
+    _figure(output, results)
+
+
+def _seed_text(seeds: list[int]) -> str:
+    if seeds == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]} … {seeds[-1]}"
+    return ", ".join(map(str, seeds))
+
+
+def _space_text(plan: dict[str, Any]) -> str:
+    spaces = plan["space"]
+    first = next(iter(spaces.values()))
+    own = {
+        arm: {k: v for k, v in space.items() if k not in first or v != first[k]}
+        for arm, space in spaces.items()
+    }
+    shared = [k for k in first if all(k in s and s[k] == first[k] for s in spaces.values())]
+    parts = [f"{k} [{first[k]['low']:g}, {first[k]['high']:g}] {first[k]['scale']}" for k in shared]
+    for arm, axes in own.items():
+        for k, v in axes.items():
+            if k not in shared:
+                parts.append(f"{arm}'s {k} [{v['low']:g}, {v['high']:g}] {v['scale']}")
+    return "; ".join(parts)
+
+
+def _figure(output: Path, results: dict[str, Any]) -> None:
+    import matplotlib.pyplot as plt
+
+    tasks = list(results)
+    figure, axes = plt.subplots(
+        1, len(tasks), figsize=(5 * len(tasks), 3.5), squeeze=False, layout="constrained"
+    )
+    for ax, task in zip(axes[0], tasks, strict=True):
+        for arm, found in results[task].items():
+            points = [(c["env_steps"], c["best"]) for c in found["curve"] if c["best"] is not None]
+            if points:
+                ax.plot(*zip(*points, strict=True), marker="o", label=arm)
+        ax.set_title(task)
+        ax.set_xlabel("env steps spent by the arm")
+        ax.set_ylabel("best trial's score at the rung")
+        ax.legend(fontsize=8)
+    figure.savefig(output / "tuning_curves.png", dpi=90)
+    plt.close(figure)

@@ -1,0 +1,414 @@
+"""What a training run is made of: static shapes and structure, and traced hyperparameters.
+
+:class:`TrainConfig` fixes array shapes and program structure; changing it recompiles.
+:class:`Hyperparameters` is a pytree of arrays passed into the compiled program, so seeds and
+hyperparameters (variants included) can be vmapped without recompiling.
+Defaults follow the paper's protocol (OpenAI baselines' ppo2 settings) and the paper's Table 2
+(:data:`TABLE2`). Every default and every check of what a run trains (its shape and its
+hyperparameters) lives here, so that ``train``, ``sweep`` and the command line resolve them
+alike; how a run is driven has its defaults and checks in :mod:`fppo_jax.run.options`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, cast
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fppo_jax.core.objectives import (
+    BUILTINS,
+    DEFAULT_VARIANT,
+    EPSILON,
+    Objective,
+    hyperparameter_names,
+    objective,
+    resolve,
+    union,
+)
+from fppo_jax.core.surrogates import Surrogate, as_trained, float32_note, real_number
+from fppo_jax.envs import MUJOCO_TASKS, lookup
+from fppo_jax.errors import InvalidInput
+
+# The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task.
+TABLE2: dict[str, dict[str, float]] = {
+    **{task: {"alpha": 1.3, "k": 0.4} for task in ("cartpole", "acrobot", "mountaincar")},
+    "hopper": {"alpha": 1.3, "k": 0.2},
+    "walker2d": {"alpha": 1.3, "k": 0.1},
+    "halfcheetah": {"alpha": 1.3, "k": 0.4},
+    "ant": {"alpha": 1.3, "k": 0.4},
+    "reacher": {"alpha": 1.1, "k": 0.4},
+    "swimmer": {"alpha": 1.1, "k": 0.1},
+}
+_TABLE2_VARIANTS = {"fppo-lp": "alpha", "fppo-qp": "k"}
+
+# The hyperparameters some built-in variants take and others do not (α, k, δ, …).
+VARIANT_SPECIFIC: tuple[str, ...] = hyperparameter_names(list(BUILTINS.values()))
+# The most env steps a run may take: the compiled program counts them in int32.
+MAX_STEPS = 2**31 - 1
+# The most seeds one setting may name on a command line: far more than a sweep trains, so more
+# is a mistyped range, refused before a list of them is built.
+MAX_SEEDS = 100_000
+SYMBOLS = {
+    "alpha": "α",
+    "k": "k",
+    "delta": "δ",
+    "epsilon": "ε",
+    "beta": "β",
+    "eps_low": "ε_low",
+    "eps_high": "ε_high",
+}
+
+
+def positive_int(name: str, value: object) -> int:
+    """`value` if it is a positive integer (numpy integers included, booleans not)."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer) or value < 1:
+        raise InvalidInput(f"{name} must be a positive integer, got {value!r}")
+    return int(value)
+
+
+def check_seed(seed: object) -> int:
+    """`seed` if it is an integer that ``jax.random.key`` takes (numpy integers included)."""
+    if isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer):
+        raise InvalidInput(f"a seed must be an integer, got {seed!r}")
+    if not -(2**63) <= seed < 2**64:
+        raise InvalidInput(f"a seed must fit in 64 bits, got {seed}")
+    return int(seed)
+
+
+def parse_seeds(text: str) -> list[int]:
+    """Seeds written on a command line: ``20`` (seeds 0 … 19), ``10:20`` (seeds 10 … 19, as
+    Python's ``range(10, 20)``) or a comma list such as ``0,3,7``; checked, and distinct."""
+    seeds: range | list[int]
+    try:
+        if ":" in text:
+            start, stop = (int(part) for part in text.split(":"))
+            seeds = range(start, stop)
+        elif "," in text:
+            seeds = [int(part) for part in text.split(",")]
+        else:
+            seeds = range(positive_int("the number of seeds", int(text)))
+    except ValueError as error:
+        if "must be" in str(error):
+            raise
+        raise InvalidInput(
+            f"seeds {text!r} are not a count (20), a range (10:20) or a list (0,3,7)"
+        ) from None
+    count = max(0, seeds.stop - seeds.start) if isinstance(seeds, range) else len(seeds)
+    if not count:
+        raise InvalidInput(f"seeds {text!r} name no seed (a range start:stop needs start < stop)")
+    if count > MAX_SEEDS:
+        raise InvalidInput(f"seeds {text!r} name {count:,} seeds, more than {MAX_SEEDS:,}")
+    if len(set(seeds)) < len(seeds):
+        raise InvalidInput(f"seeds {text!r} repeat a seed")
+    return [check_seed(seed) for seed in seeds]
+
+
+def table2(task: str | None, variant: str) -> dict[str, float]:
+    """The paper's Table 2 value of `variant`'s own hyperparameter on `task` ({} if none)."""
+    name = _TABLE2_VARIANTS.get(variant)
+    if task not in TABLE2 or name is None:
+        return {}
+    return {name: TABLE2[task][name]}
+
+
+def _field(default: Any, help: str) -> Any:
+    """A :class:`TrainConfig` field and its help text (which the command line shows)."""
+    return dataclasses.field(default=default, metadata={"help": help})
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """Static settings. Samples per update = `num_envs` × `num_steps`."""
+
+    total_steps: int = _field(100_000, "env steps per run (default: the task's budget)")
+    num_envs: int = _field(8, "parallel environments")
+    num_steps: int = _field(256, "steps per environment per update")
+    num_minibatches: int = _field(32, "minibatches per epoch")
+    num_epochs: int = _field(10, "epochs per update")
+    hidden_sizes: tuple[int, ...] = _field((64, 64), "hidden layer widths of both MLPs")
+    normalize_observations: bool = _field(True, "normalise observations (running statistics)")
+    normalize_rewards: bool = _field(True, "scale rewards by the std of discounted returns")
+    clip_value_loss: bool = _field(True, "clip the value loss with range epsilon")
+    anneal_learning_rate: bool = _field(False, "decay the learning rate linearly to 0")
+    # A small pool (MuJoCo with thousands of environments, where a reset costs a fifth of a
+    # step) is cycled by environments that end several episodes in one rollout.
+    resets_per_rollout: int | None = _field(
+        None,
+        "reset states drawn per environment per rollout (default: one per step, so every "
+        "episode starts fresh)",
+    )
+
+    def __post_init__(self) -> None:
+        for name in ("total_steps", "num_envs", "num_steps", "num_minibatches", "num_epochs"):
+            object.__setattr__(self, name, positive_int(name, getattr(self, name)))
+        if self.resets_per_rollout is not None:
+            pool = positive_int("resets_per_rollout", self.resets_per_rollout)
+            object.__setattr__(self, "resets_per_rollout", pool)
+        if self.total_steps > MAX_STEPS:
+            raise InvalidInput(
+                f"total_steps must be at most {MAX_STEPS:,} (the compiled program counts env "
+                f"steps in 32-bit integers), got {self.total_steps:,}"
+            )
+        sizes = self.hidden_sizes
+        if isinstance(sizes, str) or not isinstance(sizes, tuple | list) or not sizes:
+            raise InvalidInput(
+                f"hidden_sizes must be a sequence of positive layer widths such as (64, 64), "
+                f"got {sizes!r}"
+            )
+        widths = tuple(positive_int("each of hidden_sizes", h) for h in sizes)
+        object.__setattr__(self, "hidden_sizes", widths)
+        for name in (
+            "normalize_observations",
+            "normalize_rewards",
+            "clip_value_loss",
+            "anneal_learning_rate",
+        ):
+            if not isinstance(getattr(self, name), bool | np.bool_):
+                raise InvalidInput(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if self.samples_per_update % self.num_minibatches:
+            raise InvalidInput(
+                f"num_minibatches ({self.num_minibatches}) must divide the samples per update "
+                f"(num_envs × num_steps = {self.samples_per_update})"
+            )
+        if self.total_steps < self.samples_per_update:
+            raise InvalidInput(
+                f"total_steps ({self.total_steps}) is less than one update's samples "
+                f"(num_envs × num_steps = {self.samples_per_update})"
+            )
+
+    @property
+    def samples_per_update(self) -> int:
+        return self.num_envs * self.num_steps
+
+    @property
+    def minibatch_size(self) -> int:
+        return self.samples_per_update // self.num_minibatches
+
+    @property
+    def num_updates(self) -> int:
+        """Whole updates that fit in `total_steps` (the budget is never exceeded)."""
+        return self.total_steps // self.samples_per_update
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # baselines' ppo2 batch: 2048 samples per update, 32 minibatches, 10 epochs. Its MuJoCo runs
+    # collect them from 1 environment × 2048 steps; here 8 × 256, the same batch in shorter unrolls.
+    "paper": {"num_envs": 8, "num_steps": 256, "num_minibatches": 32, "num_epochs": 10},
+    # Thousands of environments in lockstep with short unrolls and large minibatches (as Brax
+    # and MuJoCo Playground train), for throughput on a GPU: 32,768 samples per update, one
+    # gradient step per 512 of them. Meant for budgets of several million steps.
+    "massive": {
+        "num_envs": 2048,
+        "num_steps": 16,
+        "num_minibatches": 16,
+        "num_epochs": 4,
+        "resets_per_rollout": 1,
+    },
+}
+
+
+# baselines' ppo2, whose PPO the paper compares against, anneals the learning rate
+# linearly to 0 with its MuJoCo defaults (`lr=lambda f: 3e-4 * f`) and keeps it constant
+# elsewhere (it has no defaults of its own for classic control). The paper does not say it
+# departed from them, so its preset does the same, task by task.
+ANNEALED_IN_PAPER: tuple[str, ...] = MUJOCO_TASKS
+
+
+def task_preset(preset: str, task: str | None) -> dict[str, Any]:
+    """What `preset` sets for `task` beyond its shape: the paper's learning-rate schedule."""
+    return {"anneal_learning_rate": True} if preset == "paper" and task in ANNEALED_IN_PAPER else {}
+
+
+def preset_config(preset: str, **overrides: Any) -> TrainConfig:
+    """The :class:`TrainConfig` of preset `preset` ("paper" or "massive"), with `overrides`."""
+    if preset not in PRESETS:
+        raise InvalidInput(f"unknown preset {preset!r}; valid presets: {', '.join(PRESETS)}")
+    return TrainConfig(**{**PRESETS[preset], **overrides})
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Hyperparameters:
+    """Traced settings. The surrogate's own (variant, ε, α, k, δ) live in `objective`.
+
+    `num_updates`, the run's length in updates (the learning-rate schedule's horizon and the
+    run's end), is the configuration's unless set. A compiled program's runs carry it
+    (:func:`with_budget`, once per run, in :func:`~fppo_jax.run.execution.run_chunks`), so that
+    one program serves every step budget."""
+
+    objective: Objective
+    learning_rate: jax.Array
+    gamma: jax.Array
+    gae_lambda: jax.Array
+    entropy_coef: jax.Array
+    value_coef: jax.Array
+    max_grad_norm: jax.Array
+    num_updates: jax.Array | None = None
+
+
+def run_length(hp: Hyperparameters, config: TrainConfig) -> jax.Array | int:
+    """Updates in the run: `hp`'s, traced, if it carries them; else `config`'s, a constant."""
+    return config.num_updates if hp.num_updates is None else hp.num_updates
+
+
+def with_budget(hps: Hyperparameters, num_updates: int) -> Hyperparameters:
+    """`hps` (along a leading run axis) carrying `num_updates` as every run's length."""
+    runs = hps.learning_rate.shape[0]
+    return dataclasses.replace(
+        hps, num_updates=jax.device_put(np.full(runs, num_updates, np.int32))
+    )
+
+
+HYPERPARAMETER_DEFAULTS: dict[str, float] = {
+    "learning_rate": 3e-4,
+    "gamma": 0.99,
+    "gae_lambda": 0.95,
+    "entropy_coef": 0.0,
+    "value_coef": 0.5,
+    "max_grad_norm": 0.5,
+}
+
+_RANGES: dict[str, tuple[str, Callable[[float], bool]]] = {
+    "learning_rate": ("> 0", lambda x: x > 0),
+    "gamma": ("in (0, 1]", lambda x: 0 < x <= 1),
+    "gae_lambda": ("in [0, 1]", lambda x: 0 <= x <= 1),
+    "entropy_coef": (">= 0", lambda x: x >= 0),
+    "value_coef": (">= 0", lambda x: x >= 0),
+    "max_grad_norm": ("> 0", lambda x: x > 0),
+}
+
+
+def hyperparameters(
+    variant: str | Surrogate = DEFAULT_VARIANT, *, epsilon: float = EPSILON, **values: float | None
+) -> Hyperparameters:
+    """Checked hyperparameters: the objective of `variant` (a built-in's name or a surrogate of
+    one's own; ε and its own hyperparameters, see :func:`~fppo_jax.core.objectives.objective`) and
+    the optimisation settings.
+
+    Unset settings take :data:`HYPERPARAMETER_DEFAULTS`; unknown names and out-of-range values
+    raise ``InvalidInput`` naming the parameter.
+    """
+    surrogate = resolve(variant)
+    taken_by_some = hyperparameter_names([*BUILTINS.values(), surrogate])
+    own = {name: values.pop(name) for name in taken_by_some if name in values}
+    unknown = sorted(set(values) - set(HYPERPARAMETER_DEFAULTS))
+    if unknown:
+        raise InvalidInput(
+            f"unknown hyperparameter {', '.join(unknown)}; valid: "
+            + ", ".join(["epsilon", *taken_by_some, *HYPERPARAMETER_DEFAULTS])
+        )
+    settings = {**HYPERPARAMETER_DEFAULTS, **{k: v for k, v in values.items() if v is not None}}
+    for name, value in settings.items():
+        bound, ok = _RANGES[name]
+        value = real_number(name, value)
+        if not (math.isfinite(value) and ok(value)):
+            raise InvalidInput(f"{name} must be {bound}, got {value}")
+        trained = as_trained(value)
+        if not (math.isfinite(trained) and ok(trained)):
+            raise InvalidInput(f"{name} must be {bound}, got {value}, {float32_note(value)}")
+    # NumPy's scalars, put on the device as they are (as the objective's own: no conversion
+    # program to compile).
+    scalars = jax.device_put({name: np.float32(value) for name, value in settings.items()})
+    return Hyperparameters(objective=objective(surrogate, epsilon=epsilon, **own), **scalars)
+
+
+CONFIG_FIELDS: tuple[str, ...] = tuple(field.name for field in dataclasses.fields(TrainConfig))
+
+
+def sweepable(surrogates: Iterable[Surrogate] = ()) -> tuple[str, ...]:
+    """What a sweep's grid may vary: the variant, ε, the hyperparameters of the built-ins and of
+    `surrogates`, and the optimisation settings."""
+    own = hyperparameter_names([*BUILTINS.values(), *surrogates])
+    return ("variant", "epsilon", *own, *HYPERPARAMETER_DEFAULTS)
+
+
+SWEEPABLE: tuple[str, ...] = sweepable()
+
+
+def stack_hyperparameters(hps: Sequence[Hyperparameters]) -> Hyperparameters:
+    """`hps` as one batch (a leading run axis) over all of their surrogates, for ``vmap``."""
+    menu = union([s for hp in hps for s in hp.objective.surrogates])
+    among = [dataclasses.replace(hp, objective=hp.objective.among(menu)) for hp in hps]
+    return cast(Hyperparameters, jax.tree.map(lambda *xs: jnp.stack(xs), *among))
+
+
+def resolve_config(
+    env: Any,
+    total_steps: int | None,
+    overrides: dict[str, Any],
+    also_valid: tuple[str, ...] = (),
+    preset: str = "paper",
+) -> TrainConfig:
+    """The checked TrainConfig of `preset` and `overrides`, with the task's step budget and
+    the preset's learning-rate schedule for it (:func:`task_preset`) by default."""
+    task = lookup(env) if isinstance(env, str) else None  # an unknown name is refused here
+    unknown = sorted(set(overrides) - set(CONFIG_FIELDS))
+    if unknown:
+        raise InvalidInput(
+            f"unknown setting {', '.join(unknown)}; valid: "
+            + ", ".join([*CONFIG_FIELDS, *also_valid])
+        )
+    values = {**task_preset(preset, task.name if task else None), **overrides}
+    if total_steps is not None:
+        values["total_steps"] = total_steps
+    elif "total_steps" not in values:
+        values["total_steps"] = task.total_steps if task else TrainConfig.total_steps
+    return preset_config(preset, **values)
+
+
+def resolve_hyperparameters(
+    variant: str | Surrogate, task: str | None = None, **values: Any
+) -> tuple[Hyperparameters, dict[str, Any]]:
+    """Checked hyperparameters of one setting, with Table 2's α or k for a registered `task`,
+    and the setting as plain values (the variant's name, ε, its own hyperparameters, the
+    optimisation settings), as records and tables show it."""
+    surrogate = resolve(variant)
+    given = {name: value for name, value in values.items() if value is not None}
+    hp = hyperparameters(surrogate, **{**table2(task, surrogate.name), **given})
+    o = hp.objective
+    settings: dict[str, Any] = {"variant": surrogate.name, "epsilon": as_float(o.epsilon)}
+    settings.update({name: as_float(value) for name, value in o.values.items()})
+    settings.update({name: as_float(getattr(hp, name)) for name in HYPERPARAMETER_DEFAULTS})
+    return hp, settings
+
+
+def environment_name(env: Any, environment: Any) -> str:
+    """The name a run records for its environment: the task's, the environment's own name (a
+    Gymnasium environment's), or the adapter's class."""
+    if isinstance(env, str):
+        return env
+    named = getattr(environment, "name", None)
+    return (
+        named if isinstance(named, str) else type(getattr(environment, "env", environment)).__name__
+    )
+
+
+def as_float(x: jax.Array) -> float:
+    """The shortest decimal that round-trips the float32, so that 1.3 is reported as 1.3."""
+    return float(str(np.asarray(x)[()]))
+
+
+def describe(config: TrainConfig, preset: str | None = None) -> str:
+    """One run's length and shape, in words."""
+    prefix = "" if preset is None else f"preset {preset}, "
+    schedule = ", learning rate annealed linearly to 0" if config.anneal_learning_rate else ""
+    trained = config.num_updates * config.samples_per_update
+    budget = (
+        ""
+        if trained == config.total_steps
+        else f" = {trained:,} env steps (whole updates of the {config.total_steps:,} asked)"
+    )
+    return f"{prefix}{config.num_updates} updates × {describe_update(config)}{budget}{schedule}"
+
+
+def describe_update(config: TrainConfig) -> str:
+    """One update's shape, in words."""
+    return (
+        f"{config.samples_per_update:,} samples ({config.num_envs} envs × {config.num_steps} "
+        f"steps), {config.num_minibatches} minibatches × {config.num_epochs} epochs"
+    )

@@ -1,0 +1,597 @@
+"""A surrogate objective, declared once: its name, its per-sample function and its own
+hyperparameters with their defaults and valid ranges.
+
+A surrogate maximises a per-sample objective ``L(r, A)`` of the likelihood ratio
+``r = π_θ(a|s) / π_old(a|s)`` and the advantage ``A``. Its function takes, by name, any of
+
+    ratio, advantage     the per-sample r and A (arrays of one shape)
+    kl                   the per-sample KL(π_old(·|s) ‖ π_θ(·|s)), without gradient
+    epsilon              the run's clip range ε (which also clips the value loss)
+
+and each of its own hyperparameters (float32 scalars, traced: they vmap like any pytree leaf),
+and returns L, an array of the ratio's shape and float dtype::
+
+    def clip_higher(ratio, advantage, eps_low, eps_high):
+        clipped = jnp.clip(ratio, 1 - eps_low, 1 + eps_high)
+        return jnp.minimum(ratio * advantage, clipped * advantage)
+
+    mine = surrogate("my-clip-higher", clip_higher, eps_low=0.2, eps_high=0.28,
+                     ranges={"eps_low": "(0, 1)", "eps_high": "> 0"},
+                     clip_range=("eps_low", "eps_high"))
+
+``clip_range`` names the hyperparameters giving the distances below and above 1 where the
+surrogate stops following ``r``; the diagnostics of the negatively optimised regions R± use
+them (``1 - ε`` and ``1 + ε`` when it names none).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import dis
+import functools
+import hashlib
+import inspect
+import math
+import numbers
+import re
+import sys
+import types
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
+from typing import Any, cast
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fppo_jax.errors import InvalidInput, first_line
+
+# The arguments every surrogate function may take by name, besides its own hyperparameters.
+INPUTS = ("ratio", "advantage", "kl", "epsilon")
+_NAME = re.compile(r"[a-z0-9][a-z0-9_.-]*\Z")
+_BOUND = re.compile(r"\s*(>=|<=|>|<)\s*(\S+)\s*\Z")
+_INTERVAL = re.compile(r"\s*([\[(])\s*([^,\s]+)\s*,\s*([^,\s]+)\s*([\])])\s*\Z")
+
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """Where a hyperparameter is valid, written as its error message shows it: ``"> 0"``,
+    ``">= 1"``, ``"< 1"``, ``"(0, 1)"``, ``"[0, 1)"`` …; `why` says what lies outside."""
+
+    text: str
+    why: str = ""
+
+    def __post_init__(self) -> None:
+        self.bounds()  # a range that cannot be read is refused when declared
+
+    def bounds(self) -> tuple[float, float, bool, bool]:
+        """(low, high, low included, high included)."""
+        try:
+            if match := _BOUND.match(self.text):
+                op, value = match.group(1), float(match.group(2))
+                if op.startswith(">"):
+                    return value, math.inf, op == ">=", False
+                return -math.inf, value, False, op == "<="
+            if match := _INTERVAL.match(self.text):
+                low, high = float(match.group(2)), float(match.group(3))
+                if low <= high:
+                    return low, high, match.group(1) == "[", match.group(4) == "]"
+        except ValueError:
+            pass
+        raise InvalidInput(
+            f"a range must read like '> 0', '>= 1', '< 1' or '(0, 1]', got {self.text!r}"
+        )
+
+    def __contains__(self, value: float) -> bool:
+        # Written as comparisons that NaN fails: NaN lies outside every range.
+        low, high, with_low, with_high = self.bounds()
+        above = value >= low if with_low else value > low
+        below = value <= high if with_high else value < high
+        return bool(above and below)
+
+    def __str__(self) -> str:
+        low, high, _, _ = self.bounds()
+        interval = not (math.isinf(low) or math.isinf(high))
+        return f"in {self.text.strip()}" if interval else self.text.strip()
+
+
+def as_trained(value: float) -> float:
+    """`value` as training holds it, a float32: past float32's range it is infinite, and
+    below its smallest it is 0, so a range is checked on both."""
+    with np.errstate(over="ignore"):
+        return float(np.float32(value))
+
+
+def float32_note(value: float) -> str:
+    """Why `value`, in range itself, is refused: what training's float32 makes of it."""
+    return f"which training's float32 holds as {as_trained(value):g}"
+
+
+def real_number(name: str, value: object) -> float:
+    """`value` as a float if it is a real number (numpy's included); strings and booleans,
+    which ``float`` would take, are refused."""
+    if isinstance(value, str | bool | np.bool_) or not isinstance(
+        value, numbers.Real | np.ndarray | jax.Array
+    ):
+        raise InvalidInput(f"{name} must be a number, got {value!r}")
+    if np.ndim(cast(Any, value)) != 0:
+        raise InvalidInput(
+            f"{name} must be a single number, got an array of shape {np.shape(cast(Any, value))}"
+        )
+    return float(value)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Surrogate:
+    """A declared surrogate (see the module's docstring); build one with :func:`surrogate`.
+
+    Equal only to itself, so that a compiled program's surrogates are those very functions.
+    """
+
+    name: str
+    function: Callable[..., jax.Array]
+    defaults: Mapping[str, float]
+    ranges: Mapping[str, Range]
+    needs_kl: bool = False
+    clip_range: tuple[str, str] | None = None
+    builtin: bool = False
+    # Where a tune searches each of its own hyperparameters (fppo_jax.core.search_space).
+    search: Mapping[str, Any] = dataclasses.field(default_factory=lambda: MappingProxyType({}))
+
+    @property
+    def hyperparameters(self) -> tuple[str, ...]:
+        """Its own hyperparameters' names (ε, which every surrogate has, is not one)."""
+        return tuple(self.defaults)
+
+    def __call__(
+        self,
+        ratio: jax.Array,
+        advantage: jax.Array,
+        kl: jax.Array,
+        epsilon: jax.Array,
+        values: Mapping[str, jax.Array],
+    ) -> jax.Array:
+        """L(r, A) at its hyperparameters' `values`; the function gets the inputs it takes."""
+        given = {"ratio": ratio, "advantage": advantage, "kl": kl, "epsilon": epsilon, **values}
+        return self.function(**{name: given[name] for name in _parameters(self.function)})
+
+    def check(self, name: str, value: object) -> float:
+        """`value` of hyperparameter `name` as a float, if it is a finite number in its range."""
+        value = real_number(name, value)
+        if math.isinf(value):
+            raise InvalidInput(f"{name} must be finite for {self.name}, got {value}")
+        valid = self.ranges.get(name)
+        trained = as_trained(value)
+        if math.isinf(trained) or (valid is not None and value in valid and trained not in valid):
+            bound = "finite" if valid is None else str(valid)
+            raise InvalidInput(
+                f"{name} must be {bound} for {self.name}, got {value}, {float32_note(value)}"
+            )
+        # NaN lies outside every range, and is finite nowhere.
+        if valid is not None and value not in valid:
+            why = f" ({valid.why})" if valid.why else ""
+            raise InvalidInput(f"{name} must be {valid} for {self.name}, got {value}{why}")
+        if math.isnan(value):
+            raise InvalidInput(f"{name} must be a number for {self.name}, got {value}")
+        return value
+
+    def identity(self) -> dict[str, Any]:
+        """What records keep of a surrogate of one's own, so that two functions under one name
+        are told apart: its name, its defaults and a digest of its function's source and of the
+        values it reads (:func:`function_digest`)."""
+        return {
+            "name": self.name,
+            "hyperparameters": dict(self.defaults),
+            "digest": function_digest(self.function, f"surrogate {self.name!r}"),
+            "import": self.location(),
+        }
+
+    def location(self) -> str | None:
+        """Where an import finds this surrogate (``"module:attribute"``, as the command line's
+        ``--variant`` takes it): an attribute of its function's module that is this very
+        surrogate; None for one made in a script or a notebook (``__main__``)."""
+        module = sys.modules.get(getattr(self.function, "__module__", None) or "")
+        if module is None or module.__name__ == "__main__":
+            return None
+        found = [name for name, value in vars(module).items() if value is self]
+        return f"{module.__name__}:{found[0]}" if found else None
+
+    def __repr__(self) -> str:
+        values = ", ".join(f"{k}={v:g}" for k, v in self.defaults.items())
+        return f"surrogate({self.name!r}{', ' if values else ''}{values})"
+
+
+def surrogate(
+    name: str,
+    function: Callable[..., jax.Array],
+    /,
+    *,
+    ranges: Mapping[str, str | Range] | None = None,
+    needs_kl: bool = False,
+    clip_range: tuple[str, str] | None = None,
+    search: Mapping[str, Any] | None = None,
+    **defaults: float,
+) -> Surrogate:
+    """A surrogate of one's own, accepted wherever a variant's name is (``train``, ``sweep``
+    grids, :func:`~fppo_jax.objective`, :func:`~fppo_jax.hyperparameters`).
+
+    `function` takes ``ratio``, ``advantage`` and any of ``kl`` and ``epsilon`` by name, and
+    each hyperparameter named in `defaults` (their default values); `ranges` gives a
+    hyperparameter's valid range as text (``"> 0"``, ``"[0, 1)"``); `needs_kl` says the
+    surrogate gates on the KL divergence (so calling its objective without one is refused);
+    `clip_range` names the two hyperparameters that are its distances below and above 1 (for
+    the R± diagnostics; ε's otherwise); `search` gives the interval a tune searches each of
+    them over, as ``(low, high)`` or ``(low, high, scale)`` with scale ``linear``, ``log`` or
+    ``log1m`` (see :mod:`fppo_jax.core.search_space`). Everything is checked here, and the function
+    is tried on a grid of ratios and advantages under ``jax.jit`` and ``jax.grad``, as training
+    runs it: one that cannot be traced, or a value that is not finite, of the wrong shape or not
+    a float, is refused, naming the surrogate.
+    """
+    from fppo_jax.core.objectives import BUILTINS  # the built-ins are declared with this function
+
+    if name in BUILTINS:
+        raise InvalidInput(
+            f"a surrogate cannot be named {name!r}: that is a built-in variant's name "
+            f"(built-ins: {', '.join(BUILTINS)})"
+        )
+    declared = declare(name, function, ranges, needs_kl, clip_range, defaults)
+    taken = [f"{key} is {what}" for key in defaults if (what := _taken_names().get(key))]
+    if taken:
+        raise InvalidInput(
+            f"surrogate {name!r}: a hyperparameter of its own cannot take another setting's name "
+            f"({'; '.join(taken)}), whose value it would take or shadow: rename it"
+        )
+    function_digest(function, f"surrogate {name!r}")  # what cannot be identified is refused
+    probe(declared, declared.defaults)
+    if search is None:
+        return declared
+    from fppo_jax.core.search_space import interval
+
+    if not isinstance(search, Mapping):
+        raise InvalidInput(
+            f"surrogate {name!r}: search maps its hyperparameters to (low, high), got {search!r}"
+        )
+    stray = sorted(set(search) - set(defaults))
+    if stray:
+        raise InvalidInput(
+            f"surrogate {name!r}: search names {', '.join(map(repr, stray))}, which it does not "
+            f"take (it takes: {', '.join(defaults) or 'none'})"
+        )
+    where = f"surrogate {name!r}'s search"
+    intervals = {key: interval(key, value, where) for key, value in search.items()}
+    return dataclasses.replace(declared, search=MappingProxyType(intervals))
+
+
+@functools.cache
+def _taken_names() -> dict[str, str]:
+    """What a surrogate's hyperparameter may not be named, each with what it is: an
+    optimisation setting, a field of the run's shape or any name of the command line, where a
+    hyperparameter becomes a flag and a setting of ``--config FILE``. The built-ins'
+    hyperparameters are shared, as ``alpha`` is."""
+    from fppo_jax.cli.parser import command_line_names
+    from fppo_jax.core.config import CONFIG_FIELDS, HYPERPARAMETER_DEFAULTS
+    from fppo_jax.core.objectives import BUILTINS
+
+    shared = {key for s in BUILTINS.values() for key in s.defaults}
+    return {
+        **{key: "a name of the command line" for key in command_line_names() - shared},
+        **{key: "a TrainConfig field" for key in CONFIG_FIELDS},
+        **{key: "an optimisation setting" for key in HYPERPARAMETER_DEFAULTS},
+    }
+
+
+def declare(
+    name: str,
+    function: Callable[..., jax.Array],
+    ranges: Mapping[str, str | Range] | None,
+    needs_kl: bool,
+    clip_range: tuple[str, str] | None,
+    defaults: Mapping[str, float],
+    builtin: bool = False,
+) -> Surrogate:
+    """A :class:`Surrogate`, its declaration checked (the built-ins are declared through here
+    too; :func:`surrogate` also refuses their names and tries the function)."""
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise InvalidInput(
+            f"a surrogate's name must be lower-case letters, digits, '-', '_' or '.', got {name!r}"
+        )
+    if not callable(function):
+        raise InvalidInput(f"surrogate {name!r}: its function must be callable, got {function!r}")
+    clash = sorted(set(defaults) & set(INPUTS))
+    if clash:
+        raise InvalidInput(
+            f"surrogate {name!r}: {', '.join(clash)} is an input every surrogate gets, not a "
+            "hyperparameter of its own"
+        )
+    _check_signature(name, function, defaults)
+    checked_ranges = _checked_ranges(name, ranges, clip_range, defaults)
+    if not isinstance(needs_kl, bool):
+        raise InvalidInput(f"surrogate {name!r}: needs_kl must be True or False, got {needs_kl!r}")
+    declared = Surrogate(
+        name,
+        function,
+        MappingProxyType(dict(defaults)),
+        MappingProxyType(checked_ranges),
+        needs_kl,
+        None if clip_range is None else (clip_range[0], clip_range[1]),
+        builtin,
+    )
+    for key, value in defaults.items():
+        declared.check(key, value)
+    return declared
+
+
+def _checked_ranges(
+    name: str,
+    ranges: Mapping[str, str | Range] | None,
+    clip_range: tuple[str, str] | None,
+    defaults: Mapping[str, float],
+) -> dict[str, Range]:
+    """`ranges`, each a :class:`Range`, once it and `clip_range` are found to name only
+    hyperparameters that the surrogate takes."""
+    given = {} if ranges is None else ranges
+    if not isinstance(given, Mapping) or not all(
+        isinstance(r, str | Range) for r in given.values()
+    ):
+        raise InvalidInput(
+            f"surrogate {name!r}: ranges must map hyperparameters to a range's text, such as "
+            f"{{'eps_high': '> 0'}}, got {ranges!r}"
+        )
+    checked = {key: r if isinstance(r, Range) else Range(r) for key, r in given.items()}
+    stray = sorted(set(checked) - set(defaults))
+    if clip_range is not None:
+        if not (isinstance(clip_range, tuple | list) and len(clip_range) == 2):
+            raise InvalidInput(
+                f"surrogate {name!r}: clip_range must name two hyperparameters, got {clip_range!r}"
+            )
+        stray += [key for key in clip_range if key not in defaults]
+    if stray:
+        raise InvalidInput(
+            f"surrogate {name!r} has no hyperparameter {', '.join(map(repr, stray))} "
+            f"(it takes: {', '.join(defaults) or 'none'})"
+        )
+    return checked
+
+
+def _parameters(function: Callable[..., Any]) -> tuple[str, ...]:
+    return tuple(inspect.signature(function).parameters)
+
+
+def _check_signature(
+    name: str, function: Callable[..., Any], defaults: Mapping[str, float]
+) -> None:
+    try:
+        parameters = inspect.signature(function).parameters
+    except (TypeError, ValueError):
+        raise InvalidInput(
+            f"surrogate {name!r}: the signature of {function!r} cannot be read"
+        ) from None
+    takes = (*INPUTS, *defaults)
+    unknown = [
+        p
+        for p, spec in parameters.items()
+        if p not in takes
+        or spec.kind in (spec.VAR_POSITIONAL, spec.VAR_KEYWORD, spec.POSITIONAL_ONLY)
+    ]
+    if unknown:
+        raise InvalidInput(
+            f"surrogate {name!r}: its function takes {', '.join(unknown)}, which it would not "
+            f"be given; it may take {', '.join(INPUTS)} and its hyperparameters "
+            f"({', '.join(defaults) or 'none declared'}), each by name"
+        )
+    missing = [p for p in ("ratio", "advantage", *defaults) if p not in parameters]
+    if missing:
+        raise InvalidInput(
+            f"surrogate {name!r}: its function does not take {', '.join(missing)} (a surrogate "
+            "takes ratio and advantage, and each hyperparameter it declares, by name)"
+        )
+
+
+# What a function that runs on arrays does wrong under tracing, as training traces it, and how
+# to write it instead; the most specific first (a bool conversion is a concretization).
+_TRACING_ERRORS: tuple[tuple[type[Exception], str], ...] = (
+    (
+        jax.errors.TracerBoolConversionError,
+        "uses Python control flow (if, while, and, or) on traced values; use jnp.where",
+    ),
+    (
+        jax.errors.TracerArrayConversionError,
+        "turns a traced value into a NumPy array (NumPy where jax.numpy is needed); use jax.numpy",
+    ),
+    (
+        jax.errors.TracerIntegerConversionError,
+        "needs a traced value as a Python integer; keep it an array and use jax.numpy",
+    ),
+    (
+        jax.errors.ConcretizationTypeError,
+        "needs a traced value as a Python number (float(), int(), a shape from values); keep it "
+        "an array and use jax.numpy",
+    ),
+)
+
+
+def probe(declared: Surrogate, values: Mapping[str, float], epsilon: float = 0.2) -> None:
+    """Try `declared` with `values` on ratios 0.25 … 4 and advantages of both signs (a KL of
+    0 and 0.1), under ``jax.jit`` and ``jax.grad`` as training runs it: its value must be a
+    finite float array of the ratio's shape, and its slope in the ratio finite."""
+    ratio: np.ndarray | jax.Array
+    advantage: np.ndarray | jax.Array
+    ratio, advantage = np.meshgrid(np.geomspace(0.25, 4.0, 17), [-2.0, -0.5, 0.0, 0.5, 2.0])
+    ratio, advantage = (
+        jnp.asarray(ratio.ravel(), jnp.float32),
+        jnp.asarray(advantage.ravel(), jnp.float32),
+    )
+    kl = jnp.tile(jnp.asarray([0.0, 0.1], jnp.float32), ratio.size // 2 + 1)[: ratio.size]
+    arrays = {key: jnp.asarray(value, jnp.float32) for key, value in values.items()}
+    eps = jnp.asarray(epsilon, jnp.float32)
+    inputs = (ratio, advantage, kl, eps, arrays)
+
+    where = f"surrogate {declared.name!r}"
+    try:
+        shape = jax.eval_shape(declared, *inputs)
+    except Exception as error:
+        raise _failed(where, error) from None
+    if not hasattr(shape, "shape") or shape.shape != ratio.shape:
+        raise InvalidInput(
+            f"{where} must return one value per sample (an array of the ratio's shape "
+            f"{ratio.shape}), got {_described(shape)}"
+        )
+    if not jnp.issubdtype(shape.dtype, jnp.floating):
+        raise InvalidInput(f"{where} must return floats, got {shape.dtype}")
+    try:
+        out, slope = _value_and_slope(declared, *inputs)
+    except Exception as error:
+        raise _failed(where, error) from None
+    for what, array in (("value", out), ("slope in the ratio", slope)):
+        bad = ~np.isfinite(np.asarray(array))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InvalidInput(
+                f"{where} has a {what} that is not finite ({float(np.asarray(array)[i])}) at "
+                f"ratio {float(ratio[i]):.3g}, advantage {float(advantage[i]):g} with "
+                + ", ".join(f"{k} = {v:g}" for k, v in {"epsilon": epsilon, **values}.items())
+            )
+
+
+def _failed(where: str, error: Exception) -> InvalidInput:
+    """Why the surrogate `where` names failed when tried, in one line."""
+    cause = next((why for kind, why in _TRACING_ERRORS if isinstance(error, kind)), None)
+    if cause is not None:
+        return InvalidInput(f"{where} {cause}")
+    return InvalidInput(f"{where} failed when tried: {type(error).__name__}: {first_line(error)}")
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _value_and_slope(
+    declared: Surrogate,
+    ratio: jax.Array,
+    advantage: jax.Array,
+    kl: jax.Array,
+    epsilon: jax.Array,
+    values: Mapping[str, jax.Array],
+) -> tuple[jax.Array, jax.Array]:
+    """`declared`'s value per sample and its slope in the ratio, compiled as training compiles
+    it (once per surrogate). Per sample: the surrogate is element-wise, so the slope of the sum
+    is each one's slope."""
+
+    def summed(r: jax.Array) -> tuple[jax.Array, jax.Array]:
+        out = declared(r, advantage, kl, epsilon, values)
+        return jnp.sum(out), out
+
+    (_, out), slope = jax.value_and_grad(summed, has_aux=True)(ratio)
+    return out, slope
+
+
+def _described(out: object) -> str:
+    shape = getattr(out, "shape", None)
+    return f"shape {shape}" if shape is not None else type(out).__name__
+
+
+def function_digest(function: Callable[..., Any], where: str) -> str:
+    """A short digest of what `function` computes with, so that a record tells two functions
+    apart: its source (its compiled code where the source is not at hand) and the values it
+    reads beyond its arguments (:func:`_identified`). `where` names the surrogate in the error
+    that refuses a value that cannot be identified."""
+    return hashlib.sha256(_identified(function, where, set())).hexdigest()[:16]
+
+
+def _identified(function: Callable[..., Any], where: str, seen: set[int]) -> bytes:
+    """The text that tells `function` apart: a function's source, then each global or closure
+    variable it reads, as ``name=value``; a ``functools.partial``'s function, then its bound
+    arguments; a callable instance's class, then its attributes. Modules, and functions and
+    classes of other modules (named by the source), add nothing, so a function that reads
+    nothing else is its source alone; `seen` holds the functions already identified."""
+    function = inspect.unwrap(function)
+    seen.add(id(function))
+    if isinstance(function, functools.partial):
+        bound = {**{f"args[{i}]": v for i, v in enumerate(function.args)}, **function.keywords}
+        return _joined(
+            _identified(function.func, where, seen),
+            b"partial",
+            _values(bound, getattr(function.func, "__module__", None), where, seen),
+        )
+    if isinstance(function, types.FunctionType):
+        return _joined(
+            _source(function), _values(_reads(function), function.__module__, where, seen)
+        )
+    cls = type(function)
+    methods = [f for f in vars(cls).values() if isinstance(f, types.FunctionType)]
+    try:
+        text = inspect.getsource(cls).encode()
+    except (OSError, TypeError):
+        text = b"\n".join(_source(f) for f in methods)
+    read = {name: value for f in methods for name, value in _reads(f).items()}
+    return _joined(
+        text,
+        _values(read, cls.__module__, where, seen),
+        _values(getattr(function, "__dict__", {}), cls.__module__, where, seen),
+    )
+
+
+def _joined(*parts: bytes) -> bytes:
+    return b"\n".join(part for part in parts if part)
+
+
+def _source(function: types.FunctionType) -> bytes:
+    try:
+        return inspect.getsource(function).encode()
+    except (OSError, TypeError):
+        code = function.__code__
+        return code.co_code + repr(code.co_consts).encode()
+
+
+def _reads(function: types.FunctionType) -> dict[str, Any]:
+    """The globals and closure variables `function` reads, by name, with their values."""
+    read = {
+        name: function.__globals__[name]
+        for name in _global_names(function.__code__)
+        if name in function.__globals__
+    }
+    for name, cell in zip(function.__code__.co_freevars, function.__closure__ or (), strict=True):
+        with contextlib.suppress(ValueError):  # a cell not yet assigned holds nothing
+            read[name] = cell.cell_contents
+    return read
+
+
+def _global_names(code: types.CodeType) -> list[str]:
+    """The globals that `code` and the functions defined in it load, in order."""
+    names = [i.argval for i in dis.get_instructions(code) if i.opname == "LOAD_GLOBAL"]
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names += _global_names(const)
+    return list(dict.fromkeys(names))
+
+
+def _values(read: Mapping[Any, Any], module: str | None, where: str, seen: set[int]) -> bytes:
+    """`read`'s values as ``name=value`` lines, those that identify something (see
+    :func:`_identified`); one that cannot be identified is refused, naming it."""
+    lines = []
+    for name, value in read.items():
+        if _plain(value):
+            lines.append(f"{name}={value!r}".encode())
+        elif isinstance(value, functools.partial) or (
+            isinstance(value, types.FunctionType) and value.__module__ == module
+        ):
+            # A helper of the surrogate's own: what it computes with is the surrogate's too.
+            if id(value) not in seen:
+                lines.append(f"{name}=".encode() + _identified(value, where, seen))
+        elif not (isinstance(value, types.ModuleType) or hasattr(value, "__name__")):
+            raise InvalidInput(
+                f"{where} reads {name}, of type {type(value).__name__}, which its record cannot "
+                "identify (so a changed value would pass unseen): make it a hyperparameter, or "
+                "a number, string, bool, None, or a tuple, list or dict of them"
+            )
+    return b"\n".join(lines)
+
+
+def _plain(value: object) -> bool:
+    """Whether `value` is plain data, whose ``repr`` identifies it: a number, a string, a
+    bool, None, or a tuple, list or dict of them."""
+    if value is None or isinstance(value, str | numbers.Number | np.bool_):
+        return True
+    if isinstance(value, tuple | list):
+        return all(_plain(item) for item in value)
+    if isinstance(value, dict):
+        return all(_plain(key) and _plain(item) for key, item in value.items())
+    return False

@@ -1,0 +1,1 @@
+"""A trained policy taken elsewhere: ONNX and rendering."""

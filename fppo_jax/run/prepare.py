@@ -1,0 +1,89 @@
+"""What ``train`` and ``sweep`` both do before driving: split their keyword settings into the
+run's shape (:class:`~fppo_jax.core.config.TrainConfig`), its hyperparameters and the host
+:class:`~fppo_jax.run.options.Options`; resolve the task and its backend once; check all of it
+before an environment is built or anything compiles; turn the compilation cache on
+(:mod:`fppo_jax.run.compile_cache`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Any
+
+from fppo_jax.core.config import TrainConfig, describe, environment_name, resolve_config
+from fppo_jax.core.trainer import Trainer, make_train
+from fppo_jax.envs import Environment, as_environment, choose_backend, describe_backend, make_env
+from fppo_jax.run import compile_cache
+from fppo_jax.run.options import Options
+
+
+@dataclasses.dataclass(frozen=True)
+class Prepared:
+    """A run's (or a sweep's) settings, checked: `config`, `options`, the hyperparameter
+    values given (`hyperparameters`, still to be resolved per variant), the registered `task`
+    (None for an environment object) and the `backend` chosen (`why`: how "auto" chose it).
+    The environment and the trainer are built on first use."""
+
+    env: Any
+    task: str | None
+    backend: str
+    why: str
+    preset: str
+    config: TrainConfig
+    options: Options
+    hyperparameters: dict[str, Any]
+
+    @functools.cached_property
+    def environment(self) -> Environment:
+        if isinstance(self.env, str):
+            return make_env(self.env, self.backend)
+        return as_environment(self.env)
+
+    @functools.cached_property
+    def trainer(self) -> Trainer:
+        check = getattr(self.environment, "check_batch", None)  # vector environments' sizes
+        if check is not None:
+            check(self.config.num_envs)
+            if self.options.eval_every is not None:
+                check(self.options.eval_episodes)
+        return make_train(self.config, self.environment)
+
+    @property
+    def name(self) -> str:
+        """The environment's name, as records show it."""
+        return environment_name(self.env, self.environment)
+
+    def record(self, **between: Any) -> dict[str, Any]:
+        """What outputs and checkpoints record of the run: the environment, the backend,
+        `between`, the preset and every :class:`TrainConfig` field."""
+        record = {"env": self.name, "backend": self.backend, **between, "preset": self.preset}
+        return record | dataclasses.asdict(self.config)
+
+    def header(self, description: str, runs: str = "") -> str:
+        """The line printed before compiling: `description`, the backend, `runs` (a sweep's
+        count of them) and each run's shape."""
+        backend = describe_backend(self.backend, self.why)
+        return f"{description}{backend}: {runs}{describe(self.config, self.preset)}"
+
+
+def prepare(
+    env: str | Environment | Any,
+    settings: dict[str, Any],
+    hyperparameters: tuple[str, ...],
+    *,
+    total_steps: int | None,
+    preset: str,
+    backend: str,
+) -> Prepared:
+    """`settings` (``train``'s or ``sweep``'s keyword arguments) split and checked: the names
+    in `hyperparameters` are kept for the caller to resolve per variant, the options and the
+    :class:`TrainConfig` fields are checked, and any other name is refused, listing every
+    valid one."""
+    options, overrides = Options.split(settings)
+    given = {name: overrides.pop(name) for name in list(overrides) if name in hyperparameters}
+    valid = (*hyperparameters, *Options.names())
+    config = resolve_config(env, total_steps, overrides, also_valid=valid, preset=preset)
+    chosen, why = choose_backend(env, backend)
+    task = env if isinstance(env, str) else None
+    compile_cache.enable()
+    return Prepared(env, task, chosen, why, preset, config, options, given)

@@ -1,0 +1,46 @@
+"""The signals a cluster sends a job it is about to stop, caught so that a checkpointed run
+stops cleanly: SIGTERM on preemption, at its time limit and on scancel; SIGUSR1 when asked for
+ahead of the time limit (``sbatch --signal=USR1@SECONDS``).
+
+Light on purpose (no JAX): the command line catches them from its start, before it imports
+what training needs, and the driver, within that, acts on them (:mod:`fppo_jax.run.driver`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from collections.abc import Iterator
+
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
+
+_received: list[int] | None = None  # the outermost `caught` block's, while one catches
+
+
+@contextlib.contextmanager
+def caught(numbers: tuple[int, ...]) -> Iterator[list[int]]:
+    """While the block runs, `numbers` are recorded in the list it is given instead of acting,
+    and their handlers are then restored. Within a block that catches already, that block's
+    list, which holds what came before this block began. Python handles signals in the main
+    thread alone; and a signal whose handler was not installed from Python is left to it, as it
+    could not be restored."""
+    global _received
+    if numbers and _received is not None:
+        yield _received
+        return
+    received: list[int] = []
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for number in numbers:
+            if signal.getsignal(number) is not None:
+                previous[number] = signal.signal(number, lambda n, _: received.append(n))
+    if previous:
+        _received = received
+    try:
+        yield received
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        if previous:
+            _received = None

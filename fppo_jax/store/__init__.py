@@ -1,0 +1,1 @@
+"""What is written and read back: files, checkpoints, sweeps, metric logs, saved policies."""

@@ -1,0 +1,626 @@
+"""Checkpoints of a run: everything it carries, its metrics so far and its record, written by
+orbax atomically and in the background, and verified when read back.
+
+``<directory>/<step>/`` holds four items: ``state`` (every array of the training state, PRNG keys as
+their raw data), ``curves`` (the metrics of every update so far), ``policy`` (what
+:func:`~fppo_jax.store.saved_policy.load_policy` needs) and ``record`` (JSON: the run's
+configuration, the policy's description and a SHA-256 digest of each array item). A run's step
+counts its updates; a sweep's, group × updates per run + update, and its record and ``curves`` also
+say where it is (:class:`ResumePoint`: the group, the update, the finished groups). Orbax writes a
+step into a temporary directory and renames it once complete, so a killed process leaves whole
+checkpoints only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
+checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old
+checkpoints are deleted only after a newer one is complete. Every record names the layout it was
+written in (:data:`FORMAT`): a checkpoint of another layout is refused as
+:class:`~fppo_jax.store.files.IncompatibleFormat`, and left where it is, never taken for damage.
+
+Saved policies, a trained policy on its own, are :mod:`fppo_jax.store.saved_policy`'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import re
+import shutil
+import sys
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
+
+import jax
+import numpy as np
+
+from fppo_jax.core.config import positive_int
+from fppo_jax.core.policy import Policy
+from fppo_jax.errors import FppoError, InvalidInput, MissingFile, first_line
+from fppo_jax.store.files import (
+    DirectoryBusy,
+    DirectoryLock,
+    check_format,
+    json_value,
+    tree_digest,
+    writable_directory,
+)
+
+if TYPE_CHECKING:
+    import orbax.checkpoint as ocp
+
+# What a checkpoint holds: one run (``train``) or a sweep's runs in groups (``sweep``).
+RunKind = Literal["train", "sweep"]
+
+# The layout of a checkpoint's items and record (files.check_format). Raise it when a change
+# makes checkpoints that the previous code cannot read, or that this code cannot read from it.
+# 2: a single run's state and metrics carry the run axis (of one), as a sweep's always did.
+FORMAT = 2
+# The formats whose policy item load_policy reads: the policy's layout is the first's still.
+POLICY_FORMATS = (1, 2)
+
+
+class DamagedCheckpoint(UserWarning):
+    """A checkpoint could not be read back intact and was set aside."""
+
+
+class CheckpointsUnavailable(FppoError, RuntimeError):
+    """A checkpoint directory cannot be used: another process writes there, or none of its
+    checkpoints is intact."""
+
+
+class ConfigMismatch(InvalidInput):
+    """A checkpoint belongs to a run with a different configuration."""
+
+
+class CheckpointNotWritten(CheckpointsUnavailable):
+    """A checkpoint could not be written (a full disk, a file size limit, storage gone); the
+    checkpoints before it are intact."""
+
+
+@dataclasses.dataclass
+class Restored:
+    """A checkpoint read back: its step, the state (in the structure asked for), the metrics
+    so far and the record."""
+
+    step: int
+    state: Any
+    curves: dict[str, Any]
+    record: dict[str, Any]
+
+    def point(self) -> ResumePoint:
+        """Where the checkpoint says training stopped."""
+        return ResumePoint(
+            group=self.record["group"],
+            update=self.record["update"],
+            current={name: np.asarray(values) for name, values in self.curves["current"].items()},
+            finished={k: np.asarray(v) for k, v in self.curves.get("finished", {}).items()},
+            finished_diverged=np.asarray(self.curves.get("finished_diverged", []), np.int32),
+        )
+
+
+class ResumePoint(NamedTuple):
+    """Where training is when it is checkpointed, and where a resumed run goes on: update
+    `update` of group `group` (a sweep's runs train in groups; a single run is group 0), the
+    group's metrics so far, and the finished groups' metrics and first diverged updates (empty
+    when none is finished)."""
+
+    group: int
+    update: int
+    current: dict[str, np.ndarray]
+    finished: dict[str, np.ndarray]
+    finished_diverged: np.ndarray
+
+
+def open_checkpoints(
+    directory: str | Path | None,
+    resume: bool,
+    keep: int,
+    kind: RunKind,
+    run_config: dict[str, Any],
+) -> tuple[Checkpoints | None, dict[str, Any] | None]:
+    """The checkpoints of a `kind` of run ("train" or "sweep") in `directory`, and the newest
+    one's record, checked against this run before anything is compiled (None, None without a
+    directory)."""
+    if directory is None:
+        return None, None
+    writable_directory(directory)  # else orbax's own error, a traceback, when it first writes
+    checkpoints = Checkpoints(directory, keep)
+    try:
+        checkpoints.lock()
+        record = checkpoints.latest_record()
+        if record is None and checkpoints.steps():  # never a silent fresh start
+            if not resume:
+                raise InvalidInput(
+                    f"{checkpoints.directory} already holds checkpoints (none of whose records "
+                    "can be read); choose another directory"
+                )
+            for step in reversed(checkpoints.steps()):
+                checkpoints._set_aside(step, ValueError("its record cannot be read"))
+            raise CheckpointsUnavailable(
+                f"no checkpoint in {checkpoints.directory} is intact (each was moved to "
+                f"{checkpoints.directory / 'damaged'}); nothing was restored. To start "
+                "afresh, remove the directory or choose another"
+            )
+        if record is not None and not resume:
+            raise InvalidInput(
+                f"{checkpoints.directory} already holds checkpoints; pass resume=True (--resume) "
+                "to continue that run, or choose another directory"
+            )
+        if record is not None:
+            check_format(record, f"the newest checkpoint in {checkpoints.directory}", FORMAT)
+            check_same_run(record, kind, run_config, checkpoints.directory)
+    except Exception:
+        checkpoints.close()
+        raise
+    return checkpoints, record
+
+
+def check_same_run(
+    record: dict[str, Any], kind: RunKind, current: dict[str, Any], directory: Path
+) -> None:
+    """Raise :class:`ConfigMismatch` unless checkpoint `record` belongs to a `kind` of run
+    configured as `current`, naming every field whose value differs.
+
+    A run trained to its end may go on for more steps (a larger ``total_steps``) when nothing
+    it did depends on the budget: not when its learning rate anneals over the run, and not
+    for a sweep, whose finished groups would stay short.
+    """
+    if record.get("kind") != kind:
+        raise ConfigMismatch(
+            f"{directory} holds the checkpoints of a {record.get('kind')}, not of a {kind}"
+        )
+    saved, current = json_value(record["config"]), json_value(current)
+    longer = current.get("total_steps", 0) > saved.get("total_steps", 0)
+    annealed = [bool(c.get("anneal_learning_rate")) for c in (saved, current)]
+    if longer and kind == "train" and not any(annealed):
+        saved = {**saved, "total_steps": current["total_steps"]}
+    elif longer and (kind != "train" or all(annealed)):  # else the schedules differ: named below
+        why = "its learning rate anneals over the run" if kind == "train" else "it is a sweep"
+        raise ConfigMismatch(
+            f"{directory} holds a run of {saved['total_steps']:,} steps, which cannot go on to "
+            f"{current['total_steps']:,}: {why}. Use another checkpoint directory."
+        )
+    differing = [
+        f"{name} (checkpoint {saved.get(name, '-')!r}, now {current.get(name, '-')!r})"
+        for name in sorted(set(saved) | set(current))
+        if saved.get(name) != current.get(name)
+    ]
+    if differing:
+        raise ConfigMismatch(
+            f"{directory} holds a run with a different configuration; differing: "
+            + "; ".join(differing)
+            + ". Resume with the checkpoint's settings, or use another checkpoint directory."
+        )
+
+
+class Checkpoints:
+    """The checkpoints of one run (or one sweep) in `directory`, keeping the newest `keep`."""
+
+    def __init__(self, directory: str | Path, keep: int = 3):
+        keep = positive_int("keep (checkpoints kept)", keep)
+        self.directory = Path(directory).absolute()
+        self._lock: DirectoryLock | None = None
+        if os.path.lexists(self.directory) and not self.directory.is_dir():
+            raise InvalidInput(
+                f"checkpoint directory {self.directory} is not a directory (a file, or a link "
+                "that leads to none)"
+            )
+        _QUIET.open()
+        try:
+            self._manager = _manager(self.directory, keep)
+        except BaseException:
+            _QUIET.close()
+            raise
+        self._open = True
+        self._writes = _Writes(self._manager, self.directory)
+
+    def steps(self) -> list[int]:
+        """Steps of the complete checkpoints, oldest first."""
+        return _steps(self._manager)
+
+    def latest_record(self) -> dict[str, Any] | None:
+        """The record of the newest checkpoint whose record can be read (no arrays are read:
+        for checks before compiling); None if there is none."""
+        import orbax.checkpoint as ocp
+
+        for step in reversed(self.steps()):
+            try:
+                return cast(dict[str, Any], self._read(step, record=ocp.args.JsonRestore()).record)
+            except Exception:  # a damaged record; restore() reports it
+                continue
+        return None
+
+    def restore(
+        self, like: Any, check: Callable[[dict[str, Any]], None] | None = None
+    ) -> Restored | None:
+        """The newest intact checkpoint, its state in the structure of `like` (arrays or
+        ``jax.ShapeDtypeStruct``\\ s); damaged ones are reported and set aside. `check` sees
+        the record of the one chosen, fallbacks included, and may raise. None if no
+        checkpoint is intact."""
+        import orbax.checkpoint as ocp
+
+        leaves, treedef = jax.tree.flatten(like)
+        abstract = {_name(i): _storable_shape(leaf) for i, leaf in enumerate(leaves)}
+        for step in reversed(self.steps()):
+            try:
+                record = self._read(step, record=ocp.args.JsonRestore()).record
+            except Exception as error:  # an unreadable record is damage
+                self._set_aside(step, error)
+                continue
+            check_format(record, f"checkpoint at step {step} in {self.directory}", FORMAT)
+            try:
+                names = ["state", "curves"] + (["policy"] if record["policy"] else [])
+                restore = {name: ocp.args.StandardRestore() for name in names}
+                restore["state"] = ocp.args.StandardRestore(abstract)
+                items = self._read(step, **restore)
+                for name in names:
+                    _verify(name, items[name], record)
+            except Exception as error:  # any failure to read back is damage
+                self._set_aside(step, error)
+                continue
+            if check is not None:
+                check(record)
+            state = [_from_storable(items.state[_name(i)], leaf) for i, leaf in enumerate(leaves)]
+            return Restored(step, jax.tree.unflatten(treedef, state), items.curves, record)
+        return None
+
+    def save_point(
+        self,
+        point: ResumePoint,
+        state: Any,
+        *,
+        kind: RunKind,
+        config: dict[str, Any],
+        runs_per_call: int,
+        num_updates: int,
+        policy: Policy | None = None,
+    ) -> None:
+        """Checkpoint a `kind` of run ("train" or "sweep") configured as `config` at `point`,
+        with its `state` (and, for one run, its `policy`, which ``load_policy`` reads); the
+        record names the point, which :meth:`Restored.point` reads back."""
+        record = {"kind": kind, "config": config, "group": point.group, "update": point.update}
+        record["runs_per_call"] = runs_per_call
+        curves: dict[str, Any] = {"current": point.current}
+        if point.finished:
+            curves["finished"] = point.finished
+            curves["finished_diverged"] = point.finished_diverged
+        self.save(point.group * num_updates + point.update, state, curves, record, policy)
+
+    def save(
+        self,
+        step: int,
+        state: Any,
+        curves: dict[str, Any],
+        record: dict[str, Any],
+        policy: Policy | None = None,
+    ) -> None:
+        """Start writing checkpoint `step`; it completes in the background, and then the
+        checkpoints beyond the newest `keep` are deleted. A checkpoint directory that vanished
+        or was replaced since the run began is :class:`~fppo_jax.store.files.DirectoryLost`, at
+        once."""
+        import orbax.checkpoint as ocp
+
+        if self._lock is not None:
+            self._lock.check()
+        host = jax.device_get(
+            {_name(i): _storable(leaf) for i, leaf in enumerate(jax.tree.leaves(state))}
+        )
+        arrays = {"state": host, "curves": jax.device_get(curves)}
+        if policy is not None:
+            arrays["policy"] = jax.device_get(policy.arrays())
+        record = {
+            **record,
+            "format": FORMAT,
+            "policy": policy.describe() if policy is not None else None,
+            "digests": {name: tree_digest(value) for name, value in arrays.items()},
+        }
+        # Orbax waits for the previous save to finish before it starts this one.
+        items = {name: ocp.args.StandardSave(value) for name, value in arrays.items()}
+        args = _args(**items, record=ocp.args.JsonSave(json_value(record)))
+        self.wait()  # the one before, on disk: orbax would wait for it here anyway
+        self._writes.start(step, args)
+
+    def policy(self) -> tuple[Policy, dict[str, Any]]:
+        """The policy of the newest readable checkpoint, and its record."""
+        import orbax.checkpoint as ocp
+
+        for step in reversed(self.steps()):
+            try:
+                record = self._read(step, record=ocp.args.JsonRestore()).record
+            except Exception as error:  # try the previous one
+                _warn(self.directory, step, error, "could not be read")
+                continue
+            check_format(record, f"checkpoint at step {step} in {self.directory}", POLICY_FORMATS)
+            try:
+                if record.get("policy") is not None:
+                    arrays = self._read(step, policy=ocp.args.StandardRestore()).policy
+                    _verify("policy", arrays, record)
+            except Exception as error:  # try the previous one
+                _warn(self.directory, step, error, "could not be read")
+                continue
+            if record.get("policy") is None:
+                raise InvalidInput(
+                    f"{self.directory} holds the checkpoints of a {record.get('kind')}, not of "
+                    "one policy: load_policy reads the checkpoints of train()"
+                )
+            return Policy.from_parts(record["policy"], arrays), record
+        raise MissingFile(f"no readable checkpoint in {self.directory}")
+
+    def _read(self, step: int, **items: Any) -> Any:
+        try:
+            return self._manager.restore(step, args=_args(**items))
+        except Exception:
+            _QUIET.failed = True  # its reads left behind report up to the process's exit
+            raise
+
+    def wait(self) -> None:
+        """Block until the checkpoint being written is complete; :class:`CheckpointNotWritten`
+        if it could not be."""
+        self._writes.wait()
+
+    def lock(self) -> None:
+        """Make this the directory's one writer, or raise :class:`CheckpointsUnavailable`
+        naming the process that is (:class:`~fppo_jax.store.files.DirectoryLock`)."""
+        try:
+            self._lock = DirectoryLock(self.directory, "checkpoints")
+        except DirectoryBusy as error:
+            raise CheckpointsUnavailable(str(error)) from None
+
+    def close(self, *, quiet: bool = False) -> None:
+        """Finish writing, and let another process write here. `quiet`, when the run is already
+        failing: a checkpoint still being written that fails too (into a directory that
+        vanished, say) is let go rather than raised over the run's own error."""
+        try:
+            if not quiet:
+                self.wait()
+            self._manager.close()
+        except Exception:
+            if not quiet:
+                raise
+        finally:
+            if self._open:
+                self._open = False
+                _QUIET.close()
+            if self._lock is not None:
+                self._lock.release()
+                self._lock = None
+
+    def _set_aside(self, step: int, error: Exception) -> None:
+        target = self.directory / "damaged" / str(step)
+        target.parent.mkdir(exist_ok=True)
+        shutil.rmtree(target, ignore_errors=True)
+        shutil.move(self.directory / str(step), target)
+        self._manager.reload()
+        _warn(self.directory, step, error, "is damaged", f"moved to {target}, ")
+
+
+class _Writes:
+    """Orbax's writes of `directory`'s checkpoints, each finished in a background thread: a
+    write that storage refuses, at once or in that thread, is :class:`CheckpointNotWritten`,
+    naming the newest intact checkpoint."""
+
+    def __init__(self, manager: ocp.CheckpointManager, directory: Path):
+        self.manager, self.directory = manager, directory
+        self.pending: int | None = None  # the step being written, until it is on disk
+
+    def start(self, step: int, args: ocp.args.Composite) -> None:
+        if not self._written(lambda: self.manager.save(step, args=args)):
+            raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
+        self.pending = step
+
+    def wait(self) -> None:
+        self._written(self.manager.wait_until_finished)
+        self._check_written()
+
+    def _written(self, write: Callable[[], Any]) -> Any:
+        """`write`'s result, or :class:`CheckpointNotWritten` where it, or the checkpoint written
+        before it in the background, failed to write (orbax raises what storage said, as an
+        ``OSError`` or tensorstore's ``ValueError``); then whether that earlier one is on disk."""
+        try:
+            result = write()
+        except Exception as error:
+            if not _storage_failure(error):
+                raise
+            raise self._not_written(_storage_reason(error)) from error
+        self._check_written()
+        return result
+
+    def _check_written(self) -> None:
+        """Raise :class:`CheckpointNotWritten` if the step last started is not on disk now that
+        orbax says it has finished: a failure in one of its background threads is logged there,
+        not raised, and would otherwise pass for a checkpoint."""
+        if self.pending is not None and not self.manager.is_saving_in_progress():
+            step, self.pending = self.pending, None
+            if step not in _steps(self.manager):
+                raise self._not_written(f"step {step} is not on disk after writing it")
+
+    def _not_written(self, why: str) -> CheckpointNotWritten:
+        _QUIET.failed = True  # its leftovers report up to the process's exit
+        _FAILED_WRITE_TASKS.install()
+        kept = _steps(self.manager)
+        before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
+        return CheckpointNotWritten(
+            f"could not write a checkpoint in {self.directory} ({why}); {before}. Free space, "
+            "or choose another checkpoint directory, and resume (--resume)"
+        )
+
+
+def _steps(manager: ocp.CheckpointManager) -> list[int]:
+    manager.reload()
+    return sorted(manager.all_steps())
+
+
+class _OrbaxChatter(logging.Filter):
+    """Drops orbax's own log records (through absl's logger) but for its errors: a line for
+    every save and restore at INFO and WARNING, a line for each damaged checkpoint's metadata
+    file at every look at the directory, which this module reports once, as damage, and the
+    tracebacks of a background write that failed, which it raises as CheckpointNotWritten.
+    Every other record, the user's own through absl included, passes at its own level."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if f"{os.sep}orbax{os.sep}" not in record.pathname:
+            return True
+        damaged = str(record.msg).startswith("Failed to json parse Metadata file")
+        # A background write's failure, which Checkpoints raises itself (CheckpointNotWritten).
+        failure = record.exc_info[1] if record.exc_info else None
+        unwritten = failure is not None and _storage_failure(failure)
+        unwritten |= "_SignalingThread.run() raised an exception" in str(record.msg)
+        return record.levelno >= logging.ERROR and not damaged and not unwritten
+
+
+class _FailedWriteTasks(logging.Filter):
+    """Drops asyncio's reports of orbax's tasks whose exception nobody retrieved: those of a
+    write that failed, which :class:`CheckpointNotWritten` reports already, would say it again
+    at length whenever they are collected (at the exit, or sooner). Installed once a write
+    has failed; any other task's report passes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = str(record.msg)
+        return not (message.startswith("Task exception was never retrieved") and "orbax" in message)
+
+    def install(self) -> None:
+        logger = logging.getLogger("asyncio")
+        if self not in logger.filters:
+            logger.addFilter(self)
+
+
+_FAILED_WRITE_TASKS = _FailedWriteTasks()
+
+
+class _ReadsLeftBehind:
+    """An unraisable-exception hook that drops the reports of reads that orbax left behind, and
+    passes every other report on to the hook it replaced.
+
+    When orbax's read or write of one array fails (a file cut short, a full disk), it closes
+    the event loop it works in while tensorstore is still at the other arrays. Each of those,
+    once done, schedules its result on the closed loop from a tensorstore thread, and the
+    RuntimeError is reported as unraisable: a screen of tracebacks, up to the interpreter's
+    exit, about a failure that this module reports already (a damaged checkpoint, or
+    :class:`CheckpointNotWritten`).
+    """
+
+    def __init__(self, previous: Callable[[Any], object]):
+        self.previous = previous
+
+    def __call__(self, unraisable: Any) -> None:
+        trace = unraisable.exc_traceback
+        left_behind = (
+            isinstance(unraisable.exc_value, RuntimeError)
+            and str(unraisable.exc_value) == "Event loop is closed"
+            and trace is not None
+            and trace.tb_frame.f_code.co_name == "call_soon_threadsafe"  # called from C
+        )
+        if not left_behind:
+            self.previous(unraisable)
+
+
+class _Quieting:
+    """Orbax kept quiet while checkpoints are open: :class:`_OrbaxChatter` on absl's logger
+    and :class:`_ReadsLeftBehind` as the unraisable hook, from the first :class:`Checkpoints`
+    opened to the last one closed, when the process's logger and hook are as they were found.
+    Once orbax has failed (a damaged checkpoint read, a write storage refused: `failed`), its
+    leftovers report up to the process's exit, so the quieting stays."""
+
+    def __init__(self) -> None:
+        self.users = 0
+        self.failed = False
+        self.chatter = _OrbaxChatter()
+        self.hook: _ReadsLeftBehind | None = None
+
+    def open(self) -> None:
+        if self.users == 0:
+            logger = logging.getLogger("absl")
+            if self.chatter not in logger.filters:
+                logger.addFilter(self.chatter)
+            if not isinstance(sys.unraisablehook, _ReadsLeftBehind):
+                self.hook = _ReadsLeftBehind(sys.unraisablehook)
+                sys.unraisablehook = self.hook
+        self.users += 1
+
+    def close(self) -> None:
+        self.users -= 1
+        if self.users > 0 or self.failed:
+            return
+        logging.getLogger("absl").removeFilter(self.chatter)
+        if self.hook is not None and sys.unraisablehook is self.hook:
+            sys.unraisablehook = self.hook.previous
+        self.hook = None
+
+
+_QUIET = _Quieting()
+
+
+def _manager(directory: Path, keep: int) -> ocp.CheckpointManager:
+    """Orbax's manager of `directory`'s checkpoints, writing in the background and keeping the
+    newest `keep` (it deletes older ones only after a new one is committed); in a multi-process
+    run this process alone writes there (the driver's process 0)."""
+    # Orbax on first use, here and in each method: a run without checkpoints never waits for it.
+    import orbax.checkpoint as ocp
+
+    options = ocp.CheckpointManagerOptions(
+        max_to_keep=keep, create=True, enable_async_checkpointing=True
+    )
+    if jax.process_count() > 1:
+        alone = {jax.process_index()}
+        options.multiprocessing_options = ocp.options.MultiprocessingOptions(
+            primary_host=jax.process_index(), active_processes=alone
+        )
+        options.create = False  # orbax creates it with every process only
+        directory.mkdir(parents=True, exist_ok=True)
+    return ocp.CheckpointManager(directory, options=options)
+
+
+def _warn(directory: Path, step: int, error: Exception, what: str, done: str = "") -> None:
+    warnings.warn(
+        f"checkpoint at step {step} in {directory} {what} "
+        f"({type(error).__name__}: {first_line(error)}); {done}trying the previous one",
+        DamagedCheckpoint,
+        stacklevel=4,
+    )
+
+
+def _storage_failure(error: BaseException) -> bool:
+    """Whether `error` is storage refusing a write, as orbax passes it on: an ``OSError``, or
+    tensorstore's ``ValueError`` that carries the operating system's error code."""
+    return isinstance(error, OSError) or "os_error_code" in str(error)
+
+
+def _storage_reason(error: Exception) -> str:
+    """What storage said, in the operating system's words where it gave its error code."""
+    if isinstance(error, OSError) and error.strerror:
+        return error.strerror
+    code = re.search(r"os_error_code='(\d+)'", str(error))
+    return os.strerror(int(code.group(1))) if code else first_line(error)
+
+
+def _args(**items: Any) -> ocp.args.Composite:
+    import orbax.checkpoint as ocp
+
+    return ocp.args.Composite(**items)
+
+
+def _name(index: int) -> str:
+    return f"leaf_{index:05d}"
+
+
+def _is_key(x: Any) -> bool:
+    return jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)  # type: ignore[attr-defined]  # jax.dtypes does not re-export it
+
+
+def _storable(x: Any) -> Any:
+    return jax.random.key_data(x) if _is_key(x) else x
+
+
+def _storable_shape(x: Any) -> jax.ShapeDtypeStruct:
+    if _is_key(x):
+        return cast(jax.ShapeDtypeStruct, jax.eval_shape(jax.random.key_data, x))
+    return jax.ShapeDtypeStruct(np.shape(x), x.dtype)
+
+
+def _from_storable(x: np.ndarray, like: Any) -> Any:
+    return jax.random.wrap_key_data(x) if _is_key(like) else x  # type: ignore[arg-type]  # host key data is a valid argument
+
+
+def _verify(name: str, arrays: Any, record: dict[str, Any]) -> None:
+    if tree_digest(arrays) != record["digests"][name]:
+        raise InvalidInput(f"its {name} arrays do not match the digest written with them")

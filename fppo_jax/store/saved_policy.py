@@ -1,0 +1,129 @@
+"""A trained policy saved on its own: ``<directory>/policy.json`` (its description, the run's
+configuration and a SHA-256 digest of its arrays) and ``<directory>/policy.npz`` (the arrays,
+named by their paths), each written to a temporary name and renamed; ``policy.json`` names its
+layout (:data:`FORMAT`), and one of another layout is refused, not taken for damage.
+:func:`load_policy` reads a saved policy, or the policy of a run's newest readable checkpoint
+(:mod:`fppo_jax.store.checkpoint`).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+from flax.traverse_util import flatten_dict, unflatten_dict
+
+from fppo_jax.core.policy import Policy
+from fppo_jax.errors import InvalidInput, MissingFile, first_line
+from fppo_jax.store.checkpoint import Checkpoints
+from fppo_jax.store.files import check_format, json_value, tree_digest, write_atomically
+
+POLICY_FILE, ARRAYS_FILE = "policy.json", "policy.npz"
+# The layout of policy.json and policy.npz (files.check_format; numpy_policy reads it too).
+FORMAT = 1
+
+
+def save_policy(
+    directory: str | Path,
+    policy: Policy,
+    record: dict[str, Any],
+    *,
+    overwrite: bool = False,
+) -> Path:
+    """Write `policy` and `record` (the run's ``config`` and its ``update``) to `directory` as
+    ``policy.json`` and ``policy.npz``; a saved policy already there is refused unless
+    `overwrite`. Returns the directory."""
+    directory = Path(directory)
+    check_no_saved_policy(directory, overwrite)
+    directory.mkdir(parents=True, exist_ok=True)
+    arrays = flatten_dict(jax.device_get(policy.arrays()), sep="/")
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    saved = {
+        **record,
+        "kind": "policy",
+        "format": FORMAT,
+        "policy": policy.describe(),
+        "digest": tree_digest(arrays),
+    }
+    # policy.json last: it marks the directory as a saved policy, and an overwrite killed
+    # between the two renames leaves arrays that fail its digest, never a wrong policy.
+    write_atomically(directory / ARRAYS_FILE, buffer.getvalue())
+    write_atomically(
+        directory / POLICY_FILE, (json.dumps(json_value(saved), indent=2) + "\n").encode()
+    )
+    return directory
+
+
+def check_no_saved_policy(
+    directory: str | Path, overwrite: bool = False, *, replace: str = "pass overwrite=True"
+) -> None:
+    """Raise InvalidInput if `directory` holds a saved policy and not `overwrite`; the message
+    says how to replace it (`replace`: the Python way unless told)."""
+    if not overwrite and (Path(directory) / POLICY_FILE).exists():
+        raise InvalidInput(
+            f"{directory} already holds a saved policy; {replace} to replace it, or choose "
+            "another directory"
+        )
+
+
+def load_policy(directory: str | Path) -> Policy:
+    """The trained policy in `directory`, as a :class:`~fppo_jax.core.policy.Policy`: an inference
+    function of raw observations that needs neither the trainer nor the environment.
+    `directory` holds a saved policy (``TrainResult.save``) or the checkpoints of
+    :func:`fppo_jax.train` (``checkpoint_dir``), whose newest readable one is used."""
+    return read_policy(directory)[0]
+
+
+def read_policy(directory: str | Path) -> tuple[Policy, dict[str, Any]]:
+    """The policy in `directory` and the record of its run (``config``, ``update``, ``kind``:
+    ``"policy"`` for a saved policy, ``"train"`` for a checkpoint)."""
+    directory = Path(directory)
+    if directory.is_file():
+        raise MissingFile(
+            f"{directory} is a file: name the directory that holds a saved policy "
+            f"({POLICY_FILE} and {ARRAYS_FILE}) or a run's checkpoints"
+        )
+    if not directory.is_dir():
+        raise MissingFile(f"policy or checkpoint directory {directory} not found")
+    if (directory / POLICY_FILE).exists():
+        return _read_saved_policy(directory)
+    checkpoints = Checkpoints(directory)
+    try:
+        if not checkpoints.steps():
+            raise MissingFile(
+                f"{directory} holds neither a saved policy ({POLICY_FILE} and {ARRAYS_FILE}) "
+                "nor checkpoints"
+            )
+        return checkpoints.policy()
+    finally:
+        checkpoints.close()
+
+
+def _read_saved_policy(directory: Path) -> tuple[Policy, dict[str, Any]]:
+    try:
+        saved = json.loads((directory / POLICY_FILE).read_text())
+        if not isinstance(saved, dict):
+            raise InvalidInput(f"{POLICY_FILE} holds a JSON {type(saved).__name__}, not an object")
+    except Exception as error:
+        raise _damaged(directory, error) from error
+    check_format(saved, f"the saved policy in {directory}", FORMAT)
+    try:
+        with np.load(directory / ARRAYS_FILE, allow_pickle=False) as npz:
+            arrays = dict(npz)
+        if tree_digest(arrays) != saved["digest"]:
+            raise InvalidInput("its arrays do not match the digest written with them")
+        policy = Policy.from_parts(saved["policy"], unflatten_dict(arrays, sep="/"))
+    except Exception as error:  # any failure to read back is damage
+        raise _damaged(directory, error) from error
+    return policy, saved
+
+
+def _damaged(directory: Path, error: Exception) -> InvalidInput:
+    return InvalidInput(
+        f"the saved policy in {directory} is damaged ({type(error).__name__}: {first_line(error)})"
+    )

@@ -4,7 +4,14 @@ from pathlib import Path
 import pytest
 
 import fppo_jax
-from fppo_jax.errors import FppoError, InvalidInput, MissingFile, MissingPackage, NotEnoughMemory
+from fppo_jax.errors import (
+    FppoError,
+    InvalidInput,
+    MissingFile,
+    MissingPackage,
+    NotEnoughMemory,
+    first_line,
+)
 
 PACKAGE = Path(fppo_jax.__file__).parent
 # Runs without the package's other modules (a policy deployed on its own), so its errors are the
@@ -46,3 +53,12 @@ def test_each_kind_is_caught_as_its_built_in_and_as_a_project_error(kind, built_
     for caught in (built_in, FppoError):
         with pytest.raises(caught):
             raise kind("refused")
+
+
+def test_first_line_is_the_messages_first_line_at_most_200_characters():
+    assert first_line(ValueError("cannot read\nTraceback: ...")) == "cannot read"
+    assert first_line(ValueError("\n  padded  \nsecond")) == "padded  "
+    assert first_line(ValueError("")) == "no message"
+    assert first_line(KeyError()) == "no message"
+    assert first_line(OSError("x" * 500)) == "x" * 200
+    assert first_line(KeyError("digest")) == "'digest'"

@@ -14,7 +14,6 @@ from fppo_jax.store.files import (
     DirectoryBusy,
     DirectoryLock,
     DirectoryLost,
-    first_line,
     json_value,
     tree_digest,
     writable_directory,
@@ -98,15 +97,6 @@ def test_tree_digest_tells_apart_values_names_dtypes_and_shapes_with_the_same_by
         tree_digest({"x": x[:2], "y": x[2:]}),  # the same bytes, split
     }
     assert len(digests) == 6
-
-
-def test_first_line_is_the_messages_first_line_at_most_200_characters():
-    assert first_line(ValueError("cannot read\nTraceback: ...")) == "cannot read"
-    assert first_line(ValueError("\n  padded  \nsecond")) == "padded  "
-    assert first_line(ValueError("")) == "no message"
-    assert first_line(KeyError()) == "no message"
-    assert first_line(OSError("x" * 500)) == "x" * 200
-    assert first_line(KeyError("digest")) == "'digest'"
 
 
 def test_one_lock_per_directory_until_released(tmp_path):

@@ -1,7 +1,10 @@
 """The tune's results and report, from rung scores made by hand."""
 
+import numpy as np
+import pytest
+
 from fppo_jax.tuning import Rungs
-from fppo_jax.tuning_report import arm_results, ranked, write_report
+from fppo_jax.tuning_report import arm_results, expected_best, ranked, write_report
 
 
 def row(trial, score, diverged=False):
@@ -52,6 +55,36 @@ def test_an_arms_results_say_what_the_rungs_measured():
     assert [point["env_steps"] for point in found["curve"]] == steps
     assert [point["best"] for point in found["curve"]] == [15.0, 25.0, 35.0]
     assert found["first_rung_spread"]["median"] == 10.5
+
+
+def test_the_expected_best_of_n_settings_is_dodge_et_als_estimator():
+    # Two settings drawn from {0, 1}: their best is 1 unless both are 0, with probability 1/4.
+    point, _, _ = expected_best(np.array([1.0, 0.0]), 3)
+    assert point == pytest.approx([0.5, 0.75, 0.875])
+    scores = np.array([3.0, 1.0, 4.0, 1.0, 5.0, 9.0, 2.0, 6.0, 5.0])
+    point, low, high = expected_best(scores, 9)
+    assert point[0] == pytest.approx(scores.mean())
+    assert np.all(np.diff(point) > 0) and point[-1] < scores.max()
+    assert np.all(low <= point) and np.all(point <= high)
+    assert np.all(high <= scores.max())  # a bootstrap never reaches above the best seen
+
+
+def test_the_band_repeats_with_its_seed_and_narrows_with_more_trials():
+    scores = np.array([3.0, 1.0, 4.0, 1.0, 5.0, 9.0, 2.0, 6.0, 5.0])
+    first, again = expected_best(scores, 9, seed=3), expected_best(scores, 9, seed=3)
+    assert all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
+    assert not np.array_equal(first[1], expected_best(scores, 9, seed=4)[1])
+    # The same spread of scores from 9 and from 90 trials: at every n the band of 90 is narrower.
+    # (Not a law at large n: 9 trials from a long tail hold their band under the best seen.)
+    _, low_9, high_9 = expected_best(np.linspace(0, 1, 9), 9, resamples=500)
+    _, low_90, high_90 = expected_best(np.linspace(0, 1, 90), 9, resamples=500)
+    assert np.all(high_90 - low_90 < high_9 - low_9)
+
+
+def test_one_trial_gives_a_band_of_zero_width():
+    point, low, high = expected_best(np.array([7.0]), 5)
+    assert np.array_equal(point, np.full(5, 7.0))
+    assert np.array_equal(low, point) and np.array_equal(high, point)
 
 
 def test_a_trial_without_an_episode_ranks_below_scored_ones_and_a_diverged_one_not_at_all():

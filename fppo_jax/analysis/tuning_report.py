@@ -2,9 +2,20 @@
 setting and its score, trial 0's (the default's), the tuning curve (the best score at each
 rung against the env steps spent), the share of sampled settings that beat the baseline's
 default (Jordan et al., "Evaluating the Performance of Reinforcement Learning Algorithms",
-ICML 2020), the spread of the first rung's scores over the space (how sensitive the arm is to
-its setting), the trials that diverged, and Eimer et al.'s reporting checklist (space, budget,
-seeds, selection, test) filled in from the plan. ``tuning_curves.png`` draws the curves."""
+ICML 2020), the spread of the first rung's scores over the space (the arm's sensitivity to its
+setting: quartiles, sample std and range), the trials that diverged, and Eimer et al.'s
+reporting checklist (space, budget, seeds, selection, test) filled in from the plan.
+``tuning_curves.png`` draws the curves.
+
+The band on the tuning curve is the first rung's, where every trial has trained the same
+length on a setting drawn from the space: the expected best of n settings drawn from those
+scores, against the env steps n first-rung trials cost (Dodge et al., "Show Your Work: Improved
+Reporting of Experimental Results", EMNLP 2019), with a percentile bootstrap band that
+resamples the trials (:func:`expected_best`). Later rungs hold a few trials that earlier rungs
+chose, not draws from the space, so they get no band. A bootstrap band of a maximum from a few
+trials is known to cover less often than it claims (Lourie, Cho and He, "Show Your Work with
+Confidence: Confidence Bands for Tuning Curves", NAACL 2024), and it never reaches above the
+best score seen: read it as too narrow rather than too wide."""
 
 from __future__ import annotations
 
@@ -14,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from fppo_jax.core.config import positive_int
+from fppo_jax.stats.statistics import CONFIDENCE, RESAMPLES, check_confidence
 from fppo_jax.store.files import write_atomically
 
 
@@ -22,6 +35,42 @@ def ranked(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     one (no episode finished), ties by trial number."""
     alive = [row for row in rows if not row["diverged"]]
     return sorted(alive, key=lambda r: (r["score"] is None, -(r["score"] or 0.0), r["trial"]))
+
+
+def expected_best(
+    scores: np.ndarray,
+    settings: int,
+    *,
+    confidence: float = CONFIDENCE,
+    resamples: int = RESAMPLES,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The expected best score of n settings drawn from the space, n = 1 … `settings`, from
+    the N finite `scores` of settings that were drawn, with its percentile bootstrap band at
+    level `confidence`: ``(point, low, high)``, each of length `settings`.
+
+    Sorted, v₍₁₎ ≤ … ≤ v₍N₎, n settings drawn with replacement from the scores have their best
+    at or below v₍ᵢ₎ with probability (i/N)ⁿ, so (Dodge et al. 2019, expected validation
+    performance with the empirical distribution)
+
+        E[best of n] = Σᵢ v₍ᵢ₎ · ((i/N)ⁿ − ((i − 1)/N)ⁿ),
+
+    the mean of the scores at n = 1 and rising towards the best one seen. Each of `resamples`
+    replicates draws N scores from `scores` with replacement and computes the same curve; the
+    band at each n is those curves' percentiles at (1 ∓ `confidence`)/2. Seeded: it repeats."""
+    scores = np.asarray(scores, dtype=float)
+    if not scores.size or not np.isfinite(scores).all():
+        raise ValueError(f"expected_best needs finite scores, got {scores}")
+    confidence = check_confidence(confidence)
+    resamples = positive_int("resamples", resamples)
+    n = np.arange(1, positive_int("settings", settings) + 1)[:, None]
+    i = np.arange(1, scores.size + 1)
+    weights = (i / scores.size) ** n - ((i - 1) / scores.size) ** n  # [n, i]
+    replicates = np.random.default_rng(seed).choice(scores, (resamples, scores.size))
+    curves = np.sort(replicates, axis=-1) @ weights.T  # [replicate, n]
+    tail = 100 * (1 - confidence) / 2
+    low, high = np.percentile(curves, [tail, 100 - tail], axis=0)
+    return weights @ np.sort(scores), low, high
 
 
 def _score(rows: list[dict[str, Any]], trial: int) -> float | None:
@@ -81,7 +130,8 @@ def arm_results(
             "sampled": len(sampled),
             "beat": len(beat),
         },
-        "first_rung_spread": _quartiles(finite),
+        "first_rung_spread": _spread(finite),
+        "expected_best": _expected_best_curve(finite, len(first), curve[0]["env_steps"]),
         "diverged_trials": diverged,
         "tied_rungs": [r for r, s in enumerate(rungs_scores[:-1]) if _tied(s["arms"][arm])],
     }
@@ -94,11 +144,42 @@ def _tied(rung: dict[str, Any]) -> bool:
     return len(rung["trials"]) > len(rung["survivors"]) and len(scores) == 1
 
 
-def _quartiles(x: np.ndarray) -> dict[str, float | None]:
+def _spread(x: np.ndarray) -> dict[str, float | None]:
+    """The quartiles and the sample std of scores `x` (None for the std of one score)."""
     if not x.size:
-        return {name: None for name in ("min", "q1", "median", "q3", "max")}
+        return {name: None for name in ("min", "q1", "median", "q3", "max", "sample_std")}
     q = np.percentile(x, [0, 25, 50, 75, 100])
-    return dict(zip(("min", "q1", "median", "q3", "max"), map(float, q), strict=True))
+    spread: dict[str, float | None] = dict(
+        zip(("min", "q1", "median", "q3", "max"), map(float, q), strict=True)
+    )
+    spread["sample_std"] = float(np.std(x, ddof=1)) if x.size > 1 else None
+    return spread
+
+
+def _expected_best_curve(x: np.ndarray, trials: int, env_steps: int) -> dict[str, Any] | None:
+    """:func:`expected_best` of the first rung's finite scores `x` for 1 … `trials` settings,
+    each point at the env steps its settings cost on the first rung (`env_steps` for all
+    `trials`). Trials without a score (diverged, or no episode) are not among the draws: the
+    report counts them apart. None when no trial scored."""
+    if not x.size:
+        return None
+    point, low, high = expected_best(x, trials)
+    return {
+        "scored_trials": int(x.size),
+        "confidence": CONFIDENCE,
+        "resamples": RESAMPLES,
+        "seed": 0,
+        "points": [
+            {
+                "settings": n + 1,
+                "env_steps": env_steps * (n + 1) // trials,
+                "expected_best": float(point[n]),
+                "low": float(low[n]),
+                "high": float(high[n]),
+            }
+            for n in range(trials)
+        ],
+    }
 
 
 def _number(x: float | None) -> str:
@@ -127,23 +208,21 @@ def write_report(output: Path, plan: dict[str, Any], results: dict[str, Any]) ->
             f"ending at {ends} "
             "env steps per run).",
             "",
-            "| arm | default, rung 1 | best, rung 1 | first-rung quartiles | chosen trial | "
-            f"chosen score | sampled settings above {plan['baseline']}'s default | diverged "
-            "| env steps |",
-            "|---|---|---|---|---|---|---|---|---|",
+            "| arm | default, rung 1 | best, rung 1 | chosen trial | chosen score | "
+            f"sampled settings above {plan['baseline']}'s default | diverged | env steps |",
+            "|---|---|---|---|---|---|---|---|",
         ]
         for arm, found in arms.items():
-            spread, chosen = found["first_rung_spread"], found["chosen"]
-            beat = found["beat_baseline_default"]
+            chosen, beat = found["chosen"], found["beat_baseline_default"]
             lines.append(
                 f"| {arm} | {_number(found['default']['first_rung_score'])} | "
-                f"{_number(found['curve'][0]['best'])} | {_number(spread['q1'])} / "
-                f"{_number(spread['median'])} / {_number(spread['q3'])} | "
+                f"{_number(found['curve'][0]['best'])} | "
                 f"{'—' if chosen is None else chosen['trial']} | "
                 f"{'—' if chosen is None else _number(chosen['score'])} | "
                 f"{beat['beat']} of {beat['sampled']} | {len(found['diverged_trials'])} | "
                 f"{found['env_steps']:,} |"
             )
+        lines += _first_rung_lines(plan["trials"], arms)
         tied = [
             f"{arm} at rung {', '.join(str(r + 1) for r in found['tied_rungs'])}"
             for arm, found in arms.items()
@@ -169,7 +248,9 @@ def write_report(output: Path, plan: dict[str, Any], results: dict[str, Any]) ->
         "",
         "Scores here are on the tuning seeds, which chose the settings: they are biased upward "
         "as estimates of how well the chosen settings train. The test is a study on fresh "
-        "seeds (`fppo-jax study --tuned`).",
+        "seeds (`fppo-jax study --tuned`). A bootstrap band of a best score from a few trials "
+        "covers less often than its level says, and never reaches above the best score seen "
+        "(Lourie, Cho and He, NAACL 2024): read it as too narrow rather than too wide.",
         "",
         "## Checklist (Eimer, Lindauer and Raileanu, ICML 2023)",
         "",
@@ -187,6 +268,51 @@ def write_report(output: Path, plan: dict[str, Any], results: dict[str, Any]) ->
     ]
     write_atomically(output / "report.md", ("\n".join(lines) + "\n").encode())
     _figure(output, results)
+
+
+def _first_rung_lines(trials: int, arms: dict[str, Any]) -> list[str]:
+    """The first rung's table: each arm's sensitivity (the spread of its scores over the
+    space) and the expected best of `trials` settings with its band, and which bands are wide."""
+    lines = [
+        "",
+        "The first rung, where every trial trained the same length on a setting drawn from the "
+        "space: the spread of its scores is the arm's sensitivity to its setting (sample std; "
+        "range, max − min), and the expected best of n settings drawn from them (Dodge et al., "
+        "EMNLP 2019) is the tuning curve's start, with a 95% bootstrap band over the trials.",
+        "",
+        "| arm | scored trials | quartiles | sample std | range | "
+        f"expected best of {trials} settings [95% band] |",
+        "|---|---|---|---|---|---|",
+    ]
+    wide = []
+    for arm, found in arms.items():
+        spread, band = found["first_rung_spread"], found["expected_best"]
+        width = None if spread["min"] is None else spread["max"] - spread["min"]
+        shown, scored = "—", 0
+        if band is not None:
+            first, last = band["points"][0], band["points"][-1]
+            shown = f"{_number(last['expected_best'])} [{_number(last['low'])}, "
+            shown += f"{_number(last['high'])}]"
+            scored = band["scored_trials"]
+            # Wide: the band at the full first rung is wider than all the curve rose from one
+            # setting to it, so the trials cannot tell how much the search gained. (The rise is
+            # never below 0 but for rounding, which must not call a zero-width band wide.)
+            rise = last["expected_best"] - first["expected_best"]
+            if last["high"] - last["low"] > max(rise, 0.0):
+                wide.append(arm)
+        lines.append(
+            f"| {arm} | {scored} | {_number(spread['q1'])} / {_number(spread['median'])} / "
+            f"{_number(spread['q3'])} | {_number(spread['sample_std'])} | {_number(width)} | "
+            f"{shown} |"
+        )
+    if wide:
+        lines += [
+            "",
+            f"Wide bands ({', '.join(wide)}): wider than the whole rise of the expected best "
+            f"from one setting to {trials}, so {trials} trials do not tell how much searching "
+            "this space gains.",
+        ]
+    return lines
 
 
 def _seed_text(seeds: list[int]) -> str:
@@ -221,11 +347,24 @@ def _figure(output: Path, results: dict[str, Any]) -> None:
     for ax, task in zip(axes[0], tasks, strict=True):
         for arm, found in results[task].items():
             points = [(c["env_steps"], c["best"]) for c in found["curve"] if c["best"] is not None]
-            if points:
-                ax.plot(*zip(*points, strict=True), marker="o", label=arm)
+            if not points:  # no trial scored at any rung: then none on the first, no band
+                continue
+            (line,) = ax.plot(*zip(*points, strict=True), marker="o", label=arm)
+            if found["expected_best"] is not None:
+                steps, best, low, high = (
+                    [point[key] for point in found["expected_best"]["points"]]
+                    for key in ("env_steps", "expected_best", "low", "high")
+                )
+                ax.plot(steps, best, linestyle="--", color=line.get_color())
+                ax.fill_between(steps, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
         ax.set_title(task)
         ax.set_xlabel("env steps spent by the arm")
-        ax.set_ylabel("best trial's score at the rung")
+        ax.set_ylabel("best score")
         ax.legend(fontsize=8)
+    figure.suptitle(
+        "solid: the best trial at each rung; dashed: the expected best of n first-rung "
+        "settings,\nshaded: its 95% bootstrap band over the trials",
+        fontsize=8,
+    )
     figure.savefig(output / "tuning_curves.png", dpi=90)
     plt.close(figure)

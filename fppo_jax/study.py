@@ -38,7 +38,7 @@ import numpy as np
 
 from fppo_jax import statistics
 from fppo_jax.config import positive_int, resolve_hyperparameters, sweepable
-from fppo_jax.driver import part_bounds, part_runs
+from fppo_jax.driver import check_part, part_runs
 from fppo_jax.errors import InvalidInput
 from fppo_jax.files import DirectoryLock, json_value, writable_directory, write_json
 from fppo_jax.objectives import BUILTINS, hyperparameter_names, identities, resolve, takers, union
@@ -274,7 +274,7 @@ def _check_arguments(
     if chunk is not None:
         positive_int("chunk", chunk)
     if part is not None:  # its shape: a group's runs, which it shares, are known at its look
-        part_bounds(part, part[1] if isinstance(part, tuple | list) and len(part) == 2 else 0)
+        check_part(part)
     if "variant" in settings:
         raise InvalidInput("a study's variants are its candidates and its baseline, not variant")
     taken = sorted(set(OWN_SETTINGS) & set(settings))

@@ -792,6 +792,10 @@ class _Task:
                     recorded["compile_seconds"],
                 )
             )
+        self._say(
+            f"{self.task}: rung {rung + 1}: joining its parts ({len(shares)} of {n} had runs to "
+            "train)"
+        )
         return shares
 
     def _share(self, part: tuple[int, int]) -> _Share:

@@ -545,10 +545,8 @@ class _Task:
     def run(self, allowed: float) -> int:
         """Trains up to `allowed` rungs after those recorded; returns how many it trained."""
         self.directory.mkdir(exist_ok=True)
-        while (self.directory / f"rung-{len(self.scores)}" / _SCORES).exists():
-            self._recorded(
-                json.loads((self.directory / f"rung-{len(self.scores)}" / _SCORES).read_text())
-            )
+        for scores in recorded_rungs(self.directory):
+            self._recorded(scores)
         trained = 0
         while not self.finished and trained < allowed:
             self._train_rung(len(self.scores))
@@ -715,6 +713,15 @@ class _Task:
     def _say(self, line: str) -> None:
         if self.progress:
             print(line, file=sys.stderr, flush=True)
+
+
+def recorded_rungs(directory: Path) -> list[dict[str, Any]]:
+    """The scores of a task's rungs recorded in `directory` (``rung-<r>/scores.json``), in
+    order, up to the first rung not recorded."""
+    found: list[dict[str, Any]] = []
+    while (path := directory / f"rung-{len(found)}" / _SCORES).exists():
+        found.append(json.loads(path.read_text()))
+    return found
 
 
 def fetch_diverged(state: TrainState) -> np.ndarray:

@@ -15,6 +15,7 @@ from fppo_jax import tuning
 from fppo_jax.errors import InvalidInput
 from fppo_jax.study import study
 from fppo_jax.tuning import TUNING_SEED_START, schedule, tune
+from fppo_jax.tuning_report import across_tasks
 
 # Four trials per arm halved by 2 over 8 updates: rungs of 4, 2 and 1 trials ending at updates
 # 2, 4 and 8.
@@ -226,6 +227,85 @@ def test_a_study_refuses_the_tunes_seeds_and_another_protocol(tuned, tmp_path):
             learning_rate=1e-3,
             **arguments,
         )
+
+
+def _rung(arms):
+    """A rung's scores as scores.json records them: per arm, trial → score (None: no episode
+    finished; a list: diverged, with that score)."""
+    return {
+        "arms": {
+            arm: {
+                "trials": [
+                    {
+                        "trial": t,
+                        "score": score[0] if isinstance(score, list) else score,
+                        "diverged": isinstance(score, list),
+                    }
+                    for t, score in trials.items()
+                ]
+            }
+            for arm, trials in arms.items()
+        }
+    }
+
+
+def test_across_tasks_the_best_mean_normalised_score_at_the_deepest_rung_every_task_shares():
+    rungs = {
+        # ppo's best here is trial 1, spo's trial 1: both go on.
+        "a": [
+            _rung({"ppo": {0: 10.0, 1: 50.0, 2: 30.0}, "spo": {0: 0.0, 1: 100.0, 2: 20.0}}),
+            _rung({"ppo": {1: 60.0}, "spo": {1: 90.0}}),
+        ],
+        # ppo's best here is trial 2, spo's trial 1 again.
+        "b": [
+            _rung(
+                {"ppo": {0: -100.0, 1: -90.0, 2: -50.0}, "spo": {0: -200.0, 1: -60.0, 2: -100.0}}
+            ),
+            _rung({"ppo": {2: -40.0}, "spo": {1: -70.0}}),
+        ],
+    }
+    # No trial of ppo reached the second rung on both: on the first, normalised over every
+    # arm's trials per task (a: 0 … 100, b: -200 … -50), trial 2's mean (0.3 + 1.0) / 2 beats
+    # trial 1's (0.5 + 0.733) / 2 and trial 0's.
+    found = across_tasks(rungs, "ppo")
+    assert found == {"trial": 2, "rung": 0, "normalised_score": pytest.approx(0.65)}
+    # spo's trial 1 reached the second rung on both tasks: it is the one compared there.
+    assert across_tasks(rungs, "spo") == {"trial": 1, "rung": 1, "normalised_score": 0.5}
+    # A trial that diverged on a task reached no rung there (nor one that never scored), and
+    # its score normalises nothing.
+    rungs["b"][0]["arms"]["ppo"]["trials"][2]["diverged"] = True
+    rungs["b"][1]["arms"]["ppo"]["trials"] = []
+    found = across_tasks(rungs, "ppo")
+    assert found == {
+        "trial": 1,
+        "rung": 0,
+        "normalised_score": pytest.approx((0.5 + 110 / 140) / 2),
+    }
+    # A task where every trial ties counts 0 for each; ties go to the lower trial number.
+    tied = {
+        "a": [_rung({"ppo": {0: 5.0, 1: 7.0, 2: 7.0}})],
+        "c": [_rung({"ppo": {0: 5.0, 1: 5.0, 2: 5.0}})],
+    }
+    assert across_tasks(tied, "ppo") == {"trial": 1, "rung": 0, "normalised_score": 0.5}
+    assert (
+        across_tasks({"a": rungs["a"], "c": [_rung({"ppo": {0: None, 1: [3.0]}})]}, "ppo") is None
+    )
+
+
+def test_a_tune_draws_the_same_trials_on_every_task(tmp_path):
+    tune(["cartpole", "acrobot"], ARMS, output=tmp_path, rungs=0, **SMALL)
+    optuna = tuning._optuna()
+    for arm in ARMS:
+        drawn = [
+            [
+                t.params
+                for t in optuna.load_study(
+                    study_name=f"{task}/{arm}", storage=f"sqlite:///{tmp_path}/optuna.db"
+                ).trials
+            ]
+            for task in ("cartpole", "acrobot")
+        ]
+        assert drawn[0] == drawn[1] and len(drawn[0]) == SMALL["trials"]
 
 
 def test_a_tune_not_finished_is_no_source_of_settings(tmp_path):

@@ -11,9 +11,9 @@ import pytest
 from conftest import TINY
 
 import fppo_jax
-from fppo_jax import tuning
+from fppo_jax import statistics, tuning
 from fppo_jax.errors import InvalidInput
-from fppo_jax.study import study
+from fppo_jax.study import run_scores, study
 from fppo_jax.tuning import TUNING_SEED_START, schedule, tune
 from fppo_jax.tuning_report import across_tasks
 
@@ -168,19 +168,11 @@ def test_a_changed_plan_is_refused_naming_the_change(tuned, tmp_path):
         tune("cartpole", ["ppo", "spo"], output=copy, **SMALL)
 
 
-def test_a_study_tests_the_chosen_settings_on_fresh_seeds(tuned, tmp_path):
+def test_a_study_tests_the_chosen_settings_on_fresh_seeds_with_the_defaults_beside(tuned, tmp_path):
     output, result, _ = tuned
+    arguments = dict(max_seeds=2, group_size=2, total_steps=8 * 128, progress=False, **TINY)
     found = study(
-        "cartpole",
-        "fppo-lp",
-        "ppo",
-        output=tmp_path / "study",
-        tuned=output,
-        max_seeds=2,
-        group_size=2,
-        total_steps=8 * 128,
-        progress=False,
-        **TINY,
+        "cartpole", "fppo-lp", "ppo", output=tmp_path / "study", tuned=output, **arguments
     )
     plan = found.plan["tuned"]
     assert plan["settings"]["cartpole"] == {
@@ -194,6 +186,65 @@ def test_a_study_tests_the_chosen_settings_on_fresh_seeds(tuned, tmp_path):
         assert {k: v for k, v in setting.items() if k != "variant"} == pytest.approx(expected)
     report = (tmp_path / "study/report.md").read_text()
     assert "setting a tune chose" in report
+    assert "beside_defaults" not in json.loads((tmp_path / "study/decisions.json").read_text())
+    with pytest.raises(InvalidInput, match="on a tune's settings: give tuned"):
+        study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", with_defaults=True, **arguments)
+
+    # The defaults beside: taken here from a study of the defaults without a tune, not trained.
+    plain = study("cartpole", "fppo-lp", "ppo", output=tmp_path / "plain", **arguments)
+    both = study(
+        "cartpole",
+        "fppo-lp",
+        "ppo",
+        output=tmp_path / "both",
+        tuned=output,
+        with_defaults=True,
+        reuse=tmp_path / "plain",
+        **arguments,
+    )
+    assert both.decisions == found.decisions  # the option adds runs, never changes a decision
+    assert both.plan["with_defaults"] is True
+    assert both.defaults["cartpole"].seeds == [0, 1]
+    record = json.loads((tmp_path / "both/decisions.json").read_text())
+    assert [
+        (g.get("defaults", False), "commit" in g, sorted(g.get("reused", {})))
+        for g in record["groups"]
+    ] == [(False, True, []), (True, False, ["fppo-lp", "ppo"])]
+    beside = record["beside_defaults"]
+    assert beside["endpoint"] == "final" and beside["tested"] is False
+    defaults = plain.results["cartpole"]
+    for row in beside["tuned_against_default"]:
+        arm = row["arm"]
+        expected = statistics.compare(
+            run_scores(found.results["cartpole"], arm, "final"), run_scores(defaults, arm, "final")
+        )
+        assert row["seeds"] == 2
+        assert row["probability_of_improvement"] == pytest.approx(
+            expected["probability_of_improvement"], nan_ok=True
+        )
+    assert [row["arm"] for row in beside["tuned_against_default"]] == ["fppo-lp", "ppo"]
+    (compared,) = beside["default_against_default"]
+    expected = statistics.compare(
+        run_scores(defaults, "fppo-lp", "final"), run_scores(defaults, "ppo", "final")
+    )
+    assert compared["probability_of_improvement"] == pytest.approx(
+        expected["probability_of_improvement"], nan_ok=True
+    )
+    report = (tmp_path / "both/report.md").read_text()
+    assert "| arm | seeds | P(tuned > default) | IQM difference, tuned − default |" in report
+    assert "| ppo | 2 | " in report and "not tested, outside the family" in report
+    decision = found.decisions[0]["decision"]
+    assert f"| fppo-lp | {decision} | 2 | " in report
+    with pytest.raises(InvalidInput, match="planned with with_defaults = true, not none"):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "both",
+            tuned=output,
+            reuse=tmp_path / "plain",
+            **arguments,
+        )
 
 
 def test_a_study_refuses_the_tunes_seeds_and_another_protocol(tuned, tmp_path):

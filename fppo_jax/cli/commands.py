@@ -170,6 +170,7 @@ def _study(args: argparse.Namespace) -> int:
         reuse=args.reuse,
         part=part,
         tuned=args.tuned,
+        with_defaults=args.with_defaults,
         progress=not args.quiet,
         **_evaluation(args),
         **hyperparameters_given(args),

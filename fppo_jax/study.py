@@ -83,6 +83,15 @@ EQUIVALENCE_TEST = (
     "procedure across the comparisons (fppo_jax.sequential)"
 )
 PLAN_FILE, DECISIONS_FILE, REPORT_FILE = "plan.json", "decisions.json", "report.md"
+ACROSS_TASKS = (
+    "across tasks: per arm, one trial for every task (a drawn trial is the same point on each; "
+    "trial 0 is each task's default), chosen among the arm's trials that reached the deepest "
+    "rung reached on every task by any of them: the best mean over the tune's tasks of its "
+    "score at that rung, normalised per task by the min and max of every arm's trials scored "
+    "there (a task where they all tie counts 0); ties by trial number; a trial's deepest rung "
+    "on a task is the last where it scored and did not diverge "
+    "(fppo_jax.tuning_report.across_tasks)"
+)
 # Where each arm's default setting trains beside its tuned one (with_defaults), by task and group.
 DEFAULTS = "defaults"
 
@@ -121,6 +130,7 @@ def study(
     part: tuple[int, int] | None = None,
     tuned: str | Path | None = None,
     with_defaults: bool = False,
+    across_tasks: bool = False,
     **settings: Any,
 ) -> StudyResult:
     """Compare each of `candidates` with `baseline` on each of `tasks`, adding seeds in groups
@@ -143,7 +153,9 @@ def study(
     trial 0) also trains on the same seeds at the same looks (in ``defaults/``, or taken from
     recorded runs with `reuse`), and the report and ``decisions.json`` give each arm's gain from
     tuning and the default-against-default comparisons beside the decisions, untested.
-    `total_steps`, `preset`, `backend`, `chunk` and `settings` are the sweeps'.
+    `across_tasks` chooses one trial per arm for all the tune's tasks
+    (:func:`~fppo_jax.tuning_report.across_tasks`) instead of each task's best. `total_steps`,
+    `preset`, `backend`, `chunk` and `settings` are the sweeps'.
     """
     tasks = names_of_tasks(tasks)
     candidates, baseline = _variants(candidates, baseline)
@@ -154,10 +166,13 @@ def study(
     everyone = [*candidates, baseline]
     chosen = None
     if tuned is not None:
-        chosen = tuned_settings(tuned, tasks, everyone, design, settings, bool(with_defaults))
-    elif with_defaults:
+        chosen = tuned_settings(
+            tuned, tasks, everyone, design, settings, bool(across_tasks), bool(with_defaults)
+        )
+    elif with_defaults or across_tasks:
         raise InvalidInput(
-            "with_defaults is an option of a study on a tune's settings: give tuned (--tuned DIR)"
+            "with_defaults and across_tasks are options of a study on a tune's settings: give "
+            "tuned (--tuned DIR)"
         )
     source = _Source.of(tasks, everyone, settings, shape, chunk, part, sources, chosen)
     if tuned is not None:
@@ -355,11 +370,13 @@ def tuned_settings(
     everyone: list[Surrogate],
     design: Design,
     settings: dict[str, Any],
+    across_tasks: bool = False,
     with_defaults: bool = False,
 ) -> dict[str, Any]:
     """What a study on a tune's chosen settings records of the tune in `directory`: where it is,
-    its plan's digest, its tuning seeds and each variant's chosen setting on each task; refused
-    if the tune is not finished, lacks a task or a variant, or used a seed the study would, or, with
+    its plan's digest, its tuning seeds and each variant's chosen setting on each task (with
+    `across_tasks`, the trial chosen for all the tune's tasks, and the rule); refused if the
+    tune is not finished, lacks a task or a variant, or used a seed the study would, or, with
     `with_defaults`, if a trial 0 is not the default this code trains."""
     from fppo_jax.tuning import PLAN_FILE as TUNE_PLAN
     from fppo_jax.tuning import RESULTS_FILE, plan_digest
@@ -386,18 +403,23 @@ def tuned_settings(
     for variant in everyone:
         if variant.name not in tune_plan["variants"]:
             raise InvalidInput(f"the tune in {directory} did not tune {variant.name}")
+    trials = _across_tasks(directory, tune_plan, results, everyone) if across_tasks else None
     chosen: dict[str, dict[str, Any]] = {}
     for task in tasks:
         for variant in everyone:
             found = results[task][variant.name]
             if with_defaults:
                 _check_trial_0(directory, task, variant, found["default"]["setting"])
-            if found["chosen"] is None:
+            if trials is not None:
+                setting = found["trials"][trials[variant.name]["trial"]]
+            elif found["chosen"] is None:
                 raise InvalidInput(
                     f"the tune in {directory} chose no setting for {variant.name} on {task}: "
                     "every trial diverged"
                 )
-            chosen.setdefault(task, {})[variant.name] = found["chosen"]["setting"]
+            else:
+                setting = found["chosen"]["setting"]
+            chosen.setdefault(task, {})[variant.name] = setting
     overlap = sorted(set(tune_plan["seeds"]) & set(range(design.max_seeds)))
     if overlap:
         raise InvalidInput(
@@ -409,8 +431,50 @@ def tuned_settings(
         "plan_digest": digest,
         "tuning_seeds": tune_plan["seeds"],
         "protocol": {task: tune_plan["protocol"][task] for task in tasks},
+        # recorded only where chosen across tasks: a plan from before the option is one without
+        **({} if trials is None else {"selection": ACROSS_TASKS, "trials": trials}),
         "settings": chosen,
     }
+
+
+def _across_tasks(
+    directory: Path,
+    tune_plan: dict[str, Any],
+    results: dict[str, Any],
+    everyone: list[Surrogate],
+) -> dict[str, dict[str, Any]]:
+    """Each variant's trial chosen for all the tune's tasks by the rule of
+    :func:`~fppo_jax.tuning_report.across_tasks` (its trial, rung and mean normalised score),
+    from the rungs' scores the tune recorded; refused for a tune of one task, one whose
+    ``results.json`` lacks the trials' settings, and a variant no trial of which scored on
+    every task."""
+    from fppo_jax.tuning import recorded_rungs
+    from fppo_jax.tuning_report import across_tasks
+
+    tuned = tune_plan["tasks"]
+    if len(tuned) < 2:
+        raise InvalidInput(
+            f"the tune in {directory} tuned one task ({tuned[0]}): a setting chosen across "
+            "tasks needs several (without across_tasks the setting is its best on that task)"
+        )
+    if any("trials" not in arms[v.name] for arms in results.values() for v in everyone):
+        raise InvalidInput(
+            f"the tune in {directory} did not record each trial's setting (its results.json "
+            "is from an earlier version): run the same tune command again, which trains nothing "
+            "and records them"
+        )
+    rungs = {task: recorded_rungs(directory / task) for task in tuned}
+    trials = {}
+    for variant in everyone:
+        found = across_tasks(rungs, variant.name)
+        if found is None:
+            raise InvalidInput(
+                f"no trial of {variant.name} scored on every task of the tune in {directory} "
+                "(each diverged or finished no episode on one): no setting can be chosen across "
+                "them"
+            )
+        trials[variant.name] = found
+    return trials
 
 
 def _check_trial_0(directory: Path, task: str, variant: Surrogate, trial_0: dict[str, Any]) -> None:

@@ -261,8 +261,16 @@ def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[st
     )
     tuned = plan.get("tuned")
     if tuned:
+        trials = tuned.get("trials")
+        chosen = "the setting a tune chose for it on each task"
+        if trials is not None:
+            picked = ", ".join(f"{found['trial']} of {arm}" for arm, found in trials.items())
+            chosen = (
+                "one trial of a tune for every task, chosen across the tune's tasks on "
+                f"normalised scores (trial {picked}; plan.json states the rule)"
+            )
         reused += (
-            f" Each arm trained at the setting a tune chose for it on each task (the tune in "
+            f" Each arm trained at {chosen} (the tune in "
             f"{tuned['directory']}, plan digest {tuned['plan_digest'][:12]}, tuning seeds "
             f"{tuned['tuning_seeds'][0]} … {tuned['tuning_seeds'][-1]}, none of them tested "
             "here); plan.json lists the settings."

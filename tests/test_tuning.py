@@ -14,7 +14,7 @@ import fppo_jax
 from fppo_jax import statistics, tuning
 from fppo_jax.errors import InvalidInput
 from fppo_jax.study import run_scores, study
-from fppo_jax.tuning import TUNING_SEED_START, schedule, tune
+from fppo_jax.tuning import TUNING_SEED_START, recorded_rungs, schedule, tune
 from fppo_jax.tuning_report import across_tasks
 
 # Four trials per arm halved by 2 over 8 updates: rungs of 4, 2 and 1 trials ending at updates
@@ -357,6 +357,78 @@ def test_a_tune_draws_the_same_trials_on_every_task(tmp_path):
             for task in ("cartpole", "acrobot")
         ]
         assert drawn[0] == drawn[1] and len(drawn[0]) == SMALL["trials"]
+
+
+def test_a_study_across_tasks_takes_each_arms_trial_for_every_task(tuned, tmp_path):
+    output, _, _ = tuned
+    arguments = dict(max_seeds=2, group_size=2, total_steps=8 * 128, progress=False, **TINY)
+    with pytest.raises(InvalidInput, match="tuned one task \\(cartpole\\): a setting chosen"):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "s",
+            tuned=output,
+            across_tasks=True,
+            **arguments,
+        )
+    with pytest.raises(InvalidInput, match="on a tune's settings: give tuned"):
+        study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", across_tasks=True, **arguments)
+    # A second task made of the first's records: its trials' settings are the same, as a tune's
+    # draws are on every task.
+    copy = tmp_path / "tune"
+    shutil.copytree(output, copy)
+    shutil.copytree(copy / "cartpole", copy / "acrobot")
+    plan = json.loads((copy / "tune.json").read_text())
+    plan["tasks"].append("acrobot")
+    (copy / "tune.json").write_text(json.dumps(plan))
+    results = json.loads((copy / "results.json").read_text())
+    results["acrobot"] = results["cartpole"]
+    (copy / "results.json").write_text(json.dumps(results))
+    found = study(
+        "cartpole",
+        "fppo-lp",
+        "ppo",
+        output=tmp_path / "study",
+        tuned=copy,
+        across_tasks=True,
+        with_defaults=True,
+        **arguments,
+    )
+    recorded = {task: recorded_rungs(copy / task) for task in ("cartpole", "acrobot")}
+    trials = {arm: across_tasks(recorded, arm) for arm in ["fppo-lp", "ppo"]}
+    assert found.plan["tuned"]["trials"] == trials
+    assert found.plan["tuned"]["selection"].startswith("across tasks: per arm, one trial")
+    for setting in found.results["cartpole"].settings:
+        arm = setting.pop("variant")
+        assert setting == pytest.approx(results["cartpole"][arm]["trials"][trials[arm]["trial"]])
+    assert [s["variant"] for s in found.defaults["cartpole"].settings] == ["fppo-lp", "ppo"]
+    assert "chosen across the tune's tasks" in (tmp_path / "study/report.md").read_text()
+    with pytest.raises(InvalidInput, match=r"planned with tuned\.selection = "):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "study",
+            tuned=copy,
+            with_defaults=True,
+            **arguments,
+        )
+    results = json.loads((copy / "results.json").read_text())
+    for arms in results.values():
+        for arm in arms.values():
+            del arm["trials"]
+    (copy / "results.json").write_text(json.dumps(results))
+    with pytest.raises(InvalidInput, match="run the same tune command again"):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "s",
+            tuned=copy,
+            across_tasks=True,
+            **arguments,
+        )
 
 
 def test_a_tune_not_finished_is_no_source_of_settings(tmp_path):

@@ -288,6 +288,13 @@ def _add_study_running(studied: Parser) -> None:
         "gives each arm's gain from tuning and the defaults compared, untested, beside the "
         "decisions, which stay the tuned ones",
     )
+    studied.add_argument(
+        "--across-tasks",
+        action="store_true",
+        help="with --tuned: one trial per arm for every task, the best mean over the tune's "
+        "tasks of its scores normalised per task at the deepest rung its trials reached on "
+        "all of them, instead of each task's best (docs/tuning.md)",
+    )
     add_option_flags(studied, only=("eval_every", "eval_episodes"))
 
 

@@ -415,6 +415,18 @@ def test_a_study_across_tasks_takes_each_arms_trial_for_every_task(tuned, tmp_pa
             **arguments,
         )
     results = json.loads((copy / "results.json").read_text())
+    results["cartpole"]["ppo"]["default"]["setting"]["gamma"] = 0.95
+    (copy / "results.json").write_text(json.dumps(results))
+    with pytest.raises(InvalidInput, match=r"tried ppo.s default on cartpole with gamma = 0\.95"):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "s",
+            tuned=copy,
+            with_defaults=True,
+            **arguments,
+        )
     for arms in results.values():
         for arm in arms.values():
             del arm["trials"]

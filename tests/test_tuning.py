@@ -13,9 +13,11 @@ from conftest import TINY
 
 import fppo_jax
 from fppo_jax.analysis import tuning
-from fppo_jax.analysis.studies import study
-from fppo_jax.analysis.tuning import TUNING_SEED_START, schedule, tune
+from fppo_jax.analysis.studies import run_scores, study
+from fppo_jax.analysis.tuning import TUNING_SEED_START, recorded_rungs, schedule, tune
+from fppo_jax.analysis.tuning_report import across_tasks
 from fppo_jax.errors import InvalidInput
+from fppo_jax.stats import statistics
 
 # Four trials per arm halved by 2 over 8 updates: rungs of 4, 2 and 1 trials ending at updates
 # 2, 4 and 8.
@@ -166,21 +168,22 @@ def test_a_changed_plan_is_refused_naming_the_change(tuned, tmp_path):
         tune("cartpole", ARMS, output=copy, **{**SMALL, "trials": 8})
     with pytest.raises(InvalidInput, match="variants"):
         tune("cartpole", ["ppo", "spo"], output=copy, **SMALL)
+    with pytest.raises(InvalidInput, match="sampler.seed = 0, not 1"):
+        tune("cartpole", ARMS, output=copy, **{**SMALL, "sampler_seed": 1})
+    # Another Optuna release is recorded, as the commit is, and not held against the tune: every
+    # trial was drawn before the first rung.
+    plan = json.loads((copy / "tune.json").read_text())
+    plan["sampler"]["package"] = "optuna 0.0.1"
+    (copy / "tune.json").write_text(json.dumps(plan))
+    assert tune("cartpole", ARMS, output=copy, **SMALL).finished
+    assert json.loads((copy / "tune.json").read_text())["sampler"]["package"] == "optuna 0.0.1"
 
 
-def test_a_study_tests_the_chosen_settings_on_fresh_seeds(tuned, tmp_path):
+def test_a_study_tests_the_chosen_settings_on_fresh_seeds_with_the_defaults_beside(tuned, tmp_path):
     output, result, _ = tuned
+    arguments = dict(max_seeds=2, group_size=2, total_steps=8 * 128, progress=False, **TINY)
     found = study(
-        "cartpole",
-        "fppo-lp",
-        "ppo",
-        output=tmp_path / "study",
-        tuned=output,
-        max_seeds=2,
-        group_size=2,
-        total_steps=8 * 128,
-        progress=False,
-        **TINY,
+        "cartpole", "fppo-lp", "ppo", output=tmp_path / "study", tuned=output, **arguments
     )
     plan = found.plan["tuned"]
     assert plan["settings"]["cartpole"] == {
@@ -194,6 +197,65 @@ def test_a_study_tests_the_chosen_settings_on_fresh_seeds(tuned, tmp_path):
         assert {k: v for k, v in setting.items() if k != "variant"} == pytest.approx(expected)
     report = (tmp_path / "study/report.md").read_text()
     assert "setting a tune chose" in report
+    assert "beside_defaults" not in json.loads((tmp_path / "study/decisions.json").read_text())
+    with pytest.raises(InvalidInput, match="on a tune's settings: give tuned"):
+        study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", with_defaults=True, **arguments)
+
+    # The defaults beside: taken here from a study of the defaults without a tune, not trained.
+    plain = study("cartpole", "fppo-lp", "ppo", output=tmp_path / "plain", **arguments)
+    both = study(
+        "cartpole",
+        "fppo-lp",
+        "ppo",
+        output=tmp_path / "both",
+        tuned=output,
+        with_defaults=True,
+        reuse=tmp_path / "plain",
+        **arguments,
+    )
+    assert both.decisions == found.decisions  # the option adds runs, never changes a decision
+    assert both.plan["with_defaults"] is True
+    assert both.defaults["cartpole"].seeds == [0, 1]
+    record = json.loads((tmp_path / "both/decisions.json").read_text())
+    assert [
+        (g.get("defaults", False), "commit" in g, sorted(g.get("reused", {})))
+        for g in record["groups"]
+    ] == [(False, True, []), (True, False, ["fppo-lp", "ppo"])]
+    beside = record["beside_defaults"]
+    assert beside["endpoint"] == "final" and beside["tested"] is False
+    defaults = plain.results["cartpole"]
+    for row in beside["tuned_against_default"]:
+        arm = row["arm"]
+        expected = statistics.compare(
+            run_scores(found.results["cartpole"], arm, "final"), run_scores(defaults, arm, "final")
+        )
+        assert row["seeds"] == 2
+        assert row["probability_of_improvement"] == pytest.approx(
+            expected["probability_of_improvement"], nan_ok=True
+        )
+    assert [row["arm"] for row in beside["tuned_against_default"]] == ["fppo-lp", "ppo"]
+    (compared,) = beside["default_against_default"]
+    expected = statistics.compare(
+        run_scores(defaults, "fppo-lp", "final"), run_scores(defaults, "ppo", "final")
+    )
+    assert compared["probability_of_improvement"] == pytest.approx(
+        expected["probability_of_improvement"], nan_ok=True
+    )
+    report = (tmp_path / "both/report.md").read_text()
+    assert "| arm | seeds | P(tuned > default) | IQM difference, tuned − default |" in report
+    assert "| ppo | 2 | " in report and "not tested, outside the family" in report
+    decision = found.decisions[0]["decision"]
+    assert f"| fppo-lp | {decision} | 2 | " in report
+    with pytest.raises(InvalidInput, match="planned with with_defaults = true, not none"):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "both",
+            tuned=output,
+            reuse=tmp_path / "plain",
+            **arguments,
+        )
 
 
 def test_a_study_refuses_the_tunes_seeds_and_another_protocol(tuned, tmp_path):
@@ -225,6 +287,169 @@ def test_a_study_refuses_the_tunes_seeds_and_another_protocol(tuned, tmp_path):
             output=tmp_path / "s",
             tuned=output,
             learning_rate=1e-3,
+            **arguments,
+        )
+
+
+def _rung(arms):
+    """A rung's scores as scores.json records them: per arm, trial → score (None: no episode
+    finished; a list: diverged, with that score)."""
+    return {
+        "arms": {
+            arm: {
+                "trials": [
+                    {
+                        "trial": t,
+                        "score": score[0] if isinstance(score, list) else score,
+                        "diverged": isinstance(score, list),
+                    }
+                    for t, score in trials.items()
+                ]
+            }
+            for arm, trials in arms.items()
+        }
+    }
+
+
+def test_across_tasks_the_best_mean_normalised_score_at_the_deepest_rung_every_task_shares():
+    rungs = {
+        # ppo's best here is trial 1, spo's trial 1: both go on.
+        "a": [
+            _rung({"ppo": {0: 10.0, 1: 50.0, 2: 30.0}, "spo": {0: 0.0, 1: 100.0, 2: 20.0}}),
+            _rung({"ppo": {1: 60.0}, "spo": {1: 90.0}}),
+        ],
+        # ppo's best here is trial 2, spo's trial 1 again.
+        "b": [
+            _rung(
+                {"ppo": {0: -100.0, 1: -90.0, 2: -50.0}, "spo": {0: -200.0, 1: -60.0, 2: -100.0}}
+            ),
+            _rung({"ppo": {2: -40.0}, "spo": {1: -70.0}}),
+        ],
+    }
+    # No trial of ppo reached the second rung on both: on the first, normalised over every
+    # arm's trials per task (a: 0 … 100, b: -200 … -50), trial 2's mean (0.3 + 1.0) / 2 beats
+    # trial 1's (0.5 + 0.733) / 2 and trial 0's.
+    found = across_tasks(rungs, "ppo")
+    assert found == {"trial": 2, "rung": 0, "normalised_score": pytest.approx(0.65)}
+    # spo's trial 1 reached the second rung on both tasks: it is the one compared there.
+    assert across_tasks(rungs, "spo") == {"trial": 1, "rung": 1, "normalised_score": 0.5}
+    # A trial that diverged on a task reached no rung there (nor one that never scored), and
+    # its score normalises nothing.
+    rungs["b"][0]["arms"]["ppo"]["trials"][2]["diverged"] = True
+    rungs["b"][1]["arms"]["ppo"]["trials"] = []
+    found = across_tasks(rungs, "ppo")
+    assert found == {
+        "trial": 1,
+        "rung": 0,
+        "normalised_score": pytest.approx((0.5 + 110 / 140) / 2),
+    }
+    # A task where every trial ties counts 0 for each; ties go to the lower trial number.
+    tied = {
+        "a": [_rung({"ppo": {0: 5.0, 1: 7.0, 2: 7.0}})],
+        "c": [_rung({"ppo": {0: 5.0, 1: 5.0, 2: 5.0}})],
+    }
+    assert across_tasks(tied, "ppo") == {"trial": 1, "rung": 0, "normalised_score": 0.5}
+    assert (
+        across_tasks({"a": rungs["a"], "c": [_rung({"ppo": {0: None, 1: [3.0]}})]}, "ppo") is None
+    )
+
+
+def test_a_tune_draws_the_same_trials_on_every_task(tmp_path):
+    tune(["cartpole", "acrobot"], ARMS, output=tmp_path, rungs=0, **SMALL)
+    optuna = tuning._optuna()
+    for arm in ARMS:
+        drawn = [
+            [
+                t.params
+                for t in optuna.load_study(
+                    study_name=f"{task}/{arm}", storage=f"sqlite:///{tmp_path}/optuna.db"
+                ).trials
+            ]
+            for task in ("cartpole", "acrobot")
+        ]
+        assert drawn[0] == drawn[1] and len(drawn[0]) == SMALL["trials"]
+
+
+def test_a_study_across_tasks_takes_each_arms_trial_for_every_task(tuned, tmp_path):
+    output, _, _ = tuned
+    arguments = dict(max_seeds=2, group_size=2, total_steps=8 * 128, progress=False, **TINY)
+    with pytest.raises(InvalidInput, match="tuned one task \\(cartpole\\): a setting chosen"):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "s",
+            tuned=output,
+            across_tasks=True,
+            **arguments,
+        )
+    with pytest.raises(InvalidInput, match="on a tune's settings: give tuned"):
+        study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", across_tasks=True, **arguments)
+    # A second task made of the first's records: its trials' settings are the same, as a tune's
+    # draws are on every task.
+    copy = tmp_path / "tune"
+    shutil.copytree(output, copy)
+    shutil.copytree(copy / "cartpole", copy / "acrobot")
+    plan = json.loads((copy / "tune.json").read_text())
+    plan["tasks"].append("acrobot")
+    (copy / "tune.json").write_text(json.dumps(plan))
+    results = json.loads((copy / "results.json").read_text())
+    results["acrobot"] = results["cartpole"]
+    (copy / "results.json").write_text(json.dumps(results))
+    found = study(
+        "cartpole",
+        "fppo-lp",
+        "ppo",
+        output=tmp_path / "study",
+        tuned=copy,
+        across_tasks=True,
+        with_defaults=True,
+        **arguments,
+    )
+    recorded = {task: recorded_rungs(copy / task) for task in ("cartpole", "acrobot")}
+    trials = {arm: across_tasks(recorded, arm) for arm in ["fppo-lp", "ppo"]}
+    assert found.plan["tuned"]["trials"] == trials
+    assert found.plan["tuned"]["selection"].startswith("across tasks: per arm, one trial")
+    for setting in found.results["cartpole"].settings:
+        arm = setting.pop("variant")
+        assert setting == pytest.approx(results["cartpole"][arm]["trials"][trials[arm]["trial"]])
+    assert [s["variant"] for s in found.defaults["cartpole"].settings] == ["fppo-lp", "ppo"]
+    assert "chosen across the tune's tasks" in (tmp_path / "study/report.md").read_text()
+    with pytest.raises(InvalidInput, match=r"planned with tuned\.selection = "):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "study",
+            tuned=copy,
+            with_defaults=True,
+            **arguments,
+        )
+    results = json.loads((copy / "results.json").read_text())
+    results["cartpole"]["ppo"]["default"]["setting"]["gamma"] = 0.95
+    (copy / "results.json").write_text(json.dumps(results))
+    with pytest.raises(InvalidInput, match=r"tried ppo.s default on cartpole with gamma = 0\.95"):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "s",
+            tuned=copy,
+            with_defaults=True,
+            **arguments,
+        )
+    for arms in results.values():
+        for arm in arms.values():
+            del arm["trials"]
+    (copy / "results.json").write_text(json.dumps(results))
+    with pytest.raises(InvalidInput, match="run the same tune command again"):
+        study(
+            "cartpole",
+            "fppo-lp",
+            "ppo",
+            output=tmp_path / "s",
+            tuned=copy,
+            across_tasks=True,
             **arguments,
         )
 

@@ -41,6 +41,7 @@ from fppo_jax.analysis.study_report import (
     SHARES,
     START,
     Scores,
+    beside_defaults,
     steps_name,
     write_figures,
     write_report,
@@ -89,18 +90,31 @@ EQUIVALENCE_TEST = (
     "procedure across the comparisons (fppo_jax.stats.sequential)"
 )
 PLAN_FILE, DECISIONS_FILE, REPORT_FILE = "plan.json", "decisions.json", "report.md"
+ACROSS_TASKS = (
+    "across tasks: per arm, one trial for every task (a drawn trial is the same point on each; "
+    "trial 0 is each task's default), chosen among the arm's trials that reached the deepest "
+    "rung reached on every task by any of them: the best mean over the tune's tasks of its "
+    "score at that rung, normalised per task by the min and max of every arm's trials scored "
+    "there (a task where they all tie counts 0); ties by trial number; a trial's deepest rung "
+    "on a task is the last where it scored and did not diverge "
+    "(fppo_jax.analysis.tuning_report.across_tasks)"
+)
+# Where each arm's default setting trains beside its tuned one (with_defaults), by task and group.
+DEFAULTS = "defaults"
 
 
 @dataclasses.dataclass
 class StudyResult:
     """What a study holds so far: its `plan` (as ``plan.json`` has it), one row per comparison
     in `decisions` (as ``decisions.json`` has them), each task's recorded runs merged into one
-    sweep (`results`, by task), and whether every comparison is `finished`."""
+    sweep (`results`, by task), whether every comparison is `finished`, and with
+    ``with_defaults`` each task's runs of each arm's default setting (`defaults`, by task)."""
 
     plan: dict[str, Any]
     decisions: list[dict[str, Any]]
     results: dict[str, SweepResult]
     finished: bool
+    defaults: dict[str, SweepResult] = dataclasses.field(default_factory=dict)
 
 
 def study(
@@ -122,6 +136,8 @@ def study(
     reuse: str | Path | Sequence[str | Path] | None = None,
     part: tuple[int, int] | None = None,
     tuned: str | Path | None = None,
+    with_defaults: bool = False,
+    across_tasks: bool = False,
     **settings: Any,
 ) -> StudyResult:
     """Compare each of `candidates` with `baseline` on each of `tasks`, adding seeds in groups
@@ -140,8 +156,13 @@ def study(
     ``part=(K, N)`` trains the K-th of N shares of the next look's groups and returns.
     `tuned`, a finished tune's directory (:func:`~fppo_jax.tune`), trains each arm at the
     setting the tune chose for it on each task; the plan records the tune's digest, and seeds
-    that the tune used are refused. `total_steps`, `preset`, `backend`, `chunk` and `settings`
-    are the sweeps'.
+    that the tune used are refused. With `with_defaults`, each arm's default setting (the tune's
+    trial 0) also trains on the same seeds at the same looks (in ``defaults/``, or taken from
+    recorded runs with `reuse`), and the report and ``decisions.json`` give each arm's gain from
+    tuning and the default-against-default comparisons beside the decisions, untested.
+    `across_tasks` chooses one trial per arm for all the tune's tasks
+    (:func:`~fppo_jax.analysis.tuning_report.across_tasks`) instead of each task's best.
+    `total_steps`, `preset`, `backend`, `chunk` and `settings` are the sweeps'.
     """
     tasks = names_of_tasks(tasks)
     candidates, baseline = _variants(candidates, baseline)
@@ -150,14 +171,27 @@ def study(
     sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
     shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
     everyone = [*candidates, baseline]
-    chosen = None if tuned is None else tuned_settings(tuned, tasks, everyone, design, settings)
+    chosen = None
+    if tuned is not None:
+        chosen = tuned_settings(
+            tuned, tasks, everyone, design, settings, bool(across_tasks), bool(with_defaults)
+        )
+    elif with_defaults or across_tasks:
+        raise InvalidInput(
+            "with_defaults and across_tasks are options of a study on a tune's settings: give "
+            "tuned (--tuned DIR)"
+        )
     source = _Source.of(tasks, everyone, settings, shape, chunk, part, sources, chosen)
     if tuned is not None:
         _check_tuned_protocol(tuned, source)
+    if with_defaults:
+        source = dataclasses.replace(source, defaults=source.at_defaults(everyone))
     planned = {**shape, **_planned_settings(settings)}
     plan = make_plan(tasks, candidates, baseline, design, endpoint, planned, sources)
     if chosen is not None:
         plan["tuned"] = json_value(chosen)
+    if with_defaults:  # recorded only where given: a plan from before the option is one without
+        plan["with_defaults"] = True
     output = writable_directory(output)
     # Array tasks that start together take turns to check the plan (each holds the lock briefly).
     lock = DirectoryLock(output, "a study", wait=PART_LOCK_WAIT if part is not None else 0.0)
@@ -187,6 +221,8 @@ class _Source:
     identity: dict[str, Any]
     pool: Pool | None
     tuned: dict[str, Any] | None  # a tune's chosen settings, by task and variant
+    # with_defaults: the source of each arm's default setting, trained beside its tuned one
+    defaults: _Source | None = None
 
     @classmethod
     def of(
@@ -237,6 +273,16 @@ class _Source:
             chosen = self.tuned["settings"][task]
             grid = [{"variant": v, **chosen[v.name]} for v in variants]
         return sweep_group(task, grid, seeds, where, part=self.part, **self.shape, **fixed)
+
+    def at_defaults(self, everyone: list[Surrogate]) -> _Source:
+        """The like of this source for each arm's default setting: the settings a study without
+        a tune trains (no hyperparameter given), so that such a study's recorded runs are
+        taken from the pool."""
+        expected = {
+            task: (protocol, {s["variant"]: s for s in expand_grid({"variant": everyone}, task)})
+            for task, (protocol, _) in self.expected.items()
+        }
+        return dataclasses.replace(self, expected=expected, tuned=None)
 
     def take(self, task: str, variant: Surrogate, seeds: list[int]) -> Taken | None:
         """`variant`'s runs on `task` at `seeds` from the recorded sweeps, if they hold them
@@ -331,10 +377,14 @@ def tuned_settings(
     everyone: list[Surrogate],
     design: Design,
     settings: dict[str, Any],
+    across_tasks: bool = False,
+    with_defaults: bool = False,
 ) -> dict[str, Any]:
     """What a study on a tune's chosen settings records of the tune in `directory`: where it is,
-    its plan's digest, its tuning seeds and each variant's chosen setting on each task; refused
-    if the tune is not finished, lacks a task or a variant, or used a seed the study would."""
+    its plan's digest, its tuning seeds and each variant's chosen setting on each task (with
+    `across_tasks`, the trial chosen for all the tune's tasks, and the rule); refused if the
+    tune is not finished, lacks a task or a variant, or used a seed the study would, or, with
+    `with_defaults`, if a trial 0 is not the default this code trains."""
     from fppo_jax.analysis.tuning import PLAN_FILE as TUNE_PLAN
     from fppo_jax.analysis.tuning import RESULTS_FILE, plan_digest
 
@@ -354,20 +404,29 @@ def tuned_settings(
             f"a study on a tune's settings takes each arm's from the tune: {', '.join(given)} "
             "cannot be given beside it"
         )
-    chosen: dict[str, dict[str, Any]] = {}
     for task in tasks:
         if task not in results:
             raise InvalidInput(f"the tune in {directory} did not tune {task}")
+    for variant in everyone:
+        if variant.name not in tune_plan["variants"]:
+            raise InvalidInput(f"the tune in {directory} did not tune {variant.name}")
+    trials = _across_tasks(directory, tune_plan, results, everyone) if across_tasks else None
+    chosen: dict[str, dict[str, Any]] = {}
+    for task in tasks:
         for variant in everyone:
-            found = results[task].get(variant.name)
-            if found is None:
-                raise InvalidInput(f"the tune in {directory} did not tune {variant.name}")
-            if found["chosen"] is None:
+            found = results[task][variant.name]
+            if with_defaults:
+                _check_trial_0(directory, task, variant, found["default"]["setting"])
+            if trials is not None:
+                setting = found["trials"][trials[variant.name]["trial"]]
+            elif found["chosen"] is None:
                 raise InvalidInput(
                     f"the tune in {directory} chose no setting for {variant.name} on {task}: "
                     "every trial diverged"
                 )
-            chosen.setdefault(task, {})[variant.name] = found["chosen"]["setting"]
+            else:
+                setting = found["chosen"]["setting"]
+            chosen.setdefault(task, {})[variant.name] = setting
     overlap = sorted(set(tune_plan["seeds"]) & set(range(design.max_seeds)))
     if overlap:
         raise InvalidInput(
@@ -379,8 +438,66 @@ def tuned_settings(
         "plan_digest": digest,
         "tuning_seeds": tune_plan["seeds"],
         "protocol": {task: tune_plan["protocol"][task] for task in tasks},
+        # recorded only where chosen across tasks: a plan from before the option is one without
+        **({} if trials is None else {"selection": ACROSS_TASKS, "trials": trials}),
         "settings": chosen,
     }
+
+
+def _across_tasks(
+    directory: Path,
+    tune_plan: dict[str, Any],
+    results: dict[str, Any],
+    everyone: list[Surrogate],
+) -> dict[str, dict[str, Any]]:
+    """Each variant's trial chosen for all the tune's tasks by the rule of
+    :func:`~fppo_jax.analysis.tuning_report.across_tasks` (its trial, rung and mean normalised
+    score), from the rungs' scores the tune recorded; refused for a tune of one task, one whose
+    ``results.json`` lacks the trials' settings, and a variant no trial of which scored on
+    every task."""
+    from fppo_jax.analysis.tuning import recorded_rungs
+    from fppo_jax.analysis.tuning_report import across_tasks
+
+    tuned = tune_plan["tasks"]
+    if len(tuned) < 2:
+        raise InvalidInput(
+            f"the tune in {directory} tuned one task ({tuned[0]}): a setting chosen across "
+            "tasks needs several (without across_tasks the setting is its best on that task)"
+        )
+    if any("trials" not in arms[v.name] for arms in results.values() for v in everyone):
+        raise InvalidInput(
+            f"the tune in {directory} did not record each trial's setting (its results.json "
+            "is from an earlier version): run the same tune command again, which trains nothing "
+            "and records them"
+        )
+    rungs = {task: recorded_rungs(directory / task) for task in tuned}
+    trials = {}
+    for variant in everyone:
+        found = across_tasks(rungs, variant.name)
+        if found is None:
+            raise InvalidInput(
+                f"no trial of {variant.name} scored on every task of the tune in {directory} "
+                "(each diverged or finished no episode on one): no setting can be chosen across "
+                "them"
+            )
+        trials[variant.name] = found
+    return trials
+
+
+def _check_trial_0(directory: Path, task: str, variant: Surrogate, trial_0: dict[str, Any]) -> None:
+    """Refuses a tune whose trial 0 of `variant` on `task` is not the default setting that the
+    study trains beside the tuned one (defaults changed since the tune): the gain from tuning
+    would be measured over another setting than the tune's."""
+    tuned = resolve_hyperparameters(variant, task, **trial_0)[1]
+    here = resolve_hyperparameters(variant, task)[1]
+    differs = [k for k in here if tuned.get(k) != here[k]]
+    if differs:
+        key = differs[0]
+        raise InvalidInput(
+            f"the tune in {directory} tried {variant.name}'s default on {task} with {key} = "
+            f"{tuned.get(key)!r}, and this code's default is {here[key]!r}: its trial 0 is not "
+            "the default that with_defaults would train; tune again with this code"
+        )
 
 
 def _check_tuned_protocol(directory: str | Path, source: _Source) -> None:
@@ -500,11 +617,16 @@ def _fractions(design: Design) -> tuple[float, ...]:
 
 
 def check_plan(
-    output: Path, plan: dict[str, Any], what: str = "a study", name: str = PLAN_FILE
+    output: Path,
+    plan: dict[str, Any],
+    what: str = "a study",
+    name: str = PLAN_FILE,
+    recorded_only: frozenset[str] = frozenset({"commit"}),
 ) -> dict[str, Any]:
     """Write `plan` as `name` in `output`, or check it against the one there: `what` (a study,
-    a tune) goes on only under the plan it started with (the commit aside: a group records its
-    own). Returns the plan as recorded, with the commit it was made at."""
+    a tune) goes on only under the plan it started with, the fields in `recorded_only` aside
+    (the commit: a group records its own). Returns the plan as recorded, with the commit it was
+    made at."""
     path = output / name
     if not path.exists():
         write_json(path, plan)
@@ -514,12 +636,18 @@ def check_plan(
     except (OSError, json.JSONDecodeError) as error:
         raise InvalidInput(f"cannot read the plan {path}: {error}") from None
     for field in dict.fromkeys([*recorded, *plan]):
-        if field == "commit" or recorded.get(field) == plan.get(field):
-            continue
         was, now = recorded.get(field), plan.get(field)
+        if field in recorded_only or was == now:
+            continue
         if isinstance(was, dict) and isinstance(now, dict):
-            key = next(k for k in dict.fromkeys([*was, *now]) if was.get(k) != now.get(k))
-            field, was, now = f"{field}.{key}", was.get(key), now.get(key)
+            keys = [
+                k
+                for k in dict.fromkeys([*was, *now])
+                if was.get(k) != now.get(k) and f"{field}.{k}" not in recorded_only
+            ]
+            if not keys:
+                continue
+            field, was, now = f"{field}.{keys[0]}", was.get(keys[0]), now.get(keys[0])
         raise InvalidInput(
             f"{output} holds {what} planned with {field} = {_shown(was)}, not {_shown(now)}: "
             f"{what} goes on only under its plan (start another in a new directory)"
@@ -632,8 +760,10 @@ def run_scores(result: SweepResult, variant: str, endpoint: str) -> np.ndarray:
 
 @dataclasses.dataclass(frozen=True)
 class _Group:
-    """A task's group of seeds at one look: the `variants` still to train in `where` (`result`:
-    the group recorded there already, whole) and the runs `taken` from recorded sweeps."""
+    """A task's group of seeds at one look, of the study's settings or (`defaults`) of each
+    arm's default beside them: the `variants` still to train in `where` from `source`
+    (`result`: the group recorded there already, whole) and the runs `taken` from recorded
+    sweeps."""
 
     task: str
     look: int
@@ -642,6 +772,8 @@ class _Group:
     where: Path
     result: SweepResult | None
     taken: dict[str, Taken]
+    source: _Source
+    defaults: bool
 
     @property
     def to_train(self) -> bool:
@@ -662,6 +794,7 @@ def _run(
     With ``source.part``, the first look whose groups are not all recorded has this share of
     them trained, and the call returns there, writing no decision."""
     recorded: dict[str, list[SweepResult]] = {task: [] for task in tasks}
+    defaults: dict[str, list[SweepResult]] = {task: [] for task in tasks}  # with_defaults
     trained: list[dict[str, Any]] = []
     shown = _shown_progress(source.settings)
     endpoint = plan["primary_endpoint"]
@@ -672,7 +805,9 @@ def _run(
             break
         group_seeds = list(range(design.looks[look - 1] if look else 0, seeds))
         found = [
-            _group(output, source, task, look, group_seeds, [*variants, baseline])
+            _group(output, source, task, look, group_seeds, [*variants, baseline], beside)
+            # each arm's default at the same looks, on the same seeds, as its tuned setting
+            for beside in ((False, True) if source.defaults else (False,))
             for task in tasks
             # the baseline only while one of its task's candidates waits
             if (variants := [c for c in candidates if (task, c.name) in waiting])
@@ -683,7 +818,7 @@ def _run(
                 if recorded_group(group.where, group.variants, group.seeds, source.part) is None:
                     if shown:
                         _say(_training_line(group, len(design.looks), source.part))
-                    source.train(group.task, group.variants, group.seeds, group.where)
+                    group.source.train(group.task, group.variants, group.seeds, group.where)
             return StudyResult(plan, _rows(decisions, baseline), {}, False)
         for group in to_train if source.part is None else []:
             refuse_missing_shares(group.where)
@@ -693,7 +828,7 @@ def _run(
         for group in found:
             if shown:
                 _say(_training_line(group, len(design.looks)))
-            if entry := _gather(group, source, recorded):
+            if entry := _gather(group, defaults if group.defaults else recorded):
                 trained.append(entry)
         before = decisions
         decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
@@ -703,8 +838,9 @@ def _run(
                     _say(_decision_line(task, name, baseline.name, decision))
         if source.part is None:  # an array task writes no decision: the job after the array does
             _write_decisions(output, decisions, baseline, trained, plan)  # a killed one keeps them
-            _write_merged(output, recorded, [group.task for group in found])
-    return _finish(output, plan, recorded, decisions, baseline, trained, source.part)
+            for where, runs in ((output, recorded), (output / DEFAULTS, defaults)):
+                _write_merged(where, runs, [group.task for group in found])
+    return _finish(output, plan, recorded, defaults, decisions, baseline, trained, source.part)
 
 
 def _say(line: str) -> None:
@@ -715,6 +851,7 @@ def _say(line: str) -> None:
 def _training_line(group: _Group, looks: int, part: tuple[int, int] | None = None) -> str:
     """What a look does on a task: the seeds it trains, of which settings, and those taken."""
     seeds = f"seeds {group.seeds[0]}–{group.seeds[-1]}"
+    task = f"{group.task}, defaults" if group.defaults else group.task
     said = []
     if group.to_train:
         share = "" if part is None else f" (part {part[0]} of {part[1]})"
@@ -723,7 +860,7 @@ def _training_line(group: _Group, looks: int, part: tuple[int, int] | None = Non
         said.append(f"{seeds} of {', '.join(v.name for v in group.variants)} recorded already")
     if group.taken:
         said.append(f"{seeds} of {', '.join(group.taken)} taken from recorded sweeps")
-    return f"look {group.look + 1} of {looks}, {group.task}: {'; '.join(said)}"
+    return f"look {group.look + 1} of {looks}, {task}: {'; '.join(said)}"
 
 
 def _decision_line(task: str, candidate: str, baseline: str, decision: Decision) -> str:
@@ -745,10 +882,19 @@ def _write_merged(output: Path, recorded: dict[str, list[SweepResult]], tasks: l
 
 
 def _group(
-    output: Path, source: _Source, task: str, look: int, seeds: list[int], variants: list[Surrogate]
+    output: Path,
+    source: _Source,
+    task: str,
+    look: int,
+    seeds: list[int],
+    variants: list[Surrogate],
+    defaults: bool = False,
 ) -> _Group:
-    """`task`'s group at `look`: of `variants`, those whose runs `source` takes from recorded
-    sweeps, and the others, to train in the study's own directory unless recorded there."""
+    """`task`'s group at `look` (with `defaults`, of each arm's default, in ``defaults/``): of
+    `variants`, those whose runs `source` takes from recorded sweeps, and the others, to train
+    in the study's own directory unless recorded there."""
+    if defaults:
+        source, output = cast(_Source, source.defaults), output / DEFAULTS
     taken = {v.name: t for v in variants if (t := source.take(task, v, seeds))}
     variants = [v for v in variants if v.name not in taken]
     where = output / _directory_name(task) / f"group-{look + 1}"
@@ -760,48 +906,60 @@ def _group(
             f"({'; '.join(differences)}): a study's groups share one protocol. Go on on a "
             "machine that trains as this one did (a plan's backend auto is chosen by the machine)"
         )
-    return _Group(task, look, seeds, variants, where, result, taken)
+    return _Group(task, look, seeds, variants, where, result, taken, source, defaults)
 
 
-def _gather(
-    group: _Group, source: _Source, recorded: dict[str, list[SweepResult]]
-) -> dict[str, Any] | None:
+def _gather(group: _Group, recorded: dict[str, list[SweepResult]]) -> dict[str, Any] | None:
     """`group`'s runs added to `recorded`, trained first where they are not recorded; what
     ``decisions.json`` says of the group (None when it was recorded by an earlier call)."""
-    entry: dict[str, Any] = {"task": group.task, "group": group.look + 1, "seeds": group.seeds}
+    said: dict[str, Any] = {}
     result = group.result
     if group.to_train:
-        result = source.train(group.task, group.variants, group.seeds, group.where)
-        entry["commit"] = commit()
+        result = group.source.train(group.task, group.variants, group.seeds, group.where)
+        said["commit"] = commit()
     if result is not None:
         recorded[group.task].append(result)
     recorded[group.task] += [t.result for t in group.taken.values()]
     if group.taken:
-        entry["reused"] = {name: [str(s) for s in t.sources] for name, t in group.taken.items()}
-    return entry if len(entry) > 3 else None
+        said["reused"] = {name: [str(s) for s in t.sources] for name, t in group.taken.items()}
+    if not said:
+        return None
+    of = {"defaults": True} if group.defaults else {}
+    return {"task": group.task, "group": group.look + 1, **of, "seeds": group.seeds, **said}
 
 
 def _finish(
     output: Path,
     plan: dict[str, Any],
     recorded: dict[str, list[SweepResult]],
+    defaults: dict[str, list[SweepResult]],
     decisions: dict[tuple[str, str], Decision],
     baseline: Surrogate,
     trained: list[dict[str, Any]],
     part: tuple[int, int] | None,
 ) -> StudyResult:
     """The study as it stands; unless this call trained a `part`, its decisions, report and
-    figures written."""
+    figures written, with the comparisons of each arm's default beside them where the plan
+    trains them."""
     results = {task: merge(parts) for task, parts in recorded.items() if parts}
+    at_defaults = {task: merge(parts) for task, parts in defaults.items() if parts}
     if part is not None:
         rows = _rows(decisions, baseline)
-        return StudyResult(plan, rows, results, all(row["final"] for row in rows))
-    rows = _write_decisions(output, decisions, baseline, trained, plan)
+        return StudyResult(plan, rows, results, all(row["final"] for row in rows), at_defaults)
     scores = {task: _task_scores(result, plan) for task, result in results.items()}
+    variants, endpoint = (*plan["candidates"], plan["baseline"]), plan["primary_endpoint"]
+    beside = None
+    if plan.get("with_defaults"):
+        default_scores = {
+            task: {v: run_scores(result, v, endpoint) for v in variants}
+            for task, result in at_defaults.items()
+        }
+        beside = beside_defaults(plan, scores, default_scores)
+    rows = _write_decisions(output, decisions, baseline, trained, plan, beside)
     finished = all(row["final"] for row in rows)
-    write_report(output / REPORT_FILE, plan, rows, scores, finished)
+    write_report(output / REPORT_FILE, plan, rows, scores, finished, beside)
     write_figures(output, plan, rows, results, scores)
-    return StudyResult(plan, rows, results, finished)
+    return StudyResult(plan, rows, results, finished, at_defaults)
 
 
 def _task_scores(result: SweepResult, plan: dict[str, Any]) -> Scores:
@@ -889,15 +1047,17 @@ def _write_decisions(
     baseline: Surrogate,
     trained: list[dict[str, Any]],
     plan: dict[str, Any],
+    beside: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """``decisions.json``: the plan's margin where it has one, a row per comparison
-    (returned), and every group trained with the commit it ran at, or with the recorded sweeps
-    its runs were taken from, earlier calls' groups kept."""
+    (returned), what each arm's default measured `beside` them (untested, where given), and
+    every group trained with the commit it ran at, or with the recorded sweeps its runs were
+    taken from, earlier calls' groups kept."""
     path = output / DECISIONS_FILE
     earlier = json.loads(path.read_text()).get("groups", []) if path.exists() else []
-    by_group = {(g["task"], g["group"]): g for g in earlier}
+    by_group = {(g["task"], g["group"], g.get("defaults", False)): g for g in earlier}
     for entry in trained:  # a group trained earlier keeps its commit when runs are taken now
-        key = (entry["task"], entry["group"])
+        key = (entry["task"], entry["group"], entry.get("defaults", False))
         by_group[key] = {**by_group.get(key, {}), **entry}
     groups = list(by_group.values())
     rows = _rows(decisions, baseline)
@@ -905,7 +1065,8 @@ def _write_decisions(
         "finished": all(row["final"] for row in rows),
         **({"margin": plan["margin"]} if "margin" in plan else {}),
         "comparisons": rows,
-        "groups": sorted(groups, key=lambda g: (g["group"], g["task"])),
+        **({} if beside is None else {"beside_defaults": beside}),
+        "groups": sorted(groups, key=lambda g: (g["group"], g.get("defaults", False), g["task"])),
     }
     write_json(path, record)
     return rows

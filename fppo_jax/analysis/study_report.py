@@ -48,9 +48,11 @@ def write_report(
     rows: Sequence[dict[str, Any]],
     scores: dict[str, Scores],
     finished: bool,
+    beside: dict[str, Any] | None = None,
 ) -> None:
     """``report.md`` at `path`: the plan in a paragraph, then a section per task, from each
-    comparison's row of ``decisions.json`` and each task's `scores` so far."""
+    comparison's row of ``decisions.json`` and each task's `scores` so far, and what each arm's
+    default measured `beside` them (:func:`beside_defaults`), where the study trained them."""
     lines = _preamble(plan, len(rows), finished)
     for task in plan["tasks"]:
         lines += ["", f"## {task}"]
@@ -66,8 +68,96 @@ def write_report(
                 lines += _ties(scores[task], task_rows, endpoint)
                 lines += _moved_boundaries(task_rows, rows, plan)
         lines += ["", *_speed_table(scores[task], plan)]
+        if beside is not None:
+            lines += _defaults_tables(task, beside, task_rows)
     lines += _across_tasks(plan, rows, scores)
     write_atomically(path, ("\n".join(lines) + "\n").encode())
+
+
+def beside_defaults(
+    plan: dict[str, Any], scores: dict[str, Scores], defaults: dict[str, dict[str, np.ndarray]]
+) -> dict[str, Any]:
+    """What each arm's default setting (a tune's trial 0), trained beside its tuned one on the
+    same seeds, measures on the primary endpoint, untested: per task, each arm's tuned setting
+    against its default (the gain from tuning, on the test seeds) and each candidate's default
+    against the baseline's; each over the seeds both settings ran (the first ones), with the
+    probability of improvement and the IQM difference and their bootstrap intervals, as the
+    report gives the decided comparisons'. `defaults`: each task's default runs' scores on the
+    primary endpoint, by variant, in seed order."""
+    endpoint, baseline = plan["primary_endpoint"], plan["baseline"]
+    gains, compared = [], []
+    for task in plan["tasks"]:
+        if task not in defaults or task not in scores:
+            continue
+        for arm in (*plan["candidates"], baseline):
+            pair = scores[task][arm][endpoint], defaults[task][arm]
+            gains.append({"task": task, "arm": arm, **_compared(*pair)})
+        for candidate in plan["candidates"]:
+            pair = defaults[task][candidate], defaults[task][baseline]
+            compared.append(
+                {"task": task, "candidate": candidate, "baseline": baseline, **_compared(*pair)}
+            )
+    return {
+        "endpoint": endpoint,
+        "tested": False,
+        "tuned_against_default": gains,
+        "default_against_default": compared,
+    }
+
+
+def _compared(x: np.ndarray, y: np.ndarray) -> dict[str, Any]:
+    """`x`'s runs against `y`'s over the first seeds both ran: their count, P(x > y) and the IQM
+    difference, each ``[point, low, high]`` (None where no run of a side has a score)."""
+    seeds = min(len(x), len(y))
+    found = statistics.compare(x[:seeds], y[:seeds])
+    return {
+        "seeds": seeds,
+        **{name: [None if np.isnan(v) else v for v in values] for name, values in found.items()},
+    }
+
+
+def _defaults_tables(
+    task: str, beside: dict[str, Any], task_rows: Sequence[dict[str, Any]]
+) -> list[str]:
+    """The task's tables of :func:`beside_defaults`: each arm's tuned setting against its
+    default, and each candidate's default against the baseline's beside the decision."""
+    gains = [row for row in beside["tuned_against_default"] if row["task"] == task]
+    if not gains:
+        return []
+    baseline, endpoint = task_rows[0]["baseline"], beside["endpoint"]
+    decided = {row["candidate"]: row["decision"] for row in task_rows}
+    lines = [
+        "",
+        f"Beside the decisions, each arm's default setting (the tune's trial 0), trained on the "
+        f"same seeds at the same looks: reported, not tested, outside the family whose error "
+        f"the test controls. On {endpoint}, over the first seeds both settings ran, with "
+        f"{statistics.CONFIDENCE:.0%} bootstrap intervals unadjusted for stopping early or for "
+        "the number of comparisons. What tuning gained on the test seeds:",
+        "",
+        "| arm | seeds | P(tuned > default) | IQM difference, tuned − default |",
+        "|---|---|---|---|",
+    ]
+    for row in gains:
+        cells = [row["arm"], str(row["seeds"])]
+        cells += [_cell(row["probability_of_improvement"], ".2f")]
+        cells += [_cell(row["iqm_difference"], ".1f")]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        f"Each candidate's default against {baseline}'s default, beside the decision between "
+        "their tuned settings:",
+        "",
+        f"| candidate | decision, both tuned | seeds | P(default > {baseline}'s default) | "
+        "IQM difference of the defaults |",
+        "|---|---|---|---|---|",
+    ]
+    for row in beside["default_against_default"]:
+        if row["task"] == task:
+            cells = [row["candidate"], decided[row["candidate"]], str(row["seeds"])]
+            cells += [_cell(row["probability_of_improvement"], ".2f")]
+            cells += [_cell(row["iqm_difference"], ".1f")]
+            lines.append("| " + " | ".join(cells) + " |")
+    return lines
 
 
 def normalised_scores(
@@ -171,11 +261,26 @@ def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[st
     )
     tuned = plan.get("tuned")
     if tuned:
+        trials = tuned.get("trials")
+        chosen = "the setting a tune chose for it on each task"
+        if trials is not None:
+            picked = ", ".join(f"{found['trial']} of {arm}" for arm, found in trials.items())
+            chosen = (
+                "one trial of a tune for every task, chosen across the tune's tasks on "
+                f"normalised scores (trial {picked}; plan.json states the rule)"
+            )
         reused += (
-            f" Each arm trained at the setting a tune chose for it on each task (the tune in "
+            f" Each arm trained at {chosen} (the tune in "
             f"{tuned['directory']}, plan digest {tuned['plan_digest'][:12]}, tuning seeds "
             f"{tuned['tuning_seeds'][0]} … {tuned['tuning_seeds'][-1]}, none of them tested "
             "here); plan.json lists the settings."
+        )
+    if plan.get("with_defaults"):
+        reused += (
+            " Beside each arm's tuned setting its default (the tune's trial 0) trained on the "
+            "same seeds at the same looks (defaults/): what tuning gained on these seeds, and "
+            "the defaults compared, are given under each task and in decisions.json "
+            "(beside_defaults), untested."
         )
     planned = "before any run it trained" if plan.get("reuse") else "before any run"
     equivalence = (
@@ -491,6 +596,12 @@ def _speed_table(scores: Scores, plan: dict[str, Any]) -> list[str]:
 def _listed(items: Sequence[str]) -> str:
     """`items` in words: "a", "a and b", "a, b and c"."""
     return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
+
+
+def _cell(values: Sequence[float | None], form: str) -> str:
+    """An interval as ``decisions.json`` records it, ``[point, low, high]`` or Nones, in words."""
+    point, low, high = (np.nan if v is None else v for v in values)
+    return _interval((point, low, high), form)
 
 
 def _interval(values: tuple[float, float, float], form: str) -> str:

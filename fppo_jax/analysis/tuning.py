@@ -98,6 +98,9 @@ SCORE = (
 )
 SELECTION = "per task and arm: the trial with the best score at the last rung (the full budget)"
 _STATE, _SCORES = "state.npz", "scores.json"
+# Every trial is drawn before the first rung trains, so a tune goes on under another Optuna
+# release as under another commit: both are recorded, neither compared.
+_RECORDED_ONLY = frozenset({"commit", "sampler.package"})
 CALLS_A_RUNG = 10  # compiled calls the first rung is split into, at least, for progress
 
 
@@ -277,7 +280,7 @@ def tune(
         optuna.logging.set_verbosity(optuna.logging.WARNING)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-            plan = check_plan(output, plan, "a tune", PLAN_FILE)
+            plan = check_plan(output, plan, "a tune", PLAN_FILE, _RECORDED_ONLY)
             store = _storage(optuna, storage or f"sqlite:///{(output / STORAGE_FILE).absolute()}")
             tuned = [
                 _Task(
@@ -950,6 +953,15 @@ class _Task:
     def _say(self, line: str) -> None:
         if self.progress:
             print(line, file=sys.stderr, flush=True)
+
+
+def recorded_rungs(directory: Path) -> list[dict[str, Any]]:
+    """The scores of a task's rungs recorded in `directory` (``rung-<r>/scores.json``), in
+    order, up to the first rung not recorded."""
+    found: list[dict[str, Any]] = []
+    while (path := directory / f"rung-{len(found)}" / _SCORES).exists():
+        found.append(json.loads(path.read_text()))
+    return found
 
 
 def fetch_diverged(state: TrainState) -> np.ndarray:

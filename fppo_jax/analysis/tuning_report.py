@@ -130,11 +130,57 @@ def arm_results(
             "sampled": len(sampled),
             "beat": len(beat),
         },
+        "trials": settings[arm],  # each trial's setting, for a choice across tasks
         "first_rung_spread": _spread(finite),
         "expected_best": _expected_best_curve(finite, len(first), curve[0]["env_steps"]),
         "diverged_trials": diverged,
         "tied_rungs": [r for r, s in enumerate(rungs_scores[:-1]) if _tied(s["arms"][arm])],
     }
+
+
+def across_tasks(rungs: dict[str, list[dict[str, Any]]], arm: str) -> dict[str, Any] | None:
+    """`arm`'s one trial for all the tasks of `rungs` (each task's rungs' scores, as
+    ``scores.json`` records them), as Patterson, Neumann, White and White ("Empirical Design in
+    Reinforcement Learning", 2024) choose one setting across environments: on scores normalised
+    per task, the best mean over the tasks.
+
+    Successive halving scores only its survivors at the later rungs, so the trials compared are
+    the arm's that reached, on every task, the deepest rung that any of them reached on every
+    task (a trial's deepest rung on a task: the last where it scored and did not diverge); each
+    is scored there, per task, by min–max normalisation over every arm's trials scored at that
+    rung (0 the worst, 1 the best; a task where they all tie counts 0: it cannot tell them
+    apart), and the best mean over the tasks wins, ties by trial number. Returns the trial, the
+    rung and its mean normalised score; None if no trial of `arm` scored on every task."""
+
+    def scored(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        return [row for row in rows if row["score"] is not None and not row["diverged"]]
+
+    deepest_by_task = [
+        {
+            row["trial"]: r
+            for r, rung in enumerate(task)
+            for row in scored(rung["arms"][arm]["trials"])
+        }
+        for task in rungs.values()
+    ]
+    everyone = {trial for deepest in deepest_by_task for trial in deepest}
+    shared = {t: min(deepest.get(t, -1) for deepest in deepest_by_task) for t in everyone}
+    rung = max(shared.values(), default=-1)
+    if rung < 0:
+        return None
+    means = {}
+    for trial in sorted(t for t, r in shared.items() if r == rung):
+        normalised = []
+        for task in rungs.values():
+            every = [
+                row["score"] for a in task[rung]["arms"].values() for row in scored(a["trials"])
+            ]
+            low, high = min(every), max(every)
+            own = next(r["score"] for r in task[rung]["arms"][arm]["trials"] if r["trial"] == trial)
+            normalised.append((own - low) / (high - low) if high > low else 0.0)
+        means[trial] = float(np.mean(normalised))
+    best = max(means, key=lambda t: (means[t], -t))
+    return {"trial": best, "rung": rung, "normalised_score": means[best]}
 
 
 def _tied(rung: dict[str, Any]) -> bool:

@@ -170,6 +170,8 @@ def _study(args: argparse.Namespace) -> int:
         reuse=args.reuse,
         part=part,
         tuned=args.tuned,
+        with_defaults=args.with_defaults,
+        across_tasks=args.across_tasks,
         progress=not args.quiet,
         **_evaluation(args),
         **hyperparameters_given(args),

@@ -280,6 +280,21 @@ def _add_study_running(studied: Parser) -> None:
         help="train each arm at the setting that the tune in DIR (fppo-jax tune) chose for it "
         "on each task; the plan records the tune's digest, and the tune's seeds are refused",
     )
+    studied.add_argument(
+        "--with-defaults",
+        action="store_true",
+        help="with --tuned: also train each arm's default setting (the tune's trial 0) on the "
+        "same seeds at the same looks (or take its recorded runs with --reuse); the report "
+        "gives each arm's gain from tuning and the defaults compared, untested, beside the "
+        "decisions, which stay the tuned ones",
+    )
+    studied.add_argument(
+        "--across-tasks",
+        action="store_true",
+        help="with --tuned: one trial per arm for every task, the best mean over the tune's "
+        "tasks of its scores normalised per task at the deepest rung its trials reached on "
+        "all of them, instead of each task's best (docs/tuning.md)",
+    )
     add_option_flags(studied, only=("eval_every", "eval_episodes"))
 
 

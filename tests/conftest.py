@@ -31,6 +31,7 @@ LONGEST_FIRST = (
     "test_checkpoint.py",
     "test_sweep.py",
     "test_tuning.py",
+    "test_tuning_rungs.py",
     "test_adaptive_study.py",
     "test_rebuilt_reports.py",
     "test_mujoco.py",

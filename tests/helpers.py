@@ -3,6 +3,7 @@
 import contextlib
 import dataclasses
 import io
+import json
 import runpy
 import subprocess
 import sys
@@ -13,6 +14,7 @@ from unittest import mock
 import jax
 import jax.numpy as jnp
 import numpy as np
+from conftest import TINY
 
 from fppo_jax import METRICS, SweepResult
 from fppo_jax.envs import Step, make_env
@@ -108,3 +110,15 @@ def run_script(path: Path, *args: str, cwd: Path) -> subprocess.CompletedProcess
             traceback.print_exc()
             status = 1
     return subprocess.CompletedProcess(argv, status, out.getvalue(), err.getvalue())
+
+
+# A tiny tune: four trials per arm halved by 2 over 8 updates, rungs of 4, 2 and 1 trials ending
+# at updates 2, 4 and 8.
+TUNE_SMALL = dict(trials=4, eta=2, seeds=2, total_steps=8 * 128, progress=False, **TINY)
+TUNE_ARMS = ["ppo", "fppo-lp"]
+
+
+def rung_scores(directory: Path, task: str = "cartpole") -> list[dict]:
+    """A tune's recorded rungs' scores on `task`, in order."""
+    rungs = sorted((directory / task).glob("rung-*/scores.json"))
+    return [json.loads(path.read_text()) for path in rungs]

@@ -7,27 +7,21 @@ import json
 import shutil
 
 import jax.numpy as jnp
-import numpy as np
 import pytest
 from conftest import TINY
+from helpers import TUNE_ARMS as ARMS
+from helpers import TUNE_SMALL as SMALL
+from helpers import rung_scores
 
 import fppo_jax
-from fppo_jax.analysis import tuning
+from fppo_jax.analysis import tuning, tuning_rungs
 from fppo_jax.analysis.studies import run_scores, study
-from fppo_jax.analysis.tuning import TUNING_SEED_START, recorded_rungs, schedule, tune
+from fppo_jax.analysis.tuning import TUNING_SEED_START, schedule, tune
+from fppo_jax.analysis.tuning_draws import import_optuna
 from fppo_jax.analysis.tuning_report import across_tasks
+from fppo_jax.analysis.tuning_rungs import recorded_rungs
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats import statistics
-
-# Four trials per arm halved by 2 over 8 updates: rungs of 4, 2 and 1 trials ending at updates
-# 2, 4 and 8.
-SMALL = dict(trials=4, eta=2, seeds=2, total_steps=8 * 128, progress=False, **TINY)
-ARMS = ["ppo", "fppo-lp"]
-
-
-def rung_scores(directory, task="cartpole"):
-    rungs = sorted((directory / task).glob("rung-*/scores.json"))
-    return [json.loads(path.read_text()) for path in rungs]
 
 
 def seed_scores(directory):
@@ -48,8 +42,8 @@ def tuned(tmp_path_factory):
             compiled.append(args[1].shape[0])  # the runs of the program
             return original(*args, **kwargs)
 
-        original = tuning.compile_program
-        patch.setattr(tuning, "compile_program", counting)
+        original = tuning_rungs.compile_program
+        patch.setattr(tuning_rungs, "compile_program", counting)
         result = tune("cartpole", ARMS, output=output, **SMALL)
     return output, result, compiled
 
@@ -96,7 +90,7 @@ def test_every_arm_spends_the_planned_env_steps(tuned):
 def test_trial_0_is_each_arms_default_and_the_shared_axes_are_the_same_points(tuned):
     output, result, _ = tuned
     ppo, lp = (
-        tuning._optuna().load_study(
+        import_optuna().load_study(
             study_name=f"cartpole/{arm}", storage=f"sqlite:///{output}/optuna.db"
         )
         for arm in ARMS
@@ -140,14 +134,14 @@ def test_a_stopped_or_killed_tune_goes_on_bit_for_bit(tuned, tmp_path, monkeypat
     # Stopped after its first rung, then killed while recording its second (its survivors'
     # state written, its scores not): the rung in flight is all that is lost.
     tune("cartpole", ARMS, output=tmp_path, rungs=1, **SMALL)
-    real = tuning.write_json
+    real = tuning_rungs.write_json
 
     def killed(path, value):
         if path.name == "scores.json" and path.parent.name == "rung-1":
             raise KeyboardInterrupt
         real(path, value)
 
-    monkeypatch.setattr(tuning, "write_json", killed)
+    monkeypatch.setattr(tuning_rungs, "write_json", killed)
     with pytest.raises(KeyboardInterrupt):
         tune("cartpole", ARMS, output=tmp_path, **SMALL)
     assert (tmp_path / "cartpole/rung-1/state.npz").exists()
@@ -168,7 +162,7 @@ def test_a_changed_plan_is_refused_naming_the_change(tuned, tmp_path):
         tune("cartpole", ARMS, output=copy, **{**SMALL, "trials": 8})
     with pytest.raises(InvalidInput, match="variants"):
         tune("cartpole", ["ppo", "spo"], output=copy, **SMALL)
-    with pytest.raises(InvalidInput, match="sampler.seed = 0, not 1"):
+    with pytest.raises(InvalidInput, match=r"sampler\.seed = 0, not 1"):
         tune("cartpole", ARMS, output=copy, **{**SMALL, "sampler_seed": 1})
     # Another Optuna release is recorded, as the commit is, and not held against the tune: every
     # trial was drawn before the first rung.
@@ -356,7 +350,7 @@ def test_across_tasks_the_best_mean_normalised_score_at_the_deepest_rung_every_t
 
 def test_a_tune_draws_the_same_trials_on_every_task(tmp_path):
     tune(["cartpole", "acrobot"], ARMS, output=tmp_path, rungs=0, **SMALL)
-    optuna = tuning._optuna()
+    optuna = import_optuna()
     for arm in ARMS:
         drawn = [
             [
@@ -491,99 +485,6 @@ def test_bad_input_is_refused_before_any_plan(tmp_path, arguments, message):
     assert not (tmp_path / "tune").exists()
 
 
-# Runs per compiled call of the split tunes: 3 trials × 2 seeds. Rung 0's 16 runs train in
-# groups of 6, 6 and 4 (filled up to 6), rung 1's 8 in groups of 6 and 2, rung 2's 4 in one.
-CHUNK = 6
-
-
-def split_tune(output, parts, **arguments):
-    """The tune of SMALL in groups of CHUNK runs split into `parts`, rung by rung: each part,
-    then the join (which records the rung and trains none)."""
-    arguments = {**SMALL, "chunk": CHUNK, **arguments}
-    while True:
-        for k in range(1, parts + 1):
-            tune("cartpole", ARMS, output=output, part=(k, parts), **arguments)
-        result = tune("cartpole", ARMS, output=output, rungs=0, **arguments)
-        if result.finished:
-            return result
-
-
-def optuna_trials(directory):
-    return {
-        arm: [
-            (t.number, t.state, t.value, t.intermediate_values, t.params)
-            for t in tuning._optuna()
-            .load_study(study_name=f"cartpole/{arm}", storage=f"sqlite:///{directory}/optuna.db")
-            .trials
-        ]
-        for arm in ARMS
-    }
-
-
-def test_a_tune_split_into_parts_joins_into_the_unsplit_tune_bit_for_bit(tmp_path, capsys):
-    whole = tune("cartpole", ARMS, output=tmp_path / "whole", chunk=CHUNK, **SMALL)
-    split = split_tune(tmp_path / "split", 3, progress=True)
-    assert split.finished
-    # Every run's score, every trial's mean and the survivors, as the unsplit tune's.
-    assert [rung["arms"] for rung in rung_scores(tmp_path / "split")] == [
-        rung["arms"] for rung in rung_scores(tmp_path / "whole")
-    ]
-    for rung in (0, 1):  # the survivors' state, which the next rung goes on from
-        with (
-            np.load(tmp_path / f"whole/cartpole/rung-{rung}/state.npz") as a,
-            np.load(tmp_path / f"split/cartpole/rung-{rung}/state.npz") as b,
-        ):
-            assert a.files == b.files
-            assert all(np.array_equal(a[name], b[name], equal_nan=True) for name in a.files)
-    assert split.results == whole.results
-    assert {arm: split.chosen("cartpole", arm) for arm in ARMS} == {
-        arm: whole.chosen("cartpole", arm) for arm in ARMS
-    }
-    assert optuna_trials(tmp_path / "split") == optuna_trials(tmp_path / "whole")
-    # Rung 1's 8 runs make 2 groups and rung 2's 4 one: the parts past them train nothing.
-    shares = [sorted(p.name for p in rung.glob("part-*")) for rung in _rungs(tmp_path / "split")]
-    assert shares == [["part-1", "part-2", "part-3"], ["part-1", "part-2"], ["part-1"]]
-    said = capsys.readouterr().err
-    assert "cartpole: rung 2 of 3, part 3 of 3: nothing to train, the rung's 8 runs make 2" in said
-
-
-def _rungs(directory):
-    return sorted((directory / "cartpole").glob("rung-*"))
-
-
-def test_a_missing_part_is_refused_by_name_and_a_recorded_one_not_trained_again(
-    tmp_path, monkeypatch
-):
-    arguments = {**SMALL, "chunk": CHUNK}
-    tune("cartpole", ARMS, output=tmp_path, part=(1, 2), **arguments)
-    share = tmp_path / "cartpole/rung-0/part-1/scores.json"
-    recorded = share.read_text()
-    # Only the join tells Optuna a rung's scores: a share writes nothing there.
-    assert all(not trial[3] for trials in optuna_trials(tmp_path).values() for trial in trials)
-
-    def compiled(*args, **kwargs):
-        raise AssertionError("a recorded part was trained again")
-
-    with monkeypatch.context() as patch:
-        patch.setattr(tuning, "compile_program", compiled)
-        assert not tune("cartpole", ARMS, output=tmp_path, part=(1, 2), **arguments).finished
-    assert share.read_text() == recorded
-    with pytest.raises(
-        InvalidInput,
-        match=r"cartpole: rung 1 is split into 2 parts and part 2 is missing .* --part 2/2",
-    ):
-        tune("cartpole", ARMS, output=tmp_path, **arguments)
-    assert not (tmp_path / "cartpole/rung-0/scores.json").exists()
-    # The join is the tune of its plan: another chunk is refused, naming it.
-    with pytest.raises(InvalidInput, match="chunk = 6, not 4"):
-        tune("cartpole", ARMS, output=tmp_path, **{**arguments, "chunk": 4})
-
-
-def test_a_storage_that_cannot_be_opened_is_one_error(tmp_path):
-    with pytest.raises(InvalidInput, match="cannot open Optuna's storage nosuch://here"):
-        tune("cartpole", ARMS, output=tmp_path, storage="nosuch://here", **SMALL)
-
-
 def c_scaled(ratio, advantage, c):
     return jnp.minimum(ratio * advantage, jnp.clip(ratio, 0.8, 1.2) * advantage) * c
 
@@ -598,25 +499,6 @@ def test_a_surrogate_without_a_search_interval_is_refused_by_name(tmp_path):
     assert plan["space"]["c-scaled"]["c"] == {"low": 0.5, "high": 2.0, "scale": "log"}
     with pytest.raises(InvalidInput, match="search names 'd', which it does not take"):
         fppo_jax.surrogate("c-scaled", c_scaled, c=1.0, search={"d": (0.5, 2.0)})
-
-
-def test_a_trial_that_diverges_scores_below_every_other_and_stops(tmp_path):
-    # Learning rates up to 1e30: the largest drawn make the parameters infinite at once.
-    space = {"learning_rate": (1e-4, 1e30, "log")}
-    result = tune("cartpole", ARMS, output=tmp_path, space=space, **SMALL)  # the shapes above
-    assert result.finished
-    first = rung_scores(tmp_path)[0]["arms"]["ppo"]
-    diverged = [row["trial"] for row in first["trials"] if row["diverged"]]
-    assert diverged and 0 not in diverged
-    assert not set(diverged) & set(first["survivors"])
-    found = result.results["cartpole"]["ppo"]
-    assert found["diverged_trials"] == diverged
-    assert found["chosen"]["trial"] not in diverged
-    studied = tuning._optuna().load_study(
-        study_name="cartpole/ppo", storage=f"sqlite:///{tmp_path}/optuna.db"
-    )
-    assert [t.number for t in studied.trials if t.state.name == "FAIL"] == diverged
-    assert "| ppo | " in (tmp_path / "report.md").read_text()
 
 
 def test_the_command_line_plans_tunes_and_refuses_in_one_line(tuned, tmp_path, capsys):

@@ -455,8 +455,8 @@ def _across_tasks(
     score), from the rungs' scores the tune recorded; refused for a tune of one task, one whose
     ``results.json`` lacks the trials' settings, and a variant no trial of which scored on
     every task."""
-    from fppo_jax.analysis.tuning import recorded_rungs
     from fppo_jax.analysis.tuning_report import across_tasks
+    from fppo_jax.analysis.tuning_rungs import recorded_rungs
 
     tuned = tune_plan["tasks"]
     if len(tuned) < 2:

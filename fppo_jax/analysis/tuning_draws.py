@@ -1,0 +1,154 @@
+"""A tune's population, drawn through Optuna: per task one study of draws (a quasi-random or
+random sampler over the shared axes and every arm's own), so that every arm gets the same points
+on the axes they share, and per arm a study of its trials, which the rungs report their scores
+to. Trial 0 is each arm's default (:func:`~fppo_jax.core.search_space.default_setting`)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from fppo_jax.core.search_space import (
+    Interval,
+    SearchSpace,
+    default_setting,
+)
+from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.errors import InvalidInput, MissingPackage, first_line, install_hint
+
+
+def open_storage(optuna: Any, url: str) -> Any:
+    """Optuna's storage at `url`, opened (a SQLite file is made if need be)."""
+    try:
+        return optuna.storages.RDBStorage(url)
+    except Exception as error:  # SQLAlchemy's and the database driver's own errors
+        raise InvalidInput(f"cannot open Optuna's storage {url}: {first_line(error)}") from None
+
+
+def import_optuna() -> Any:
+    try:
+        import optuna
+    except ImportError:
+        raise MissingPackage(f"tuning needs Optuna: {install_hint('tune')}") from None
+    return optuna
+
+
+def draw_population(
+    optuna: Any,
+    storage: Any,
+    task: str,
+    arms: list[Surrogate],
+    spaces: dict[str, SearchSpace],
+    trials: int,
+    sampler: str,
+    seed: int,
+) -> dict[str, list[dict[str, float]]]:
+    """Each arm's trials on `task`, as settings: trial 0 its default, the others drawn.
+
+    The draws are one Optuna study (``<task>/draws``) over the shared axes and every arm's own
+    (``<arm>.<name>``), so that the arms share their points on the shared axes; each draw is
+    told ``PRUNED`` (drawn, not scored: Optuna's samplers learn a space from trials that
+    ended). Each arm's trials are then a study of their own (``<task>/<arm>``) that the rungs
+    report their scores to. A study cut short while it was being drawn is drawn again from its
+    seed: the same points."""
+    draws = _draws(optuna, storage, task, arms, spaces, trials, sampler, seed)
+    population = {}
+    for arm in arms:
+        axes = spaces[arm.name].axes
+        name = f"{task}/{arm.name}"
+        study = _complete_study(optuna, storage, name, trials)
+        if study is None:
+            study = optuna.create_study(study_name=name, storage=storage, direction="maximize")
+            for draw in draws:
+                shared = spaces[arm.name].shared
+                study.enqueue_trial(
+                    {
+                        _param(k, axis): draw[_param(k if k in shared else f"{arm.name}.{k}", axis)]
+                        for k, axis in axes.items()
+                    }
+                )
+                trial = study.ask()
+                for key, axis in axes.items():
+                    _suggest(trial, key, axis)
+        population[arm.name] = [
+            dict(t.params) for t in sorted(study.get_trials(deepcopy=False), key=lambda t: t.number)
+        ]
+    return population
+
+
+def _draws(
+    optuna: Any,
+    storage: Any,
+    task: str,
+    arms: list[Surrogate],
+    spaces: dict[str, SearchSpace],
+    trials: int,
+    sampler: str,
+    seed: int,
+) -> list[dict[str, float]]:
+    axes = dict(next(iter(spaces.values())).shared)
+    defaults = {k: default_setting(arms[0], task)[k] for k in axes}
+    for arm in arms:
+        own = default_setting(arm, task)
+        for key, axis in spaces[arm.name].own.items():
+            axes[f"{arm.name}.{key}"] = axis
+            defaults[f"{arm.name}.{key}"] = own[key]
+    first = {_param(k, axis): _internal(defaults[k], axis) for k, axis in axes.items()}
+    name = f"{task}/draws"
+    study = _complete_study(optuna, storage, name, trials)
+    if study is None:
+        drawn = (
+            optuna.samplers.QMCSampler(scramble=True, seed=seed)
+            if sampler == "qmc"
+            else optuna.samplers.RandomSampler(seed=seed)
+        )
+        study = optuna.create_study(study_name=name, storage=storage, sampler=drawn)
+        study.set_user_attr("role", "the points each arm's trials take; scores are in theirs")
+        study.enqueue_trial(first)
+        for _ in range(trials):
+            trial = study.ask()
+            for key, axis in axes.items():
+                _suggest(trial, key, axis)
+            study.tell(trial, state=optuna.trial.TrialState.PRUNED)
+    done = sorted(study.get_trials(deepcopy=False), key=lambda t: t.number)
+    return [dict(t.params) for t in done]
+
+
+def _complete_study(optuna: Any, storage: Any, name: str, trials: int) -> Any:
+    """Study `name`, if it holds its `trials` trials (each with its parameters); one cut short
+    is deleted, to be made again."""
+    try:
+        study = optuna.load_study(study_name=name, storage=storage)
+    except KeyError:
+        return None
+    held = study.get_trials(deepcopy=False)
+    waiting = optuna.trial.TrialState.WAITING
+    if len(held) == trials and all(t.state != waiting and t.params for t in held):
+        return study
+    optuna.delete_study(study_name=name, storage=storage)
+    return None
+
+
+def _param(name: str, axis: Interval) -> str:
+    """What Optuna calls axis `name`: on a log1m scale it draws ``1-<name>``, log-uniformly."""
+    return f"1-{name}" if axis.scale == "log1m" else name
+
+
+def _internal(value: float, axis: Interval) -> float:
+    return 1 - value if axis.scale == "log1m" else value
+
+
+def _suggest(trial: Any, name: str, axis: Interval) -> None:
+    """`trial`'s value of `name` on `axis`, drawn (or taken, if enqueued) and recorded."""
+    if axis.scale == "log1m":
+        trial.suggest_float(_param(name, axis), 1 - axis.high, 1 - axis.low, log=True)
+    else:
+        trial.suggest_float(name, axis.low, axis.high, log=axis.scale == "log")
+
+
+def setting_of(params: Mapping[str, float]) -> dict[str, float]:
+    """A trial's parameters as a setting (``1-gamma`` drawn is γ)."""
+    return {
+        (key[2:] if key.startswith("1-") else key): (1 - value if key.startswith("1-") else value)
+        for key, value in params.items()
+    }

@@ -15,13 +15,10 @@ from fppo_jax.core.config import (
     TABLE2,
     TrainConfig,
     as_float,
-    check_seed,
     describe,
     describe_update,
     environment_name,
     hyperparameters,
-    parse_seeds,
-    positive_int,
     preset_config,
     resolve_config,
     resolve_hyperparameters,
@@ -31,83 +28,6 @@ from fppo_jax.core.config import (
 from fppo_jax.envs import MUJOCO_TASKS, lookup
 
 SMALL = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
-
-
-def test_positive_int_takes_python_and_numpy_integers_and_returns_a_python_int():
-    for value in (1, 7, np.int64(7), np.int32(7), np.uint8(7)):
-        checked = positive_int("n", value)
-        assert checked == int(value) and type(checked) is int
-
-
-@pytest.mark.parametrize(
-    "value", [0, -1, True, np.bool_(True), 2.0, np.float32(2.0), "3", None, [3]]
-)
-def test_positive_int_refuses_anything_else_naming_the_setting_and_the_value(value):
-    with pytest.raises(
-        ValueError, match=re.escape(f"width must be a positive integer, got {value!r}")
-    ):
-        positive_int("width", value)
-
-
-def test_check_seed_takes_every_64_bit_integer_signed_or_not():
-    for seed in (0, -5, -(2**63), 2**63, 2**64 - 1, np.uint64(2**64 - 1), np.int8(-3)):
-        checked = check_seed(seed)
-        assert checked == int(seed) and type(checked) is int
-
-
-@pytest.mark.parametrize(
-    "seed, message",
-    [
-        (True, "a seed must be an integer, got True"),
-        (1.0, "a seed must be an integer, got 1.0"),
-        ("1", "a seed must be an integer, got '1'"),
-        (None, "a seed must be an integer, got None"),
-        (2**64, f"a seed must fit in 64 bits, got {2**64}"),
-        (-(2**63) - 1, f"a seed must fit in 64 bits, got {-(2**63) - 1}"),
-    ],
-)
-def test_check_seed_refuses_non_integers_and_seeds_beyond_64_bits(seed, message):
-    with pytest.raises(ValueError, match=re.escape(message)):
-        check_seed(seed)
-
-
-@pytest.mark.parametrize(
-    "text, seeds",
-    [
-        ("3", [0, 1, 2]),  # a count
-        ("1", [0]),
-        ("10:13", [10, 11, 12]),  # a range, as range(10, 13)
-        ("-2:1", [-2, -1, 0]),
-        ("0,3,7", [0, 3, 7]),  # a list, in its order
-        ("7,0", [7, 0]),
-    ],
-)
-def test_parse_seeds_reads_a_count_a_range_or_a_list(text, seeds):
-    assert parse_seeds(text) == seeds
-
-
-@pytest.mark.parametrize(
-    "text, message",
-    [
-        ("abc", "seeds 'abc' are not a count (20), a range (10:20) or a list (0,3,7)"),
-        ("1.5", "seeds '1.5' are not a count"),
-        ("1:2:3", "seeds '1:2:3' are not a count"),
-        ("3,", "seeds '3,' are not a count"),
-        ("", "seeds '' are not a count"),
-        ("0", "the number of seeds must be a positive integer, got 0"),
-        ("-1", "the number of seeds must be a positive integer, got -1"),
-        ("5:5", "seeds '5:5' name no seed (a range start:stop needs start < stop)"),
-        ("6:2", "seeds '6:2' name no seed"),
-        ("1,2,1", "seeds '1,2,1' repeat a seed"),
-        (f"0,{2**64}", f"a seed must fit in 64 bits, got {2**64}"),
-        # Refused by their count, before a list of them is built.
-        ("0:10000000000", "'0:10000000000' name 10,000,000,000 seeds, more than 100,000"),
-        ("100001", "'100001' name 100,001 seeds, more than 100,000"),
-    ],
-)
-def test_parse_seeds_refuses_what_names_no_distinct_valid_seeds(text, message):
-    with pytest.raises(ValueError, match=re.escape(message)):
-        parse_seeds(text)
 
 
 def test_table2_gives_the_papers_alpha_or_k_of_the_variants_that_take_them():

@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from fppo_jax import sweep
-from fppo_jax.core.config import parse_seeds
+from fppo_jax.core.checks import parse_seeds
 from fppo_jax.core.objectives import VARIANTS
 from fppo_jax.envs import MUJOCO_TASKS
 

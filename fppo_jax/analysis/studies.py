@@ -45,7 +45,8 @@ from fppo_jax.analysis.study_report import (
     write_figures,
     write_report,
 )
-from fppo_jax.core.config import positive_int, resolve_hyperparameters, sweepable
+from fppo_jax.core.checks import check_part, positive_int
+from fppo_jax.core.config import resolve_hyperparameters, sweepable
 from fppo_jax.core.objectives import (
     BUILTINS,
     hyperparameter_names,
@@ -56,7 +57,7 @@ from fppo_jax.core.objectives import (
 )
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
-from fppo_jax.run.driver import part_bounds, part_runs
+from fppo_jax.run.driver import part_runs
 from fppo_jax.run.options import Options
 from fppo_jax.run.prepare import prepare
 from fppo_jax.run.results import SweepResult, merge
@@ -281,7 +282,7 @@ def _check_arguments(
     if chunk is not None:
         positive_int("chunk", chunk)
     if part is not None:  # its shape: a group's runs, which it shares, are known at its look
-        part_bounds(part, part[1] if isinstance(part, tuple | list) and len(part) == 2 else 0)
+        check_part(part)
     if "variant" in settings:
         raise InvalidInput("a study's variants are its candidates and its baseline, not variant")
     taken = sorted(set(OWN_SETTINGS) & set(settings))

@@ -46,9 +46,9 @@ import numpy as np
 
 from fppo_jax.analysis.studies import check_plan, commit, names_of_tasks
 from fppo_jax.analysis.tuning_report import ranked
+from fppo_jax.core.checks import check_seeds, positive_int
 from fppo_jax.core.config import (
     CONFIG_FIELDS,
-    positive_int,
     resolve_hyperparameters,
     stack_hyperparameters,
     with_budget,
@@ -310,8 +310,6 @@ def _baseline(baseline: str | None, arms: list[Surrogate]) -> str:
 
 
 def _tuning_seeds(seeds: int | Sequence[int]) -> list[int]:
-    from fppo_jax.run.sweeps import check_seeds
-
     if isinstance(seeds, int | np.integer) and not isinstance(seeds, bool):
         count = positive_int("seeds", seeds)
         return list(range(TUNING_SEED_START, TUNING_SEED_START + count))

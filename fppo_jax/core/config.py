@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from fppo_jax.core.checks import positive_int, real_number
 from fppo_jax.core.objectives import (
     BUILTINS,
     DEFAULT_VARIANT,
@@ -30,7 +31,7 @@ from fppo_jax.core.objectives import (
     resolve,
     union,
 )
-from fppo_jax.core.surrogates import Surrogate, as_trained, float32_note, real_number
+from fppo_jax.core.surrogates import Surrogate, as_trained, float32_note
 from fppo_jax.envs import MUJOCO_TASKS, lookup
 from fppo_jax.errors import InvalidInput
 
@@ -50,9 +51,6 @@ _TABLE2_VARIANTS = {"fppo-lp": "alpha", "fppo-qp": "k"}
 VARIANT_SPECIFIC: tuple[str, ...] = hyperparameter_names(list(BUILTINS.values()))
 # The most env steps a run may take: the compiled program counts them in int32.
 MAX_STEPS = 2**31 - 1
-# The most seeds one setting may name on a command line: far more than a sweep trains, so more
-# is a mistyped range, refused before a list of them is built.
-MAX_SEEDS = 100_000
 SYMBOLS = {
     "alpha": "α",
     "k": "k",
@@ -62,50 +60,6 @@ SYMBOLS = {
     "eps_low": "ε_low",
     "eps_high": "ε_high",
 }
-
-
-def positive_int(name: str, value: object) -> int:
-    """`value` if it is a positive integer (numpy integers included, booleans not)."""
-    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer) or value < 1:
-        raise InvalidInput(f"{name} must be a positive integer, got {value!r}")
-    return int(value)
-
-
-def check_seed(seed: object) -> int:
-    """`seed` if it is an integer that ``jax.random.key`` takes (numpy integers included)."""
-    if isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer):
-        raise InvalidInput(f"a seed must be an integer, got {seed!r}")
-    if not -(2**63) <= seed < 2**64:
-        raise InvalidInput(f"a seed must fit in 64 bits, got {seed}")
-    return int(seed)
-
-
-def parse_seeds(text: str) -> list[int]:
-    """Seeds written on a command line: ``20`` (seeds 0 … 19), ``10:20`` (seeds 10 … 19, as
-    Python's ``range(10, 20)``) or a comma list such as ``0,3,7``; checked, and distinct."""
-    seeds: range | list[int]
-    try:
-        if ":" in text:
-            start, stop = (int(part) for part in text.split(":"))
-            seeds = range(start, stop)
-        elif "," in text:
-            seeds = [int(part) for part in text.split(",")]
-        else:
-            seeds = range(positive_int("the number of seeds", int(text)))
-    except ValueError as error:
-        if "must be" in str(error):
-            raise
-        raise InvalidInput(
-            f"seeds {text!r} are not a count (20), a range (10:20) or a list (0,3,7)"
-        ) from None
-    count = max(0, seeds.stop - seeds.start) if isinstance(seeds, range) else len(seeds)
-    if not count:
-        raise InvalidInput(f"seeds {text!r} name no seed (a range start:stop needs start < stop)")
-    if count > MAX_SEEDS:
-        raise InvalidInput(f"seeds {text!r} name {count:,} seeds, more than {MAX_SEEDS:,}")
-    if len(set(seeds)) < len(seeds):
-        raise InvalidInput(f"seeds {text!r} repeat a seed")
-    return [check_seed(seed) for seed in seeds]
 
 
 def table2(task: str | None, variant: str) -> dict[str, float]:

@@ -48,6 +48,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from fppo_jax.core.checks import real_number
 from fppo_jax.core.surrogates import (
     Range,
     Surrogate,
@@ -55,7 +56,6 @@ from fppo_jax.core.surrogates import (
     declare,
     float32_note,
     probe,
-    real_number,
 )
 from fppo_jax.errors import FppoError, InvalidInput, first_line
 

@@ -39,12 +39,13 @@ import sys
 import types
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
-from typing import Any, cast
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from fppo_jax.core.checks import real_number
 from fppo_jax.errors import InvalidInput, first_line
 
 # The arguments every surrogate function may take by name, besides its own hyperparameters.
@@ -106,20 +107,6 @@ def as_trained(value: float) -> float:
 def float32_note(value: float) -> str:
     """Why `value`, in range itself, is refused: what training's float32 makes of it."""
     return f"which training's float32 holds as {as_trained(value):g}"
-
-
-def real_number(name: str, value: object) -> float:
-    """`value` as a float if it is a real number (numpy's included); strings and booleans,
-    which ``float`` would take, are refused."""
-    if isinstance(value, str | bool | np.bool_) or not isinstance(
-        value, numbers.Real | np.ndarray | jax.Array
-    ):
-        raise InvalidInput(f"{name} must be a number, got {value!r}")
-    if np.ndim(cast(Any, value)) != 0:
-        raise InvalidInput(
-            f"{name} must be a single number, got an array of shape {np.shape(cast(Any, value))}"
-        )
-    return float(value)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from fppo_jax.core.checks import check_seed
 from fppo_jax.core.config import (
     HYPERPARAMETER_DEFAULTS,
-    check_seed,
     resolve_hyperparameters,
 )
 from fppo_jax.core.objectives import (

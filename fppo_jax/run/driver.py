@@ -25,6 +25,7 @@ import jax
 import numpy as np
 from jax.sharding import Mesh
 
+from fppo_jax.core.checks import check_part
 from fppo_jax.core.config import Hyperparameters
 from fppo_jax.core.policy import make_policy
 from fppo_jax.core.trainer import Trainer, TrainState
@@ -366,14 +367,7 @@ def _share(plan: Plan, size: int, across: int) -> Plan:
 def part_bounds(part: object, count: int) -> tuple[int, int]:
     """Where the K-th (from 1) of N shares of `count` things starts and stops, for
     ``part=(K, N)``: shares as equal as they can be, the first ones one longer."""
-    if (
-        not isinstance(part, tuple | list)
-        or len(part) != 2
-        or not all(isinstance(x, int | np.integer) and not isinstance(x, bool) for x in part)
-        or not 1 <= part[0] <= part[1]
-    ):
-        raise InvalidInput(f"part must be (K, N) with 1 <= K <= N, got {part!r}")
-    k, n = int(part[0]), int(part[1])
+    k, n = check_part(part)
     if n > count:
         raise InvalidInput(f"part {k} of {n}: the sweep has only {count} runs to share")
     size, extra = divmod(count, n)

@@ -52,8 +52,6 @@ from fppo_jax.run.hooks import (
     Evaluation,
     Finished,
     Hook,
-    MetricLogs,
-    OutputDirectory,
     ProgressReport,
     UserCallback,
 )
@@ -480,10 +478,10 @@ class _Training:
                 self.checkpoints, self.finished, record, single_run, resumed_from
             )
             hooks.append(self.checkpoint)
-        if self.outputs:
-            hooks.append(OutputDirectory(self.outputs))
+        if self.outputs:  # after the checkpoint, so that a lost directory loses no state
+            hooks.append(self.outputs)
         if self.logs:
-            hooks.append(MetricLogs(self.logs))
+            hooks.append(self.logs)
         if self.options.callback is not None:
             hooks.append(UserCallback(self.options.callback, self.plan.kind == "train"))
         if self.report:

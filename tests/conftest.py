@@ -44,7 +44,7 @@ LONGEST_FIRST = (
     "test_gpu_suite.py",
     "test_plots.py",
     "test_envs.py",
-    "test_objectives.py",
+    "test_variants.py",
     "test_results.py",
     "test_experiment_scripts.py",
     "test_saved_policy.py",

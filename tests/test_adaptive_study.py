@@ -149,7 +149,7 @@ def test_a_group_cut_short_is_not_taken_for_a_recorded_one(tmp_path, tiny):
     where = tmp_path / "group"
     fppo_jax.sweep("cartpole", {"variant": ["ppo"]}, [0, 1], total_steps=512, log_dir=where, **tiny)
     whole = SweepResult.read(where)
-    ppo = fppo_jax.core.objectives.resolve("ppo")
+    ppo = fppo_jax.core.resolution.resolve("ppo")
     assert recorded_group(where, [ppo], [0, 1]) is not None
     cut = SweepResult(**{**whole.__dict__, "runs": whole.runs[:1], "diverged": whole.diverged[:1]})
     cut.metrics = {name: values[:1] for name, values in whole.metrics.items()}

@@ -47,13 +47,9 @@ import numpy as np
 from fppo_jax.analysis.studies import check_plan, commit, names_of_tasks
 from fppo_jax.analysis.tuning_report import ranked
 from fppo_jax.core.checks import check_seeds, positive_int
-from fppo_jax.core.config import (
-    CONFIG_FIELDS,
-    resolve_hyperparameters,
-    stack_hyperparameters,
-    with_budget,
-)
-from fppo_jax.core.objectives import identities, resolve, union
+from fppo_jax.core.config import CONFIG_FIELDS, stack_hyperparameters, with_budget
+from fppo_jax.core.objectives import identities, union
+from fppo_jax.core.resolution import resolve, resolve_hyperparameters
 from fppo_jax.core.search_space import (
     Interval,
     SearchSpace,

@@ -14,9 +14,11 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from fppo_jax.core.checks import check_part, parse_seeds, positive_int
-from fppo_jax.core.config import HYPERPARAMETER_DEFAULTS, PRESETS, TrainConfig
-from fppo_jax.core.objectives import BUILTINS, EPSILON, hyperparameter_names, resolve
+from fppo_jax.core.config import PRESETS, TrainConfig
+from fppo_jax.core.objectives import hyperparameter_names
+from fppo_jax.core.resolution import HYPERPARAMETER_DEFAULTS, resolve
 from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.variants import BUILTINS, EPSILON
 from fppo_jax.envs import BACKENDS
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.options import Options

@@ -22,24 +22,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.core.checks import check_seeds, positive_int, real_number
-from fppo_jax.core.config import (
+from fppo_jax.core.config import Hyperparameters, stack_hyperparameters
+from fppo_jax.core.objectives import hyperparameter_names, identities, takers, union
+from fppo_jax.core.resolution import (
     HYPERPARAMETER_DEFAULTS,
-    Hyperparameters,
+    resolve,
     resolve_hyperparameters,
-    stack_hyperparameters,
     sweepable,
     table2,
 )
-from fppo_jax.core.objectives import (
-    BUILTINS,
-    DEFAULT_VARIANT,
-    hyperparameter_names,
-    identities,
-    resolve,
-    takers,
-    union,
-)
 from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.variants import BUILTINS, DEFAULT_VARIANT
 from fppo_jax.envs import Environment
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.driver import Outcome, Plan, drive, part_bounds, part_runs

@@ -110,7 +110,7 @@ def test_hyperparameters_take_defaults_and_check_each_range_at_its_bounds():
         "entropy_coef": (-0.1, "entropy_coef must be >= 0, got -0.1"),
         "value_coef": (math.nan, "value_coef must be >= 0, got nan"),
         "max_grad_norm": (0.0, "max_grad_norm must be > 0, got 0.0"),
-        "learning_rate": (math.inf, "learning_rate must be > 0, got inf"),
+        "learning_rate": (math.inf, "learning_rate must be finite, got inf"),
     }
     for name, (value, message) in refused.items():
         with pytest.raises(ValueError, match=re.escape(message)):

@@ -4,6 +4,7 @@ apart."""
 
 import inspect
 import json
+import re
 
 import jax
 import jax.numpy as jnp
@@ -15,7 +16,7 @@ from own_surrogates import clipped, my_clip_higher, my_ppo
 import fppo_jax
 from fppo_jax import objective, surrogate, sweep, train
 from fppo_jax.cli import main
-from fppo_jax.core.surrogates import Range
+from fppo_jax.core.surrogates import Range, check_in_range
 
 TINY_STEPS = 512
 
@@ -27,6 +28,28 @@ def test_a_range_reads_as_its_message_shows_it():
     assert str(Range("(0, 1)")) == "in (0, 1)" and str(Range("> 0")) == "> 0"
     with pytest.raises(ValueError, match="a range must read like"):
         Range("positive")
+
+
+@pytest.mark.parametrize(
+    "value, valid, of, message",
+    [
+        (float("inf"), Range("> 0"), "", "x must be finite, got inf"),
+        (float("inf"), None, "mine", "x must be finite for mine, got inf"),
+        (0.0, Range("(0, 1]"), "", "x must be in (0, 1], got 0.0"),
+        (0.5, Range(">= 1", "why"), "mine", "x must be >= 1 for mine, got 0.5 (why)"),
+        (float("nan"), Range(">= 0"), "", "x must be >= 0, got nan"),
+        (float("nan"), None, "mine", "x must be a number for mine, got nan"),
+        (1e300, None, "", "x must be finite, got 1e+300, which training's float32 holds as inf"),
+        (1e-300, Range("> 0"), "", "x must be > 0, got 1e-300, which training's float32 holds"),
+        ("1", Range("> 0"), "", "x must be a number, got '1'"),
+    ],
+)
+def test_every_hyperparameter_is_checked_by_one_function_with_one_message(
+    value, valid, of, message
+):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        check_in_range("x", value, valid, of)
+    assert check_in_range("x", np.float32(0.5), Range("(0, 1)")) == 0.5
 
 
 def test_a_surrogate_is_accepted_where_a_variants_name_is():

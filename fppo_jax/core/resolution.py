@@ -13,19 +13,17 @@ settings, checked here; :func:`resolve_hyperparameters` does it all for one sett
 from __future__ import annotations
 
 import importlib
-import math
 import os
 import sys
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from typing import Any
 
 import jax
 import numpy as np
 
-from fppo_jax.core.checks import real_number
 from fppo_jax.core.config import Hyperparameters
 from fppo_jax.core.objectives import Objective, hyperparameter_names, union
-from fppo_jax.core.surrogates import Range, Surrogate, as_trained, float32_note, probe
+from fppo_jax.core.surrogates import Range, Surrogate, check_in_range, probe
 from fppo_jax.core.variants import BUILTINS, DEFAULT_VARIANT, EPSILON, VARIANTS
 from fppo_jax.errors import FppoError, InvalidInput, first_line
 
@@ -64,13 +62,13 @@ HYPERPARAMETER_DEFAULTS: dict[str, float] = {
     "max_grad_norm": 0.5,
 }
 
-_RANGES: dict[str, tuple[str, Callable[[float], bool]]] = {
-    "learning_rate": ("> 0", lambda x: x > 0),
-    "gamma": ("in (0, 1]", lambda x: 0 < x <= 1),
-    "gae_lambda": ("in [0, 1]", lambda x: 0 <= x <= 1),
-    "entropy_coef": (">= 0", lambda x: x >= 0),
-    "value_coef": (">= 0", lambda x: x >= 0),
-    "max_grad_norm": ("> 0", lambda x: x > 0),
+_RANGES: dict[str, Range] = {
+    "learning_rate": Range("> 0"),
+    "gamma": Range("(0, 1]"),
+    "gae_lambda": Range("[0, 1]"),
+    "entropy_coef": Range(">= 0"),
+    "value_coef": Range(">= 0"),
+    "max_grad_norm": Range("> 0"),
 }
 
 
@@ -119,13 +117,7 @@ def hyperparameters(
         )
     settings = {**HYPERPARAMETER_DEFAULTS, **{k: v for k, v in values.items() if v is not None}}
     for name, value in settings.items():
-        bound, ok = _RANGES[name]
-        value = real_number(name, value)
-        if not (math.isfinite(value) and ok(value)):
-            raise InvalidInput(f"{name} must be {bound}, got {value}")
-        trained = as_trained(value)
-        if not (math.isfinite(trained) and ok(trained)):
-            raise InvalidInput(f"{name} must be {bound}, got {value}, {float32_note(value)}")
+        check_in_range(name, value, _RANGES[name])
     # NumPy's scalars, put on the device as they are (as the objective's own: no conversion
     # program to compile).
     scalars = jax.device_put({name: np.float32(value) for name, value in settings.items()})
@@ -152,11 +144,7 @@ def objective(
     if extra:
         takes = ", ".join(["epsilon", *s.defaults])
         raise InvalidInput(f"{s.name} has no hyperparameter {', '.join(extra)} (it takes: {takes})")
-    eps = real_number("epsilon", epsilon)
-    if eps not in EPSILON_RANGE:
-        raise InvalidInput(f"epsilon must be {EPSILON_RANGE}, got {eps}")
-    if as_trained(eps) not in EPSILON_RANGE:
-        raise InvalidInput(f"epsilon must be {EPSILON_RANGE}, got {eps}, {float32_note(eps)}")
+    eps = check_in_range("epsilon", epsilon, EPSILON_RANGE)
     values = {key: s.check(key, value) for key, value in {**s.defaults, **given}.items()}
     if not s.builtin:
         probe(s, values, eps)

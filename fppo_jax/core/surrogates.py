@@ -95,6 +95,28 @@ class Range:
         return f"in {self.text.strip()}" if interval else self.text.strip()
 
 
+def check_in_range(name: str, value: object, valid: Range | None, of: str = "") -> float:
+    """`value` of hyperparameter `name` as a float, if it is a finite number in `valid` (any, if
+    None) both as given and as training holds it (:func:`as_trained`): the one check of every
+    hyperparameter, a surrogate's own (`of` names it in the message: "for fppo-lp"), ε and the
+    optimisation settings."""
+    value = real_number(name, value)
+    of = f" for {of}" if of else ""
+    if math.isinf(value):
+        raise InvalidInput(f"{name} must be finite{of}, got {value}")
+    # NaN lies outside every range, and is finite nowhere.
+    if valid is not None and value not in valid:
+        why = f" ({valid.why})" if valid.why else ""
+        raise InvalidInput(f"{name} must be {valid}{of}, got {value}{why}")
+    if math.isnan(value):
+        raise InvalidInput(f"{name} must be a number{of}, got {value}")
+    trained = as_trained(value)
+    if math.isinf(trained) or (valid is not None and trained not in valid):
+        bound = "finite" if valid is None else str(valid)
+        raise InvalidInput(f"{name} must be {bound}{of}, got {value}, {float32_note(value)}")
+    return value
+
+
 def as_trained(value: float) -> float:
     """`value` as training holds it, a float32: past float32's range it is infinite, and
     below its smallest it is 0, so a range is checked on both."""
@@ -144,23 +166,7 @@ class Surrogate:
 
     def check(self, name: str, value: object) -> float:
         """`value` of hyperparameter `name` as a float, if it is a finite number in its range."""
-        value = real_number(name, value)
-        if math.isinf(value):
-            raise InvalidInput(f"{name} must be finite for {self.name}, got {value}")
-        valid = self.ranges.get(name)
-        trained = as_trained(value)
-        if math.isinf(trained) or (valid is not None and value in valid and trained not in valid):
-            bound = "finite" if valid is None else str(valid)
-            raise InvalidInput(
-                f"{name} must be {bound} for {self.name}, got {value}, {float32_note(value)}"
-            )
-        # NaN lies outside every range, and is finite nowhere.
-        if valid is not None and value not in valid:
-            why = f" ({valid.why})" if valid.why else ""
-            raise InvalidInput(f"{name} must be {valid} for {self.name}, got {value}{why}")
-        if math.isnan(value):
-            raise InvalidInput(f"{name} must be a number for {self.name}, got {value}")
-        return value
+        return check_in_range(name, value, self.ranges.get(name), self.name)
 
     def identity(self) -> dict[str, Any]:
         """What records keep of a surrogate of one's own, so that two functions under one name

@@ -165,20 +165,6 @@ def test_as_float_is_the_shortest_decimal_of_the_float32():
     assert np.float32(as_float(np.float32(0.1) / 3)) == np.float32(0.1) / 3  # round-trips
 
 
-@pytest.fixture
-def module_here(tmp_path, monkeypatch):
-    """Writes a module in a new current directory that is not on Python's path (as under the
-    installed command); the module is forgotten afterwards."""
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", os.getcwd())])
-
-    def write(name, text):
-        (tmp_path / f"{name}.py").write_text(text)
-        monkeypatch.delitem(sys.modules, name, raising=False)
-
-    return write
-
-
 def test_a_surrogate_module_is_imported_from_the_current_directory(module_here):
     module_here(
         "here_mine",

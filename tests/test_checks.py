@@ -117,6 +117,7 @@ def test_check_seeds_refuses_what_names_no_distinct_valid_seeds(seeds, message):
 
 def test_check_seeds_takes_a_count_a_sequence_or_an_array():
     assert check_seeds(3) == [0, 1, 2]
+    assert check_seeds(2, first=1_000_000) == [1_000_000, 1_000_001]
     assert check_seeds(np.int64(2)) == [0, 1]
     assert check_seeds([7, 0]) == [7, 0]
     assert check_seeds(range(10, 12)) == [10, 11]

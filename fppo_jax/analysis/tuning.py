@@ -214,7 +214,7 @@ def tune(
             f"a tune takes run-shape settings ({', '.join(CONFIG_FIELDS)}), not "
             f"{', '.join(stray)}: the hyperparameters are its search space"
         )
-    tuning_seeds = _tuning_seeds(seeds)
+    tuning_seeds = check_seeds(seeds, first=TUNING_SEED_START)
     baseline = _baseline(baseline, arms)
     given = read_space_file(space) if isinstance(space, str | Path) else space
     spaces = search_spaces(arms, given)
@@ -303,13 +303,6 @@ def _baseline(baseline: str | None, arms: list[Surrogate]) -> str:
     if baseline not in names:
         raise InvalidInput(f"the baseline {baseline!r} is not among the tuned variants {names}")
     return baseline
-
-
-def _tuning_seeds(seeds: int | Sequence[int]) -> list[int]:
-    if isinstance(seeds, int | np.integer) and not isinstance(seeds, bool):
-        count = positive_int("seeds", seeds)
-        return list(range(TUNING_SEED_START, TUNING_SEED_START + count))
-    return check_seeds(seeds)
 
 
 def _storage(optuna: Any, url: str) -> Any:

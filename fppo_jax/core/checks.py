@@ -59,13 +59,13 @@ def check_seed(seed: object) -> int:
     return int(seed)
 
 
-def check_seeds(seeds: object, shown: str | None = None) -> list[int]:
-    """Seeds 0 … n−1 for a count n, else the given ones (a sequence, a range), checked: at
-    least one, at most :data:`MAX_SEEDS` (counted before a list of them is built), each a seed
-    (:func:`check_seed`), distinct, and distinct in the low 32 bits that JAX's keys keep.
-    `shown` is how the seeds were written (a command line's text), for the messages."""
+def check_seeds(seeds: object, shown: str | None = None, first: int = 0) -> list[int]:
+    """Seeds `first` … `first` + n − 1 for a count n, else the given ones (a sequence, a range),
+    checked: at least one, at most :data:`MAX_SEEDS` (counted before a list of them is built),
+    each a seed (:func:`check_seed`), distinct, and distinct in the low 32 bits that JAX's keys
+    keep. `shown` is how the seeds were written (a command line's text), for the messages."""
     if isinstance(seeds, int | np.integer) and not isinstance(seeds, bool | np.bool_):
-        seeds = range(positive_int("seeds", seeds))
+        seeds = range(first, first + positive_int("seeds", seeds))
     elif (
         isinstance(seeds, str)
         or not isinstance(seeds, Sequence | np.ndarray)
@@ -84,9 +84,9 @@ def check_seeds(seeds: object, shown: str | None = None) -> list[int]:
         raise InvalidInput(f"seeds must be distinct, got {described}")
     # JAX's keys (without 64-bit mode) keep a seed's low 32 bits: seeds equal there would train
     # the same run twice, and count it as two.
-    first: dict[int, int] = {}
+    by_low_bits: dict[int, int] = {}
     for seed in checked:
-        other = first.setdefault(seed % 2**32, seed)
+        other = by_low_bits.setdefault(seed % 2**32, seed)
         if other != seed:
             raise InvalidInput(
                 f"seeds {other} and {seed} give the same key (JAX keeps a seed's low 32 bits), "

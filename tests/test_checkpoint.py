@@ -23,12 +23,12 @@ from fppo_jax import (
     DamagedCheckpoint,
     IncompatibleFormat,
     TrainingDiverged,
-    checkpoint,
     load_policy,
     train,
 )
 from fppo_jax.cli import main
 from fppo_jax.core.trainer import METRICS
+from fppo_jax.store import checkpoint
 from fppo_jax.store.checkpoint import Checkpoints
 
 RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 20, **TINY}

@@ -7,6 +7,7 @@ import json
 import shutil
 
 import jax.numpy as jnp
+import numpy as np
 import pytest
 from conftest import TINY
 
@@ -252,12 +253,105 @@ def test_a_tune_not_finished_is_no_source_of_settings(tmp_path):
         ({"total_steps": 128}, "too short for 3 rungs"),
         ({"seeds": [0, 0]}, "seeds must be distinct"),
         ({"sampler_seed": -1}, r"sampler_seed must be an integer in \[0, 2\*\*32\)"),
+        ({"part": (0, 2), "chunk": 2}, r"part must be the K-th of N parts, .* got \(0, 2\)"),
+        ({"part": (3, 2), "chunk": 2}, r"part must be the K-th of N parts, .* got \(3, 2\)"),
+        ({"part": "x", "chunk": 2}, "part must be the K-th of N parts, 1 <= K <= N, got 'x'"),
+        ({"part": (1, 2)}, "part 1 of 2 needs chunk"),
+        ({"chunk": 3}, "must be a multiple of the 2 seeds per trial, got 3"),
     ],
 )
 def test_bad_input_is_refused_before_any_plan(tmp_path, arguments, message):
     with pytest.raises(InvalidInput, match=message):
         tune("cartpole", ARMS, output=tmp_path / "tune", **{**SMALL, **arguments})
     assert not (tmp_path / "tune").exists()
+
+
+# Runs per compiled call of the split tunes: 3 trials × 2 seeds. Rung 0's 16 runs train in
+# groups of 6, 6 and 4 (filled up to 6), rung 1's 8 in groups of 6 and 2, rung 2's 4 in one.
+CHUNK = 6
+
+
+def split_tune(output, parts, **arguments):
+    """The tune of SMALL in groups of CHUNK runs split into `parts`, rung by rung: each part,
+    then the join (which records the rung and trains none)."""
+    arguments = {**SMALL, "chunk": CHUNK, **arguments}
+    while True:
+        for k in range(1, parts + 1):
+            tune("cartpole", ARMS, output=output, part=(k, parts), **arguments)
+        result = tune("cartpole", ARMS, output=output, rungs=0, **arguments)
+        if result.finished:
+            return result
+
+
+def optuna_trials(directory):
+    return {
+        arm: [
+            (t.number, t.state, t.value, t.intermediate_values, t.params)
+            for t in tuning._optuna()
+            .load_study(study_name=f"cartpole/{arm}", storage=f"sqlite:///{directory}/optuna.db")
+            .trials
+        ]
+        for arm in ARMS
+    }
+
+
+def test_a_tune_split_into_parts_joins_into_the_unsplit_tune_bit_for_bit(tmp_path, capsys):
+    whole = tune("cartpole", ARMS, output=tmp_path / "whole", chunk=CHUNK, **SMALL)
+    split = split_tune(tmp_path / "split", 3, progress=True)
+    assert split.finished
+    # Every run's score, every trial's mean and the survivors, as the unsplit tune's.
+    assert [rung["arms"] for rung in rung_scores(tmp_path / "split")] == [
+        rung["arms"] for rung in rung_scores(tmp_path / "whole")
+    ]
+    for rung in (0, 1):  # the survivors' state, which the next rung goes on from
+        with (
+            np.load(tmp_path / f"whole/cartpole/rung-{rung}/state.npz") as a,
+            np.load(tmp_path / f"split/cartpole/rung-{rung}/state.npz") as b,
+        ):
+            assert a.files == b.files
+            assert all(np.array_equal(a[name], b[name], equal_nan=True) for name in a.files)
+    assert split.results == whole.results
+    assert {arm: split.chosen("cartpole", arm) for arm in ARMS} == {
+        arm: whole.chosen("cartpole", arm) for arm in ARMS
+    }
+    assert optuna_trials(tmp_path / "split") == optuna_trials(tmp_path / "whole")
+    # Rung 1's 8 runs make 2 groups and rung 2's 4 one: the parts past them train nothing.
+    shares = [sorted(p.name for p in rung.glob("part-*")) for rung in _rungs(tmp_path / "split")]
+    assert shares == [["part-1", "part-2", "part-3"], ["part-1", "part-2"], ["part-1"]]
+    said = capsys.readouterr().err
+    assert "cartpole: rung 2 of 3, part 3 of 3: nothing to train, the rung's 8 runs make 2" in said
+
+
+def _rungs(directory):
+    return sorted((directory / "cartpole").glob("rung-*"))
+
+
+def test_a_missing_part_is_refused_by_name_and_a_recorded_one_not_trained_again(
+    tmp_path, monkeypatch
+):
+    arguments = {**SMALL, "chunk": CHUNK}
+    tune("cartpole", ARMS, output=tmp_path, part=(1, 2), **arguments)
+    share = tmp_path / "cartpole/rung-0/part-1/scores.json"
+    recorded = share.read_text()
+    # Only the join tells Optuna a rung's scores: a share writes nothing there.
+    assert all(not trial[3] for trials in optuna_trials(tmp_path).values() for trial in trials)
+
+    def compiled(*args, **kwargs):
+        raise AssertionError("a recorded part was trained again")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(tuning, "compile_program", compiled)
+        assert not tune("cartpole", ARMS, output=tmp_path, part=(1, 2), **arguments).finished
+    assert share.read_text() == recorded
+    with pytest.raises(
+        InvalidInput,
+        match=r"cartpole: rung 1 is split into 2 parts and part 2 is missing .* --part 2/2",
+    ):
+        tune("cartpole", ARMS, output=tmp_path, **arguments)
+    assert not (tmp_path / "cartpole/rung-0/scores.json").exists()
+    # The join is the tune of its plan: another chunk is refused, naming it.
+    with pytest.raises(InvalidInput, match="chunk = 6, not 4"):
+        tune("cartpole", ARMS, output=tmp_path, **{**arguments, "chunk": 4})
 
 
 def test_a_storage_that_cannot_be_opened_is_one_error(tmp_path):
@@ -318,3 +412,9 @@ def test_the_command_line_plans_tunes_and_refuses_in_one_line(tuned, tmp_path, c
     assert capsys.readouterr().err.strip() == (
         "fppo-jax: error: eta (the halving rate) must be an integer of at least 2, got 1"
     )
+    for part in ("0/2", "3/2", "x"):
+        with pytest.raises(SystemExit):
+            main([*flags, "--output", str(tmp_path / "c"), "--chunk", "2", "--part", part])
+        said = capsys.readouterr().err
+        assert "argument --part: " in said and f"got '{part}'" in said
+    assert not (tmp_path / "c").exists()

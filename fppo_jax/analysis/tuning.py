@@ -16,7 +16,10 @@ the rungs, the budget per arm and task, the sampler and its seed, the score and 
 rule, and the commit. Each finished rung writes ``<task>/rung-<r>/`` (its scores, and the state
 its survivors go on from) and records every trial's score in Optuna's storage (a SQLite file in
 the output, or a database URL that many processes share): the same call again goes on from the
-last rung recorded, bit for bit; a changed plan is refused naming the change. At the end,
+last rung recorded, bit for bit; a changed plan is refused naming the change. A SLURM job
+array's tasks each train a share of a rung (whole groups of its runs, in
+``<task>/rung-<r>/part-<K>/``) and rank nothing; a call without a part joins the shares into
+the rung trained unsplit, bit for bit, and alone tells Optuna its scores. At the end,
 ``results.json`` holds each arm's chosen setting per task, and ``report.md`` the tuning report
 (:mod:`fppo_jax.analysis.tuning_report`); ``fppo_jax.study(..., tuned=output)`` then decides on
 fresh seeds.
@@ -44,9 +47,9 @@ from typing import Any, cast
 import jax
 import numpy as np
 
-from fppo_jax.analysis.studies import check_plan, commit, names_of_tasks
+from fppo_jax.analysis.studies import PART_LOCK_WAIT, check_plan, commit, names_of_tasks
 from fppo_jax.analysis.tuning_report import ranked
-from fppo_jax.core.checks import check_seeds, positive_int
+from fppo_jax.core.checks import check_part, check_seeds, positive_int
 from fppo_jax.core.config import CONFIG_FIELDS, stack_hyperparameters, with_budget
 from fppo_jax.core.objectives import identities, union
 from fppo_jax.core.resolution import resolve, resolve_hyperparameters
@@ -61,6 +64,7 @@ from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.trainer import TrainState
 from fppo_jax.envs import resets_itself
 from fppo_jax.errors import InvalidInput, MissingFile, MissingPackage, first_line, install_hint
+from fppo_jax.run.driver import share_bounds
 from fppo_jax.run.execution import compile_program, run_keys
 from fppo_jax.run.memory import check_host_memory
 from fppo_jax.run.prepare import Prepared, prepare
@@ -175,6 +179,8 @@ def tune(
     sampler_seed: int = 0,
     storage: str | None = None,
     rungs: int | None = None,
+    chunk: int | None = None,
+    part: tuple[int, int] | None = None,
     total_steps: int | None = None,
     preset: str = "paper",
     backend: str = "auto",
@@ -190,8 +196,14 @@ def tune(
     `sampler_seed`; `storage` is Optuna's storage URL (default: a SQLite file in `output`).
     `baseline` (default: ``ppo`` if tuned, else the first variant) is the arm whose default the
     report measures the others' sampled settings against. `rungs` limits the rungs this call
-    trains (the same call later goes on). `total_steps`, `preset`, `backend` and `settings`
-    (run-shape fields of :class:`~fppo_jax.core.config.TrainConfig`) are every run's.
+    trains (the same call later goes on; 0 trains none, but joins the shares recorded).
+    `chunk`, a multiple of the seeds' count, is the runs each compiled call trains (default:
+    each rung's runs in one call): a rung's runs, in order, train in groups of that many.
+    ``part=(K, N)`` (with `chunk`) trains the K-th of N shares of those groups of each task's
+    next rung, records it in ``<task>/rung-<r>/part-<K>/`` and returns; a call without `part`
+    joins the shares into the rung trained unsplit with the same `chunk`, bit for bit.
+    `total_steps`, `preset`, `backend` and `settings` (run-shape fields of
+    :class:`~fppo_jax.core.config.TrainConfig`) are every run's.
     """
     tasks = names_of_tasks(tasks, "a tune")
     arms = _arms(variants)
@@ -215,6 +227,7 @@ def tune(
             f"{', '.join(stray)}: the hyperparameters are its search space"
         )
     tuning_seeds = check_seeds(seeds, first=TUNING_SEED_START)
+    part = _checked_split(chunk, part, len(tuning_seeds))
     baseline = _baseline(baseline, arms)
     given = read_space_file(space) if isinstance(space, str | Path) else space
     spaces = search_spaces(arms, given)
@@ -239,10 +252,20 @@ def tune(
         baseline,
         sampler,
         sampler_seed,
-        {"total_steps": total_steps, "preset": preset, "backend": backend, **settings},
+        {
+            "total_steps": total_steps,
+            "preset": preset,
+            "backend": backend,
+            # The groups a rung trains in make its numbers: recorded where given, so that the
+            # shares and their join are one tune (and a tune planned before it goes on).
+            **({} if chunk is None else {"chunk": chunk}),
+            **settings,
+        },
     )
     output = writable_directory(output)
-    lock = DirectoryLock(output, "a tune")
+    # Array tasks that start together take turns with the lock: each holds it while it reads
+    # and writes the plan and Optuna's storage, then lets go to train its share.
+    lock = DirectoryLock(output, "a tune", wait=PART_LOCK_WAIT if part is not None else 0.0)
     verbosity = optuna.logging.get_verbosity()
     try:
         # Optuna's line per study made and per trial told, and its note that the Sobol sampler
@@ -252,36 +275,63 @@ def tune(
             warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
             plan = check_plan(output, plan, "a tune", PLAN_FILE)
             store = _storage(optuna, storage or f"sqlite:///{(output / STORAGE_FILE).absolute()}")
-            left, results = math.inf if rungs is None else rungs, {}
-            for task in tasks:
-                population = _population(
-                    optuna, store, task, arms, spaces, trials, sampler, sampler_seed
-                )
-                tuned = _Task(
+            tuned = [
+                _Task(
                     task,
                     runs[task],
                     arms,
-                    population,
+                    _population(optuna, store, task, arms, spaces, trials, sampler, sampler_seed),
                     schedules[task],
                     tuning_seeds,
+                    chunk,
                     output / task,
                     optuna,
                     store,
                     progress,
                 )
-                left -= tuned.run(left)
-                if tuned.finished:
-                    results[task] = tuned.results(baseline)
+                for task in tasks
+            ]
+            for each in tuned:  # what is recorded, told to Optuna; shares joined without a part
+                each.read(join=part is None)
+            if part is not None:  # a share writes only its own files: the others go on
+                lock.release()
+            left = math.inf if rungs is None else rungs
+            for each in tuned:
+                left -= each.train(left, part)
     finally:
         optuna.logging.set_verbosity(verbosity)
         lock.release()
+    results = {each.task: each.results(baseline) for each in tuned if each.finished}
     finished = len(results) == len(tasks)
-    if finished:
+    if finished and part is None:
         from fppo_jax.analysis.tuning_report import write_report
 
         write_json(output / RESULTS_FILE, results)
         write_report(output, plan, results)
     return TuneResult(plan, results, finished, output)
+
+
+def _checked_split(chunk: int | None, part: object, seeds: int) -> tuple[int, int] | None:
+    """`part` as (K, N), with `chunk` checked before any plan: a chunk of whole trials, and a
+    split only of groups that an unsplit tune with the same chunk trains alike."""
+    if chunk is not None and positive_int("chunk", chunk) % seeds:
+        raise InvalidInput(
+            f"chunk (runs per compiled call) must be a multiple of the {seeds} seeds per trial, "
+            f"got {chunk}: all seeds of a trial train in one group"
+        )
+    if part is None:
+        return None
+    k, n = check_part(part)
+    if chunk is None and n > 1:
+        # XLA rounds a vmapped program by its run count: a share trained as its own program
+        # would differ in the last bits from the rung trained whole, and then diverge.
+        raise InvalidInput(
+            f"part {k} of {n} needs chunk (--chunk), the runs per compiled call, the same for "
+            "every share and the join: a rung's runs train in groups of that many and a share "
+            "trains whole groups, so that the joined rung is the one trained unsplit, bit for "
+            "bit"
+        )
+    return k, n
 
 
 def _arms(variants: Any) -> list[Surrogate]:
@@ -496,6 +546,21 @@ def setting_of(params: Mapping[str, float]) -> dict[str, float]:
     }
 
 
+@dataclasses.dataclass
+class _Share:
+    """What a share of a rung trained: its `runs` (arm, trial, seed, in the rung's order), each
+    run's score at the rung's end (NaN where no episode finished) and whether it diverged, the
+    leaves of its state (as :func:`_save_leaves` writes them; none at the last rung, which no
+    rung goes on from), and the seconds it trained and compiled."""
+
+    runs: list[tuple[str, int, int]]
+    last: np.ndarray
+    diverged: np.ndarray
+    leaves: list[np.ndarray]
+    seconds: float
+    compile_seconds: float
+
+
 class _Task:
     """One task's population, rung by rung."""
 
@@ -507,13 +572,14 @@ class _Task:
         population: dict[str, list[dict[str, float]]],
         rungs: Rungs,
         seeds: list[int],
+        chunk: int | None,
         directory: Path,
         optuna: Any,
         storage: Any,
         progress: bool,
     ):
         self.task, self.prepared, self.arms = task, prepared, arms
-        self.rungs, self.seeds = rungs, seeds
+        self.rungs, self.seeds, self.chunk = rungs, seeds, chunk
         self.settings = {arm: [setting_of(p) for p in params] for arm, params in population.items()}
         self.directory, self.optuna, self.storage, self.progress = (
             directory,
@@ -528,18 +594,51 @@ class _Task:
     def finished(self) -> bool:
         return len(self.scores) == len(self.rungs.trials)
 
-    def run(self, allowed: float) -> int:
-        """Trains up to `allowed` rungs after those recorded; returns how many it trained."""
+    def read(self, join: bool) -> None:
+        """Takes the rungs recorded, and where `join`, the rungs whose shares array tasks
+        recorded, joined (a rung with some of its shares missing is refused)."""
         self.directory.mkdir(exist_ok=True)
-        while (self.directory / f"rung-{len(self.scores)}" / _SCORES).exists():
-            self._recorded(
-                json.loads((self.directory / f"rung-{len(self.scores)}" / _SCORES).read_text())
-            )
+        while not self.finished:
+            where = self._where(len(self.scores))
+            if (where / _SCORES).exists():
+                self._recorded(json.loads((where / _SCORES).read_text()))
+            elif join and any(where.glob(f"part-*/{_SCORES}")):
+                self._record(self._read_shares())
+            else:
+                return
+
+    def train(self, allowed: float, part: tuple[int, int] | None) -> int:
+        """Trains up to `allowed` rungs after those read, each as its one share; with `part`,
+        that share of the next rung alone, recorded for the join. Returns how many rungs it
+        trained (or trained a share of)."""
+        if part is not None:
+            if self.finished or allowed < 1:
+                return 0
+            self._train_part(part)
+            return 1
         trained = 0
         while not self.finished and trained < allowed:
-            self._train_rung(len(self.scores))
+            self._record([self._share((1, 1))])
             trained += 1
         return trained
+
+    def _where(self, rung: int) -> Path:
+        return self.directory / f"rung-{rung}"
+
+    def _order(self) -> list[tuple[str, int, int]]:
+        """The next rung's runs: each arm's live trials × the seeds, in that order."""
+        return [
+            (arm, t, seed)
+            for arm, trials in self.live.items()
+            for t in trials
+            for seed in self.seeds
+        ]
+
+    def _groups(self, runs: int) -> tuple[int, int]:
+        """The size and the count of the groups that a rung of `runs` runs trains in: `chunk`
+        runs each (all of them if it has fewer), as the unsplit tune and its shares alike."""
+        size = min(self.chunk or runs, runs)
+        return size, -(-runs // size)
 
     def _recorded(self, scores: dict[str, Any]) -> None:
         """A rung's scores: told to Optuna (again, if a kill came between), and its survivors
@@ -570,25 +669,22 @@ class _Task:
                     study.tell(trial, state=states.PRUNED)
             self.live[arm] = list(arms[arm]["survivors"])
 
-    def _train_rung(self, rung: int) -> None:
-        """Trains rung `rung`'s live trials × seeds as one program, then records the rung: its
-        scores, and the state its survivors go on from."""
-        order = [
-            (arm, t, seed)
-            for arm, trials in self.live.items()
-            for t in trials
-            for seed in self.seeds
-        ]
-        began = time.perf_counter()
-        state, last, compile_seconds = self._train(order, rung) if order else (None, None, 0.0)
-        diverged = np.zeros(len(order), bool) if state is None else fetch_diverged(state)
+    def _record(self, shares: list[_Share]) -> None:
+        """Records the next rung from its `shares`, in order: its scores, ranked, and the state
+        its survivors go on from; then tells Optuna (the join alone writes to it)."""
+        rung, order = len(self.scores), self._order()
+        assert [run for share in shares for run in share.runs] == order
+        last = np.concatenate([share.last for share in shares])
+        diverged = np.concatenate([share.diverged for share in shares])
         arms = self._scores(order, last, diverged, rung)
-        where = self.directory / f"rung-{rung}"
+        where = self._where(rung)
         where.mkdir(exist_ok=True)
-        if state is not None and rung + 1 < len(self.rungs.trials):
+        if rung + 1 < len(self.rungs.trials):
             keep = [i for i, (arm, t, _) in enumerate(order) if t in arms[arm]["survivors"]]
-            _save_state(where / _STATE, jax.tree.map(lambda x: x[np.asarray(keep, int)], state))
-        seconds = time.perf_counter() - began - compile_seconds
+            leaves = zip(*(share.leaves for share in shares), strict=True)
+            _save_leaves(where / _STATE, [np.concatenate(leaf)[keep] for leaf in leaves])
+        seconds = sum(share.seconds for share in shares)
+        compile_seconds = sum(share.compile_seconds for share in shares)
         scores = {"arms": arms, "seconds": seconds, "compile_seconds": compile_seconds}
         write_json(where / _SCORES, scores)
         self._recorded(scores)
@@ -600,39 +696,179 @@ class _Task:
         )
         self._say(f"{self.task}: rung {rung + 1} done in {seconds:.1f} s; best: {best}")
 
-    def _train(
-        self, order: list[tuple[str, int, int]], rung: int
-    ) -> tuple[TrainState, np.ndarray, float]:
-        """The runs of `order` (arm, trial, seed) trained through `rung`, from the recorded
-        state of the rung before: their state, each run's score and the seconds compiling."""
+    def _train_part(self, part: tuple[int, int]) -> None:
+        """Trains `part`'s share of the next rung and records it in ``part-<K>/`` for the join
+        (its runs' scores and state), unless it is recorded already."""
+        rung, (k, n) = len(self.scores), part
+        where = self._where(rung) / f"part-{k}"
+        said = f"{self.task}: rung {rung + 1} of {len(self.rungs.trials)}, part {k} of {n}"
+        if (where / _SCORES).exists():
+            self._say(f"{said}: recorded already (a call without a part joins the rung's parts)")
+            return
+        share = self._share(part)
+        if not share.runs:
+            runs = len(self._order())
+            size, groups = self._groups(runs)
+            self._say(
+                f"{said}: nothing to train, the rung's {runs} runs make {groups} group"
+                f"{'s' * (groups > 1)} of {size}, fewer than the parts"
+            )
+            return
+        where.mkdir(parents=True, exist_ok=True)
+        if share.leaves:
+            _save_leaves(where / _STATE, share.leaves)
+        recorded = {
+            "part": [k, n],
+            "runs": share.runs,
+            "scores": [float(v) if math.isfinite(v) else None for v in share.last],
+            "diverged": share.diverged.tolist(),
+            "seconds": share.seconds,
+            "compile_seconds": share.compile_seconds,
+        }
+        write_json(where / _SCORES, recorded)  # last: a share with its scores is whole
+        self._say(f"{said}: {len(share.runs)} runs recorded in {share.seconds:.1f} s")
+
+    def _read_shares(self) -> list[_Share]:
+        """The next rung's shares that array tasks recorded, every one that has runs to train,
+        each checked to hold its runs; a missing one is refused by name."""
+        rung, order = len(self.scores), self._order()
+        where = self._where(rung)
+        found = {}
+        for path in where.glob(f"part-*/{_SCORES}"):
+            recorded = json.loads(path.read_text())
+            found[tuple(recorded["part"])] = recorded
+        splits = sorted({n for _, n in found})
+        if len(splits) > 1:
+            raise InvalidInput(
+                f"{where} holds shares of splits into {' and '.join(map(str, splits))} parts: "
+                "remove those of the split not carried through, then run this again"
+            )
+        n = splits[0]
+        size, groups = self._groups(len(order))
+        shares = []
+        for k in range(1, n + 1):
+            first, stop = share_bounds((k, n), groups)
+            runs = order[first * size : stop * size]
+            if not runs:
+                continue  # a share past the rung's groups: nothing to train, nothing recorded
+            if (k, n) not in found:
+                raise InvalidInput(
+                    f"{self.task}: rung {rung + 1} is split into {n} parts and part {k} is "
+                    f"missing ({where}/part-{k}): train it with --part {k}/{n} (part=({k}, {n})), "
+                    "then run this again"
+                )
+            recorded = found[k, n]
+            later = rung + 1 < len(self.rungs.trials)
+            leaves = _read_leaves(where / f"part-{k}" / _STATE) if later else []
+            if [tuple(run) for run in recorded["runs"]] != runs or any(
+                len(leaf) != len(runs) for leaf in leaves
+            ):
+                raise InvalidInput(
+                    f"{where}/part-{k} does not hold part {k} of {n} of this rung: remove it and "
+                    f"train it again with --part {k}/{n}"
+                )
+            last = [math.nan if v is None else v for v in recorded["scores"]]
+            shares.append(
+                _Share(
+                    runs,
+                    np.asarray(last, float),
+                    np.asarray(recorded["diverged"], bool),
+                    leaves,
+                    recorded["seconds"],
+                    recorded["compile_seconds"],
+                )
+            )
+        self._say(
+            f"{self.task}: rung {rung + 1}: joining its parts ({len(shares)} of {n} had runs to "
+            "train)"
+        )
+        return shares
+
+    def _share(self, part: tuple[int, int]) -> _Share:
+        """Trains `part`'s share of the next rung: whole groups of the rung's runs (:meth:`_groups`;
+        the last one filled up with the rung's last run), each a call of one program."""
+        rung, order = len(self.scores), self._order()
+        size, groups = self._groups(len(order))
+        first, stop = share_bounds(part, groups)
+        runs = order[first * size : stop * size]
+        if not runs:
+            return _Share([], np.zeros(0), np.zeros(0, bool), [], 0.0, 0.0)
         rungs, trainer = self.rungs, self.prepared.trainer
+        start = 0 if rung == 0 else rungs.ends[rung - 1]
+        live = ", ".join(f"{len(t)} {arm}" for arm, t in self.live.items())
+        split = "" if part == (1, 1) else f", part {part[0]} of {part[1]}"
+        grouped = "" if groups == 1 else f" in groups of {size}, {len(runs)} of them here"
+        self._say(
+            f"{self.task}: rung {rung + 1} of {len(rungs.trials)}{split}: trials {live} × "
+            f"{len(self.seeds)} seeds = {len(order)} runs{grouped}, updates {start + 1}–"
+            f"{rungs.ends[rung]} of {trainer.config.num_updates}; compiling…"
+        )
+        check_host_memory(trainer, size)
+        began, program = time.perf_counter(), None
+        lasts, diverged, leaves = [], [], []
+        for group in range(first, stop):
+            # Every group has one shape, so one program: the rung's last run fills up its last.
+            index = np.minimum(np.arange(group * size, (group + 1) * size), len(order) - 1)
+            keys, hps = self._inputs([order[i] for i in index])
+            if program is None:
+                program = compile_program(trainer, keys, hps, jax.vmap, rungs.updates_per_call)
+                self._say(
+                    f"{self.task}: rung {rung + 1} compiled in {program.compile_seconds:.1f} s"
+                )
+            said = f"{self.task}: rung {rung + 1}" + (
+                f", group {group + 1} of {groups}" if groups > 1 else ""
+            )
+            state, last = self._train(program, keys, hps, index, len(order), rung, said)
+            kept = slice(0, len(order) - group * size)  # the group's own runs, not the fill
+            lasts.append(last[kept])
+            diverged.append(fetch_diverged(state)[kept])
+            if rung + 1 < len(rungs.trials):  # the last rung's state goes on nowhere
+                leaves.append([_plain(leaf)[kept] for leaf in jax.tree.leaves(state)])
+        assert program is not None
+        return _Share(
+            runs,
+            np.concatenate(lasts),
+            np.concatenate(diverged),
+            [np.concatenate(leaf) for leaf in zip(*leaves, strict=True)],
+            time.perf_counter() - began - program.compile_seconds,
+            program.compile_seconds,
+        )
+
+    def _inputs(self, runs: list[tuple[str, int, int]]) -> tuple[jax.Array, Any]:
+        """The keys and the stacked hyperparameters of `runs` (arm, trial, seed)."""
         surrogates = {arm.name: arm for arm in self.arms}
         hps = stack_hyperparameters(
             [
                 resolve_hyperparameters(surrogates[arm], None, **self.settings[arm][trial])[0]
-                for arm, trial, _ in order
+                for arm, trial, _ in runs
             ]
         )
-        keys = run_keys([seed for _, _, seed in order])
-        check_host_memory(trainer, len(order))
+        return run_keys([seed for _, _, seed in runs]), hps
+
+    def _train(
+        self,
+        program: Any,
+        keys: jax.Array,
+        hps: Any,
+        index: np.ndarray,
+        runs: int,
+        rung: int,
+        said: str,
+    ) -> tuple[TrainState, np.ndarray]:
+        """The runs `index` of the rung's `runs` (their `keys` and `hps`) trained by `program`
+        through `rung`, from the recorded state of the rung before: their state and each
+        run's score (`said` names them in progress lines)."""
+        rungs, trainer = self.rungs, self.prepared.trainer
         start = 0 if rung == 0 else rungs.ends[rung - 1]
-        live = ", ".join(f"{len(t)} {arm}" for arm, t in self.live.items())
-        self._say(
-            f"{self.task}: rung {rung + 1} of {len(rungs.trials)}: trials {live} × "
-            f"{len(self.seeds)} seeds = {len(order)} runs, updates {start + 1}–{rungs.ends[rung]}"
-            f" of {trainer.config.num_updates}; compiling…"
-        )
-        program = compile_program(trainer, keys, hps, jax.vmap, rungs.updates_per_call)
         if rung == 0:
             state = program.init(keys, hps)
         else:
             like = jax.eval_shape(jax.vmap(trainer.init), keys, hps)
-            state = _load_state(self.directory / f"rung-{rung - 1}" / _STATE, like)
+            state = _load_state(self._where(rung - 1) / _STATE, like, index, runs)
             if resets_itself(trainer.env):  # their state lived outside JAX, in another batch
                 state = jax.jit(jax.vmap(trainer.restart_envs))(state)
-        self._say(f"{self.task}: rung {rung + 1} compiled in {program.compile_seconds:.1f} s")
         budgeted = with_budget(hps, trainer.config.num_updates)
-        last = np.full(len(order), np.nan)
+        last = np.full(len(index), np.nan)
         calls = -(-(rungs.ends[rung] - start) // rungs.updates_per_call)
         began = time.perf_counter()
         for call in range(calls):
@@ -643,12 +879,12 @@ class _Task:
                 last = returns[:, ran][:, -1]
             if (call + 1) % -(-calls // CALLS_A_RUNG) == 0 and call + 1 < calls:
                 done = min(start + (call + 1) * rungs.updates_per_call, rungs.ends[rung])
-                rate = (done - start) * trainer.config.samples_per_update * len(order)
+                rate = (done - start) * trainer.config.samples_per_update * len(index)
                 self._say(
-                    f"{self.task}: rung {rung + 1}: update {done} of {rungs.ends[rung]}, "
+                    f"{said}: update {done} of {rungs.ends[rung]}, "
                     f"{rate / (time.perf_counter() - began):,.0f} env steps/s"
                 )
-        return state, last, program.compile_seconds
+        return state, last
 
     def _scores(
         self,
@@ -708,34 +944,42 @@ def fetch_diverged(state: TrainState) -> np.ndarray:
     return np.asarray(jax.device_get(state.nonfinite_update)) >= 0
 
 
-def _save_state(path: Path, state: TrainState) -> None:
-    """The survivors' state, atomically: its leaves in order (keys as their data)."""
+def _save_leaves(path: Path, leaves: list[np.ndarray]) -> None:
+    """A state's leaves (:func:`_plain`: keys as their data), atomically, in order."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    leaves = [_plain(leaf) for leaf in jax.tree.leaves(state)]
     buffer = io.BytesIO()
     np.savez(buffer, *leaves)
     write_atomically(path, buffer.getvalue())
 
 
-def _load_state(path: Path, like: Any) -> TrainState:
-    """The state :func:`_save_state` wrote, its leaves checked against `like`'s."""
+def _read_leaves(path: Path) -> list[np.ndarray]:
+    """The leaves that :func:`_save_leaves` wrote in `path`."""
     if not path.exists():
-        raise MissingFile(f"{path} is missing: the rung before it must be trained again")
-    leaves, treedef = jax.tree.flatten(like)
+        raise MissingFile(f"{path} is missing: remove its rung (or part) to train it again")
     try:
         with np.load(path) as saved:
-            arrays = [saved[f"arr_{i}"] for i in range(len(leaves))]
+            return [saved[f"arr_{i}"] for i in range(len(saved.files))]
     except Exception as error:  # a damaged or foreign file: NumPy's and zipfile's errors
         raise InvalidInput(
             f"cannot read {path}: {error}; remove its rung to train it again"
         ) from None
+
+
+def _load_state(path: Path, like: Any, index: np.ndarray, runs: int) -> TrainState:
+    """Runs `index` of the `runs` runs whose state `path` holds, checked against `like`
+    (theirs), on the device."""
+    leaves, treedef = jax.tree.flatten(like)
+    arrays = _read_leaves(path)
     restored = []
-    for array, leaf in zip(arrays, leaves, strict=True):
+    for saved, leaf in zip(arrays, leaves, strict=False):
+        array: Any = saved[index] if len(saved) == runs else saved  # the check below refuses it
         if jax.numpy.issubdtype(leaf.dtype, jax.dtypes.prng_key):
             array = jax.random.wrap_key_data(array)
         if array.shape != leaf.shape:
-            raise InvalidInput(f"{path} does not hold this tune's state; remove its rung")
+            break
         restored.append(array)
+    if len(arrays) != len(leaves) or len(restored) != len(leaves):
+        raise InvalidInput(f"{path} does not hold this tune's state; remove its rung")
     return cast(TrainState, jax.device_put(jax.tree.unflatten(treedef, restored)))
 
 

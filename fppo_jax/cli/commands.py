@@ -192,6 +192,7 @@ def _study(args: argparse.Namespace) -> int:
 def _tune(args: argparse.Namespace) -> int:
     from fppo_jax.analysis.tuning import tune
 
+    part = array_part() if args.part == "auto" else args.part
     result = tune(
         args.tasks,
         args.variants,
@@ -205,10 +206,19 @@ def _tune(args: argparse.Namespace) -> int:
         sampler_seed=args.sampler_seed,
         storage=args.storage,
         rungs=args.rungs,
+        chunk=args.chunk,
+        part=part,
         backend=args.backend,
         progress=not args.quiet,
         **config_overrides(args),
     )
+    if part is not None:
+        print(
+            f"part {part[0]} of {part[1]} of each task's next rung recorded in {args.output} (or "
+            "nothing was left to train); once every part is, the same command without --part "
+            "joins them and goes on (--rungs 0: joins them alone)"
+        )
+        return 0
     if not result.finished:
         print(f"wrote {args.output}/tune.json and the rungs so far; the same command goes on")
         return 0

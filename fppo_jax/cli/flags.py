@@ -62,15 +62,16 @@ seeds = _argument(parse_seeds)
 
 @_argument
 def part(text: str) -> tuple[int, int] | str:
-    """``K/N``: the K-th of N shares of a sweep; or ``auto``: a SLURM job array task's share,
-    read from SLURM's variables when the sweep starts (``cli.slurm.array_part``)."""
+    """``K/N``: the K-th of N shares of a sweep (a study's look, a tune's rung); or ``auto``: a
+    SLURM job array task's share, read from SLURM's variables when the command starts
+    (``cli.slurm.array_part``)."""
     if text == "auto":
         return text
     try:
         k, n = (int(x) for x in text.split("/"))
     except ValueError:
         raise InvalidInput(f"expected K/N such as 2/8, or auto, got {text!r}") from None
-    return check_part((k, n))
+    return check_part((k, n), shown=text)
 
 
 @_argument

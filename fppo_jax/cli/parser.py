@@ -346,7 +346,24 @@ def _add_tune(commands: argparse._SubParsersAction[Parser]) -> None:
         "--rungs",
         type=looks,
         metavar="N",
-        help="train at most N more rungs now, then stop (the same command goes on later)",
+        help="train at most N more rungs now, then stop (the same command goes on later); 0 "
+        "trains none, but joins the parts of a rung that --part recorded",
+    )
+    tuned.add_argument(
+        "--chunk",
+        type=count,
+        help="runs per compiled call, a multiple of --seeds-per-trial: a rung's runs train in "
+        "groups of that many, the same for every part and the join (default: each rung's runs "
+        "in one call)",
+    )
+    tuned.add_argument(
+        "--part",
+        type=part,
+        metavar="K/N",
+        help="train only the K-th of N shares of the groups of --chunk runs of each task's next "
+        "rung, record it and stop, ranking nothing (auto: a SLURM job array task's share); the "
+        "same command without --part, once every share is recorded, joins them into the rung "
+        "trained unsplit, bit for bit, and goes on",
     )
     tuned.add_argument(
         "--output", type=path, required=True, metavar="DIR", help="the tune's directory"

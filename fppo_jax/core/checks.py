@@ -114,14 +114,16 @@ def parse_seeds(text: str) -> list[int]:
     return check_seeds(seeds, shown=text)
 
 
-def check_part(part: object) -> tuple[int, int]:
-    """`part` as (K, N) if it is the K-th of N shares of a sweep: two integers (numpy's
-    included), 1 <= K <= N."""
+def check_part(part: object, shown: str | None = None) -> tuple[int, int]:
+    """`part` as (K, N) if it is the K-th of N shares (of a sweep, a study's look, a tune's
+    rung): two integers (numpy's included), 1 <= K <= N. `shown` is how it was written (a
+    command line's ``K/N``), for the message."""
     if (
         not isinstance(part, tuple | list)
         or len(part) != 2
         or not all(isinstance(x, int | np.integer) and not isinstance(x, bool) for x in part)
         or not 1 <= part[0] <= part[1]
     ):
-        raise InvalidInput(f"part must be K/N, the K-th of N parts, with 1 <= K <= N, got {part!r}")
+        described = repr(part) if shown is None else repr(shown)
+        raise InvalidInput(f"part must be the K-th of N parts, 1 <= K <= N, got {described}")
     return int(part[0]), int(part[1])

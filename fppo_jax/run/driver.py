@@ -362,15 +362,22 @@ def _share(plan: Plan, size: int, across: int) -> Plan:
     )
 
 
-def part_bounds(part: object, count: int) -> tuple[int, int]:
-    """Where the K-th (from 1) of N shares of `count` things starts and stops, for
-    ``part=(K, N)``: shares as equal as they can be, the first ones one longer."""
+def share_bounds(part: object, count: int) -> tuple[int, int]:
+    """Where the K-th of N shares of `count` things starts and stops, for ``part=(K, N)``:
+    shares as equal as they can be, the first ones one longer; with fewer things than shares,
+    the shares past them are empty."""
     k, n = check_part(part)
-    if n > count:
-        raise InvalidInput(f"part {k} of {n}: the sweep has only {count} runs to share")
     size, extra = divmod(count, n)
     start = (k - 1) * size + min(k - 1, extra)
     return start, start + size + (k <= extra)
+
+
+def part_bounds(part: object, count: int) -> tuple[int, int]:
+    """:func:`share_bounds` of a sweep's `count` runs, which has one for each of its parts."""
+    k, n = check_part(part)
+    if n > count:
+        raise InvalidInput(f"part {k} of {n}: the sweep has only {count} runs to share")
+    return share_bounds(part, count)
 
 
 def part_runs(part: tuple[int, int], num_runs: int, size: int, across: int = 1) -> tuple[int, int]:

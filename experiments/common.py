@@ -496,7 +496,7 @@ def draw_ablation(directory: Path, task: str, axes: Sequence[Axes]) -> None:
     """Each recorded ablation part of `task` on its own Axes: max average return against its
     hyperparameter, with Table 2's choice marked."""
     from fppo_jax.analysis.plots import plot_ablation
-    from fppo_jax.core.config import table2
+    from fppo_jax.core.resolution import table2
     from fppo_jax.run.results import SweepResult
 
     for ax, part in zip(axes, ablation_parts(directory, task), strict=False):

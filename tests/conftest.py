@@ -1,5 +1,6 @@
 import os
 import shutil
+import sys
 import tempfile
 
 import pytest
@@ -45,7 +46,7 @@ LONGEST_FIRST = (
     "test_gpu_suite.py",
     "test_plots.py",
     "test_envs.py",
-    "test_objectives.py",
+    "test_variants.py",
     "test_results.py",
     "test_experiment_scripts.py",
     "test_saved_policy.py",
@@ -123,3 +124,17 @@ def saved_policies(tmp_path_factory) -> dict:
     }
     record = {"config": {"env": "a test's"}, "update": 0}
     return {name: save_policy(where / name, p, record) for name, p in made.items()}
+
+
+@pytest.fixture
+def module_here(tmp_path, monkeypatch):
+    """Writes a module in a new current directory that is not on Python's path (as under the
+    installed command); the module is forgotten afterwards."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", os.getcwd())])
+
+    def write(name, text):
+        (tmp_path / f"{name}.py").write_text(text)
+        monkeypatch.delitem(sys.modules, name, raising=False)
+
+    return write

@@ -149,7 +149,7 @@ def test_a_group_cut_short_is_not_taken_for_a_recorded_one(tmp_path, tiny):
     where = tmp_path / "group"
     fppo_jax.sweep("cartpole", {"variant": ["ppo"]}, [0, 1], total_steps=512, log_dir=where, **tiny)
     whole = SweepResult.read(where)
-    ppo = fppo_jax.core.objectives.resolve("ppo")
+    ppo = fppo_jax.core.resolution.resolve("ppo")
     assert recorded_group(where, [ppo], [0, 1]) is not None
     cut = SweepResult(**{**whole.__dict__, "runs": whole.runs[:1], "diverged": whole.diverged[:1]})
     cut.metrics = {name: values[:1] for name, values in whole.metrics.items()}
@@ -528,7 +528,10 @@ def test_the_command_states_what_each_look_can_decide_and_records_the_margin(tmp
     assert "planned with margin = 0.2, not none" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main([*common, "--margin", "0.5"])
-    assert "a margin in (0, 0.5) such as 0.2, got 0.5" in capsys.readouterr().err
+    assert (
+        "the equivalence margin (a distance from 1/2 of P(candidate > baseline)) must be in "
+        "(0, 0.5), got 0.5" in capsys.readouterr().err
+    )
 
 
 def test_a_study_recorded_before_margins_reads_and_decides_as_it_did(tmp_path, monkeypatch):

@@ -1,127 +1,25 @@
-"""fppo_jax.core.config: the checks of a run's settings, their messages, presets and Table 2."""
+"""fppo_jax.core.config: the run's shape, its checks and their messages, and the presets."""
 
 import dataclasses
-import math
 import re
 
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from fppo_jax.core.config import (
-    HYPERPARAMETER_DEFAULTS,
     MAX_STEPS,
     PRESETS,
-    TABLE2,
     TrainConfig,
-    as_float,
-    check_seed,
     describe,
     describe_update,
     environment_name,
-    hyperparameters,
-    parse_seeds,
-    positive_int,
     preset_config,
     resolve_config,
-    resolve_hyperparameters,
-    table2,
     task_preset,
 )
 from fppo_jax.envs import MUJOCO_TASKS, lookup
 
 SMALL = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
-
-
-def test_positive_int_takes_python_and_numpy_integers_and_returns_a_python_int():
-    for value in (1, 7, np.int64(7), np.int32(7), np.uint8(7)):
-        checked = positive_int("n", value)
-        assert checked == int(value) and type(checked) is int
-
-
-@pytest.mark.parametrize(
-    "value", [0, -1, True, np.bool_(True), 2.0, np.float32(2.0), "3", None, [3]]
-)
-def test_positive_int_refuses_anything_else_naming_the_setting_and_the_value(value):
-    with pytest.raises(
-        ValueError, match=re.escape(f"width must be a positive integer, got {value!r}")
-    ):
-        positive_int("width", value)
-
-
-def test_check_seed_takes_every_64_bit_integer_signed_or_not():
-    for seed in (0, -5, -(2**63), 2**63, 2**64 - 1, np.uint64(2**64 - 1), np.int8(-3)):
-        checked = check_seed(seed)
-        assert checked == int(seed) and type(checked) is int
-
-
-@pytest.mark.parametrize(
-    "seed, message",
-    [
-        (True, "a seed must be an integer, got True"),
-        (1.0, "a seed must be an integer, got 1.0"),
-        ("1", "a seed must be an integer, got '1'"),
-        (None, "a seed must be an integer, got None"),
-        (2**64, f"a seed must fit in 64 bits, got {2**64}"),
-        (-(2**63) - 1, f"a seed must fit in 64 bits, got {-(2**63) - 1}"),
-    ],
-)
-def test_check_seed_refuses_non_integers_and_seeds_beyond_64_bits(seed, message):
-    with pytest.raises(ValueError, match=re.escape(message)):
-        check_seed(seed)
-
-
-@pytest.mark.parametrize(
-    "text, seeds",
-    [
-        ("3", [0, 1, 2]),  # a count
-        ("1", [0]),
-        ("10:13", [10, 11, 12]),  # a range, as range(10, 13)
-        ("-2:1", [-2, -1, 0]),
-        ("0,3,7", [0, 3, 7]),  # a list, in its order
-        ("7,0", [7, 0]),
-    ],
-)
-def test_parse_seeds_reads_a_count_a_range_or_a_list(text, seeds):
-    assert parse_seeds(text) == seeds
-
-
-@pytest.mark.parametrize(
-    "text, message",
-    [
-        ("abc", "seeds 'abc' are not a count (20), a range (10:20) or a list (0,3,7)"),
-        ("1.5", "seeds '1.5' are not a count"),
-        ("1:2:3", "seeds '1:2:3' are not a count"),
-        ("3,", "seeds '3,' are not a count"),
-        ("", "seeds '' are not a count"),
-        ("0", "the number of seeds must be a positive integer, got 0"),
-        ("-1", "the number of seeds must be a positive integer, got -1"),
-        ("5:5", "seeds '5:5' name no seed (a range start:stop needs start < stop)"),
-        ("6:2", "seeds '6:2' name no seed"),
-        ("1,2,1", "seeds '1,2,1' repeat a seed"),
-        (f"0,{2**64}", f"a seed must fit in 64 bits, got {2**64}"),
-        # Refused by their count, before a list of them is built.
-        ("0:10000000000", "'0:10000000000' name 10,000,000,000 seeds, more than 100,000"),
-        ("100001", "'100001' name 100,001 seeds, more than 100,000"),
-    ],
-)
-def test_parse_seeds_refuses_what_names_no_distinct_valid_seeds(text, message):
-    with pytest.raises(ValueError, match=re.escape(message)):
-        parse_seeds(text)
-
-
-def test_table2_gives_the_papers_alpha_or_k_of_the_variants_that_take_them():
-    assert table2("hopper", "fppo-qp") == {"k": 0.2}
-    assert table2("walker2d", "fppo-qp") == {"k": 0.1}
-    assert table2("swimmer", "fppo-lp") == {"alpha": 1.1}
-    assert table2("reacher", "fppo-lp") == {"alpha": 1.1}
-    assert table2("cartpole", "fppo-lp") == {"alpha": 1.3}
-    for variant in ("ppo", "tr-ppo", "ppo-rb", "tr-ppo-rb"):  # their own: not in Table 2
-        assert table2("hopper", variant) == {}
-    assert table2(None, "fppo-qp") == {} and table2("gymnax/Pendulum-v1", "fppo-lp") == {}
-    # Every task of the table is a registered one, and every MuJoCo task is in the table.
-    assert all(lookup(task).name == task for task in TABLE2)
-    assert set(MUJOCO_TASKS) <= set(TABLE2)
 
 
 def test_num_updates_is_the_whole_updates_within_the_budget():
@@ -202,75 +100,6 @@ def test_resolve_config_takes_the_tasks_budget_unless_told_and_lists_valid_setti
     assert resolve_config("hopper", None, {"total_steps": 8192}).total_steps == 8192
     with pytest.raises(ValueError, match=r"unknown setting lr, zz; valid: total_steps, .*, seed$"):
         resolve_config("cartpole", None, {"zz": 1, "lr": 1}, also_valid=("variant", "seed"))
-
-
-def test_hyperparameters_take_defaults_and_check_each_range_at_its_bounds():
-    hp = hyperparameters()
-    for name, value in HYPERPARAMETER_DEFAULTS.items():
-        assert getattr(hp, name).dtype == jnp.float32
-        assert float(getattr(hp, name)) == pytest.approx(value)
-    edges = hyperparameters(gamma=1.0, gae_lambda=0.0, entropy_coef=0.0, value_coef=0.0)
-    assert (float(edges.gamma), float(edges.gae_lambda)) == (1.0, 0.0)
-    assert float(hyperparameters(gamma=None).gamma) == pytest.approx(0.99)  # None: the default
-    refused = {
-        "gamma": (0.0, "gamma must be in (0, 1], got 0.0"),
-        "gae_lambda": (1.01, "gae_lambda must be in [0, 1], got 1.01"),
-        "entropy_coef": (-0.1, "entropy_coef must be >= 0, got -0.1"),
-        "value_coef": (math.nan, "value_coef must be >= 0, got nan"),
-        "max_grad_norm": (0.0, "max_grad_norm must be > 0, got 0.0"),
-        "learning_rate": (math.inf, "learning_rate must be > 0, got inf"),
-    }
-    for name, (value, message) in refused.items():
-        with pytest.raises(ValueError, match=re.escape(message)):
-            hyperparameters(**{name: value})
-    with pytest.raises(ValueError, match=r"unknown hyperparameter lr; valid: epsilon, alpha, k"):
-        hyperparameters(lr=1e-3)
-
-
-@pytest.mark.parametrize(
-    "given, message",
-    [
-        (
-            {"gamma": 1e-300},
-            "gamma must be in (0, 1], got 1e-300, which training's float32 holds as 0",
-        ),
-        (
-            {"learning_rate": 1e300},
-            "learning_rate must be > 0, got 1e+300, which training's float32",
-        ),
-        ({"variant": "fppo-qp", "k": 1e300}, "k must be >= 0 for fppo-qp, got 1e+300, which train"),
-        ({"variant": "tr-ppo", "delta": 1e-300}, "delta must be > 0 for tr-ppo, got 1e-300, which"),
-        ({"epsilon": 1e-300}, "epsilon must be in (0, 1), got 1e-300, which training's float32 h"),
-    ],
-)
-def test_a_value_in_range_that_float32_takes_out_of_it_is_refused(given, message):
-    with pytest.raises(ValueError, match=re.escape(message)):
-        hyperparameters(**given)
-
-
-def test_resolve_hyperparameters_reports_the_setting_as_plain_decimals():
-    hp, settings = resolve_hyperparameters("fppo-qp", "cartpole", gamma=None, value_coef=0.7)
-    assert settings == {
-        "variant": "fppo-qp",
-        "epsilon": 0.2,
-        "k": 0.4,  # Table 2's, for CartPole
-        "learning_rate": 0.0003,
-        "gamma": 0.99,
-        "gae_lambda": 0.95,
-        "entropy_coef": 0.0,
-        "value_coef": 0.7,
-        "max_grad_norm": 0.5,
-    }
-    assert float(hp.value_coef) == np.float32(0.7)
-    assert "alpha" not in resolve_hyperparameters("ppo", "hopper")[1]
-    with pytest.raises(ValueError, match="unknown variant 'lp'"):
-        resolve_hyperparameters("lp", "hopper")
-
-
-def test_as_float_is_the_shortest_decimal_of_the_float32():
-    assert float(np.float32(1.3)) != 1.3 and as_float(jnp.float32(1.3)) == 1.3
-    assert as_float(np.float32(3e-4)) == 3e-4 and as_float(jnp.asarray(0.99)) == 0.99
-    assert np.float32(as_float(np.float32(0.1) / 3)) == np.float32(0.1) / 3  # round-trips
 
 
 def test_environment_name_is_the_tasks_the_environments_own_or_its_class():

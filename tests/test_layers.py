@@ -13,7 +13,7 @@ LAYERS = ["errors", "envs", "core", "stats", "store", "export", "run", "analysis
 
 # The one import that runs upward, done lazily: a surrogate's hyperparameter may not take a
 # name of the command line, and only the parser knows them all.
-UPWARD = {("core.surrogates", "cli.parser")}
+UPWARD = {("core.own_surrogates", "cli.parser")}
 
 PACKAGE = Path(fppo_jax.__file__).parent
 

@@ -8,11 +8,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fppo_jax.core.config import hyperparameters
 from fppo_jax.core.distributions import Categorical
 from fppo_jax.core.losses import Batch
 from fppo_jax.core.losses import ppo_loss as eager_ppo_loss
 from fppo_jax.core.networks import make_networks
+from fppo_jax.core.resolution import hyperparameters
 from fppo_jax.envs import Discrete
 
 N = 64

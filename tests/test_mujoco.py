@@ -10,9 +10,9 @@ import pytest
 import fppo_jax
 from fppo_jax import TrainConfig, hyperparameters, make_env, make_train, sweep
 from fppo_jax.cli import main
-from fppo_jax.core.config import TABLE2
 from fppo_jax.core.gae import gae
-from fppo_jax.core.objectives import VARIANTS
+from fppo_jax.core.resolution import TABLE2
+from fppo_jax.core.variants import VARIANTS
 from fppo_jax.envs import MUJOCO_TASKS, TASKS, Box, as_environment
 from fppo_jax.envs.mjx import BraxEnvironment, Swimmer, swimmer_model
 from fppo_jax.export.render import RenderingUnavailable, episode_positions, save_frames

@@ -6,7 +6,8 @@ import dataclasses
 import pytest
 
 import fppo_jax.run.prepare
-from fppo_jax.core.config import HYPERPARAMETER_DEFAULTS, TrainConfig
+from fppo_jax.core.config import TrainConfig
+from fppo_jax.core.resolution import HYPERPARAMETER_DEFAULTS
 from fppo_jax.run.options import Options
 from fppo_jax.run.prepare import prepare
 

@@ -222,7 +222,7 @@ def test_merge_joins_settings_and_seeds_from_the_command_line(tmp_path, capsys):
     assert f"| ppo | 9 | {6.5 / 81:.2f} [" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         main(["table", str(out), "--ci", "95"])
-    assert "a confidence level in (0, 1)" in capsys.readouterr().err
+    assert "the confidence level must be in (0, 1), got 95.0" in capsys.readouterr().err
 
 
 def test_a_merge_into_a_directory_another_merge_writes_is_refused(tmp_path, capsys):

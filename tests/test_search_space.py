@@ -5,7 +5,6 @@ import json
 
 import pytest
 
-from fppo_jax.core.objectives import BUILTINS
 from fppo_jax.core.search_space import (
     OWN,
     SHARED,
@@ -15,6 +14,7 @@ from fppo_jax.core.search_space import (
     read_space_file,
     search_spaces,
 )
+from fppo_jax.core.variants import BUILTINS
 from fppo_jax.errors import InvalidInput
 
 

@@ -252,7 +252,7 @@ def test_an_equivalent_comparison_passes_its_share_only_to_the_equivalence_tests
 @pytest.mark.parametrize(
     "margin, level, message",
     [
-        (0.5, 0.05, "margin is a distance from 1/2 .* in \\(0, 0.5\\), got 0.5"),
+        (0.5, 0.05, "margin \\(a distance from 1/2 .*\\) must be in \\(0, 0.5\\), got 0.5"),
         (0.0, 0.05, "in \\(0, 0.5\\), got 0.0"),
         (True, 0.05, "got True"),
         (0.2, 0.5, "an equivalence margin needs an error level below 0.5"),

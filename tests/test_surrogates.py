@@ -2,12 +2,9 @@
 compiled program as the built-ins, and recorded so that two functions under one name are told
 apart."""
 
-import functools
 import inspect
 import json
-import os
 import re
-import sys
 
 import jax
 import jax.numpy as jnp
@@ -19,7 +16,7 @@ from own_surrogates import clipped, my_clip_higher, my_ppo
 import fppo_jax
 from fppo_jax import objective, surrogate, sweep, train
 from fppo_jax.cli import main
-from fppo_jax.core.surrogates import Range
+from fppo_jax.core.surrogates import Range, check_in_range
 
 TINY_STEPS = 512
 
@@ -33,6 +30,28 @@ def test_a_range_reads_as_its_message_shows_it():
         Range("positive")
 
 
+@pytest.mark.parametrize(
+    "value, valid, of, message",
+    [
+        (float("inf"), Range("> 0"), "", "x must be finite, got inf"),
+        (float("inf"), None, "mine", "x must be finite for mine, got inf"),
+        (0.0, Range("(0, 1]"), "", "x must be in (0, 1], got 0.0"),
+        (0.5, Range(">= 1", "why"), "mine", "x must be >= 1 for mine, got 0.5 (why)"),
+        (float("nan"), Range(">= 0"), "", "x must be >= 0, got nan"),
+        (float("nan"), None, "mine", "x must be a number for mine, got nan"),
+        (1e300, None, "", "x must be finite, got 1e+300, which training's float32 holds as inf"),
+        (1e-300, Range("> 0"), "", "x must be > 0, got 1e-300, which training's float32 holds"),
+        ("1", Range("> 0"), "", "x must be a number, got '1'"),
+    ],
+)
+def test_every_hyperparameter_is_checked_by_one_function_with_one_message(
+    value, valid, of, message
+):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        check_in_range("x", value, valid, of)
+    assert check_in_range("x", np.float32(0.5), Range("(0, 1)")) == 0.5
+
+
 def test_a_surrogate_is_accepted_where_a_variants_name_is():
     o = objective(my_clip_higher, eps_high=0.3)
     assert o.name == "my-clip-higher" and float(o.values["eps_high"]) == pytest.approx(0.3)
@@ -41,7 +60,7 @@ def test_a_surrogate_is_accepted_where_a_variants_name_is():
     # Its declared clip range bounds the R± diagnostics.
     below, above = o.clip_range()
     assert float(below) == pytest.approx(0.2) and float(above) == pytest.approx(0.3)
-    assert fppo_jax.core.objectives.resolve("own_surrogates:my_ppo") is my_ppo
+    assert fppo_jax.core.resolution.resolve("own_surrogates:my_ppo") is my_ppo
 
 
 def test_a_user_surrogate_computes_what_its_function_does():
@@ -143,38 +162,6 @@ def test_a_bad_surrogate_gets_one_clear_error(args, kwargs, match):
         surrogate(*args, **kwargs)
 
 
-@pytest.mark.parametrize(
-    "hyperparameter, what",
-    [
-        ("learning_rate", "an optimisation setting"),
-        ("gamma", "an optimisation setting"),
-        ("num_envs", "a TrainConfig field"),
-        ("steps", "a name of the command line"),
-        ("output", "a name of the command line"),
-        ("seed", "a name of the command line"),
-        ("level", "a name of the command line"),
-        ("variant", "a name of the command line"),
-        ("command", "a name of the command line"),
-    ],
-)
-def test_a_hyperparameter_cannot_take_a_settings_or_a_flags_name(hyperparameter, what):
-    function = eval(f"lambda ratio, advantage, {hyperparameter}: ratio * advantage")
-    with pytest.raises(
-        ValueError,
-        match=f"surrogate 'mine': a hyperparameter of its own cannot take another setting's "
-        f"name \\({hyperparameter} is {what}\\), whose value it would take or shadow: rename it",
-    ):
-        surrogate("mine", function, **{hyperparameter: 0.001})
-
-
-def test_a_hyperparameter_may_share_a_builtins_name_as_a_grid_axis_does():
-    mine = surrogate("mine", lambda ratio, advantage, alpha: alpha * ratio * advantage, alpha=1.0)
-    assert fppo_jax.expand_grid({"variant": ["fppo-lp", mine], "alpha": [1.1]}) == [
-        {"variant": "fppo-lp", "alpha": 1.1},
-        {"variant": "mine", "alpha": 1.1},
-    ]
-
-
 def test_a_user_surrogates_hyperparameters_are_checked_before_compiling():
     with pytest.raises(ValueError, match=r"eps_high must be > 0 for my-clip-higher, got -1\.0"):
         train("cartpole", my_clip_higher, eps_high=-1.0)
@@ -273,65 +260,13 @@ def test_a_resumed_run_refuses_another_function_under_the_same_name(tiny, tmp_pa
 
 def test_one_default_variant_everywhere():
     from fppo_jax.cli.parser import build_parser
-    from fppo_jax.core.objectives import DEFAULT_VARIANT
+    from fppo_jax.core.variants import DEFAULT_VARIANT
 
     assert fppo_jax.hyperparameters().objective.name == DEFAULT_VARIANT
     assert inspect.signature(train).parameters["variant"].default == DEFAULT_VARIANT
     assert fppo_jax.expand_grid({}) == [{"variant": DEFAULT_VARIANT}]
     assert build_parser().parse_args(["train"]).variant.name == DEFAULT_VARIANT
     assert [s.name for s in build_parser().parse_args(["sweep"]).variant] == [DEFAULT_VARIANT]
-
-
-@pytest.fixture
-def module_here(tmp_path, monkeypatch):
-    """Writes a module in a new current directory that is not on Python's path (as under the
-    installed command); the module is forgotten afterwards."""
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", os.getcwd())])
-
-    def write(name, text):
-        (tmp_path / f"{name}.py").write_text(text)
-        monkeypatch.delitem(sys.modules, name, raising=False)
-
-    return write
-
-
-def test_a_surrogate_module_is_imported_from_the_current_directory(module_here):
-    module_here(
-        "here_mine",
-        "import fppo_jax\n"
-        "mine = fppo_jax.surrogate('here-mine', lambda ratio, advantage: ratio * advantage)\n",
-    )
-    assert fppo_jax.core.objectives.resolve("here_mine:mine").name == "here-mine"
-    assert os.getcwd() not in sys.path  # the directory is on the path only while importing
-    with pytest.raises(
-        ValueError,
-        match=re.escape(
-            f"no module 'here_absent' in the current directory or on Python's path (looked in "
-            f"{os.getcwd()}, "
-        ),
-    ):
-        fppo_jax.core.objectives.resolve("here_absent:mine")
-
-
-@pytest.mark.parametrize(
-    "text, match",
-    [
-        ("import sys\nsys.exit(0)\n", r"importing here_bad called sys.exit\(0\); a module"),
-        (
-            "raise RuntimeError('no GPU here')\n",
-            "importing here_bad raised RuntimeError: no GPU here",
-        ),
-        ("x = 1\ndef f(:\n", r"here_bad does not parse: .*here_bad.py:2: SyntaxError: "),
-    ],
-)
-def test_a_surrogate_module_that_fails_to_import_is_one_line_naming_it(
-    module_here, capsys, text, match
-):
-    module_here("here_bad", text)
-    assert main(["train", "--variant", "here_bad:mine"]) == 2
-    err = capsys.readouterr().err
-    assert re.fullmatch(f"fppo-jax: error: variant 'here_bad:mine': {match}.*\n", err), err
 
 
 def test_an_abbreviated_variant_flag_is_refused_rather_than_losing_its_surrogates_flags(
@@ -348,61 +283,6 @@ def test_an_abbreviated_variant_flag_is_refused_rather_than_losing_its_surrogate
         main(["train", "--vari", "here_scaled:mine", "--c", "0.5"])
     assert exited.value.code == 2
     assert "unrecognized arguments: --vari here_scaled:mine --c 0.5" in capsys.readouterr().err
-
-
-SCALE = 1.0  # read by _scaled: part of its surrogate's identity
-
-
-def _scaled(ratio, advantage):
-    return SCALE * ratio * advantage
-
-
-def _scaled_by(scale):
-    def scaled(ratio, advantage):
-        return scale * ratio * advantage
-
-    return scaled
-
-
-def _scaled_with(scale, ratio, advantage):
-    return scale * ratio * advantage
-
-
-class _Scaled:
-    def __init__(self, scale):
-        self.scale = scale
-
-    def __call__(self, ratio, advantage):
-        return self.scale * ratio * advantage
-
-
-WEIGHTS = jnp.ones(3)
-
-
-def _weighted(ratio, advantage):
-    return WEIGHTS.sum() * ratio * advantage
-
-
-def test_a_surrogates_identity_covers_the_values_its_function_reads(monkeypatch):
-    def digest(function):
-        return surrogate("scaled", function).identity()["digest"]
-
-    # A module's constant: a rerun, a resumed run or a merge of another value is refused.
-    first = digest(_scaled)
-    assert digest(_scaled) == first
-    monkeypatch.setattr(sys.modules[__name__], "SCALE", 2.0)
-    assert digest(_scaled) != first
-    # A closure's variable, a partial's bound arguments and a callable instance's attributes:
-    # the same made twice is the same surrogate, and another value another.
-    for make in (_scaled_by, functools.partial(functools.partial, _scaled_with), _Scaled):
-        assert digest(make(1.0)) == digest(make(1.0)) != digest(make(2.0))
-    with pytest.raises(
-        ValueError,
-        match=r"^surrogate 'weighted' reads WEIGHTS, of type ArrayImpl, which its record cannot "
-        "identify .*: make it a hyperparameter, or a number, string, bool, None, or a tuple, "
-        "list or dict of them$",
-    ):
-        surrogate("weighted", _weighted)
 
 
 def test_a_rerun_from_a_record_refuses_a_surrogate_changed_since(tmp_path, capsys):

@@ -165,7 +165,7 @@ def test_bad_settings_fail_before_compiling():
 
 def test_task_defaults_follow_table_2():
     # The one resolution that train and sweep share (a run's config records its result).
-    from fppo_jax.core.config import resolve_hyperparameters
+    from fppo_jax.core.resolution import resolve_hyperparameters
     from fppo_jax.run.sweeps import expand_grid
 
     assert resolve_hyperparameters("fppo-lp", "cartpole")[1]["alpha"] == 1.3

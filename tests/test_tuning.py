@@ -472,9 +472,9 @@ def test_a_tune_not_finished_is_no_source_of_settings(tmp_path):
         ({"total_steps": 128}, "too short for 3 rungs"),
         ({"seeds": [0, 0]}, "seeds must be distinct"),
         ({"sampler_seed": -1}, r"sampler_seed must be an integer in \[0, 2\*\*32\)"),
-        ({"part": (0, 2), "chunk": 2}, r"part must be \(K, N\) with 1 <= K <= N, got \(0, 2\)"),
-        ({"part": (3, 2), "chunk": 2}, r"part must be \(K, N\) with 1 <= K <= N, got \(3, 2\)"),
-        ({"part": "x", "chunk": 2}, "part must be \\(K, N\\) with 1 <= K <= N, got 'x'"),
+        ({"part": (0, 2), "chunk": 2}, r"part must be the K-th of N parts, .* got \(0, 2\)"),
+        ({"part": (3, 2), "chunk": 2}, r"part must be the K-th of N parts, .* got \(3, 2\)"),
+        ({"part": "x", "chunk": 2}, "part must be the K-th of N parts, 1 <= K <= N, got 'x'"),
         ({"part": (1, 2)}, "part 1 of 2 needs chunk"),
         ({"chunk": 3}, "must be a multiple of the 2 seeds per trial, got 3"),
     ],
@@ -523,5 +523,5 @@ def test_the_command_line_plans_tunes_and_refuses_in_one_line(tuned, tmp_path, c
         with pytest.raises(SystemExit):
             main([*flags, "--output", str(tmp_path / "c"), "--chunk", "2", "--part", part])
         said = capsys.readouterr().err
-        assert "argument --part: expected K/N" in said and f"got '{part}'" in said
+        assert "argument --part: " in said and f"got '{part}'" in said
     assert not (tmp_path / "c").exists()

@@ -13,7 +13,7 @@ from fppo_jax.analysis.tuning_draws import (
     open_storage,
     setting_of,
 )
-from fppo_jax.core.objectives import resolve
+from fppo_jax.core.resolution import resolve
 from fppo_jax.core.search_space import search_spaces
 from fppo_jax.errors import InvalidInput
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import matplotlib
 
-from fppo_jax.core.config import table2
+from fppo_jax.core.resolution import table2
 from fppo_jax.envs import TASKS
 from fppo_jax.run.results import SweepResult
 

@@ -30,7 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax import make_env, make_train
-from fppo_jax.core.config import describe, resolve_config, resolve_hyperparameters
+from fppo_jax.core.config import describe, resolve_config
+from fppo_jax.core.resolution import resolve_hyperparameters
 from fppo_jax.envs import BACKENDS, MUJOCO_TASKS, choose_backend
 from fppo_jax.stats.statistics import sample_std
 

@@ -33,6 +33,7 @@ import jax.numpy as jnp
 
 import fppo_jax.core.objectives as objectives
 import fppo_jax.core.trainer as trainer_module
+import fppo_jax.core.variants as variants
 from fppo_jax import make_train
 from fppo_jax.core.trainer import Trainer
 
@@ -68,7 +69,7 @@ ppo_surrogate_only = functools.partial(
     mock.patch.object,
     objectives.Objective,
     "__call__",
-    lambda o, r, a, kl=None: objectives.ppo(r, a, o.epsilon),
+    lambda o, r, a, kl=None: variants.ppo(r, a, o.epsilon),
 )
 jax_permutation = functools.partial(
     mock.patch.object, trainer_module, "permutation", jax.random.permutation

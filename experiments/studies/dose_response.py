@@ -38,7 +38,7 @@ import numpy as np
 
 from fppo_jax import SweepResult, merge
 from fppo_jax.analysis.study_report import ruled_out
-from fppo_jax.core.config import SYMBOLS
+from fppo_jax.core.resolution import SYMBOLS
 from fppo_jax.run.results import labels
 from fppo_jax.stats import statistics
 
@@ -73,7 +73,7 @@ TREND_NAMES = {
 PERMUTATIONS = 10_000  # statistics.trend_test's
 P_DECIMALS = 2  # what the permutation p's Monte Carlo error (0.003 to 0.005 here) allows
 DPI = 80
-# Why a control can part from PPO's run (tests/test_objectives.py shows the gradients).
+# Why a control can part from PPO's run (tests/test_variants.py shows the gradients).
 PARTED = (
     "A control equals PPO's objective in real arithmetic, not always in float32: where r lies "
     "within rounding of 1 ± ε, rA and (1 ± ε)A can round to the same number, and PPO's "

@@ -38,8 +38,8 @@ from pathlib import Path
 from typing import Any
 
 from fppo_jax import sweep
-from fppo_jax.core.config import parse_seeds
-from fppo_jax.core.objectives import VARIANTS
+from fppo_jax.core.checks import parse_seeds
+from fppo_jax.core.variants import VARIANTS
 from fppo_jax.envs import MUJOCO_TASKS
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules

@@ -24,8 +24,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import PercentFormatter
 
-from fppo_jax.core.config import VARIANT_SPECIFIC
-from fppo_jax.core.objectives import EPSILON, VARIANTS, objective
+from fppo_jax.core.resolution import VARIANT_SPECIFIC, objective
+from fppo_jax.core.variants import EPSILON, VARIANTS
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.results import SweepResult, labels, max_average_return, nanmean
 from fppo_jax.stats import statistics

@@ -46,18 +46,13 @@ from fppo_jax.analysis.study_report import (
     write_figures,
     write_report,
 )
-from fppo_jax.core.config import positive_int, resolve_hyperparameters, sweepable
-from fppo_jax.core.objectives import (
-    BUILTINS,
-    hyperparameter_names,
-    identities,
-    resolve,
-    takers,
-    union,
-)
+from fppo_jax.core.checks import check_part, positive_int
+from fppo_jax.core.objectives import hyperparameter_names, identities, takers, union
+from fppo_jax.core.resolution import resolve, resolve_hyperparameters, sweepable
 from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.variants import BUILTINS
 from fppo_jax.errors import InvalidInput
-from fppo_jax.run.driver import check_part, part_runs
+from fppo_jax.run.driver import part_runs
 from fppo_jax.run.options import Options
 from fppo_jax.run.prepare import prepare
 from fppo_jax.run.results import SweepResult, merge

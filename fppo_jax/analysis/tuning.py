@@ -45,11 +45,10 @@ import numpy as np
 from fppo_jax.analysis.studies import PART_LOCK_WAIT, check_plan, commit, names_of_tasks
 from fppo_jax.analysis.tuning_draws import draw_population, import_optuna, open_storage
 from fppo_jax.analysis.tuning_rungs import CALLS_A_RUNG, TaskTune
-from fppo_jax.core.config import (
-    CONFIG_FIELDS,
-    positive_int,
-)
-from fppo_jax.core.objectives import identities, resolve, union
+from fppo_jax.core.checks import check_part, check_seeds, positive_int
+from fppo_jax.core.config import CONFIG_FIELDS
+from fppo_jax.core.objectives import identities, union
+from fppo_jax.core.resolution import resolve
 from fppo_jax.core.search_space import (
     SearchSpace,
     read_space_file,
@@ -57,7 +56,6 @@ from fppo_jax.core.search_space import (
 )
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput, MissingFile
-from fppo_jax.run.driver import check_part
 from fppo_jax.run.prepare import Prepared, prepare
 from fppo_jax.store.files import (
     DirectoryLock,
@@ -227,7 +225,7 @@ def tune(
             f"a tune takes run-shape settings ({', '.join(CONFIG_FIELDS)}), not "
             f"{', '.join(stray)}: the hyperparameters are its search space"
         )
-    tuning_seeds = _tuning_seeds(seeds)
+    tuning_seeds = check_seeds(seeds, first=TUNING_SEED_START)
     part = _checked_split(chunk, part, len(tuning_seeds))
     baseline = _baseline(baseline, arms)
     given = read_space_file(space) if isinstance(space, str | Path) else space
@@ -358,15 +356,6 @@ def _baseline(baseline: str | None, arms: list[Surrogate]) -> str:
     if baseline not in names:
         raise InvalidInput(f"the baseline {baseline!r} is not among the tuned variants {names}")
     return baseline
-
-
-def _tuning_seeds(seeds: int | Sequence[int]) -> list[int]:
-    from fppo_jax.run.sweeps import check_seeds
-
-    if isinstance(seeds, int | np.integer) and not isinstance(seeds, bool):
-        count = positive_int("seeds", seeds)
-        return list(range(TUNING_SEED_START, TUNING_SEED_START + count))
-    return check_seeds(seeds)
 
 
 def make_plan(

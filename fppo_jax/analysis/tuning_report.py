@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from fppo_jax.core.config import positive_int
+from fppo_jax.core.checks import positive_int
 from fppo_jax.stats.statistics import CONFIDENCE, RESAMPLES, check_confidence
 from fppo_jax.store.files import write_atomically
 

@@ -23,10 +23,10 @@ if TYPE_CHECKING:
     from fppo_jax.analysis.tuning import Rungs
 from fppo_jax.analysis.tuning_report import ranked
 from fppo_jax.core.config import (
-    resolve_hyperparameters,
     stack_hyperparameters,
     with_budget,
 )
+from fppo_jax.core.resolution import resolve_hyperparameters
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.trainer import TrainState
 from fppo_jax.envs import resets_itself

@@ -17,13 +17,9 @@ import numpy as np
 from fppo_jax.analysis.studies import study
 from fppo_jax.cli.flags import config_overrides, hyperparameters_given, options
 from fppo_jax.cli.slurm import array_part
-from fppo_jax.core.config import (
-    PRESETS,
-    TABLE2,
-    describe_update,
-    preset_config,
-)
-from fppo_jax.core.objectives import BUILTINS, EPSILON
+from fppo_jax.core.config import PRESETS, describe_update, preset_config
+from fppo_jax.core.resolution import TABLE2
+from fppo_jax.core.variants import BUILTINS, EPSILON
 from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.api import train

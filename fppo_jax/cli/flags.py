@@ -13,19 +13,17 @@ from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any, NoReturn
 
-from fppo_jax.core.config import (
-    HYPERPARAMETER_DEFAULTS,
-    PRESETS,
-    TrainConfig,
-    parse_seeds,
-    positive_int,
-)
-from fppo_jax.core.objectives import BUILTINS, EPSILON, hyperparameter_names, resolve
+from fppo_jax.core.checks import check_part, parse_seeds, positive_int
+from fppo_jax.core.config import PRESETS, TrainConfig
+from fppo_jax.core.objectives import hyperparameter_names
+from fppo_jax.core.resolution import HYPERPARAMETER_DEFAULTS, resolve
 from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.variants import BUILTINS, EPSILON
 from fppo_jax.envs import BACKENDS
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.options import Options
-from fppo_jax.stats.statistics import CONFIDENCE, ENDPOINTS
+from fppo_jax.stats.sequential import check_level, check_margin
+from fppo_jax.stats.statistics import CONFIDENCE, ENDPOINTS, check_confidence
 
 
 def _argument(parse: Callable[[str], Any]) -> Callable[[str], Any]:
@@ -73,9 +71,7 @@ def part(text: str) -> tuple[int, int] | str:
         k, n = (int(x) for x in text.split("/"))
     except ValueError:
         raise InvalidInput(f"expected K/N such as 2/8, or auto, got {text!r}") from None
-    if not 1 <= k <= n:
-        raise InvalidInput(f"expected K/N with 1 <= K <= N, got {text!r}")
-    return k, n
+    return check_part((k, n), shown=text)
 
 
 @_argument
@@ -85,15 +81,18 @@ def path(text: str) -> Path:
     return Path(text)
 
 
+def _number(text: str) -> float | str:
+    """`text` as a float, or as it is (which a check refuses, showing it) if it is none."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 @_argument
 def confidence(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not 0 < value < 1:
-        raise InvalidInput(f"a confidence level in (0, 1) such as 0.95, got {text}")
-    return value
+    """A confidence level in (0, 1), such as 0.95."""
+    return check_confidence(_number(text))
 
 
 @_argument
@@ -137,25 +136,13 @@ def values(text: str) -> list[float]:
 @_argument
 def level(text: str) -> float:
     """An error level in (0, 1), such as 0.05."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not 0 < value < 1:
-        raise InvalidInput(f"an error level in (0, 1) such as 0.05, got {text}")
-    return value
+    return check_level(_number(text))
 
 
 @_argument
 def margin(text: str) -> float:
     """An equivalence margin on P(candidate > baseline), in (0, 0.5), such as 0.2."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not 0 < value < 0.5:
-        raise InvalidInput(f"a margin in (0, 0.5) such as 0.2, got {text}")
-    return value
+    return check_margin(_number(text))
 
 
 @_argument

@@ -30,8 +30,8 @@ from fppo_jax.cli.flags import (
     variant,
     variants,
 )
-from fppo_jax.core.objectives import DEFAULT_VARIANT, VARIANTS
 from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.variants import DEFAULT_VARIANT, VARIANTS
 from fppo_jax.errors import install_hint
 from fppo_jax.run.options import Options
 from fppo_jax.stats.statistics import ENDPOINTS, STATISTICS, STUDY_ENDPOINTS

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any, cast
 
 from fppo_jax.core.config import PRESETS
-from fppo_jax.core.objectives import resolve
+from fppo_jax.core.resolution import resolve
 from fppo_jax.errors import InvalidInput
 
 # What a run's config.json records beside its settings (metric_log.environment_record).

@@ -3,117 +3,29 @@
 :class:`TrainConfig` fixes array shapes and program structure; changing it recompiles.
 :class:`Hyperparameters` is a pytree of arrays passed into the compiled program, so seeds and
 hyperparameters (variants included) can be vmapped without recompiling.
-Defaults follow the paper's protocol (OpenAI baselines' ppo2 settings) and the paper's Table 2
-(:data:`TABLE2`). Every default and every check of what a run trains (its shape and its
-hyperparameters) lives here, so that ``train``, ``sweep`` and the command line resolve them
-alike; how a run is driven has its defaults and checks in :mod:`fppo_jax.run.options`.
+The run's shape has its defaults (the paper's protocol, OpenAI baselines' ppo2 settings) and
+checks here, in :class:`TrainConfig` and its presets; the hyperparameters have theirs in
+:mod:`fppo_jax.core.resolution`, where a variant's name is resolved; how a run is driven has its
+defaults and checks in :mod:`fppo_jax.run.options`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Sequence
 from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.core.objectives import (
-    BUILTINS,
-    DEFAULT_VARIANT,
-    EPSILON,
-    Objective,
-    hyperparameter_names,
-    objective,
-    resolve,
-    union,
-)
-from fppo_jax.core.surrogates import Surrogate, as_trained, float32_note, real_number
+from fppo_jax.core.checks import positive_int
+from fppo_jax.core.objectives import Objective, union
 from fppo_jax.envs import MUJOCO_TASKS, lookup
 from fppo_jax.errors import InvalidInput
 
-# The paper's Table 2: FPPO-LP's α and FPPO-QP's k per task.
-TABLE2: dict[str, dict[str, float]] = {
-    **{task: {"alpha": 1.3, "k": 0.4} for task in ("cartpole", "acrobot", "mountaincar")},
-    "hopper": {"alpha": 1.3, "k": 0.2},
-    "walker2d": {"alpha": 1.3, "k": 0.1},
-    "halfcheetah": {"alpha": 1.3, "k": 0.4},
-    "ant": {"alpha": 1.3, "k": 0.4},
-    "reacher": {"alpha": 1.1, "k": 0.4},
-    "swimmer": {"alpha": 1.1, "k": 0.1},
-}
-_TABLE2_VARIANTS = {"fppo-lp": "alpha", "fppo-qp": "k"}
-
-# The hyperparameters some built-in variants take and others do not (α, k, δ, …).
-VARIANT_SPECIFIC: tuple[str, ...] = hyperparameter_names(list(BUILTINS.values()))
 # The most env steps a run may take: the compiled program counts them in int32.
 MAX_STEPS = 2**31 - 1
-# The most seeds one setting may name on a command line: far more than a sweep trains, so more
-# is a mistyped range, refused before a list of them is built.
-MAX_SEEDS = 100_000
-SYMBOLS = {
-    "alpha": "α",
-    "k": "k",
-    "delta": "δ",
-    "epsilon": "ε",
-    "beta": "β",
-    "eps_low": "ε_low",
-    "eps_high": "ε_high",
-}
-
-
-def positive_int(name: str, value: object) -> int:
-    """`value` if it is a positive integer (numpy integers included, booleans not)."""
-    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer) or value < 1:
-        raise InvalidInput(f"{name} must be a positive integer, got {value!r}")
-    return int(value)
-
-
-def check_seed(seed: object) -> int:
-    """`seed` if it is an integer that ``jax.random.key`` takes (numpy integers included)."""
-    if isinstance(seed, bool | np.bool_) or not isinstance(seed, int | np.integer):
-        raise InvalidInput(f"a seed must be an integer, got {seed!r}")
-    if not -(2**63) <= seed < 2**64:
-        raise InvalidInput(f"a seed must fit in 64 bits, got {seed}")
-    return int(seed)
-
-
-def parse_seeds(text: str) -> list[int]:
-    """Seeds written on a command line: ``20`` (seeds 0 … 19), ``10:20`` (seeds 10 … 19, as
-    Python's ``range(10, 20)``) or a comma list such as ``0,3,7``; checked, and distinct."""
-    seeds: range | list[int]
-    try:
-        if ":" in text:
-            start, stop = (int(part) for part in text.split(":"))
-            seeds = range(start, stop)
-        elif "," in text:
-            seeds = [int(part) for part in text.split(",")]
-        else:
-            seeds = range(positive_int("the number of seeds", int(text)))
-    except ValueError as error:
-        if "must be" in str(error):
-            raise
-        raise InvalidInput(
-            f"seeds {text!r} are not a count (20), a range (10:20) or a list (0,3,7)"
-        ) from None
-    count = max(0, seeds.stop - seeds.start) if isinstance(seeds, range) else len(seeds)
-    if not count:
-        raise InvalidInput(f"seeds {text!r} name no seed (a range start:stop needs start < stop)")
-    if count > MAX_SEEDS:
-        raise InvalidInput(f"seeds {text!r} name {count:,} seeds, more than {MAX_SEEDS:,}")
-    if len(set(seeds)) < len(seeds):
-        raise InvalidInput(f"seeds {text!r} repeat a seed")
-    return [check_seed(seed) for seed in seeds]
-
-
-def table2(task: str | None, variant: str) -> dict[str, float]:
-    """The paper's Table 2 value of `variant`'s own hyperparameter on `task` ({} if none)."""
-    name = _TABLE2_VARIANTS.get(variant)
-    if task not in TABLE2 or name is None:
-        return {}
-    return {name: TABLE2[task][name]}
 
 
 def _field(default: Any, help: str) -> Any:
@@ -264,70 +176,7 @@ def with_budget(hps: Hyperparameters, num_updates: int) -> Hyperparameters:
     )
 
 
-HYPERPARAMETER_DEFAULTS: dict[str, float] = {
-    "learning_rate": 3e-4,
-    "gamma": 0.99,
-    "gae_lambda": 0.95,
-    "entropy_coef": 0.0,
-    "value_coef": 0.5,
-    "max_grad_norm": 0.5,
-}
-
-_RANGES: dict[str, tuple[str, Callable[[float], bool]]] = {
-    "learning_rate": ("> 0", lambda x: x > 0),
-    "gamma": ("in (0, 1]", lambda x: 0 < x <= 1),
-    "gae_lambda": ("in [0, 1]", lambda x: 0 <= x <= 1),
-    "entropy_coef": (">= 0", lambda x: x >= 0),
-    "value_coef": (">= 0", lambda x: x >= 0),
-    "max_grad_norm": ("> 0", lambda x: x > 0),
-}
-
-
-def hyperparameters(
-    variant: str | Surrogate = DEFAULT_VARIANT, *, epsilon: float = EPSILON, **values: float | None
-) -> Hyperparameters:
-    """Checked hyperparameters: the objective of `variant` (a built-in's name or a surrogate of
-    one's own; ε and its own hyperparameters, see :func:`~fppo_jax.core.objectives.objective`) and
-    the optimisation settings.
-
-    Unset settings take :data:`HYPERPARAMETER_DEFAULTS`; unknown names and out-of-range values
-    raise ``InvalidInput`` naming the parameter.
-    """
-    surrogate = resolve(variant)
-    taken_by_some = hyperparameter_names([*BUILTINS.values(), surrogate])
-    own = {name: values.pop(name) for name in taken_by_some if name in values}
-    unknown = sorted(set(values) - set(HYPERPARAMETER_DEFAULTS))
-    if unknown:
-        raise InvalidInput(
-            f"unknown hyperparameter {', '.join(unknown)}; valid: "
-            + ", ".join(["epsilon", *taken_by_some, *HYPERPARAMETER_DEFAULTS])
-        )
-    settings = {**HYPERPARAMETER_DEFAULTS, **{k: v for k, v in values.items() if v is not None}}
-    for name, value in settings.items():
-        bound, ok = _RANGES[name]
-        value = real_number(name, value)
-        if not (math.isfinite(value) and ok(value)):
-            raise InvalidInput(f"{name} must be {bound}, got {value}")
-        trained = as_trained(value)
-        if not (math.isfinite(trained) and ok(trained)):
-            raise InvalidInput(f"{name} must be {bound}, got {value}, {float32_note(value)}")
-    # NumPy's scalars, put on the device as they are (as the objective's own: no conversion
-    # program to compile).
-    scalars = jax.device_put({name: np.float32(value) for name, value in settings.items()})
-    return Hyperparameters(objective=objective(surrogate, epsilon=epsilon, **own), **scalars)
-
-
 CONFIG_FIELDS: tuple[str, ...] = tuple(field.name for field in dataclasses.fields(TrainConfig))
-
-
-def sweepable(surrogates: Iterable[Surrogate] = ()) -> tuple[str, ...]:
-    """What a sweep's grid may vary: the variant, ε, the hyperparameters of the built-ins and of
-    `surrogates`, and the optimisation settings."""
-    own = hyperparameter_names([*BUILTINS.values(), *surrogates])
-    return ("variant", "epsilon", *own, *HYPERPARAMETER_DEFAULTS)
-
-
-SWEEPABLE: tuple[str, ...] = sweepable()
 
 
 def stack_hyperparameters(hps: Sequence[Hyperparameters]) -> Hyperparameters:
@@ -361,22 +210,6 @@ def resolve_config(
     return preset_config(preset, **values)
 
 
-def resolve_hyperparameters(
-    variant: str | Surrogate, task: str | None = None, **values: Any
-) -> tuple[Hyperparameters, dict[str, Any]]:
-    """Checked hyperparameters of one setting, with Table 2's α or k for a registered `task`,
-    and the setting as plain values (the variant's name, ε, its own hyperparameters, the
-    optimisation settings), as records and tables show it."""
-    surrogate = resolve(variant)
-    given = {name: value for name, value in values.items() if value is not None}
-    hp = hyperparameters(surrogate, **{**table2(task, surrogate.name), **given})
-    o = hp.objective
-    settings: dict[str, Any] = {"variant": surrogate.name, "epsilon": as_float(o.epsilon)}
-    settings.update({name: as_float(value) for name, value in o.values.items()})
-    settings.update({name: as_float(getattr(hp, name)) for name in HYPERPARAMETER_DEFAULTS})
-    return hp, settings
-
-
 def environment_name(env: Any, environment: Any) -> str:
     """The name a run records for its environment: the task's, the environment's own name (a
     Gymnasium environment's), or the adapter's class."""
@@ -386,11 +219,6 @@ def environment_name(env: Any, environment: Any) -> str:
     return (
         named if isinstance(named, str) else type(getattr(environment, "env", environment)).__name__
     )
-
-
-def as_float(x: jax.Array) -> float:
-    """The shortest decimal that round-trips the float32, so that 1.3 is reported as 1.3."""
-    return float(str(np.asarray(x)[()]))
 
 
 def describe(config: TrainConfig, preset: str | None = None) -> str:

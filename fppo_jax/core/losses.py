@@ -10,7 +10,7 @@ import jax.numpy as jnp
 from fppo_jax.core.config import Hyperparameters
 from fppo_jax.core.distributions import Distribution
 from fppo_jax.core.networks import Networks
-from fppo_jax.core.objectives import negative_regions, outside_clip_range
+from fppo_jax.core.variants import negative_regions, outside_clip_range
 
 
 class Batch(NamedTuple):

@@ -29,9 +29,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from fppo_jax.core.config import HYPERPARAMETER_DEFAULTS, hyperparameters, table2
-from fppo_jax.core.objectives import EPSILON
+from fppo_jax.core.resolution import HYPERPARAMETER_DEFAULTS, hyperparameters, table2
 from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.variants import EPSILON
 from fppo_jax.errors import InvalidInput
 
 SCALES = ("linear", "log", "log1m")

@@ -1,5 +1,7 @@
 """A surrogate objective, declared once: its name, its per-sample function and its own
-hyperparameters with their defaults and valid ranges.
+hyperparameters with their defaults and valid ranges (:class:`Surrogate`, :func:`declare`,
+through which the built-ins and one's own are declared), and its function tried as training
+runs it (:func:`probe`).
 
 A surrogate maximises a per-sample objective ``L(r, A)`` of the likelihood ratio
 ``r = π_θ(a|s) / π_old(a|s)`` and the advantage ``A``. Its function takes, by name, any of
@@ -26,25 +28,22 @@ them (``1 - ε`` and ``1 + ε`` when it names none).
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import dis
 import functools
-import hashlib
 import inspect
 import math
-import numbers
 import re
 import sys
-import types
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
-from typing import Any, cast
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from fppo_jax.core.checks import real_number
+from fppo_jax.core.digest import function_digest
 from fppo_jax.errors import InvalidInput, first_line
 
 # The arguments every surrogate function may take by name, besides its own hyperparameters.
@@ -96,6 +95,28 @@ class Range:
         return f"in {self.text.strip()}" if interval else self.text.strip()
 
 
+def check_in_range(name: str, value: object, valid: Range | None, of: str = "") -> float:
+    """`value` of hyperparameter `name` as a float, if it is a finite number in `valid` (any, if
+    None) both as given and as training holds it (:func:`as_trained`): the one check of every
+    hyperparameter, a surrogate's own (`of` names it in the message: "for fppo-lp"), ε and the
+    optimisation settings."""
+    value = real_number(name, value)
+    of = f" for {of}" if of else ""
+    if math.isinf(value):
+        raise InvalidInput(f"{name} must be finite{of}, got {value}")
+    # NaN lies outside every range, and is finite nowhere.
+    if valid is not None and value not in valid:
+        why = f" ({valid.why})" if valid.why else ""
+        raise InvalidInput(f"{name} must be {valid}{of}, got {value}{why}")
+    if math.isnan(value):
+        raise InvalidInput(f"{name} must be a number{of}, got {value}")
+    trained = as_trained(value)
+    if math.isinf(trained) or (valid is not None and trained not in valid):
+        bound = "finite" if valid is None else str(valid)
+        raise InvalidInput(f"{name} must be {bound}{of}, got {value}, {float32_note(value)}")
+    return value
+
+
 def as_trained(value: float) -> float:
     """`value` as training holds it, a float32: past float32's range it is infinite, and
     below its smallest it is 0, so a range is checked on both."""
@@ -108,23 +129,10 @@ def float32_note(value: float) -> str:
     return f"which training's float32 holds as {as_trained(value):g}"
 
 
-def real_number(name: str, value: object) -> float:
-    """`value` as a float if it is a real number (numpy's included); strings and booleans,
-    which ``float`` would take, are refused."""
-    if isinstance(value, str | bool | np.bool_) or not isinstance(
-        value, numbers.Real | np.ndarray | jax.Array
-    ):
-        raise InvalidInput(f"{name} must be a number, got {value!r}")
-    if np.ndim(cast(Any, value)) != 0:
-        raise InvalidInput(
-            f"{name} must be a single number, got an array of shape {np.shape(cast(Any, value))}"
-        )
-    return float(value)
-
-
 @dataclasses.dataclass(frozen=True, eq=False)
 class Surrogate:
-    """A declared surrogate (see the module's docstring); build one with :func:`surrogate`.
+    """A declared surrogate (see the module's docstring); build one with
+    :func:`~fppo_jax.core.own_surrogates.surrogate`.
 
     Equal only to itself, so that a compiled program's surrogates are those very functions.
     """
@@ -158,23 +166,7 @@ class Surrogate:
 
     def check(self, name: str, value: object) -> float:
         """`value` of hyperparameter `name` as a float, if it is a finite number in its range."""
-        value = real_number(name, value)
-        if math.isinf(value):
-            raise InvalidInput(f"{name} must be finite for {self.name}, got {value}")
-        valid = self.ranges.get(name)
-        trained = as_trained(value)
-        if math.isinf(trained) or (valid is not None and value in valid and trained not in valid):
-            bound = "finite" if valid is None else str(valid)
-            raise InvalidInput(
-                f"{name} must be {bound} for {self.name}, got {value}, {float32_note(value)}"
-            )
-        # NaN lies outside every range, and is finite nowhere.
-        if valid is not None and value not in valid:
-            why = f" ({valid.why})" if valid.why else ""
-            raise InvalidInput(f"{name} must be {valid} for {self.name}, got {value}{why}")
-        if math.isnan(value):
-            raise InvalidInput(f"{name} must be a number for {self.name}, got {value}")
-        return value
+        return check_in_range(name, value, self.ranges.get(name), self.name)
 
     def identity(self) -> dict[str, Any]:
         """What records keep of a surrogate of one's own, so that two functions under one name
@@ -202,85 +194,6 @@ class Surrogate:
         return f"surrogate({self.name!r}{', ' if values else ''}{values})"
 
 
-def surrogate(
-    name: str,
-    function: Callable[..., jax.Array],
-    /,
-    *,
-    ranges: Mapping[str, str | Range] | None = None,
-    needs_kl: bool = False,
-    clip_range: tuple[str, str] | None = None,
-    search: Mapping[str, Any] | None = None,
-    **defaults: float,
-) -> Surrogate:
-    """A surrogate of one's own, accepted wherever a variant's name is (``train``, ``sweep``
-    grids, :func:`~fppo_jax.objective`, :func:`~fppo_jax.hyperparameters`).
-
-    `function` takes ``ratio``, ``advantage`` and any of ``kl`` and ``epsilon`` by name, and
-    each hyperparameter named in `defaults` (their default values); `ranges` gives a
-    hyperparameter's valid range as text (``"> 0"``, ``"[0, 1)"``); `needs_kl` says the
-    surrogate gates on the KL divergence (so calling its objective without one is refused);
-    `clip_range` names the two hyperparameters that are its distances below and above 1 (for
-    the R± diagnostics; ε's otherwise); `search` gives the interval a tune searches each of
-    them over, as ``(low, high)`` or ``(low, high, scale)`` with scale ``linear``, ``log`` or
-    ``log1m`` (see :mod:`fppo_jax.core.search_space`). Everything is checked here, and the function
-    is tried on a grid of ratios and advantages under ``jax.jit`` and ``jax.grad``, as training
-    runs it: one that cannot be traced, or a value that is not finite, of the wrong shape or not
-    a float, is refused, naming the surrogate.
-    """
-    from fppo_jax.core.objectives import BUILTINS  # the built-ins are declared with this function
-
-    if name in BUILTINS:
-        raise InvalidInput(
-            f"a surrogate cannot be named {name!r}: that is a built-in variant's name "
-            f"(built-ins: {', '.join(BUILTINS)})"
-        )
-    declared = declare(name, function, ranges, needs_kl, clip_range, defaults)
-    taken = [f"{key} is {what}" for key in defaults if (what := _taken_names().get(key))]
-    if taken:
-        raise InvalidInput(
-            f"surrogate {name!r}: a hyperparameter of its own cannot take another setting's name "
-            f"({'; '.join(taken)}), whose value it would take or shadow: rename it"
-        )
-    function_digest(function, f"surrogate {name!r}")  # what cannot be identified is refused
-    probe(declared, declared.defaults)
-    if search is None:
-        return declared
-    from fppo_jax.core.search_space import interval
-
-    if not isinstance(search, Mapping):
-        raise InvalidInput(
-            f"surrogate {name!r}: search maps its hyperparameters to (low, high), got {search!r}"
-        )
-    stray = sorted(set(search) - set(defaults))
-    if stray:
-        raise InvalidInput(
-            f"surrogate {name!r}: search names {', '.join(map(repr, stray))}, which it does not "
-            f"take (it takes: {', '.join(defaults) or 'none'})"
-        )
-    where = f"surrogate {name!r}'s search"
-    intervals = {key: interval(key, value, where) for key, value in search.items()}
-    return dataclasses.replace(declared, search=MappingProxyType(intervals))
-
-
-@functools.cache
-def _taken_names() -> dict[str, str]:
-    """What a surrogate's hyperparameter may not be named, each with what it is: an
-    optimisation setting, a field of the run's shape or any name of the command line, where a
-    hyperparameter becomes a flag and a setting of ``--config FILE``. The built-ins'
-    hyperparameters are shared, as ``alpha`` is."""
-    from fppo_jax.cli.parser import command_line_names
-    from fppo_jax.core.config import CONFIG_FIELDS, HYPERPARAMETER_DEFAULTS
-    from fppo_jax.core.objectives import BUILTINS
-
-    shared = {key for s in BUILTINS.values() for key in s.defaults}
-    return {
-        **{key: "a name of the command line" for key in command_line_names() - shared},
-        **{key: "a TrainConfig field" for key in CONFIG_FIELDS},
-        **{key: "an optimisation setting" for key in HYPERPARAMETER_DEFAULTS},
-    }
-
-
 def declare(
     name: str,
     function: Callable[..., jax.Array],
@@ -291,7 +204,8 @@ def declare(
     builtin: bool = False,
 ) -> Surrogate:
     """A :class:`Surrogate`, its declaration checked (the built-ins are declared through here
-    too; :func:`surrogate` also refuses their names and tries the function)."""
+    too; :func:`~fppo_jax.core.own_surrogates.surrogate` also refuses their names and tries the
+    function)."""
     if not isinstance(name, str) or not _NAME.match(name):
         raise InvalidInput(
             f"a surrogate's name must be lower-case letters, digits, '-', '_' or '.', got {name!r}"
@@ -486,112 +400,3 @@ def _value_and_slope(
 def _described(out: object) -> str:
     shape = getattr(out, "shape", None)
     return f"shape {shape}" if shape is not None else type(out).__name__
-
-
-def function_digest(function: Callable[..., Any], where: str) -> str:
-    """A short digest of what `function` computes with, so that a record tells two functions
-    apart: its source (its compiled code where the source is not at hand) and the values it
-    reads beyond its arguments (:func:`_identified`). `where` names the surrogate in the error
-    that refuses a value that cannot be identified."""
-    return hashlib.sha256(_identified(function, where, set())).hexdigest()[:16]
-
-
-def _identified(function: Callable[..., Any], where: str, seen: set[int]) -> bytes:
-    """The text that tells `function` apart: a function's source, then each global or closure
-    variable it reads, as ``name=value``; a ``functools.partial``'s function, then its bound
-    arguments; a callable instance's class, then its attributes. Modules, and functions and
-    classes of other modules (named by the source), add nothing, so a function that reads
-    nothing else is its source alone; `seen` holds the functions already identified."""
-    function = inspect.unwrap(function)
-    seen.add(id(function))
-    if isinstance(function, functools.partial):
-        bound = {**{f"args[{i}]": v for i, v in enumerate(function.args)}, **function.keywords}
-        return _joined(
-            _identified(function.func, where, seen),
-            b"partial",
-            _values(bound, getattr(function.func, "__module__", None), where, seen),
-        )
-    if isinstance(function, types.FunctionType):
-        return _joined(
-            _source(function), _values(_reads(function), function.__module__, where, seen)
-        )
-    cls = type(function)
-    methods = [f for f in vars(cls).values() if isinstance(f, types.FunctionType)]
-    try:
-        text = inspect.getsource(cls).encode()
-    except (OSError, TypeError):
-        text = b"\n".join(_source(f) for f in methods)
-    read = {name: value for f in methods for name, value in _reads(f).items()}
-    return _joined(
-        text,
-        _values(read, cls.__module__, where, seen),
-        _values(getattr(function, "__dict__", {}), cls.__module__, where, seen),
-    )
-
-
-def _joined(*parts: bytes) -> bytes:
-    return b"\n".join(part for part in parts if part)
-
-
-def _source(function: types.FunctionType) -> bytes:
-    try:
-        return inspect.getsource(function).encode()
-    except (OSError, TypeError):
-        code = function.__code__
-        return code.co_code + repr(code.co_consts).encode()
-
-
-def _reads(function: types.FunctionType) -> dict[str, Any]:
-    """The globals and closure variables `function` reads, by name, with their values."""
-    read = {
-        name: function.__globals__[name]
-        for name in _global_names(function.__code__)
-        if name in function.__globals__
-    }
-    for name, cell in zip(function.__code__.co_freevars, function.__closure__ or (), strict=True):
-        with contextlib.suppress(ValueError):  # a cell not yet assigned holds nothing
-            read[name] = cell.cell_contents
-    return read
-
-
-def _global_names(code: types.CodeType) -> list[str]:
-    """The globals that `code` and the functions defined in it load, in order."""
-    names = [i.argval for i in dis.get_instructions(code) if i.opname == "LOAD_GLOBAL"]
-    for const in code.co_consts:
-        if isinstance(const, types.CodeType):
-            names += _global_names(const)
-    return list(dict.fromkeys(names))
-
-
-def _values(read: Mapping[Any, Any], module: str | None, where: str, seen: set[int]) -> bytes:
-    """`read`'s values as ``name=value`` lines, those that identify something (see
-    :func:`_identified`); one that cannot be identified is refused, naming it."""
-    lines = []
-    for name, value in read.items():
-        if _plain(value):
-            lines.append(f"{name}={value!r}".encode())
-        elif isinstance(value, functools.partial) or (
-            isinstance(value, types.FunctionType) and value.__module__ == module
-        ):
-            # A helper of the surrogate's own: what it computes with is the surrogate's too.
-            if id(value) not in seen:
-                lines.append(f"{name}=".encode() + _identified(value, where, seen))
-        elif not (isinstance(value, types.ModuleType) or hasattr(value, "__name__")):
-            raise InvalidInput(
-                f"{where} reads {name}, of type {type(value).__name__}, which its record cannot "
-                "identify (so a changed value would pass unseen): make it a hyperparameter, or "
-                "a number, string, bool, None, or a tuple, list or dict of them"
-            )
-    return b"\n".join(lines)
-
-
-def _plain(value: object) -> bool:
-    """Whether `value` is plain data, whose ``repr`` identifies it: a number, a string, a
-    bool, None, or a tuple, list or dict of them."""
-    if value is None or isinstance(value, str | numbers.Number | np.bool_):
-        return True
-    if isinstance(value, tuple | list):
-        return all(_plain(item) for item in value)
-    if isinstance(value, dict):
-        return all(_plain(key) and _plain(item) for key, item in value.items())
-    return False

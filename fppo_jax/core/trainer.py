@@ -26,8 +26,9 @@ from fppo_jax.core.gae import gae
 from fppo_jax.core.losses import Batch, LossInfo, ppo_loss
 from fppo_jax.core.networks import Networks, make_networks
 from fppo_jax.core.normalization import RunningStats
-from fppo_jax.core.objectives import Objective, distance_past_bound, negative_regions
+from fppo_jax.core.objectives import Objective
 from fppo_jax.core.permutation import permutation
+from fppo_jax.core.variants import distance_past_bound, negative_regions
 from fppo_jax.envs import (
     Box,
     Environment,

@@ -4,21 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from fppo_jax.core.config import (
-    HYPERPARAMETER_DEFAULTS,
-    check_seed,
-    resolve_hyperparameters,
-)
-from fppo_jax.core.objectives import (
-    BUILTINS,
-    DEFAULT_VARIANT,
-    EPSILON,
-    hyperparameter_names,
-    identities,
-    resolve,
-)
+from fppo_jax.core.checks import check_seed
+from fppo_jax.core.objectives import hyperparameter_names, identities
 from fppo_jax.core.policy import make_policy
+from fppo_jax.core.resolution import HYPERPARAMETER_DEFAULTS, resolve, resolve_hyperparameters
 from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.variants import BUILTINS, DEFAULT_VARIANT, EPSILON
 from fppo_jax.envs import Environment
 from fppo_jax.run.distributed import is_main_process
 from fppo_jax.run.driver import Outcome, Plan, drive

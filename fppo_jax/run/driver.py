@@ -25,6 +25,7 @@ import jax
 import numpy as np
 from jax.sharding import Mesh
 
+from fppo_jax.core.checks import check_part
 from fppo_jax.core.config import Hyperparameters
 from fppo_jax.core.policy import make_policy
 from fppo_jax.core.trainer import Trainer, TrainState
@@ -51,8 +52,6 @@ from fppo_jax.run.hooks import (
     Evaluation,
     Finished,
     Hook,
-    MetricLogs,
-    OutputDirectory,
     ProgressReport,
     UserCallback,
 )
@@ -363,18 +362,6 @@ def _share(plan: Plan, size: int, across: int) -> Plan:
     )
 
 
-def check_part(part: object) -> tuple[int, int]:
-    """``part=(K, N)`` checked: the K-th (from 1) of N shares."""
-    if (
-        not isinstance(part, tuple | list)
-        or len(part) != 2
-        or not all(isinstance(x, int | np.integer) and not isinstance(x, bool) for x in part)
-        or not 1 <= part[0] <= part[1]
-    ):
-        raise InvalidInput(f"part must be (K, N) with 1 <= K <= N, got {part!r}")
-    return int(part[0]), int(part[1])
-
-
 def share_bounds(part: object, count: int) -> tuple[int, int]:
     """Where the K-th of N shares of `count` things starts and stops, for ``part=(K, N)``:
     shares as equal as they can be, the first ones one longer; with fewer things than shares,
@@ -498,10 +485,10 @@ class _Training:
                 self.checkpoints, self.finished, record, single_run, resumed_from
             )
             hooks.append(self.checkpoint)
-        if self.outputs:
-            hooks.append(OutputDirectory(self.outputs))
+        if self.outputs:  # after the checkpoint, so that a lost directory loses no state
+            hooks.append(self.outputs)
         if self.logs:
-            hooks.append(MetricLogs(self.logs))
+            hooks.append(self.logs)
         if self.options.callback is not None:
             hooks.append(UserCallback(self.options.callback, self.plan.kind == "train"))
         if self.report:

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.core.config import check_seed, positive_int
+from fppo_jax.core.checks import check_seed, positive_int
 from fppo_jax.core.policy import Policy
 from fppo_jax.envs import Environment
 from fppo_jax.errors import InvalidInput

@@ -3,7 +3,10 @@
 After each chunk of updates the driver hands every hook the :class:`Chunk` it ended, in the
 order the driver lists them: the checkpoint, the output directory's check, the metric logs,
 the user's callback, the progress report. Each hook owns its state and its format; its
-``after_chunk`` returns True to stop training after this chunk (only the callback does).
+``after_chunk`` returns True to stop training after this chunk (only the callback does). Two of
+them are the stored things themselves, whose ``after_chunk`` is their own:
+:class:`~fppo_jax.store.files.DirectoryLock` (the output directory's check) and
+:class:`~fppo_jax.store.metric_log.Logs`.
 """
 
 from __future__ import annotations
@@ -24,8 +27,6 @@ from fppo_jax.run.execution import concatenate, first_run
 from fppo_jax.run.options import Callback, Snapshot, callback_stops
 from fppo_jax.run.progress import Counter, Progress
 from fppo_jax.store.checkpoint import Checkpoints, ResumePoint
-from fppo_jax.store.files import DirectoryLock
-from fppo_jax.store.metric_log import Logs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -97,29 +98,6 @@ class Checkpoint:
                 policy = make_policy(self.single_run, first_run(host))
             self.checkpoints.save_point(point, host, **self.record, policy=policy)
         self.saved.append(chunk.update)
-        return False
-
-
-class OutputDirectory:
-    """Stops the run with an error naming the log directory once it is gone or replaced. Listed
-    after the checkpoint, so that a lost directory loses no state."""
-
-    def __init__(self, outputs: DirectoryLock):
-        self.outputs = outputs
-
-    def after_chunk(self, chunk: Chunk) -> bool:
-        self.outputs.check()
-        return False
-
-
-class MetricLogs:
-    """Appends the chunk's updates to the CSV, TensorBoard and W&B logs asked for."""
-
-    def __init__(self, logs: Logs):
-        self.logs = logs
-
-    def after_chunk(self, chunk: Chunk) -> bool:
-        self.logs.write(chunk.metrics, chunk.runs)
         return False
 
 

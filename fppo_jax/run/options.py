@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from fppo_jax.core.config import positive_int
+from fppo_jax.core.checks import positive_int
 from fppo_jax.errors import InvalidInput, install_hint
 
 if TYPE_CHECKING:  # the trainer, not needed to declare or check options (the command's flags)
@@ -167,7 +167,7 @@ class Options:
             raise InvalidInput(f"progress must be True, False or a callable, got {self.progress!r}")
         if self.callback is not None and not callable(self.callback):
             raise InvalidInput(f"callback must be a callable, got {self.callback!r}")
-        positive_int("keep", self.keep)
+        object.__setattr__(self, "keep", positive_int("keep", self.keep))
         positive_int("eval_episodes", self.eval_episodes)
         for name in ("checkpoint_every", "eval_every", "devices"):
             if getattr(self, name) is not None:

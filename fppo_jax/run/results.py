@@ -12,8 +12,8 @@ from typing import Any, cast
 
 import numpy as np
 
-from fppo_jax.core.config import SYMBOLS, VARIANT_SPECIFIC
 from fppo_jax.core.policy import Policy
+from fppo_jax.core.resolution import SYMBOLS, VARIANT_SPECIFIC
 from fppo_jax.core.trainer import METRICS, TrainState
 from fppo_jax.envs import Environment, backend_name, resets_itself
 from fppo_jax.errors import InvalidInput

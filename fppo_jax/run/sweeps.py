@@ -21,27 +21,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.core.config import (
+from fppo_jax.core.checks import check_seeds, positive_int, real_number
+from fppo_jax.core.config import Hyperparameters, stack_hyperparameters
+from fppo_jax.core.objectives import hyperparameter_names, identities, takers, union
+from fppo_jax.core.resolution import (
     HYPERPARAMETER_DEFAULTS,
-    MAX_SEEDS,
-    Hyperparameters,
-    check_seed,
-    positive_int,
+    resolve,
     resolve_hyperparameters,
-    stack_hyperparameters,
     sweepable,
     table2,
 )
-from fppo_jax.core.objectives import (
-    BUILTINS,
-    DEFAULT_VARIANT,
-    hyperparameter_names,
-    identities,
-    resolve,
-    takers,
-    union,
-)
-from fppo_jax.core.surrogates import Surrogate, real_number
+from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.variants import BUILTINS, DEFAULT_VARIANT
 from fppo_jax.envs import Environment
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.driver import Outcome, Plan, drive, part_bounds, part_runs
@@ -343,33 +334,3 @@ def _warn_diverged(result: SweepResult) -> None:
             f"{result.diverged[i]}; its state before that update was kept",
             file=sys.stderr,
         )
-
-
-def check_seeds(seeds: int | Sequence[int]) -> list[int]:
-    """Seeds 0 … n−1 for a count, else the given ones, checked."""
-    if isinstance(seeds, int | np.integer) and not isinstance(seeds, bool | np.bool_):
-        seeds = range(positive_int("seeds", seeds))
-    elif (
-        isinstance(seeds, str)
-        or not isinstance(seeds, Sequence | np.ndarray)
-        or np.ndim(seeds) != 1
-    ):
-        raise InvalidInput(f"seeds must be a count or a sequence of integers, got {seeds!r}")
-    if len(seeds) > MAX_SEEDS:
-        raise InvalidInput(f"a sweep takes at most {MAX_SEEDS:,} seeds, got {len(seeds):,}")
-    checked = [check_seed(seed) for seed in seeds]
-    if not checked:
-        raise InvalidInput("a sweep needs at least one seed")
-    if len(set(checked)) < len(checked):
-        raise InvalidInput(f"seeds must be distinct, got {checked}")
-    # JAX's keys (without 64-bit mode) keep a seed's low 32 bits: seeds equal there would train
-    # the same run twice, and count it as two.
-    first: dict[int, int] = {}
-    for seed in checked:
-        other = first.setdefault(seed % 2**32, seed)
-        if other != seed:
-            raise InvalidInput(
-                f"seeds {other} and {seed} give the same key (JAX keeps a seed's low 32 bits), "
-                "so the same run: choose seeds that differ below 2**32"
-            )
-    return checked

@@ -89,7 +89,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fppo_jax.core.config import MAX_SEEDS, positive_int
+from fppo_jax.core.checks import MAX_SEEDS, check_fraction, positive_int
 from fppo_jax.errors import InvalidInput
 
 # Points per look of the boundaries' integration grid, odd for Simpson's rule: enough for the
@@ -122,9 +122,7 @@ class Design:
             raise InvalidInput(
                 f"group_size ({self.group_size}) is larger than max_seeds ({self.max_seeds})"
             )
-        number = isinstance(self.level, float | int | np.floating)
-        if isinstance(self.level, bool) or not (number and 0 < self.level < 1):
-            raise InvalidInput(f"the error level must be in (0, 1), got {self.level!r}")
+        check_level(self.level)
         if self.margin is not None:
             check_margin(self.margin)
             if self.level >= 0.5:
@@ -158,15 +156,16 @@ class Decision:
     interval: tuple[float, float] | None = None
 
 
-def check_margin(margin: float) -> float:
+def check_level(level: object) -> float:
+    """`level` if it is a study's two-sided family-wise error level α, in (0, 1)."""
+    return check_fraction("the error level", level)
+
+
+def check_margin(margin: object) -> float:
     """`margin` if it is an equivalence margin δ on the probability of improvement, in (0, ½)."""
-    number = isinstance(margin, float | int | np.floating | np.integer)
-    if isinstance(margin, bool) or not (number and 0 < margin < 0.5):
-        raise InvalidInput(
-            f"the equivalence margin is a distance from 1/2 of P(candidate > baseline), in "
-            f"(0, 0.5), got {margin!r}"
-        )
-    return float(margin)
+    return check_fraction(
+        "the equivalence margin (a distance from 1/2 of P(candidate > baseline))", margin, 0.5
+    )
 
 
 def spent(alpha: float, fraction: float) -> float:

@@ -30,7 +30,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from fppo_jax.core.config import positive_int
+from fppo_jax.core.checks import check_fraction, positive_int
 from fppo_jax.errors import InvalidInput
 
 CONFIDENCE = 0.95
@@ -136,12 +136,9 @@ def _finite(x: np.ndarray) -> np.ndarray:
     return cast(np.ndarray, x[np.isfinite(x)])
 
 
-def check_confidence(confidence: float) -> float:
+def check_confidence(confidence: object) -> float:
     """`confidence` if it is a level in (0, 1)."""
-    number = isinstance(confidence, int | float | np.integer | np.floating)
-    if isinstance(confidence, bool) or not number or not 0 < confidence < 1:
-        raise InvalidInput(f"the confidence level must be in (0, 1), got {confidence!r}")
-    return float(confidence)
+    return check_fraction("the confidence level", confidence)
 
 
 def bootstrap(

@@ -33,7 +33,6 @@ from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
 import jax
 import numpy as np
 
-from fppo_jax.core.config import positive_int
 from fppo_jax.core.policy import Policy
 from fppo_jax.errors import FppoError, InvalidInput, MissingFile, first_line
 from fppo_jax.store.files import (
@@ -194,10 +193,10 @@ def check_same_run(
 
 
 class Checkpoints:
-    """The checkpoints of one run (or one sweep) in `directory`, keeping the newest `keep`."""
+    """The checkpoints of one run (or one sweep) in `directory`, keeping the newest `keep` (a
+    positive integer, as :class:`~fppo_jax.run.options.Options` checks it)."""
 
     def __init__(self, directory: str | Path, keep: int = 3):
-        keep = positive_int("keep (checkpoints kept)", keep)
         self.directory = Path(directory).absolute()
         self._lock: DirectoryLock | None = None
         if os.path.lexists(self.directory) and not self.directory.is_dir():

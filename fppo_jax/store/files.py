@@ -100,6 +100,12 @@ class DirectoryLock:
                 "while it ran: what it had written there is lost, and the run stopped"
             )
 
+    def after_chunk(self, chunk: object) -> bool:
+        """As one of the driver's hooks: stops the run with :class:`DirectoryLost` once the
+        directory is gone or replaced (:meth:`check`), else goes on."""
+        self.check()
+        return False
+
     def release(self) -> None:
         if self._descriptor is not None:
             os.close(self._descriptor)

@@ -16,7 +16,7 @@ import secrets
 from collections.abc import Sequence
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import jax
 import numpy as np
@@ -267,15 +267,29 @@ class WandbLog:
         self._open.clear()
 
 
+class Chunk(Protocol):
+    """What a chunk of updates gives the logs: every update of its group so far
+    (``[run, update]``) and the group's runs (the driver's chunk, :mod:`fppo_jax.run.hooks`)."""
+
+    @property
+    def metrics(self) -> dict[str, np.ndarray]: ...
+
+    @property
+    def runs(self) -> range: ...
+
+
 class Logs:
-    """Every log a run writes to, written and closed together."""
+    """Every log a run writes to, written and closed together; one of the driver's hooks."""
 
     def __init__(self, sinks: list[MetricLog | WandbLog]):
         self._sinks = sinks
 
-    def write(self, metrics: dict[str, np.ndarray], runs: range) -> None:
+    def after_chunk(self, chunk: Chunk) -> bool:
+        """Appends the chunk's updates to the CSV, TensorBoard and W&B logs asked for; never
+        stops training."""
         for sink in self._sinks:
-            sink.write(metrics, runs)
+            sink.write(chunk.metrics, chunk.runs)
+        return False
 
     def close(self) -> None:
         for sink in self._sinks:

@@ -20,11 +20,9 @@ Saved policies, a trained policy on its own, are :mod:`fppo_jax.store.saved_poli
 from __future__ import annotations
 
 import dataclasses
-import logging
 import os
 import re
 import shutil
-import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -205,13 +203,7 @@ class Checkpoints:
                 f"checkpoint directory {self.directory} is not a directory (a file, or a link "
                 "that leads to none)"
             )
-        _QUIET.open()
-        try:
-            self._manager = _manager(self.directory, keep)
-        except BaseException:
-            _QUIET.close()
-            raise
-        self._open = True
+        self._manager = _manager(self.directory, keep)
         self._writes = _Writes(self._manager, self.directory)
 
     def steps(self) -> list[int]:
@@ -347,11 +339,7 @@ class Checkpoints:
         raise MissingFile(f"no readable checkpoint in {self.directory}")
 
     def _read(self, step: int, **items: Any) -> Any:
-        try:
-            return self._manager.restore(step, args=_args(**items))
-        except Exception:
-            _QUIET.failed = True  # its reads left behind report up to the process's exit
-            raise
+        return self._manager.restore(step, args=_args(**items))
 
     def wait(self) -> None:
         """Block until the checkpoint being written is complete; :class:`CheckpointNotWritten`
@@ -378,9 +366,6 @@ class Checkpoints:
             if not quiet:
                 raise
         finally:
-            if self._open:
-                self._open = False
-                _QUIET.close()
             if self._lock is not None:
                 self._lock.release()
                 self._lock = None
@@ -435,8 +420,6 @@ class _Writes:
                 raise self._not_written(f"step {step} is not on disk after writing it")
 
     def _not_written(self, why: str) -> CheckpointNotWritten:
-        _QUIET.failed = True  # its leftovers report up to the process's exit
-        _FAILED_WRITE_TASKS.install()
         kept = _steps(self.manager)
         before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
         return CheckpointNotWritten(
@@ -448,106 +431,6 @@ class _Writes:
 def _steps(manager: ocp.CheckpointManager) -> list[int]:
     manager.reload()
     return sorted(manager.all_steps())
-
-
-class _OrbaxChatter(logging.Filter):
-    """Drops orbax's own log records (through absl's logger) but for its errors: a line for
-    every save and restore at INFO and WARNING, a line for each damaged checkpoint's metadata
-    file at every look at the directory, which this module reports once, as damage, and the
-    tracebacks of a background write that failed, which it raises as CheckpointNotWritten.
-    Every other record, the user's own through absl included, passes at its own level."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        if f"{os.sep}orbax{os.sep}" not in record.pathname:
-            return True
-        damaged = str(record.msg).startswith("Failed to json parse Metadata file")
-        # A background write's failure, which Checkpoints raises itself (CheckpointNotWritten).
-        failure = record.exc_info[1] if record.exc_info else None
-        unwritten = failure is not None and _storage_failure(failure)
-        unwritten |= "_SignalingThread.run() raised an exception" in str(record.msg)
-        return record.levelno >= logging.ERROR and not damaged and not unwritten
-
-
-class _FailedWriteTasks(logging.Filter):
-    """Drops asyncio's reports of orbax's tasks whose exception nobody retrieved: those of a
-    write that failed, which :class:`CheckpointNotWritten` reports already, would say it again
-    at length whenever they are collected (at the exit, or sooner). Installed once a write
-    has failed; any other task's report passes."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        message = str(record.msg)
-        return not (message.startswith("Task exception was never retrieved") and "orbax" in message)
-
-    def install(self) -> None:
-        logger = logging.getLogger("asyncio")
-        if self not in logger.filters:
-            logger.addFilter(self)
-
-
-_FAILED_WRITE_TASKS = _FailedWriteTasks()
-
-
-class _ReadsLeftBehind:
-    """An unraisable-exception hook that drops the reports of reads that orbax left behind, and
-    passes every other report on to the hook it replaced.
-
-    When orbax's read or write of one array fails (a file cut short, a full disk), it closes
-    the event loop it works in while tensorstore is still at the other arrays. Each of those,
-    once done, schedules its result on the closed loop from a tensorstore thread, and the
-    RuntimeError is reported as unraisable: a screen of tracebacks, up to the interpreter's
-    exit, about a failure that this module reports already (a damaged checkpoint, or
-    :class:`CheckpointNotWritten`).
-    """
-
-    def __init__(self, previous: Callable[[Any], object]):
-        self.previous = previous
-
-    def __call__(self, unraisable: Any) -> None:
-        trace = unraisable.exc_traceback
-        left_behind = (
-            isinstance(unraisable.exc_value, RuntimeError)
-            and str(unraisable.exc_value) == "Event loop is closed"
-            and trace is not None
-            and trace.tb_frame.f_code.co_name == "call_soon_threadsafe"  # called from C
-        )
-        if not left_behind:
-            self.previous(unraisable)
-
-
-class _Quieting:
-    """Orbax kept quiet while checkpoints are open: :class:`_OrbaxChatter` on absl's logger
-    and :class:`_ReadsLeftBehind` as the unraisable hook, from the first :class:`Checkpoints`
-    opened to the last one closed, when the process's logger and hook are as they were found.
-    Once orbax has failed (a damaged checkpoint read, a write storage refused: `failed`), its
-    leftovers report up to the process's exit, so the quieting stays."""
-
-    def __init__(self) -> None:
-        self.users = 0
-        self.failed = False
-        self.chatter = _OrbaxChatter()
-        self.hook: _ReadsLeftBehind | None = None
-
-    def open(self) -> None:
-        if self.users == 0:
-            logger = logging.getLogger("absl")
-            if self.chatter not in logger.filters:
-                logger.addFilter(self.chatter)
-            if not isinstance(sys.unraisablehook, _ReadsLeftBehind):
-                self.hook = _ReadsLeftBehind(sys.unraisablehook)
-                sys.unraisablehook = self.hook
-        self.users += 1
-
-    def close(self) -> None:
-        self.users -= 1
-        if self.users > 0 or self.failed:
-            return
-        logging.getLogger("absl").removeFilter(self.chatter)
-        if self.hook is not None and sys.unraisablehook is self.hook:
-            sys.unraisablehook = self.hook.previous
-        self.hook = None
-
-
-_QUIET = _Quieting()
 
 
 def _manager(directory: Path, keep: int) -> ocp.CheckpointManager:

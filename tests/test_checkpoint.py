@@ -499,3 +499,23 @@ def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(
     assert steps_on_disk(tmp_path) == [1, 2, 3]
     resumed = train(**RUN, checkpoint_dir=tmp_path, resume=True, checkpoint_every=1, keep=10)
     assert resumed.resumed_from == 3 and len(resumed.metrics["env_steps"]) == 20
+
+
+def test_orbax_custom_metadata_reads_damage_as_nothing_so_the_record_stays_an_item(tmp_path):
+    # Why a checkpoint's record (its format, configuration and digests) is an item of its own,
+    # written and read through orbax, rather than orbax's custom_metadata: a damaged
+    # _CHECKPOINT_METADATA reads back as {}, as a checkpoint saved without any does (orbax
+    # logs it, and raises nothing), so the record's own format and digests could not be told
+    # from no record; and moving the record would hide its format from every earlier fppo-jax,
+    # which would take each new checkpoint for damaged and set it aside, not refuse it.
+    import orbax.checkpoint as ocp
+
+    options = ocp.CheckpointManagerOptions(create=True, enable_async_checkpointing=False)
+    manager = ocp.CheckpointManager(tmp_path, options=options)
+    state = ocp.args.Composite(state=ocp.args.StandardSave({"x": np.arange(3.0)}))
+    manager.save(1, args=state, custom_metadata={"format": 3})
+    manager.save(2, args=state)
+    assert manager.metadata(1).custom_metadata == {"format": 3}
+    (tmp_path / "1" / "_CHECKPOINT_METADATA").write_text("garbage")
+    assert manager.metadata(1).custom_metadata == {} == manager.metadata(2).custom_metadata
+    manager.close()

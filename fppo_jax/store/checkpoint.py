@@ -1,18 +1,24 @@
 """Checkpoints of a run: everything it carries, its metrics so far and its record, written by
-orbax atomically and in the background, and verified when read back.
+orbax's ``CheckpointManager`` atomically and in the background, and verified when read back.
 
 ``<directory>/<step>/`` holds four items: ``state`` (every array of the training state, PRNG keys as
 their raw data), ``curves`` (the metrics of every update so far), ``policy`` (what
 :func:`~fppo_jax.store.saved_policy.load_policy` needs) and ``record`` (JSON: the run's
 configuration, the policy's description and a SHA-256 digest of each array item). A run's step
 counts its updates; a sweep's, group × updates per run + update, and its record and ``curves`` also
-say where it is (:class:`ResumePoint`: the group, the update, the finished groups). Orbax writes a
-step into a temporary directory and renames it once complete, so a killed process leaves whole
-checkpoints only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
-checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old
-checkpoints are deleted only after a newer one is complete. Every record names the layout it was
-written in (:data:`FORMAT`): a checkpoint of another layout is refused as
+say where it is (:class:`ResumePoint`: the group, the update, the finished groups). A checkpoint is
+an artifact (:mod:`fppo_jax.store.artifact`) whose files orbax writes: orbax commits a step whole
+(a temporary directory, renamed once complete) and keeps the newest `keep` (deleting older ones
+only after a newer one is committed); the record, sealed with its format and digests, catches one
+damaged afterwards (a truncated or altered file). A damaged checkpoint is reported, set aside in
+``<directory>/damaged/`` and the one before it used. Every record names the layout it was written
+in (:data:`FORMAT`): a checkpoint of another layout is refused as
 :class:`~fppo_jax.store.files.IncompatibleFormat`, and left where it is, never taken for damage.
+
+Nothing here changes the process: orbax logs through absl at its own levels, and reports its own
+failures (a damaged checkpoint read, a write storage refused) as it does; what this module says of
+them is one warning per damaged checkpoint and one error (:class:`CheckpointNotWritten`,
+:class:`CheckpointsUnavailable`).
 
 Saved policies, a trained policy on its own, are :mod:`fppo_jax.store.saved_policy`'s.
 """
@@ -22,7 +28,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
-import shutil
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -34,6 +39,7 @@ import numpy as np
 from fppo_jax.core.config import positive_int
 from fppo_jax.core.policy import Policy
 from fppo_jax.errors import FppoError, InvalidInput, MissingFile, first_line
+from fppo_jax.store import artifact
 from fppo_jax.store.files import (
     DirectoryBusy,
     DirectoryLock,
@@ -300,15 +306,15 @@ class Checkpoints:
         arrays = {"state": host, "curves": jax.device_get(curves)}
         if policy is not None:
             arrays["policy"] = jax.device_get(policy.arrays())
-        record = {
-            **record,
-            "format": FORMAT,
-            "policy": policy.describe() if policy is not None else None,
-            "digests": {name: tree_digest(value) for name, value in arrays.items()},
-        }
+        record = artifact.seal(
+            record,
+            FORMAT,
+            policy=policy.describe() if policy is not None else None,
+            digests={name: tree_digest(value) for name, value in arrays.items()},
+        )
         # Orbax waits for the previous save to finish before it starts this one.
         items = {name: ocp.args.StandardSave(value) for name, value in arrays.items()}
-        args = _args(**items, record=ocp.args.JsonSave(json_value(record)))
+        args = _args(**items, record=ocp.args.JsonSave(record))
         self.wait()  # the one before, on disk: orbax would wait for it here anyway
         self._writes.start(step, args)
 
@@ -371,10 +377,7 @@ class Checkpoints:
                 self._lock = None
 
     def _set_aside(self, step: int, error: Exception) -> None:
-        target = self.directory / "damaged" / str(step)
-        target.parent.mkdir(exist_ok=True)
-        shutil.rmtree(target, ignore_errors=True)
-        shutil.move(self.directory / str(step), target)
+        target = artifact.set_aside(self.directory / str(step))
         self._manager.reload()
         _warn(self.directory, step, error, "is damaged", f"moved to {target}, ")
 
@@ -505,5 +508,4 @@ def _from_storable(x: np.ndarray, like: Any) -> Any:
 
 
 def _verify(name: str, arrays: Any, record: dict[str, Any]) -> None:
-    if tree_digest(arrays) != record["digests"][name]:
-        raise InvalidInput(f"its {name} arrays do not match the digest written with them")
+    artifact.verify(arrays, record["digests"][name], name)

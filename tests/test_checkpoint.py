@@ -525,3 +525,23 @@ def test_orbax_custom_metadata_reads_damage_as_nothing_so_the_record_stays_an_it
     (tmp_path / "1" / "_CHECKPOINT_METADATA").write_text("garbage")
     assert manager.metadata(1).custom_metadata == {} == manager.metadata(2).custom_metadata
     manager.close()
+
+
+def test_orbax_reads_a_flipped_byte_as_other_values_so_checkpoints_keep_their_digests(tmp_path):
+    # Why each checkpoint's record holds a digest of its arrays: orbax checks no content of its
+    # own, and an altered data file reads back without an error, as other values.
+    import orbax.checkpoint as ocp
+
+    options = ocp.CheckpointManagerOptions(create=True, enable_async_checkpointing=False)
+    manager = ocp.CheckpointManager(tmp_path, options=options)
+    x = np.random.default_rng(0).normal(size=100_000)
+    manager.save(1, args=ocp.args.Composite(state=ocp.args.StandardSave({"x": x})))
+    data = max(
+        (p for p in (tmp_path / "1" / "state").rglob("*") if p.is_file()), key=os.path.getsize
+    )
+    altered = bytearray(data.read_bytes())
+    altered[len(altered) // 2] ^= 0x01
+    data.write_bytes(bytes(altered))
+    read = manager.restore(1, args=ocp.args.Composite(state=ocp.args.StandardRestore()))
+    assert 0 < np.sum(read.state["x"] != x) < 10
+    manager.close()

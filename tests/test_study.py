@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 from helpers import run_script
 
-from fppo_jax import SweepResult, merge, statistics
+from fppo_jax import SweepResult, merge
+from fppo_jax.stats import statistics
 
 EXPERIMENTS = Path(__file__).resolve().parent.parent / "experiments"
 # Six runs per compiled call in every test's sweeps of the paper's shape: one program for all.

@@ -36,10 +36,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from fppo_jax import SweepResult, merge, statistics
+from fppo_jax import SweepResult, merge
 from fppo_jax.analysis.study_report import ruled_out
 from fppo_jax.core.config import SYMBOLS
 from fppo_jax.run.results import labels
+from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

@@ -31,9 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fppo_jax import SweepResult, merge, statistics
+from fppo_jax import SweepResult, merge
 from fppo_jax.analysis.study_report import ruled_out
 from fppo_jax.envs import MUJOCO_TASKS
+from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

@@ -32,10 +32,11 @@ import numpy as np
 from study import PROTOCOLS as PROTOCOL_SETTINGS
 
 import fppo_jax
-from fppo_jax import SweepResult, merge, statistics
+from fppo_jax import SweepResult, merge
 from fppo_jax.analysis.plots import plot_curves
 from fppo_jax.envs import MUJOCO_TASKS
 from fppo_jax.run.results import labels, max_average_return
+from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

@@ -1,6 +1,7 @@
 import csv
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -236,8 +237,9 @@ def test_all_checkpoints_damaged_is_an_error_never_a_silent_fresh_start(tmp_path
 
 
 def test_the_command_line_says_in_a_line_each_that_the_checkpoints_are_damaged(tmp_path):
-    # Files cut short fail orbax's reads mid-way, the case whose reads left behind on a closed
-    # event loop would otherwise print a screen of tracebacks, up to the interpreter's exit.
+    # Files cut short fail orbax's reads mid-way. Orbax and Python may report those reads
+    # (their tracebacks, at their own level: the library installs no filter or hook to hide
+    # them); what fppo-jax says is one line per damaged checkpoint and one error.
     flags = [
         *["train", "--env", "cartpole", "--variant", "fppo-qp", "--seed", "3", "--steps", "512"],
         *["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"],
@@ -256,8 +258,12 @@ def test_the_command_line_says_in_a_line_each_that_the_checkpoints_are_damaged(t
         env={**os.environ, "PYTHONPATH": path},
     )
     assert resumed.returncode == 2
-    assert "Traceback" not in resumed.stderr and "Event loop is closed" not in resumed.stderr
-    said = [line for line in resumed.stderr.splitlines() if line.startswith("fppo-jax: ")]
+    # Python reports orbax's reads from their own threads, piece by piece: such a piece may
+    # come right before or after a line of fppo-jax's.
+    said = re.findall(
+        r"fppo-jax: (?:warning: .*?trying the previous one|error: .*?choose another)",
+        resumed.stderr,
+    )
     assert len(said) == 3, resumed.stderr
     for line, step in zip(said, (4, 2), strict=False):
         assert line.startswith(
@@ -343,14 +349,17 @@ def test_training_checkpointing_resuming_and_reading_leave_the_process_as_they_f
     # In a process of its own, so that this one's logging, hooks and warning filters do not
     # interfere: the loggers that existed before (the root's, absl's, asyncio's, jax's,
     # orbax's...: level, filters, handlers), the unraisable hook and the warning filters are
-    # as they were after a run that checkpoints, its resume, load_policy and a checkpointed
-    # sweep read back; and orbax's chatter does not reach the user's screen. The libraries
+    # as they were after importing fppo_jax, a run that checkpoints, its resume, load_policy
+    # of its checkpoints and of a saved policy, a checkpointed sweep read back, and a resume
+    # that finds its newest checkpoint damaged (orbax's own report of that failure may reach
+    # the screen at its own level; nothing else of orbax's does). The libraries
     # the run uses set up their own on import (urllib3 and botocore add warning filters, absl
     # and jax loggers): the process imports them first, as a first process running the same
     # calls did (`modules`), so that what is compared is what the calls do.
     def calls(where: Path) -> str:
         return textwrap.dedent(
             f"""
+            import sys
             import fppo_jax
             from fppo_jax import SweepResult
             shape = dict(num_envs=4, num_steps=32, num_minibatches=4, num_epochs=2,
@@ -364,6 +373,16 @@ def test_training_checkpointing_resuming_and_reading_leave_the_process_as_they_f
                            checkpoint_dir={str(where / "sweep-checkpoints")!r},
                            log_dir={str(where / "sweep")!r}, **shape)
             SweepResult.read({str(where / "sweep")!r})
+            result = fppo_jax.train("cartpole", variant="ppo", total_steps=256, **shape)
+            result.save({str(where / "policy")!r})
+            fppo_jax.load_policy({str(where / "policy")!r})
+            print("DAMAGED", file=sys.stderr, flush=True)  # orbax may speak from here on
+            import pathlib
+            steps = [p for p in pathlib.Path({str(where / "run")!r}).iterdir() if p.name.isdigit()]
+            for file in (max(steps, key=lambda p: int(p.name)) / "state").rglob("*"):
+                if file.is_file():
+                    file.write_bytes(file.read_bytes()[: file.stat().st_size // 2])
+            fppo_jax.train(total_steps=768, resume=True, **run)  # warns, and trains on
             """
         )
 
@@ -413,7 +432,9 @@ def test_training_checkpointing_resuming_and_reading_leave_the_process_as_they_f
     done = python(snapshot + calls(tmp_path / "second") + compare)
     assert done.returncode == 0, done.stderr
     assert "the user's own absl warning" in done.stderr
-    assert "orbax" not in done.stderr.lower(), done.stderr
+    quiet, failing = done.stderr.split("DAMAGED\n")
+    assert "orbax" not in quiet.lower(), quiet  # quiet on its own where nothing fails
+    assert "DamagedCheckpoint: checkpoint at step 6" in failing, failing
 
 
 def test_a_checkpoint_of_another_format_is_refused_as_incompatible_and_left_as_it_is(
@@ -470,8 +491,7 @@ def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(
                            keep=10, callback=refuse)
         except fppo_jax.CheckpointNotWritten as error:
             print(error)
-            # The failed write's leftovers report up to the exit: their quieting stays.
-            print(type(sys.unraisablehook).__name__)
+            print(sys.unraisablehook is sys.__unraisablehook__)  # the library installs none
             sys.exit(3)
     """)
     done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True)
@@ -479,9 +499,49 @@ def test_a_checkpoint_storage_refuses_is_one_error_naming_the_newest_intact_one(
     assert done.stdout == (
         f"could not write a checkpoint in {tmp_path} (File too large); the newest intact one is "
         "step 3. Free space, or choose another checkpoint directory, and resume (--resume)\n"
-        "_ReadsLeftBehind\n"
+        "True\n"
     )
-    assert "Traceback" not in done.stderr and "Event loop is closed" not in done.stderr
+    # What else stderr holds is orbax's own report of the failed write, at its own level.
     assert steps_on_disk(tmp_path) == [1, 2, 3]
     resumed = train(**RUN, checkpoint_dir=tmp_path, resume=True, checkpoint_every=1, keep=10)
     assert resumed.resumed_from == 3 and len(resumed.metrics["env_steps"]) == 20
+
+
+def test_orbax_custom_metadata_reads_damage_as_nothing_so_the_record_stays_an_item(tmp_path):
+    # Why a checkpoint's record (its format, configuration and digests) is an item of its own,
+    # written and read through orbax, rather than orbax's custom_metadata: a damaged
+    # _CHECKPOINT_METADATA reads back as {}, as a checkpoint saved without any does (orbax
+    # logs it, and raises nothing), so the record's own format and digests could not be told
+    # from no record; and moving the record would hide its format from every earlier fppo-jax,
+    # which would take each new checkpoint for damaged and set it aside, not refuse it.
+    import orbax.checkpoint as ocp
+
+    options = ocp.CheckpointManagerOptions(create=True, enable_async_checkpointing=False)
+    manager = ocp.CheckpointManager(tmp_path, options=options)
+    state = ocp.args.Composite(state=ocp.args.StandardSave({"x": np.arange(3.0)}))
+    manager.save(1, args=state, custom_metadata={"format": 3})
+    manager.save(2, args=state)
+    assert manager.metadata(1).custom_metadata == {"format": 3}
+    (tmp_path / "1" / "_CHECKPOINT_METADATA").write_text("garbage")
+    assert manager.metadata(1).custom_metadata == {} == manager.metadata(2).custom_metadata
+    manager.close()
+
+
+def test_orbax_reads_a_flipped_byte_as_other_values_so_checkpoints_keep_their_digests(tmp_path):
+    # Why each checkpoint's record holds a digest of its arrays: orbax checks no content of its
+    # own, and an altered data file reads back without an error, as other values.
+    import orbax.checkpoint as ocp
+
+    options = ocp.CheckpointManagerOptions(create=True, enable_async_checkpointing=False)
+    manager = ocp.CheckpointManager(tmp_path, options=options)
+    x = np.random.default_rng(0).normal(size=100_000)
+    manager.save(1, args=ocp.args.Composite(state=ocp.args.StandardSave({"x": x})))
+    data = max(
+        (p for p in (tmp_path / "1" / "state").rglob("*") if p.is_file()), key=os.path.getsize
+    )
+    altered = bytearray(data.read_bytes())
+    altered[len(altered) // 2] ^= 0x01
+    data.write_bytes(bytes(altered))
+    read = manager.restore(1, args=ocp.args.Composite(state=ocp.args.StandardRestore()))
+    assert 0 < np.sum(read.state["x"] != x) < 10
+    manager.close()

@@ -122,7 +122,7 @@ def test_a_damaged_saved_policy_is_reported_naming_its_directory(tmp_path, how):
 def test_a_policy_json_that_is_not_an_object_is_damage(tmp_path):
     save_gaussian_policy(tmp_path)
     (tmp_path / "policy.json").write_text("[1]")
-    damaged = r"is damaged \(InvalidInput: policy.json holds a JSON list, not an object"
+    damaged = r"is damaged \(DamagedArtifact: .*policy.json holds a list, not an object"
     with pytest.raises(ValueError, match=damaged):
         load_policy(tmp_path)
 

@@ -1,18 +1,24 @@
 """Checkpoints of a run: everything it carries, its metrics so far and its record, written by
-orbax atomically and in the background, and verified when read back.
+orbax's ``CheckpointManager`` atomically and in the background, and verified when read back.
 
 ``<directory>/<step>/`` holds four items: ``state`` (every array of the training state, PRNG keys as
 their raw data), ``curves`` (the metrics of every update so far), ``policy`` (what
 :func:`~fppo_jax.store.saved_policy.load_policy` needs) and ``record`` (JSON: the run's
 configuration, the policy's description and a SHA-256 digest of each array item). A run's step
 counts its updates; a sweep's, group × updates per run + update, and its record and ``curves`` also
-say where it is (:class:`ResumePoint`: the group, the update, the finished groups). Orbax writes a
-step into a temporary directory and renames it once complete, so a killed process leaves whole
-checkpoints only; the digest catches one damaged afterwards (a truncated or altered file). A damaged
-checkpoint is reported, moved to ``<directory>/damaged/`` and the one before it used. Old
-checkpoints are deleted only after a newer one is complete. Every record names the layout it was
-written in (:data:`FORMAT`): a checkpoint of another layout is refused as
+say where it is (:class:`ResumePoint`: the group, the update, the finished groups). A checkpoint is
+an artifact (:mod:`fppo_jax.store.artifact`) whose files orbax writes: orbax commits a step whole
+(a temporary directory, renamed once complete) and keeps the newest `keep` (deleting older ones
+only after a newer one is committed); the record, sealed with its format and digests, catches one
+damaged afterwards (a truncated or altered file). A damaged checkpoint is reported, set aside in
+``<directory>/damaged/`` and the one before it used. Every record names the layout it was written
+in (:data:`FORMAT`): a checkpoint of another layout is refused as
 :class:`~fppo_jax.store.files.IncompatibleFormat`, and left where it is, never taken for damage.
+
+Nothing here changes the process: orbax logs through absl at its own levels, and reports its own
+failures (a damaged checkpoint read, a write storage refused) as it does; what this module says of
+them is one warning per damaged checkpoint and one error (:class:`CheckpointNotWritten`,
+:class:`CheckpointsUnavailable`).
 
 Saved policies, a trained policy on its own, are :mod:`fppo_jax.store.saved_policy`'s.
 """
@@ -20,11 +26,8 @@ Saved policies, a trained policy on its own, are :mod:`fppo_jax.store.saved_poli
 from __future__ import annotations
 
 import dataclasses
-import logging
 import os
 import re
-import shutil
-import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -35,6 +38,7 @@ import numpy as np
 
 from fppo_jax.core.policy import Policy
 from fppo_jax.errors import FppoError, InvalidInput, MissingFile, first_line
+from fppo_jax.store import artifact
 from fppo_jax.store.files import (
     DirectoryBusy,
     DirectoryLock,
@@ -204,13 +208,7 @@ class Checkpoints:
                 f"checkpoint directory {self.directory} is not a directory (a file, or a link "
                 "that leads to none)"
             )
-        _QUIET.open()
-        try:
-            self._manager = _manager(self.directory, keep)
-        except BaseException:
-            _QUIET.close()
-            raise
-        self._open = True
+        self._manager = _manager(self.directory, keep)
         self._writes = _Writes(self._manager, self.directory)
 
     def steps(self) -> list[int]:
@@ -307,15 +305,15 @@ class Checkpoints:
         arrays = {"state": host, "curves": jax.device_get(curves)}
         if policy is not None:
             arrays["policy"] = jax.device_get(policy.arrays())
-        record = {
-            **record,
-            "format": FORMAT,
-            "policy": policy.describe() if policy is not None else None,
-            "digests": {name: tree_digest(value) for name, value in arrays.items()},
-        }
+        record = artifact.seal(
+            record,
+            FORMAT,
+            policy=policy.describe() if policy is not None else None,
+            digests={name: tree_digest(value) for name, value in arrays.items()},
+        )
         # Orbax waits for the previous save to finish before it starts this one.
         items = {name: ocp.args.StandardSave(value) for name, value in arrays.items()}
-        args = _args(**items, record=ocp.args.JsonSave(json_value(record)))
+        args = _args(**items, record=ocp.args.JsonSave(record))
         self.wait()  # the one before, on disk: orbax would wait for it here anyway
         self._writes.start(step, args)
 
@@ -346,11 +344,7 @@ class Checkpoints:
         raise MissingFile(f"no readable checkpoint in {self.directory}")
 
     def _read(self, step: int, **items: Any) -> Any:
-        try:
-            return self._manager.restore(step, args=_args(**items))
-        except Exception:
-            _QUIET.failed = True  # its reads left behind report up to the process's exit
-            raise
+        return self._manager.restore(step, args=_args(**items))
 
     def wait(self) -> None:
         """Block until the checkpoint being written is complete; :class:`CheckpointNotWritten`
@@ -377,18 +371,12 @@ class Checkpoints:
             if not quiet:
                 raise
         finally:
-            if self._open:
-                self._open = False
-                _QUIET.close()
             if self._lock is not None:
                 self._lock.release()
                 self._lock = None
 
     def _set_aside(self, step: int, error: Exception) -> None:
-        target = self.directory / "damaged" / str(step)
-        target.parent.mkdir(exist_ok=True)
-        shutil.rmtree(target, ignore_errors=True)
-        shutil.move(self.directory / str(step), target)
+        target = artifact.set_aside(self.directory / str(step))
         self._manager.reload()
         _warn(self.directory, step, error, "is damaged", f"moved to {target}, ")
 
@@ -434,8 +422,6 @@ class _Writes:
                 raise self._not_written(f"step {step} is not on disk after writing it")
 
     def _not_written(self, why: str) -> CheckpointNotWritten:
-        _QUIET.failed = True  # its leftovers report up to the process's exit
-        _FAILED_WRITE_TASKS.install()
         kept = _steps(self.manager)
         before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
         return CheckpointNotWritten(
@@ -447,106 +433,6 @@ class _Writes:
 def _steps(manager: ocp.CheckpointManager) -> list[int]:
     manager.reload()
     return sorted(manager.all_steps())
-
-
-class _OrbaxChatter(logging.Filter):
-    """Drops orbax's own log records (through absl's logger) but for its errors: a line for
-    every save and restore at INFO and WARNING, a line for each damaged checkpoint's metadata
-    file at every look at the directory, which this module reports once, as damage, and the
-    tracebacks of a background write that failed, which it raises as CheckpointNotWritten.
-    Every other record, the user's own through absl included, passes at its own level."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        if f"{os.sep}orbax{os.sep}" not in record.pathname:
-            return True
-        damaged = str(record.msg).startswith("Failed to json parse Metadata file")
-        # A background write's failure, which Checkpoints raises itself (CheckpointNotWritten).
-        failure = record.exc_info[1] if record.exc_info else None
-        unwritten = failure is not None and _storage_failure(failure)
-        unwritten |= "_SignalingThread.run() raised an exception" in str(record.msg)
-        return record.levelno >= logging.ERROR and not damaged and not unwritten
-
-
-class _FailedWriteTasks(logging.Filter):
-    """Drops asyncio's reports of orbax's tasks whose exception nobody retrieved: those of a
-    write that failed, which :class:`CheckpointNotWritten` reports already, would say it again
-    at length whenever they are collected (at the exit, or sooner). Installed once a write
-    has failed; any other task's report passes."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        message = str(record.msg)
-        return not (message.startswith("Task exception was never retrieved") and "orbax" in message)
-
-    def install(self) -> None:
-        logger = logging.getLogger("asyncio")
-        if self not in logger.filters:
-            logger.addFilter(self)
-
-
-_FAILED_WRITE_TASKS = _FailedWriteTasks()
-
-
-class _ReadsLeftBehind:
-    """An unraisable-exception hook that drops the reports of reads that orbax left behind, and
-    passes every other report on to the hook it replaced.
-
-    When orbax's read or write of one array fails (a file cut short, a full disk), it closes
-    the event loop it works in while tensorstore is still at the other arrays. Each of those,
-    once done, schedules its result on the closed loop from a tensorstore thread, and the
-    RuntimeError is reported as unraisable: a screen of tracebacks, up to the interpreter's
-    exit, about a failure that this module reports already (a damaged checkpoint, or
-    :class:`CheckpointNotWritten`).
-    """
-
-    def __init__(self, previous: Callable[[Any], object]):
-        self.previous = previous
-
-    def __call__(self, unraisable: Any) -> None:
-        trace = unraisable.exc_traceback
-        left_behind = (
-            isinstance(unraisable.exc_value, RuntimeError)
-            and str(unraisable.exc_value) == "Event loop is closed"
-            and trace is not None
-            and trace.tb_frame.f_code.co_name == "call_soon_threadsafe"  # called from C
-        )
-        if not left_behind:
-            self.previous(unraisable)
-
-
-class _Quieting:
-    """Orbax kept quiet while checkpoints are open: :class:`_OrbaxChatter` on absl's logger
-    and :class:`_ReadsLeftBehind` as the unraisable hook, from the first :class:`Checkpoints`
-    opened to the last one closed, when the process's logger and hook are as they were found.
-    Once orbax has failed (a damaged checkpoint read, a write storage refused: `failed`), its
-    leftovers report up to the process's exit, so the quieting stays."""
-
-    def __init__(self) -> None:
-        self.users = 0
-        self.failed = False
-        self.chatter = _OrbaxChatter()
-        self.hook: _ReadsLeftBehind | None = None
-
-    def open(self) -> None:
-        if self.users == 0:
-            logger = logging.getLogger("absl")
-            if self.chatter not in logger.filters:
-                logger.addFilter(self.chatter)
-            if not isinstance(sys.unraisablehook, _ReadsLeftBehind):
-                self.hook = _ReadsLeftBehind(sys.unraisablehook)
-                sys.unraisablehook = self.hook
-        self.users += 1
-
-    def close(self) -> None:
-        self.users -= 1
-        if self.users > 0 or self.failed:
-            return
-        logging.getLogger("absl").removeFilter(self.chatter)
-        if self.hook is not None and sys.unraisablehook is self.hook:
-            sys.unraisablehook = self.hook.previous
-        self.hook = None
-
-
-_QUIET = _Quieting()
 
 
 def _manager(directory: Path, keep: int) -> ocp.CheckpointManager:
@@ -621,5 +507,4 @@ def _from_storable(x: np.ndarray, like: Any) -> Any:
 
 
 def _verify(name: str, arrays: Any, record: dict[str, Any]) -> None:
-    if tree_digest(arrays) != record["digests"][name]:
-        raise InvalidInput(f"its {name} arrays do not match the digest written with them")
+    artifact.verify(arrays, record["digests"][name], name)

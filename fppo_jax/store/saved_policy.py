@@ -1,26 +1,25 @@
-"""A trained policy saved on its own: ``<directory>/policy.json`` (its description, the run's
-configuration and a SHA-256 digest of its arrays) and ``<directory>/policy.npz`` (the arrays,
-named by their paths), each written to a temporary name and renamed; ``policy.json`` names its
-layout (:data:`FORMAT`), and one of another layout is refused, not taken for damage.
-:func:`load_policy` reads a saved policy, or the policy of a run's newest readable checkpoint
-(:mod:`fppo_jax.store.checkpoint`).
+"""A trained policy saved on its own, an artifact (:mod:`fppo_jax.store.artifact`):
+``<directory>/policy.json`` (its description, the run's configuration and a SHA-256 digest of its
+arrays) and ``<directory>/policy.npz`` (the arrays, named by their paths), each written to a
+temporary name and renamed, the record last; ``policy.json`` names its layout (:data:`FORMAT`),
+and one of another layout is refused, not taken for damage. :func:`load_policy` reads a saved
+policy, or the policy of a run's newest readable checkpoint (:mod:`fppo_jax.store.checkpoint`).
 """
 
 from __future__ import annotations
 
-import io
-import json
 from pathlib import Path
 from typing import Any
 
 import jax
-import numpy as np
 from flax.traverse_util import flatten_dict, unflatten_dict
 
 from fppo_jax.core.policy import Policy
 from fppo_jax.errors import InvalidInput, MissingFile, first_line
+from fppo_jax.store import artifact
+from fppo_jax.store.artifact import DamagedArtifact
 from fppo_jax.store.checkpoint import Checkpoints
-from fppo_jax.store.files import check_format, json_value, tree_digest, write_atomically
+from fppo_jax.store.files import tree_digest
 
 POLICY_FILE, ARRAYS_FILE = "policy.json", "policy.npz"
 # The layout of policy.json and policy.npz (files.check_format; numpy_policy reads it too).
@@ -39,23 +38,16 @@ def save_policy(
     `overwrite`. Returns the directory."""
     directory = Path(directory)
     check_no_saved_policy(directory, overwrite)
-    directory.mkdir(parents=True, exist_ok=True)
     arrays = flatten_dict(jax.device_get(policy.arrays()), sep="/")
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
-    saved = {
-        **record,
-        "kind": "policy",
-        "format": FORMAT,
-        "policy": policy.describe(),
-        "digest": tree_digest(arrays),
-    }
+    saved = artifact.seal(
+        {**record, "kind": "policy"},
+        FORMAT,
+        policy=policy.describe(),
+        digest=tree_digest(arrays),
+    )
     # policy.json last: it marks the directory as a saved policy, and an overwrite killed
     # between the two renames leaves arrays that fail its digest, never a wrong policy.
-    write_atomically(directory / ARRAYS_FILE, buffer.getvalue())
-    write_atomically(
-        directory / POLICY_FILE, (json.dumps(json_value(saved), indent=2) + "\n").encode()
-    )
+    artifact.write(directory, POLICY_FILE, saved, {ARRAYS_FILE: artifact.arrays_file(arrays)})
     return directory
 
 
@@ -105,25 +97,20 @@ def read_policy(directory: str | Path) -> tuple[Policy, dict[str, Any]]:
 
 
 def _read_saved_policy(directory: Path) -> tuple[Policy, dict[str, Any]]:
+    what = f"the saved policy in {directory}"
     try:
-        saved = json.loads((directory / POLICY_FILE).read_text())
-        if not isinstance(saved, dict):
-            raise InvalidInput(f"{POLICY_FILE} holds a JSON {type(saved).__name__}, not an object")
-    except Exception as error:
+        saved = artifact.read_record(directory / POLICY_FILE, what, FORMAT)
+    except DamagedArtifact as error:
         raise _damaged(directory, error) from error
-    check_format(saved, f"the saved policy in {directory}", FORMAT)
     try:
-        with np.load(directory / ARRAYS_FILE, allow_pickle=False) as npz:
-            arrays = dict(npz)
-        if tree_digest(arrays) != saved["digest"]:
-            raise InvalidInput("its arrays do not match the digest written with them")
+        arrays = artifact.read_arrays(directory / ARRAYS_FILE, saved["digest"])
         policy = Policy.from_parts(saved["policy"], unflatten_dict(arrays, sep="/"))
     except Exception as error:  # any failure to read back is damage
         raise _damaged(directory, error) from error
     return policy, saved
 
 
-def _damaged(directory: Path, error: Exception) -> InvalidInput:
-    return InvalidInput(
+def _damaged(directory: Path, error: Exception) -> DamagedArtifact:
+    return DamagedArtifact(
         f"the saved policy in {directory} is damaged ({type(error).__name__}: {first_line(error)})"
     )

@@ -1,9 +1,10 @@
-"""A sweep's files: ``curves.csv`` (one row per run and update, a column per metric) and
-``sweep.json`` (the settings, seeds, runs, configuration and times, with the SHA-256 digest of
-that ``curves.csv`` and one of each run's values, by which a re-sorted or filtered
-``curves.csv`` is still known for its sweep's), each written whole or not at all, and read back
-checked, every flaw named with its file. ``sweep.json`` names its layout (:data:`FORMAT`); one
-of another layout is refused as :class:`~fppo_jax.store.files.IncompatibleFormat`, not as damage."""
+"""A sweep's files, an artifact (:mod:`fppo_jax.store.artifact`): ``curves.csv`` (one row per
+run and update, a column per metric) and ``sweep.json`` (the settings, seeds, runs,
+configuration and times, with the SHA-256 digest of that ``curves.csv`` and one of each run's
+values, by which a re-sorted or filtered ``curves.csv`` is still known for its sweep's), each
+written whole or not at all, the record last, and read back checked, every flaw named with its
+file. ``sweep.json`` names its layout (:data:`FORMAT`); one of another layout is refused as
+:class:`~fppo_jax.store.files.IncompatibleFormat`, not as damage."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ import numpy as np
 
 from fppo_jax.core.trainer import METRICS
 from fppo_jax.errors import InvalidInput, MissingFile
-from fppo_jax.store.files import check_format, write_atomically, write_json
+from fppo_jax.store import artifact
 from fppo_jax.store.numpy_policy import digest
 
 # The layout of sweep.json and curves.csv (files.check_format; a record without one is in the
@@ -35,7 +36,6 @@ def write_sweep(
     `sweep.json`: `record` (``settings``, ``seeds``, ``runs``, ``diverged``, ``config``,
     ``compile_seconds``, ``train_seconds``) with the digests."""
     directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
     keys = list(dict.fromkeys(k for s in record["settings"] for k in s))
     text = io.StringIO(newline="")
     writer = csv.writer(text)
@@ -52,17 +52,16 @@ def write_sweep(
         _run_digest(np.array([[float(repr(x)) for x in metrics[m][i].tolist()] for m in metrics]).T)
         for i in range(len(record["runs"]))
     ]
-    write_atomically(directory / "curves.csv", curves)
-    record = {
-        "format": FORMAT,
-        **record,
-        "curves_sha256": hashlib.sha256(curves).hexdigest(),
-        "digest_columns": list(metrics),
-        "run_digests": digests,
-    }
-    # Last, and naming the curves it goes with: a process stopped between the two renames
-    # leaves a pair that reading refuses, never one that reads as a wrong sweep.
-    write_json(directory / "sweep.json", record)
+    record = artifact.seal(
+        record,
+        FORMAT,
+        curves_sha256=hashlib.sha256(curves).hexdigest(),
+        digest_columns=list(metrics),
+        run_digests=digests,
+    )
+    # sweep.json last, naming the curves it goes with: a process stopped between the two
+    # renames leaves a pair that reading refuses, never one that reads as a wrong sweep.
+    artifact.write(directory, "sweep.json", record, {"curves.csv": curves})
 
 
 def read_sweep(directory: str | Path) -> tuple[dict[str, Any], dict[str, np.ndarray], list[int]]:
@@ -184,15 +183,8 @@ def _digest(value: Any) -> bool:
 def _read_record(path: Path) -> dict[str, Any]:
     """``sweep.json`` at `path`, checked against :data:`RECORD`; an ``InvalidInput`` naming the
     file says what is wrong with it."""
-    try:
-        record = json.loads(path.read_bytes())
-    except ValueError as error:  # not JSON, or not text: a file cut short or written over
-        raise InvalidInput(f"{path} is not valid JSON ({error})") from None
-    if not isinstance(record, dict):
-        raise InvalidInput(
-            f"{path} holds a {type(record).__name__}, not a sweep's record (an object)"
-        )
-    check_format(record, f"the sweep record {path}", FORMAT)
+    what = f"the sweep record {path}"
+    record = artifact.read_record(path, what, FORMAT, "a sweep's record (an object)")
     missing = [key for key in RECORD if key not in record]
     if missing:
         raise InvalidInput(f"{path} has no {', '.join(missing)}")

@@ -229,3 +229,26 @@ def test_an_interval_is_at_the_edge_only_within_its_bounds_monte_carlo_error(mon
     assert common.edge((0.2, 0.1, 0.3), draw, 0.5) is None and not seeds  # far: not drawn again
     assert common.edge((0.5, 0.5, 0.5), lambda seed: (0.5, 0.5, 0.5), 0.5) is None  # all tied
     assert common.outcome((0.3, 0.1, 0.45)) == "worse"
+
+
+def test_the_plan_converter_removes_the_rules_module_and_nothing_else(tmp_path):
+    """A study recorded when its rule's words named their module goes on once converted."""
+    from fppo_jax.analysis.studies import EQUIVALENCE_TEST, TEST
+
+    plan = tmp_path / "study" / "plan.json"
+    plan.parent.mkdir()
+    recorded = {"test": TEST + " (fppo_jax.sequential)", "level": 0.05}
+    recorded |= {"equivalence": {"equivalence_test": EQUIVALENCE_TEST + " (fppo_jax.sequential)"}}
+    plan.write_text(json.dumps(recorded, indent=2))
+    other = tmp_path / "study" / "decisions.json"
+    other.write_text('{"note": "x (fppo_jax.sequential)"}')
+    done = run_script(EXPERIMENTS / "convert_plans.py", str(tmp_path), cwd=EXPERIMENTS)
+    assert done.returncode == 0 and f"converted {plan}" in done.stdout
+    assert json.loads(plan.read_text()) == {
+        "test": TEST,
+        "level": 0.05,
+        "equivalence": {"equivalence_test": EQUIVALENCE_TEST},
+    }
+    assert other.read_text() == '{"note": "x (fppo_jax.sequential)"}'  # only plans
+    again = run_script(EXPERIMENTS / "convert_plans.py", str(tmp_path), cwd=EXPERIMENTS)
+    assert again.returncode == 0 and again.stdout == ""

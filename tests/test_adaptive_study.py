@@ -15,7 +15,8 @@ import fppo_jax
 from fppo_jax.analysis.reuse import Pool
 from fppo_jax.analysis.studies import check_plan, recorded_group, run_scores
 from fppo_jax.cli import main
-from fppo_jax.run.results import PART_FIELDS, SweepResult, merge
+from fppo_jax.run.merge import PART_FIELDS, merge
+from fppo_jax.run.results import SweepResult
 from fppo_jax.stats import statistics
 from fppo_jax.stats.sequential import Design, decide
 
@@ -567,7 +568,7 @@ def test_the_report_notes_ceilings_ties_and_boundaries_that_holm_moved(tmp_path)
     # Task a decided worse at its first look; task b, CartPole-like, most runs tied at the
     # return's cap of 200, then tested at the whole α that a's decision passed on.
     from fppo_jax.analysis.study_report import write_report
-    from fppo_jax.stats.sequential import boundaries
+    from fppo_jax.stats.spending import boundaries
 
     rng = np.random.default_rng(1)
     fractions = (0.5, 1.0)

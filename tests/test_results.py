@@ -9,7 +9,8 @@ from helpers import sweep_by_hand
 
 from fppo_jax import METRICS, SweepResult, sweep
 from fppo_jax.cli import main
-from fppo_jax.run.results import max_average_return, merge
+from fppo_jax.run.merge import merge
+from fppo_jax.run.results import max_average_return
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2, "total_steps": 256}
 
@@ -149,7 +150,7 @@ def test_parts_that_ran_other_settings_merge_and_their_grids_join():
 def shares(whole: SweepResult, count: int, size: int = 1) -> list[SweepResult]:
     """`whole`'s runs split as ``sweep(..., part=(K, count), chunk=size)`` splits them, K = 1 …
     count: whole groups of `size` runs each."""
-    from fppo_jax.run.driver import part_runs
+    from fppo_jax.run.plan import part_runs
 
     whole = dataclasses.replace(whole, config={**whole.config, "runs_per_call": size})
     made = []

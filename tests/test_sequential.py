@@ -11,21 +11,22 @@ from helpers import run_script
 from scipy import stats
 
 from fppo_jax.stats import statistics
-from fppo_jax.stats.sequential import (
-    Design,
-    boundaries,
-    decide,
+from fppo_jax.stats.decidable import (
     equivalence_reachable,
     fewest_seeds,
-    improvement_estimate,
     largest_z,
-    mann_whitney_z,
     narrowest_half_width,
     plan_lines,
-    repeated_confidence,
-    shift_for,
-    simulate,
 )
+from fppo_jax.stats.sequential import (
+    Design,
+    decide,
+    improvement_estimate,
+    mann_whitney_z,
+    repeated_confidence,
+)
+from fppo_jax.stats.simulation import shift_for, simulate
+from fppo_jax.stats.spending import boundaries
 
 
 def test_boundaries_are_the_published_obrien_fleming_type_ones():

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from fppo_jax.analysis.study_report import _ceiling
+from fppo_jax.analysis.study_sections import _ceiling
 
 PLAN = {"candidates": ["spo"], "baseline": "ppo"}
 

@@ -199,7 +199,7 @@ def test_a_grid_that_is_not_a_mapping_is_refused_saying_what_one_is(grid):
 
 
 def test_parts_share_the_sweep_s_groups_in_run_order():
-    from fppo_jax.run.driver import part_bounds, part_runs
+    from fppo_jax.run.plan import part_bounds, part_runs
 
     assert [part_bounds((k, 3), 7) for k in (1, 2, 3)] == [(0, 3), (3, 5), (5, 7)]
     assert part_bounds((1, 1), 4) == (0, 4)

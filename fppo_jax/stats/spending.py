@@ -13,7 +13,7 @@ import numpy as np
 from fppo_jax.errors import InvalidInput
 
 # Points per look of the boundaries' integration grid, odd for Simpson's rule: enough for the
-# published boundaries to four decimals (tests/test_sequential.py).
+# published boundaries to four decimals (tests/test_spending.py).
 GRID_POINTS = 801
 
 

@@ -11,6 +11,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 # A few updates of a small batch: enough to exercise every part of an update quickly.
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
+# The same on the command line.
+TINY_FLAGS = ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
 # A progress callback that reports nothing: the run is called in the chunks progress reporting
 # uses (one update each, up to 20 updates), as a run with checkpoints, logs or a callback is. A
 # test that compares with such runs, or trains beside them, passes it to share their program.
@@ -29,14 +31,17 @@ LONGEST_FIRST = (
     "test_distributed.py",
     "test_trainer.py",
     "test_driver.py",
+    "test_training.py",
     "test_checkpoint.py",
-    "test_sweep.py",
+    "test_sweeps.py",
     "test_tuning.py",
     "test_tuning_rungs.py",
-    "test_adaptive_study.py",
+    "test_studies.py",
+    "test_reuse.py",
     "test_rebuilt_reports.py",
-    "test_mujoco.py",
-    "test_cli.py",
+    "test_mjx.py",
+    "test_commands.py",
+    "test_settings.py",
     "test_surrogates.py",
     "test_native.py",
     "test_gymnasium.py",
@@ -44,10 +49,11 @@ LONGEST_FIRST = (
     "test_compile_cache.py",
     "test_regression.py",
     "test_gpu_suite.py",
+    "test_merge.py",
     "test_plots.py",
-    "test_envs.py",
+    "test_gymnax.py",
     "test_variants.py",
-    "test_results.py",
+    "test_rollout.py",
     "test_experiment_scripts.py",
     "test_saved_policy.py",
     "test_faults.py",

@@ -122,3 +122,23 @@ def rung_scores(directory: Path, task: str = "cartpole") -> list[dict]:
     """A tune's recorded rungs' scores on `task`, in order."""
     rungs = sorted((directory / task).glob("rung-*/scores.json"))
     return [json.loads(path.read_text()) for path in rungs]
+
+
+def two_settings(shift: float = 100.0, seeds: int = 8) -> SweepResult:
+    """PPO and FPPO-LP over `seeds` seeds, FPPO-LP's final returns `shift` above PPO's."""
+    settings = [{"variant": "ppo"}, {"variant": "fppo-lp", "alpha": 1.3}]
+    runs = [{"setting": s, "seed": seed} for s in range(2) for seed in range(seeds)]
+    final = np.concatenate([np.arange(seeds), np.arange(seeds) + shift])
+    curves = np.stack([np.linspace(0, f, 4) for f in final])
+    metrics = {name: np.zeros_like(curves) for name in METRICS}
+    metrics.update(average_return=curves, env_steps=np.tile(np.arange(1, 5) * 64, (len(runs), 1)))
+    return SweepResult(
+        settings=settings,
+        seeds=list(range(seeds)),
+        runs=runs,
+        metrics=metrics,
+        diverged=np.zeros(len(runs), np.int64),
+        config={"env": "cartpole", "seeds": list(range(seeds)), "runs_per_call": len(runs)},
+        compile_seconds=1.0,
+        train_seconds=2.0,
+    )

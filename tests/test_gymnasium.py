@@ -11,69 +11,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from conftest import TINY
+from gymnasium_envs import Corridor, rollout, rollouts
 
 import fppo_jax.run.driver
 import fppo_jax.run.memory
 from fppo_jax import make_env, sweep, train
 from fppo_jax.envs import Discrete, Step, as_environment, draw_resets
 from fppo_jax.envs.gymnasium import gymnasium_environment
-
-
-class Corridor(gymnasium.Env):
-    """Walk right (action 1) to position 3: terminated there; truncated at 5 steps otherwise.
-    Observations are (position, steps); every step rewards 1."""
-
-    observation_space = gymnasium.spaces.Box(-10.0, 10.0, (2,), np.float32)
-    action_space = gymnasium.spaces.Discrete(2)
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        self.position, self.steps = 0, 0
-        return np.array([0.0, 0.0], np.float32), {}
-
-    def step(self, action):
-        self.position += int(action)
-        self.steps += 1
-        obs = np.array([self.position, self.steps], np.float32)
-        return obs, 1.0, self.position >= 3, self.steps >= 5, {}
-
-
-class Broken(Corridor):
-    def step(self, action):
-        raise RuntimeError("the simulator crashed")
-
-
-class NaNs(Corridor):
-    def step(self, action):
-        obs, reward, terminated, truncated, info = super().step(action)
-        return obs * np.nan, reward, terminated, truncated, info
-
-
-def rollout(env, action: int, steps: int):
-    """`steps` steps of one environment, always taking `action`."""
-
-    def step(state, key):
-        state, out = env.step(key, state, jnp.int32(action))
-        return state, out
-
-    state, _ = env.reset(jax.random.key(0))
-    return jax.jit(lambda s: jax.lax.scan(step, s, jax.random.split(jax.random.key(1), steps)))(
-        state
-    )[1]
-
-
-def rollouts(env, actions, steps: int) -> tuple[jax.Array, Step]:
-    """`steps` steps of `len(actions)` environments reset together, the i-th always taking
-    ``actions[i]``: (their first observations, the steps' outcomes [step, environment])."""
-    actions = jnp.asarray(actions)
-    count = len(actions)
-
-    def step(state, key):
-        return jax.vmap(env.step)(jax.random.split(key, count), state, actions)
-
-    state, first = draw_resets(env, jax.random.key(0), (count,))
-    keys = jax.random.split(jax.random.key(1), steps)
-    return first, jax.jit(lambda s: jax.lax.scan(step, s, keys))(state)[1]
 
 
 def test_episodes_end_where_the_environment_says_and_restart_at_once():
@@ -121,98 +65,6 @@ def test_keyword_arguments_reach_gymnasium_make():
     steps = rollout(short, 0, 30)
     ends = np.flatnonzero(steps.terminated | steps.truncated) + 1
     assert ends.size and np.diff(np.concatenate([[0], ends])).max() <= 10
-
-
-def faulty(name: str, reset=None, step=None, space=None) -> type:
-    """A Corridor whose reset or step returns what `reset` or `step` make of its own outcome,
-    or whose observation space is `space`."""
-
-    def own_reset(self, *, seed=None, options=None):
-        out = Corridor.reset(self, seed=seed, options=options)
-        return out if reset is None else reset(out)
-
-    def own_step(self, action):
-        out = Corridor.step(self, action)
-        return out if step is None else step(out)
-
-    body = {"reset": own_reset, "step": own_step}
-    return type(name, (Corridor,), body | ({"observation_space": space} if space else {}))
-
-
-def reward(value):
-    return lambda out: (out[0], value, *out[2:])
-
-
-def observation(value):
-    return lambda out: (value, *out[1:])
-
-
-MISBEHAVING = {
-    "raises in reset": (
-        faulty("ResetRaises", reset=lambda out: 1 / 0),
-        r"ResetRaises: reset raised ZeroDivisionError: division by zero \(at .*test_gymnasium",
-    ),
-    "raises in step": (Broken, "Broken: step raised RuntimeError: the simulator crashed"),
-    "a NaN observation": (NaNs, r"NaNs: step returned a non-finite observation \[nan nan\]"),
-    "an infinite observation": (
-        faulty("Infinite", reset=lambda out: (out[0] + np.inf, out[1])),
-        "Infinite: reset returned a non-finite observation",
-    ),
-    "an observation of another shape": (
-        faulty("Longer", step=observation(np.zeros(3))),
-        r"Longer: step returned observations of shape \(3,\), not \(2,\)",
-    ),
-    "a string observation": (
-        faulty("Text", step=observation("position 1")),
-        r"Text: step returned the observation 'position 1' \(str\), not numbers",
-    ),
-    "a NaN reward": (faulty("NaNReward", step=reward(np.nan)), "reward nan .*a finite number"),
-    "an infinite reward": (faulty("InfReward", step=reward(-np.inf)), "reward -inf"),
-    "an array reward": (
-        faulty("ArrayReward", step=reward(np.ones(2))),
-        r"ArrayReward: step returned the reward an array of shape \(2,\) \(float64\), not a",
-    ),
-    "a None reward": (faulty("NoReward", step=reward(None)), r"reward None \(NoneType\)"),
-    "a string reward": (faulty("TextReward", step=reward("1")), r"reward '1' \(str\)"),
-    "flags of another shape": (
-        faulty("Flags", step=lambda out: (*out[:2], np.zeros(2, bool), *out[3:])),
-        r"Flags: step returned terminated=an array of shape \(2,\) \(bool\), not a bool",
-    ),
-    "the old four values from step": (
-        faulty("OldStep", step=lambda out: (*out[:2], out[2] or out[3], out[4])),
-        r"OldStep: step returned a 4-tuple, not the five values .*old Gym API",
-    ),
-    "a bare observation from reset": (
-        faulty("BareReset", reset=lambda out: out[0]),
-        r"BareReset: reset returned an array of shape \(2,\) \(float32\), not the pair",
-    ),
-    "an empty observation space": (
-        faulty("Empty", space=gymnasium.spaces.Box(0.0, 1.0, (0,), np.float32)),
-        r"Empty: its observation space Box\(.*\) is empty",
-    ),
-}
-
-
-@pytest.mark.parametrize("env, message", MISBEHAVING.values(), ids=MISBEHAVING.keys())
-def test_an_environment_that_breaks_the_api_is_named_with_its_fault_before_compiling(
-    env, message, monkeypatch
-):
-    monkeypatch.setattr(fppo_jax.run.driver, "compile_program", lambda *_: pytest.fail("compiled"))
-    with pytest.raises(ValueError, match=message):
-        train(env, "ppo", total_steps=256, **TINY)
-
-
-def test_faults_after_the_first_step_stop_training_naming_the_environment():
-    class LaterNaN(Corridor):
-        def step(self, action):
-            obs, reward, terminated, truncated, info = super().step(action)
-            return obs, np.nan if self.steps == 4 else reward, terminated, truncated, info
-
-    with pytest.raises(Exception, match=r"LaterNaN: step returned the reward nan"):
-        train(LaterNaN, "ppo", total_steps=256, **TINY)
-    vector = gymnasium.vector.SyncVectorEnv([LaterNaN, LaterNaN])
-    with pytest.raises(Exception, match=r"SyncVectorEnv.*: step returned the reward .*2 finite"):
-        rollouts(as_environment(vector), [0, 0], 5)
 
 
 def test_a_missing_extra_and_a_module_s_own_id_are_named():

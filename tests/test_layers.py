@@ -65,3 +65,24 @@ def test_every_layer_says_what_lives_there_and_what_it_may_import():
         readme = (PACKAGE / layer / "README.md").read_text()
         below = LAYERS[: LAYERS.index(layer)]
         assert f"may import {', '.join(below)}" in " ".join(readme.split()), layer
+
+
+TESTS = Path(__file__).resolve().parent
+
+
+def test_every_module_has_a_test_file_of_its_own():
+    """Each module of the package (a folder's ``__init__`` apart) is tested in
+    ``tests/test_<module>.py``, so that what tests a module is found by its name: the names are
+    unique across the layers, and each file holds a test."""
+    stems = [path.stem for path in _modules().values() if path.stem != "__init__"]
+    assert len(stems) == len(set(stems)), sorted(s for s in stems if stems.count(s) > 1)
+    missing = sorted(
+        f"{module}: tests/test_{path.stem}.py"
+        for module, path in _modules().items()
+        if path.stem != "__init__" and "def test_" not in _text(TESTS / f"test_{path.stem}.py")
+    )
+    assert not missing, "modules without a test file of their own:\n" + "\n".join(missing)
+
+
+def _text(path: Path) -> str:
+    return path.read_text() if path.is_file() else ""

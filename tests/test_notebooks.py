@@ -44,7 +44,7 @@ def test_notebook_is_committed_without_outputs(path):
 
 # A notebook that takes most of a minute or more runs with -m slow: the quickstart trains on MJX
 # and renders, the sweeps and escape-speed ones train dozens of runs. What they call is tested
-# on its own in the default run (test_plots.py, test_sweep.py, test_trainer.py).
+# on its own in the default run (test_plots.py, test_sweeps.py, test_trainer.py).
 SLOW = {"quickstart", "sweeps", "escape_speed"}
 RUNNABLE = [
     pytest.param(path, marks=pytest.mark.slow) if path.stem in SLOW else path for path in NOTEBOOKS

@@ -151,7 +151,7 @@ def test_a_profile_falls_from_every_run_to_none():
         "threshold on the normalised score",
         "fraction of runs above the threshold",
     )
-    from fppo_jax.analysis.study_report import profile_label
+    from fppo_jax.analysis.study_figures import profile_label
 
     label = profile_label("final", "ppo")
     assert label == "threshold on the normalised final (1 = ppo's IQM on the task)"

@@ -1,56 +1,20 @@
-"""The decision rule of a study that adds seeds (fppo_jax.stats.sequential): its boundaries against
-published ones, its statistic against SciPy's, its replay of the looks, Holm's recycling, its
-equivalence test, and its error rates by simulation on synthetic scores (no training)."""
-
-import tempfile
-from pathlib import Path
+"""The decision rule of a study that adds seeds (fppo_jax.stats.sequential): its repeated
+confidence levels, its statistic against SciPy's, its replay of the looks, Holm's recycling and
+its equivalence test."""
 
 import numpy as np
 import pytest
-from helpers import run_script
 from scipy import stats
 
 from fppo_jax.stats import statistics
 from fppo_jax.stats.sequential import (
     Design,
-    boundaries,
     decide,
-    equivalence_reachable,
-    fewest_seeds,
     improvement_estimate,
-    largest_z,
     mann_whitney_z,
-    narrowest_half_width,
-    plan_lines,
     repeated_confidence,
-    shift_for,
-    simulate,
 )
-
-
-def test_boundaries_are_the_published_obrien_fleming_type_ones():
-    # Lan–DeMets O'Brien–Fleming-type spending, five equally spaced looks, two-sided 0.05
-    # (Jennison and Turnbull 2000, Table 7.5; gsDesign's sfLDOF at 0.025 a side).
-    five = boundaries(0.05, (0.2, 0.4, 0.6, 0.8, 1.0))
-    np.testing.assert_allclose(five, [4.8769, 3.3570, 2.6803, 2.2898, 2.0310], atol=2e-4)
-    np.testing.assert_allclose(boundaries(0.05, (0.5, 1.0)), [2.9626, 1.9686], atol=2e-4)
-    assert boundaries(0.05, (1.0,)) == pytest.approx((stats.norm.isf(0.025),), abs=1e-6)
-    with pytest.raises(ValueError, match="must increase from above 0"):
-        boundaries(0.05, (0.5, 0.5))
-
-
-def test_one_sided_boundaries_are_the_published_ones():
-    # gsDesign's sfLDOF, one-sided 0.025, five looks: the two-sided 0.05 values to 4 decimals
-    # (no path crosses both); one look is the fixed one-sided test.
-    five = (0.2, 0.4, 0.6, 0.8, 1.0)
-    np.testing.assert_allclose(
-        boundaries(0.025, five, sides=1), [4.8769, 3.3570, 2.6803, 2.2898, 2.0310], atol=2e-4
-    )
-    assert boundaries(0.05, (1.0,), sides=1) == pytest.approx((stats.norm.isf(0.05),), abs=1e-6)
-    # One-sided at a is one side of the two-sided at 2a, less the paths crossing both sides.
-    np.testing.assert_allclose(boundaries(0.05, five, sides=1), boundaries(0.1, five), atol=1e-6)
-    with pytest.raises(ValueError, match="a boundary has 1 or 2 sides, got 3"):
-        boundaries(0.05, five, sides=3)
+from fppo_jax.stats.spending import boundaries
 
 
 def test_a_repeated_confidence_interval_s_level_is_set_by_the_boundary_of_its_look():
@@ -140,46 +104,6 @@ def test_one_look_is_holms_procedure_on_the_normal_p_values():
         assert decided == rejected.tolist()
 
 
-def test_the_family_wise_error_is_at_most_alpha_and_a_real_difference_takes_fewer_seeds():
-    design = Design(group_size=5, max_seeds=30, level=0.05)
-    family = [2, 2]  # two tasks, two candidates each against the task's baseline
-    studies = 2000
-    null = simulate(design, family, shift=0.0, studies=studies, seed=0)
-    standard_error = np.sqrt(design.level * (1 - design.level) / studies)
-    assert null["false_decision_rate"] <= design.level + 3 * standard_error
-
-    shifted = simulate(design, family, shift=1.0, studies=1000, seed=1)
-    assert shifted["false_decision_rate"] == 0 and shifted["power"] > 0.9
-    # The fixed design (one look, Holm across the same family) that matches this power needs
-    # more seeds than the sequential one used on average.
-    needed = next(
-        n
-        for n in range(10, 61, 2)
-        if simulate(Design(n, n), family, shift=1.0, studies=1000, seed=1)["power"]
-        >= shifted["power"]
-    )
-    assert shifted["seeds"] < needed - 3
-
-
-def test_the_experiments_smoke_run_writes_its_table_into_a_temporary_directory(
-    tmp_path, monkeypatch
-):
-    experiments = Path(__file__).resolve().parent.parent / "experiments"
-    script = experiments / "studies" / "sequential_rule.py"
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # where its temporary directory goes
-    done = run_script(script, "--smoke", cwd=experiments)
-    assert done.returncode == 0, done.stdout + done.stderr
-    written = Path(done.stdout.split("wrote ")[-1].strip())
-    assert written.parent.parent == tmp_path
-    assert written.parent.name.startswith("fppo-sequential-rule-smoke-")
-    table = written.read_text()
-    assert "- 200 simulated studies per row" in table
-    assert "| 2 tasks × 2 candidates | 1 | 0.000 | 0.9" in table
-    results = str(experiments / "results")
-    refused = run_script(script, "--smoke", "--results", results, cwd=experiments)
-    assert refused.returncode != 0 and "never writes into the recorded results" in refused.stderr
-
-
 def test_the_improvement_estimate_is_u_over_nm_with_a_placement_error_floored_at_the_null_one():
     rng = np.random.default_rng(4)
     x, y = rng.normal(0.3, 1, 12).round(1), rng.normal(0, 2, 9).round(1)
@@ -261,85 +185,3 @@ def test_an_equivalent_comparison_passes_its_share_only_to_the_equivalence_tests
 def test_a_margin_outside_its_range_is_refused(margin, level, message):
     with pytest.raises(ValueError, match=message):
         Design(5, 30, level, margin)
-
-
-def test_what_each_look_can_decide_is_stated_before_any_run():
-    assert largest_z(5) == pytest.approx(np.sqrt(75 / 11))  # 2.61: all of one above the other
-    x, y = np.arange(5.0), np.arange(5.0) + 10
-    assert abs(mann_whitney_z(x, y)) == pytest.approx(largest_z(5))
-    design = Design(group_size=5, max_seeds=30, margin=0.2)
-    lines = plan_lines(design, 1)
-    assert lines[1] == (
-        "  look 1, 5 seeds per setting: ±5.37 (warning: cannot decide, |z| is at most 2.61 with "
-        "5 seeds; reaching ±5.37 takes at least 20 seeds per setting)"
-    )
-    assert largest_z(19) < 5.37 <= largest_z(20) and fewest_seeds(5.37) == 20
-    assert fewest_seeds(float("inf")) is None
-    assert lines[2] == "  look 2, 10 seeds per setting: ±3.71" and len(lines) == 8
-    # Equivalence needs the look's narrowest interval, at P = 1/2 and se at its floor, within
-    # the margin: not at 20 seeds, at 25.
-    critical = boundaries(0.05, tuple(n / 30 for n in design.looks), sides=1)
-    assert narrowest_half_width(20, critical[3]) > 0.2 >= narrowest_half_width(25, critical[4])
-    assert equivalence_reachable(design, 1) == 25
-    assert lines[-1] == (
-        "  equivalent (P(candidate > baseline) within 1/2 ± 0.2): reachable from 25 seeds per "
-        "setting"
-    )
-    # Too narrow a margin for the design: a warning with the seeds a last look would need.
-    narrow = plan_lines(Design(group_size=5, max_seeds=30, margin=0.05), 4)
-    assert narrow[-1].startswith("  warning: no look can decide equivalent (P(candidate")
-    needed = int(narrow[-1].split("needs about ")[1].split()[0])
-    last = boundaries(0.0125, tuple(n / 30 for n in design.looks), sides=1)[-1]
-    assert narrowest_half_width(needed, last) <= 0.05 < narrowest_half_width(needed - 1, last)
-    assert plan_lines(Design(5, 30), 1)[-1].startswith("  look 6, 30 seeds")  # no margin
-    # No look can decide: said once more, with the seeds the last look's boundary needs.
-    never = plan_lines(Design(group_size=1, max_seeds=2), 1)
-    assert never[2].endswith("with 2 seeds; reaching ±1.97 takes at least 4 seeds per setting)")
-    assert never[-1] == (
-        "  warning: no look of this design can decide better or worse, whatever the scores: its "
-        "last look, 2 seeds per setting, needs 4 to reach ±1.97; plan more seeds (max_seeds) or "
-        "fewer looks (a larger group_size)"
-    )
-    assert not any("no look" in line for line in plan_lines(Design(2, 4), 2))  # look 2 can
-
-
-def test_a_false_equivalent_at_the_margin_is_at_most_the_level():
-    # P(candidate > baseline) exactly at 1/2 ± δ: any `equivalent` is false. Seeded.
-    design = Design(group_size=10, max_seeds=50, level=0.05, margin=0.2)
-    studies = 2000
-    bound = design.level + 3 * np.sqrt(design.level * (1 - design.level) / studies)
-    for shift, seed in ((shift_for(0.7), 1), (shift_for(0.3), 2)):
-        found = simulate(design, [1], shift=shift, studies=studies, seed=seed)
-        assert found["false_equivalence_rate"] <= bound
-        assert found["false_equivalence_rate"] > design.level / 2  # near the level: a real test
-    family = simulate(design, [2, 2], shift=shift_for(0.7), studies=1000, seed=3)
-    assert family["false_equivalence_rate"] <= design.level + 3 * np.sqrt(0.05 * 0.95 / 1000)
-
-
-def test_identical_settings_are_decided_equivalent_within_fifty_seeds_nine_times_in_ten():
-    # m = 0.2, level 0.05, groups of 10 seeds up to 50 per setting, one comparison: with no
-    # difference the study decides `equivalent` in 91% of 2,000 studies, with 40 seeds per
-    # setting on average; better or worse stays at most the level.
-    design = Design(group_size=10, max_seeds=50, level=0.05, margin=0.2)
-    found = simulate(design, [1], shift=0.0, studies=2000, seed=3)
-    assert found["equivalent"] == pytest.approx(0.9085, abs=1e-9)
-    assert found["seeds"] == pytest.approx(40.0, abs=0.05)
-    assert found["false_decision_rate"] <= 0.05 + 3 * np.sqrt(0.05 * 0.95 / 2000)
-    assert found["false_equivalence_rate"] == 0  # P = 1/2 is within the margin
-
-
-def test_the_equivalence_experiment_s_smoke_run_writes_its_table_into_a_temporary_directory(
-    tmp_path, monkeypatch
-):
-    experiments = Path(__file__).resolve().parent.parent / "experiments"
-    script = experiments / "studies" / "equivalence_rule.py"
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    done = run_script(script, "--smoke", cwd=experiments)
-    assert done.returncode == 0, done.stdout + done.stderr
-    written = Path(done.stdout.split("wrote ")[-1].strip())
-    assert written.parent.name.startswith("fppo-equivalence-rule-smoke-")
-    table = written.read_text()
-    assert "- 200 simulated studies per row" in table
-    rows = [line.split(" | ") for line in table.splitlines() if line.startswith("| 5 to 30")]
-    # Equivalence reachable from 25 seeds for one comparison, from 30 at Holm's α/4 for four.
-    assert [row[-1] for row in rows] == ["25 |"] * 3 + ["30 |"] * 3

@@ -17,3 +17,9 @@ def test_no_test_waits_against_a_wall_clock_limit():
         if LIMIT.search(line)
     ]
     assert not found, "\n".join(found)
+
+
+def test_the_files_the_suite_runs_first_are_there():
+    from conftest import LONGEST_FIRST
+
+    assert [name for name in LONGEST_FIRST if not (TESTS / name).is_file()] == []

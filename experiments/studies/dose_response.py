@@ -37,7 +37,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from fppo_jax import SweepResult, merge
-from fppo_jax.analysis.study_report import ruled_out
+from fppo_jax.analysis.study_sections import ruled_out
 from fppo_jax.core.resolution import SYMBOLS
 from fppo_jax.run.results import labels
 from fppo_jax.stats import statistics

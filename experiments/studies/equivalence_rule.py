@@ -22,7 +22,9 @@ import sys
 import time
 from pathlib import Path
 
-from fppo_jax.stats.sequential import Design, equivalence_reachable, shift_for, simulate
+from fppo_jax.stats.decidable import equivalence_reachable
+from fppo_jax.stats.sequential import Design
+from fppo_jax.stats.simulation import shift_for, simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

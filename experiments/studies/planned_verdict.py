@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from fppo_jax import SweepResult, merge
-from fppo_jax.analysis.study_report import ruled_out
+from fppo_jax.analysis.study_sections import ruled_out
 from fppo_jax.envs import MUJOCO_TASKS
 from fppo_jax.stats import statistics
 

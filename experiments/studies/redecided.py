@@ -39,7 +39,9 @@ from study import PROTOCOLS
 import fppo_jax
 from fppo_jax.analysis.studies import run_scores
 from fppo_jax.stats import statistics
-from fppo_jax.stats.sequential import boundaries, improvement_estimate, narrowest_half_width
+from fppo_jax.stats.decidable import narrowest_half_width
+from fppo_jax.stats.sequential import improvement_estimate
+from fppo_jax.stats.spending import boundaries
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

@@ -19,7 +19,8 @@ import sys
 import time
 from pathlib import Path
 
-from fppo_jax.stats.sequential import Design, simulate
+from fppo_jax.stats.sequential import Design
+from fppo_jax.stats.simulation import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 

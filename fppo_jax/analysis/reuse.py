@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 
 from fppo_jax.errors import MissingFile
-from fppo_jax.run.results import PART_FIELDS, SweepResult, merge
+from fppo_jax.run.merge import PART_FIELDS, merge
+from fppo_jax.run.results import SweepResult
 
 
 @dataclasses.dataclass(frozen=True)

@@ -9,7 +9,7 @@ the seed schedule, the settings and the code's commit), each group of each task 
 as one sweep merged over its groups (``<task>/curves.csv`` and ``sweep.json``, after every
 look), ``decisions.json`` after every look and ``report.md``
 (:mod:`fppo_jax.analysis.study_report`). With ``progress=True`` the study prints on stderr its
-plan's boundaries (:func:`~fppo_jax.stats.sequential.plan_lines`), each look's task and seeds,
+plan's boundaries (:func:`~fppo_jax.stats.decidable.plan_lines`), each look's task and seeds,
 and each decision as it is made. The same call again goes on from
 the groups recorded; a study whose plan differs is refused, naming the field.
 
@@ -37,28 +37,25 @@ from typing import Any, cast
 import numpy as np
 
 from fppo_jax.analysis.reuse import Pool, Taken, protocol_differences
-from fppo_jax.analysis.study_report import (
-    SHARES,
-    START,
-    Scores,
-    beside_defaults,
-    steps_name,
-    write_figures,
-    write_report,
-)
+from fppo_jax.analysis.study_figures import write_figures
+from fppo_jax.analysis.study_report import beside_defaults, write_report
+from fppo_jax.analysis.study_sections import SHARES, START, Scores, steps_name
 from fppo_jax.core.checks import check_part, positive_int
 from fppo_jax.core.objectives import hyperparameter_names, identities, takers, union
 from fppo_jax.core.resolution import resolve, resolve_hyperparameters, sweepable
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.variants import BUILTINS
 from fppo_jax.errors import InvalidInput
-from fppo_jax.run.driver import part_runs
+from fppo_jax.run.merge import merge
 from fppo_jax.run.options import Options
+from fppo_jax.run.plan import part_runs
 from fppo_jax.run.prepare import prepare
-from fppo_jax.run.results import SweepResult, merge
+from fppo_jax.run.results import SweepResult
 from fppo_jax.run.sweeps import expand_grid, sweep
 from fppo_jax.stats import statistics
-from fppo_jax.stats.sequential import Decision, Design, boundaries, decide, plan_lines
+from fppo_jax.stats.decidable import plan_lines
+from fppo_jax.stats.sequential import Decision, Design, decide
+from fppo_jax.stats.spending import boundaries
 from fppo_jax.store.files import DirectoryLock, json_value, writable_directory, write_json
 
 ENDPOINTS = statistics.STUDY_ENDPOINTS  # decided on; those not chosen are reported beside it

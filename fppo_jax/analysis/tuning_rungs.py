@@ -31,9 +31,9 @@ from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.trainer import TrainState
 from fppo_jax.envs import resets_itself
 from fppo_jax.errors import InvalidInput, MissingFile
-from fppo_jax.run.driver import share_bounds
 from fppo_jax.run.execution import compile_program, run_keys
 from fppo_jax.run.memory import check_host_memory
+from fppo_jax.run.plan import share_bounds
 from fppo_jax.run.prepare import Prepared
 from fppo_jax.store.files import (
     write_atomically,

@@ -71,7 +71,7 @@ def _run(args: argparse.Namespace) -> int:
     from fppo_jax.cli.commands import COMMANDS
     from fppo_jax.run import compile_cache
     from fppo_jax.run.distributed import initialize
-    from fppo_jax.run.driver import StoppedBySignal
+    from fppo_jax.run.stop_signals import StoppedBySignal
 
     with _warnings_as_lines():
         try:

@@ -24,9 +24,11 @@ from fppo_jax.envs import BACKENDS, NAMESPACES, TASKS, make_env
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.api import train
 from fppo_jax.run.distributed import is_main_process
-from fppo_jax.run.results import SweepResult, labels, merge
+from fppo_jax.run.merge import merge
+from fppo_jax.run.results import SweepResult, labels
 from fppo_jax.run.sweeps import sweep
-from fppo_jax.stats.sequential import Design, plan_lines
+from fppo_jax.stats.decidable import plan_lines
+from fppo_jax.stats.sequential import Design
 from fppo_jax.stats.statistics import CONFIDENCE, STATISTICS, sample_std
 from fppo_jax.store.checkpoint import Checkpoints
 from fppo_jax.store.files import DirectoryLock, writable_directory

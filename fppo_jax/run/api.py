@@ -12,10 +12,11 @@ from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.variants import BUILTINS, DEFAULT_VARIANT, EPSILON
 from fppo_jax.envs import Environment
 from fppo_jax.run.distributed import is_main_process
-from fppo_jax.run.driver import Outcome, Plan, drive
+from fppo_jax.run.driver import drive
 from fppo_jax.run.execution import batch_of_one_on_device, first_run, first_run_on_device, run_keys
+from fppo_jax.run.plan import Outcome, Plan
 from fppo_jax.run.prepare import Prepared, prepare
-from fppo_jax.run.results import TrainResult
+from fppo_jax.run.train_result import TrainResult
 
 
 def train(

@@ -3,7 +3,8 @@ stops cleanly: SIGTERM on preemption, at its time limit and on scancel; SIGUSR1 
 ahead of the time limit (``sbatch --signal=USR1@SECONDS``).
 
 Light on purpose (no JAX): the command line catches them from its start, before it imports
-what training needs, and the driver, within that, acts on them (:mod:`fppo_jax.run.driver`).
+what training needs, and the driver, within that, acts on them (:mod:`fppo_jax.run.training`),
+stopping with :class:`StoppedBySignal`.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import contextlib
 import signal
 import threading
 from collections.abc import Iterator
+from pathlib import Path
 
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
 
@@ -44,3 +46,25 @@ def caught(numbers: tuple[int, ...]) -> Iterator[list[int]]:
             signal.signal(number, handler)
         if previous:
             _received = None
+
+
+class StoppedBySignal(Exception):
+    """A checkpointed run stopped on SIGTERM or SIGUSR1 at the end of a chunk of updates, its
+    checkpoint written, or before training if the signal came while it started or compiled
+    (`trained` False), with nothing new checkpointed: resuming goes on from `update` (the
+    newest checkpoint's, 0 if none)."""
+
+    def __init__(
+        self, signal_number: int, update: int, checkpoint_dir: str | Path, trained: bool = True
+    ):
+        self.signal = signal.Signals(signal_number)
+        self.update, self.trained = update, trained
+        where = Path(checkpoint_dir).absolute()
+        if trained:
+            said = f"after update {update}, checkpointed in {where}; resume (--resume) to go on"
+            said += " from there"
+        else:
+            said = "before training (while starting or compiling), nothing new checkpointed; "
+            said += f"resume (--resume) to go on from the newest checkpoint in {where}, or from "
+            said += "the start if there is none"
+        super().__init__(f"stopped by {self.signal.name} {said}")

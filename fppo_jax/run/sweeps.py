@@ -35,8 +35,9 @@ from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.variants import BUILTINS, DEFAULT_VARIANT
 from fppo_jax.envs import Environment
 from fppo_jax.errors import InvalidInput
-from fppo_jax.run.driver import Outcome, Plan, drive, part_bounds, part_runs
+from fppo_jax.run.driver import drive
 from fppo_jax.run.execution import run_keys
+from fppo_jax.run.plan import Outcome, Plan, part_bounds, part_runs
 from fppo_jax.run.prepare import Prepared, prepare
 from fppo_jax.run.results import SweepResult, labels
 

@@ -84,17 +84,14 @@ runs a side |Z| cannot exceed 2.6, so the first look of a long design cannot dec
 from __future__ import annotations
 
 import dataclasses
-import functools
 from collections.abc import Sequence
 
 import numpy as np
 
 from fppo_jax.core.checks import MAX_SEEDS, check_fraction, positive_int
 from fppo_jax.errors import InvalidInput
+from fppo_jax.stats.spending import boundaries
 
-# Points per look of the boundaries' integration grid, odd for Simpson's rule: enough for the
-# published boundaries to four decimals (tests/test_sequential.py).
-GRID_POINTS = 801
 # Far more looks than a study plans, and few enough that their boundaries take seconds.
 MAX_LOOKS = 200
 
@@ -168,83 +165,6 @@ def check_margin(margin: object) -> float:
     )
 
 
-def spent(alpha: float, fraction: float) -> float:
-    """Lan–DeMets' O'Brien–Fleming-type spending: the two-sided error spent by information
-    fraction `fraction`, each side spending α/2 as 2 − 2Φ(Φ⁻¹(1 − α/4) / √t)."""
-    from scipy import special
-
-    return float(4 * special.ndtr(-special.ndtri(1 - alpha / 4) / np.sqrt(fraction)))
-
-
-def _excess_crossing(
-    bound: float,
-    points: np.ndarray,
-    weighted: np.ndarray,
-    step: float,
-    spend: float,
-    sides: int,
-) -> float:
-    """The probability that a path not yet stopped, at `points` with density × weights
-    `weighted`, crosses +`bound` (or, with two `sides`, ±`bound`) after an increment of sd
-    `step`, less `spend`."""
-    from scipy import special
-
-    outside = special.ndtr((points - bound) / step)
-    if sides == 2:
-        outside = outside + special.ndtr((-bound - points) / step)
-    return float(weighted @ outside) - spend
-
-
-@functools.lru_cache(maxsize=256)
-def boundaries(alpha: float, fractions: tuple[float, ...], sides: int = 2) -> tuple[float, ...]:
-    """The critical values c_k on the Z scale at the information `fractions` (0 < t_1 < … ≤ 1)
-    that spend `alpha` by :func:`spent`: P(first |Z_k| ≥ c_k at look k) = a*(t_k) − a*(t_{k−1})
-    under the null hypothesis, by Simpson's rule over the values S = Z√t of the paths that have
-    not crossed. With ``sides=1``, the one-sided test at level `alpha`: the upper boundary
-    alone, spending ``spent(2·alpha, t) / 2`` (one side of the two-sided function at 2·alpha),
-    so that P(first Z_k ≥ c_k at look k) is that spending's increment; it differs from the
-    two-sided boundary at 2·alpha only by the paths that would cross both boundaries (in the
-    fourth decimal at the levels of a study)."""
-    from scipy import optimize
-
-    if not fractions or any(b <= a for a, b in zip((0.0, *fractions), fractions, strict=False)):
-        raise InvalidInput(f"information fractions must increase from above 0, got {fractions}")
-    if fractions[-1] > 1:
-        raise InvalidInput(f"information fractions must be at most 1, got {fractions}")
-    if sides not in (1, 2):
-        raise InvalidInput(f"a boundary has 1 or 2 sides, got {sides!r}")
-
-    def spending(fraction: float) -> float:
-        return spent(alpha, fraction) if sides == 2 else spent(2 * alpha, fraction) / 2
-
-    critical: list[float] = []
-    # The density of the paths that have not crossed, at the previous look, on its grid and
-    # times Simpson's weights; before the first look every path is at 0.
-    points, weighted = np.zeros(1), np.ones(1)
-    previous, before = 0.0, 0.0
-    for fraction in fractions:
-        spend = spending(fraction) - before
-        step = np.sqrt(fraction - previous)
-
-        if spend <= 0:  # nothing left to spend at this look: it cannot decide
-            bound = np.inf
-        else:
-            problem = (points, weighted, step, spend, sides)
-            bound = optimize.brentq(_excess_crossing, 1e-9, 40.0, args=problem, xtol=1e-12)
-        critical.append(float(bound / np.sqrt(fraction)))
-        far = 12.0 * np.sqrt(fraction)  # beyond 12 sd no path is left to count
-        top = min(bound, far)
-        grid = np.linspace(-top if sides == 2 else -far, top, GRID_POINTS)
-        simpson = np.full(GRID_POINTS, 2.0)
-        simpson[1::2], simpson[[0, -1]] = 4.0, 1.0
-        simpson *= (grid[1] - grid[0]) / 3
-        gaussian = np.exp(-0.5 * ((grid[:, None] - points[None, :]) / step) ** 2)
-        density = gaussian @ weighted / (step * np.sqrt(2 * np.pi))
-        points, weighted = grid, simpson * density
-        previous, before = fraction, spending(fraction)
-    return tuple(critical)
-
-
 def repeated_confidence(design: Design, comparisons: int, seeds: int) -> float:
     """The confidence level of the repeated confidence interval at the look that holds `seeds`
     seeds of each setting (Jennison and Turnbull 1989; 2000, ch. 9): 2Φ(c_k) − 1, for the
@@ -262,112 +182,6 @@ def repeated_confidence(design: Design, comparisons: int, seeds: int) -> float:
     fractions = tuple(n / design.max_seeds for n in looks)
     critical = boundaries(design.level / comparisons, fractions)[looks.index(seeds)]
     return float(2 * special.ndtr(critical) - 1)
-
-
-def largest_z(seeds: int) -> float:
-    """The largest |z| that :func:`mann_whitney_z` reaches with `seeds` scores of each setting:
-    every candidate run above every baseline run (or below), U − n²/2 = ±n²/2 over
-    σ = n·√((2n + 1)/12), so √(3n² / (2n + 1)); ties only lower it. A look whose boundary is
-    above it cannot decide ``better`` or ``worse``."""
-    n = positive_int("seeds", seeds)
-    return float(np.sqrt(3 * n * n / (2 * n + 1)))
-
-
-def fewest_seeds(critical: float) -> int | None:
-    """The fewest seeds per setting whose :func:`largest_z` reaches `critical`: the smallest n
-    with 3n² ≥ c²(2n + 1); None for a boundary no seeds reach (infinite: a look that spends no
-    error)."""
-    if not np.isfinite(critical):
-        return None
-    c2 = float(critical) ** 2
-    n = max(1, int(np.ceil((c2 + np.sqrt(c2 * c2 + 3 * c2)) / 3)))
-    while n > 1 and largest_z(n - 1) >= critical:  # the root rounded up past the edge
-        n -= 1
-    while largest_z(n) < critical:
-        n += 1
-    return n
-
-
-def _reaching(critical: float) -> str:
-    """What it would take a look to reach `critical`, in words."""
-    needed = fewest_seeds(critical)
-    if needed is None:
-        return "it spends no error, so no seeds can"
-    return f"reaching ±{critical:.2f} takes at least {needed} seeds per setting"
-
-
-def narrowest_half_width(seeds: int, critical: float) -> float:
-    """The narrowest half-width c·se of the equivalence test's interval with `seeds` scores of
-    each setting at boundary `critical`: se at its floor √((2n + 1) / (12n²)) (:func:
-    `improvement_estimate`). Where it exceeds the margin no scores can decide ``equivalent``."""
-    n = positive_int("seeds", seeds)
-    return float(critical * np.sqrt((2 * n + 1) / (12 * n * n)))
-
-
-def equivalence_reachable(design: Design, comparisons: int) -> int | None:
-    """The fewest seeds per setting (one of the design's looks) at which ``equivalent`` can be
-    decided at the first level of Holm's procedure, α / `comparisons`: the first look whose
-    narrowest interval (:func:`narrowest_half_width`) fits within the margin; None if none
-    does, or the design has no margin."""
-    if design.margin is None:
-        return None
-    looks = design.looks
-    fractions = tuple(n / design.max_seeds for n in looks)
-    critical = boundaries(design.level / comparisons, fractions, sides=1)
-    fits = [
-        n
-        for n, c in zip(looks, critical, strict=True)
-        if narrowest_half_width(n, c) <= design.margin
-    ]
-    return fits[0] if fits else None
-
-
-def plan_lines(design: Design, comparisons: int) -> list[str]:
-    """What a study's plan can decide, in a few lines for the command line: each look's
-    boundary if no comparison is decided (level α / `comparisons`), with a warning where the
-    look's seeds cannot reach it (:func:`largest_z`) that names the fewest seeds per setting
-    that could (:func:`fewest_seeds`), and one more where no look can; and, with a margin,
-    the fewest seeds at which ``equivalent`` becomes reachable
-    (:func:`equivalence_reachable`), or a warning that no look reaches it, with the seeds one
-    last look of the same boundary would need."""
-    positive_int("comparisons", comparisons)
-    looks = design.looks
-    fractions = tuple(n / design.max_seeds for n in looks)
-    level = design.level / comparisons
-    critical = boundaries(level, fractions)
-    lines = [
-        f"plan: {len(looks)} look{'s' if len(looks) > 1 else ''}; better or worse when |z| "
-        f"reaches the look's boundary (level {level:.3g} while no comparison is decided):"
-    ]
-    for k, (n, c) in enumerate(zip(looks, critical, strict=True)):
-        line = f"  look {k + 1}, {n} seeds per setting: ±{c:.2f}"
-        if largest_z(n) < c:
-            line += (
-                f" (warning: cannot decide, |z| is at most {largest_z(n):.2f} with {n} seeds; "
-                f"{_reaching(c)})"
-            )
-        lines.append(line)
-    if all(largest_z(n) < c for n, c in zip(looks, critical, strict=True)):
-        lines.append(
-            "  warning: no look of this design can decide better or worse, whatever the "
-            f"scores: its last look, {looks[-1]} seeds per setting, needs "
-            f"{fewest_seeds(critical[-1])} to reach ±{critical[-1]:.2f}; plan more seeds "
-            "(max_seeds) or fewer looks (a larger group_size)"
-        )
-    if design.margin is None:
-        return lines
-    reachable = equivalence_reachable(design, comparisons)
-    within = f"equivalent (P(candidate > baseline) within 1/2 ± {design.margin:g})"
-    if reachable is not None:
-        return [*lines, f"  {within}: reachable from {reachable} seeds per setting"]
-    last = boundaries(level, fractions, sides=1)[-1]
-    ratio = (design.margin / last) ** 2  # the fewest n with last·√((2n + 1)/(12n²)) ≤ margin
-    needed = int(np.ceil((2 + np.sqrt(4 + 48 * ratio)) / (24 * ratio)))
-    return [
-        *lines,
-        f"  warning: no look can decide {within}; at its last boundary it needs about "
-        f"{needed} seeds per setting",
-    ]
 
 
 def mann_whitney_z(candidate: np.ndarray, baseline: np.ndarray) -> float:
@@ -605,69 +419,3 @@ def _not_decided(
         )
     wanted = f"look {done + 1} needs {looks[done]} seeds"
     return Decision(None, seeds, latest, boundary, f"awaits seeds: {wanted}", interval)
-
-
-def shift_for(probability: float) -> float:
-    """The shift in sd of two normal distributions of equal sd at which P(candidate >
-    baseline) is `probability`: √2·Φ⁻¹(p), since the difference of two draws has sd √2."""
-    from scipy import special
-
-    return float(np.sqrt(2) * special.ndtri(probability))
-
-
-def simulate(
-    design: Design,
-    candidates_per_task: Sequence[int],
-    *,
-    shift: float = 0.0,
-    studies: int = 2000,
-    seed: int = 0,
-) -> dict[str, float]:
-    """The rule's operating characteristics, by simulating `studies` studies on synthetic
-    scores, no training: on each task a baseline and `candidates_per_task[i]` candidates, every
-    score normal with sd 1, each candidate's mean `shift` above its baseline's (below, if
-    negative), so that P(candidate > baseline) = Φ(shift / √2) (:func:`shift_for`).
-
-    Returns ``false_decision_rate``: the share of studies with any comparison decided ``better``
-    or ``worse`` against the truth (with ``shift=0`` any such decision, the family-wise error;
-    else any in the wrong direction); ``power``: the share of comparisons decided ``better``;
-    ``equivalent``: the share decided ``equivalent`` (0 without a margin);
-    ``false_equivalence_rate``: the share of studies with any comparison decided ``equivalent``
-    where P(candidate > baseline) is at or beyond the margin (|P − ½| ≥ δ, to 1e-9; else 0);
-    ``seeds``: the mean seeds per setting a comparison used; ``runs``: the mean runs a study
-    trained (a task's baseline runs as long as any of its candidates). Seeded, so it
-    repeats."""
-    from scipy import special
-
-    rng = np.random.default_rng(seed)
-    n = design.max_seeds
-    false, better, equivalent, false_equivalent, seeds, runs = 0, 0, 0, 0, 0, 0
-    comparisons = sum(candidates_per_task)
-    wrong = ("worse",) if shift > 0 else ("better",) if shift < 0 else ("better", "worse")
-    distance = abs(float(special.ndtr(shift / np.sqrt(2))) - 0.5)
-    beyond = design.margin is not None and distance >= design.margin - 1e-9
-    for _ in range(studies):
-        scores = []
-        for count in candidates_per_task:
-            baseline = rng.standard_normal(n)
-            scores += [(rng.standard_normal(n) + shift, baseline) for _ in range(count)]
-        decisions = decide(scores, design)
-        false += any(d.decision in wrong for d in decisions)
-        better += sum(d.decision == "better" for d in decisions)
-        said = sum(d.decision == "equivalent" for d in decisions)
-        equivalent += said
-        false_equivalent += beyond and said > 0
-        used = [d.seeds for d in decisions]
-        seeds += sum(used)
-        start = 0
-        for count in candidates_per_task:
-            runs += sum(used[start : start + count]) + max(used[start : start + count])
-            start += count
-    return {
-        "false_decision_rate": false / studies,
-        "power": better / (studies * comparisons),
-        "equivalent": equivalent / (studies * comparisons),
-        "false_equivalence_rate": false_equivalent / studies,
-        "seeds": seeds / (studies * comparisons),
-        "runs": runs / studies,
-    }

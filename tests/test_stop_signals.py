@@ -11,9 +11,10 @@ from pathlib import Path
 import pytest
 
 import fppo_jax
-import fppo_jax.run.driver as driver
+import fppo_jax.run.training as training
 from fppo_jax import train
 from fppo_jax.cli import main
+from fppo_jax.run.stop_signals import STOP_SIGNALS
 from fppo_jax.store.saved_policy import read_policy
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -23,7 +24,7 @@ FLAGS += ["--num-steps", "32", "--minibatches", "4", "--epochs", "2", "--checkpo
 
 def signal_after_first_chunk(monkeypatch, number):
     """The process sends itself `number` while the first chunk of updates is being handled."""
-    run_chunks = driver.run_chunks
+    run_chunks = training.run_chunks
 
     def chunks_then_signal(*args):
         for index, chunk in enumerate(run_chunks(*args)):
@@ -31,18 +32,18 @@ def signal_after_first_chunk(monkeypatch, number):
                 os.kill(os.getpid(), number)
             yield chunk
 
-    monkeypatch.setattr(driver, "run_chunks", chunks_then_signal)
+    monkeypatch.setattr(training, "run_chunks", chunks_then_signal)
 
 
 @pytest.mark.parametrize("number, status", [(signal.SIGTERM, 143), (signal.SIGUSR1, 138)])
 def test_a_stop_signal_checkpoints_the_chunk_and_exits_for_a_requeue(
     tmp_path, monkeypatch, capsys, number, status
 ):
-    before = {n: signal.getsignal(n) for n in driver.STOP_SIGNALS}
+    before = {n: signal.getsignal(n) for n in STOP_SIGNALS}
     signal_after_first_chunk(monkeypatch, number)
     flags = [*FLAGS, "--checkpoint-dir", str(tmp_path)]
     assert main(flags) == status
-    assert {n: signal.getsignal(n) for n in driver.STOP_SIGNALS} == before
+    assert {n: signal.getsignal(n) for n in STOP_SIGNALS} == before
     error = capsys.readouterr().err
     assert f"stopped by {signal.Signals(number).name} after update 1, checkpointed in" in error
     assert read_policy(tmp_path)[1]["update"] == 1

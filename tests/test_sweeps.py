@@ -12,7 +12,6 @@ from helpers import sweep_by_hand
 import fppo_jax
 from fppo_jax import METRICS, VARIANTS, SweepResult, expand_grid, merge, sweep, train
 from fppo_jax.cli import main
-from fppo_jax.errors import InvalidInput
 
 TINY_SHAPE = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 TINY = {**TINY_SHAPE, "total_steps": 256}
@@ -198,112 +197,9 @@ def test_a_grid_that_is_not_a_mapping_is_refused_saying_what_one_is(grid):
         sweep("cartpole", grid)
 
 
-def test_parts_share_the_sweep_s_groups_in_run_order():
-    from fppo_jax.run.driver import part_bounds, part_runs
-
-    assert [part_bounds((k, 3), 7) for k in (1, 2, 3)] == [(0, 3), (3, 5), (5, 7)]
-    assert part_bounds((1, 1), 4) == (0, 4)
-    assert part_bounds((np.int64(2), np.int64(3)), 7) == (3, 5)  # numpy integers are integers
-    for bad in ((0, 2), (3, 2), (1.0, 2), "1/2", (1, 2, 3)):
-        with pytest.raises(ValueError, match="part must be"):
-            part_bounds(bad, 4)
-    with pytest.raises(ValueError, match="only 2 runs to share"):
-        part_bounds((1, 3), 2)
-    # 7 runs in groups of 2 are 4 groups (the last padded): a part takes whole groups of them.
-    assert [part_runs((k, 3), 7, 2) for k in (1, 2, 3)] == [(0, 4), (4, 6), (6, 7)]
-    assert [part_runs((k, 4), 7, 2) for k in (1, 2, 3, 4)] == [(0, 2), (2, 4), (4, 6), (6, 7)]
-    assert part_runs((1, 1), 7, 7) == (0, 7)
-    with pytest.raises(
-        ValueError,
-        match=r"7 runs train as 3 groups of 3 .* at most 2, or split it into at most 3 parts$",
-    ):
-        part_runs((1, 4), 7, 3)
-    with pytest.raises(
-        ValueError,
-        match=r"6 runs train as 2 groups of 4 .* at most 2, or split it into at most 2 parts$",
-    ):
-        part_runs((2, 3), 6, 4, across=2)
-    with pytest.raises(ValueError, match=r"bit for bit\): split it into at most 2 parts$"):
-        part_runs((2, 3), 6, 4, across=4)
-
-
-def slurm_array(task, first, last, step, count):
-    from fppo_jax.cli.slurm import ARRAY_VARIABLES
-
-    values = (task, first, last, step, count)
-    return {name: str(value) for name, value in zip(ARRAY_VARIABLES, values, strict=True)}
-
-
-def test_a_slurm_array_task_takes_its_index_among_the_array_s_tasks():
-    from fppo_jax.cli.slurm import array_part
-
-    stepped = [array_part(slurm_array(task, 0, 6, 2, 4)) for task in (0, 2, 4, 6)]
-    assert stepped == [(1, 4), (2, 4), (3, 4), (4, 4)]  # --array=0-6:2
-    assert [array_part(slurm_array(task, 1, 8, 1, 8)) for task in (1, 8)] == [(1, 8), (8, 8)]
-    assert array_part(slurm_array(3, 0, 7, 1, 8)) == (4, 8)
-
-
-@pytest.mark.parametrize(
-    "changed, problem",
-    [
-        ({}, "not a SLURM job array task"),
-        ({"SLURM_ARRAY_TASK_ID": "abc"}, "SLURM_ARRAY_TASK_ID is not a whole number"),
-        ({"SLURM_ARRAY_TASK_ID": ""}, "SLURM_ARRAY_TASK_ID is not a whole number"),
-        ({"SLURM_ARRAY_TASK_MIN": "-1"}, "SLURM_ARRAY_TASK_MIN is not a whole number"),
-        ({"SLURM_ARRAY_TASK_COUNT": "0"}, "must be at least 1"),
-        ({"SLURM_ARRAY_TASK_STEP": None}, "set SLURM_ARRAY_TASK_ID but not SLURM_ARRAY_TASK_STEP"),
-        ({"SLURM_ARRAY_TASK_COUNT": "5"}, "not one evenly stepped range"),
-        ({"SLURM_ARRAY_TASK_ID": "3"}, "SLURM_ARRAY_TASK_ID is not one of the array's indices"),
-        ({"SLURM_ARRAY_TASK_ID": "8"}, "SLURM_ARRAY_TASK_ID is not one of the array's indices"),
-    ],
-)
-def test_slurm_variables_that_name_no_part_are_refused_naming_them(changed, problem):
-    from fppo_jax.cli.slurm import array_part
-
-    environ = {} if not changed else {**slurm_array(2, 0, 6, 2, 4), **changed}
-    environ = {name: text for name, text in environ.items() if text is not None}
-    with pytest.raises(ValueError, match=problem) as refused:
-        array_part(environ)
-    message = str(refused.value)
-    assert message.startswith("--part auto cannot take this task's part from SLURM's job array")
-    assert message.endswith("pass --part K/N instead (the K-th of N parts)")
-    assert all(f"{name}={text!r}" in message for name, text in environ.items())
-
-
-def test_a_resubmitted_array_task_is_refused_rather_than_training_another_part():
-    from fppo_jax.cli.slurm import array_part
-
-    with pytest.raises(ValueError, match=r"an array of one task.*SLURM_ARRAY_TASK_ID='2'"):
-        array_part(slurm_array(2, 2, 2, 1, 1))  # sbatch --array=2
-    with pytest.raises(ValueError, match="the array starts at 3, not 0 or 1"):
-        array_part(slurm_array(5, 3, 5, 2, 2))  # sbatch --array=3,5
-
-
-def test_a_sweep_is_split_over_a_slurm_array_only_when_asked(monkeypatch, capsys):
-    import fppo_jax.cli.commands as commands
-
-    asked = []
-
-    def sweep_of(*args, part, **kwargs):
-        asked.append(part)
-        raise InvalidInput("stopped before training")
-
-    monkeypatch.setattr(commands, "sweep", sweep_of)
-    for name, text in slurm_array(4, 0, 6, 2, 4).items():
-        monkeypatch.setenv(name, text)
-    flags = ["sweep", "--env", "cartpole", "--seeds", "2"]
-    assert main(flags) == 2
-    assert "SLURM array task 4 trains the whole sweep; --part auto" in capsys.readouterr().err
-    assert main([*flags, "--part", "auto"]) == 2 and main([*flags, "--part", "2/3"]) == 2
-    assert asked == [None, (3, 4), (2, 3)]
-    monkeypatch.setenv("SLURM_ARRAY_TASK_COUNT", "1")
-    assert main([*flags, "--part", "auto"]) == 2
-    assert "SLURM_ARRAY_TASK_COUNT='1'" in capsys.readouterr().err and len(asked) == 3
-
-
 # Two processes at once, with -m slow; parts merging into the unsplit sweep bit for bit are
 # test_a_split_sweep_merges_into_the_unsplit_sweep_bit_for_bit's in the default run, and
-# --part's shares tests/test_adaptive_study.py's.
+# --part's shares tests/test_studies.py's.
 @pytest.mark.slow
 def test_two_parts_in_two_processes_merge_into_the_one_process_sweep(tmp_path, capsys):
     flags = ["--env", "cartpole", "--variant", "ppo,fppo-lp", "--seeds", "3", "--steps", "256"]

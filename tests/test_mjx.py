@@ -9,13 +9,12 @@ import pytest
 
 import fppo_jax
 from fppo_jax import TrainConfig, hyperparameters, make_env, make_train, sweep
-from fppo_jax.cli import main
 from fppo_jax.core.gae import gae
 from fppo_jax.core.resolution import TABLE2
 from fppo_jax.core.variants import VARIANTS
 from fppo_jax.envs import MUJOCO_TASKS, TASKS, Box, as_environment
 from fppo_jax.envs.mjx import BraxEnvironment, Swimmer, swimmer_model
-from fppo_jax.export.render import RenderingUnavailable, episode_positions, save_frames
+from fppo_jax.export.render import RenderingUnavailable, episode_positions
 
 SHAPES = {  # observation size, action size
     "hopper": (11, 3),
@@ -186,7 +185,7 @@ def test_every_variant_trains_on_a_mujoco_task():
 
 
 # Training on MJX to render takes about a minute on a CPU: with -m slow (clipping is also
-# tests/test_policy.py's, and the video writer is tested below).
+# tests/test_policy.py's, and the video writer tests/test_render.py's).
 @pytest.mark.slow
 def test_policy_actions_are_clipped_and_an_episode_renders(tmp_path, swimmer):
     result = fppo_jax.train(
@@ -208,42 +207,3 @@ def test_policy_actions_are_clipped_and_an_episode_renders(tmp_path, swimmer):
     assert image.shape == (240, 320 * 7, 3) and image.std() > 0
     with pytest.raises(ValueError, match=r"render to a \.png"):
         result.render(tmp_path / "swimmer.webm")
-
-
-def test_frames_are_saved_as_an_mp4_played_at_the_environments_speed(tmp_path):
-    frames = np.random.default_rng(0).integers(0, 256, (26, 240, 320, 3), dtype=np.uint8)
-    video = save_frames(frames, tmp_path / "episode.mp4", dt=0.04)
-    assert b"ftyp" in video.read_bytes()[:32]  # an MP4 container
-    from imageio_ffmpeg import count_frames_and_secs
-
-    assert count_frames_and_secs(video) == (26, pytest.approx(1.04, abs=0.05))
-
-
-# Four MuJoCo programs compile: training, the deterministic and the stochastic evaluation, and
-# the rendered episode.
-@pytest.mark.slow
-def test_eval_renders_an_episode_of_a_saved_policy_as_mp4(tmp_path, capsys):
-    result = fppo_jax.train(
-        "reacher",
-        "ppo",
-        backend="mjx",
-        total_steps=64,
-        num_envs=2,
-        num_steps=32,
-        num_minibatches=1,
-        num_epochs=1,
-    )
-    result.save(tmp_path / "policy")
-    video = tmp_path / "episode.mp4"
-    flags = ["eval", "--checkpoint", str(tmp_path / "policy"), "--episodes", "1"]
-    code = main([*flags, "--render", str(video)])
-    if code == 2:
-        error = capsys.readouterr().err
-        assert "not rendered" in error and "MUJOCO_GL" in error
-        pytest.skip(f"no OpenGL context on this machine: {error}")
-    assert code == 0 and f"wrote {video}" in capsys.readouterr().out
-    assert b"ftyp" in video.read_bytes()[:32]
-    from imageio_ffmpeg import count_frames_and_secs
-
-    # The start and 50 steps of 20 ms.
-    assert count_frames_and_secs(video) == (51, pytest.approx(1.02, abs=0.05))

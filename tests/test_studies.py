@@ -12,10 +12,10 @@ from own_surrogates import frozen, my_ppo
 from scipy import stats
 
 import fppo_jax
-from fppo_jax.analysis.reuse import Pool
 from fppo_jax.analysis.studies import check_plan, recorded_group, run_scores
 from fppo_jax.cli import main
-from fppo_jax.run.results import PART_FIELDS, SweepResult, merge
+from fppo_jax.run.merge import merge
+from fppo_jax.run.results import SweepResult
 from fppo_jax.stats import statistics
 from fppo_jax.stats.sequential import Design, decide
 
@@ -274,62 +274,6 @@ def test_no_group_writes_the_plan_alone_and_a_bad_setting_writes_nothing(tmp_pat
     assert "No group recorded yet." in (output / "report.md").read_text()
 
 
-def test_a_study_takes_the_baseline_s_recorded_runs_instead_of_training_them(tmp_path, tiny):
-    pool = tmp_path / "recorded" / "ppo-part"  # as a seed study records PPO's runs
-    fppo_jax.sweep("cartpole", {"variant": ["ppo"]}, seeds=16, log_dir=pool, **tiny, **BUDGET)
-    output = tmp_path / "study"
-    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
-    done = fppo_jax.study("cartpole", [frozen, "fppo-lp"], "ppo", reuse=pool.parent, **settings)
-
-    assert done.finished and json.loads((output / "plan.json").read_text())["reuse"] == [
-        str(pool.parent)
-    ]
-    group_1 = SweepResult.read(output / "cartpole" / "group-1")
-    assert [s["variant"] for s in group_1.settings] == ["frozen", "fppo-lp"]  # no PPO trained
-    groups = json.loads((output / "decisions.json").read_text())["groups"]
-    assert [(g["group"], g["seeds"][0], g["reused"]) for g in groups] == [
-        (1, 0, {"ppo": [str(pool)]}),
-        (2, 8, {"ppo": [str(pool)]}),
-    ]
-    assert all(len(g["commit"]) == 40 for g in groups)  # and the candidates were trained
-    recorded = SweepResult.read(pool)
-    for endpoint in ("final", "auc"):  # the baseline's scores are the recorded runs'
-        np.testing.assert_array_equal(
-            run_scores(done.results["cartpole"], "ppo", endpoint),
-            run_scores(recorded, "ppo", endpoint),
-        )
-    report = (output / "report.md").read_text()
-    assert "were taken instead of trained" in report
-    # Runs recorded before the plan: it says what it preregistered and what it did not.
-    assert "Planned in plan.json before any run it trained (commit" in report
-    assert "for them the plan is no preregistration" in report
-    again = fppo_jax.study("cartpole", [frozen, "fppo-lp"], "ppo", reuse=pool.parent, **settings)
-    assert again.decisions == done.decisions  # resumed: nothing trained, nothing taken anew
-    with pytest.raises(ValueError, match="planned with reuse = "):
-        fppo_jax.study("cartpole", [frozen, "fppo-lp"], "ppo", **settings)
-
-    # Taken only whole, and only under the same protocol and setting.
-    taken = Pool.read([pool.parent])
-    protocol = {k: v for k, v in recorded.config.items() if k not in PART_FIELDS}
-    ppo = recorded.settings[0]
-    assert taken.take(protocol, ppo, None, list(range(8, 16))).sources == [pool]
-    assert taken.take(protocol, ppo, None, list(range(10, 18))) is None  # seeds 16, 17 missing
-    assert taken.take({**protocol, "num_envs": 8}, ppo, None, [0]) is None
-    assert taken.take(protocol, {**ppo, "learning_rate": 0.001}, None, [0]) is None
-    with pytest.raises(FileNotFoundError, match="no directory of recorded sweeps to reuse"):
-        Pool.read([tmp_path / "nowhere"])
-    elsewhere = tmp_path / "another-study"  # a mistyped directory is refused before any plan
-    with pytest.raises(FileNotFoundError, match="no directory of recorded sweeps to reuse"):
-        fppo_jax.study(
-            "cartpole",
-            frozen,
-            "ppo",
-            reuse=tmp_path / "nowhere",
-            **{**settings, "output": elsewhere},
-        )
-    assert not elsewhere.exists()
-
-
 def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tmp_path, tiny):
     output = tmp_path / "study"
     settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
@@ -401,71 +345,6 @@ def test_the_report_aggregates_over_tasks_the_recorded_seed_study_unchanged(tmp_
         means.append("{:.2f} [{:.2f}, {:.2f}]".format(*statistics.aggregate_improvement(pairs)))
     assert f"| fppo-qp | {means[0]} | {means[1]} | " in report
     assert (tmp_path / "profiles.png").read_bytes().startswith(b"\x89PNG")
-
-
-def _scores(rng, start: float, shift: float) -> dict:
-    """A task's scores as a study holds them: 10 runs per setting, where they start, and
-    their final, auc and max, the candidate's shifted by `shift`."""
-    base = rng.normal(100.0, 10.0, 10)
-    per = {"ppo": base, "spo": base + shift}
-    return {
-        v: {"final": x, "auc": x, "max": x, "start": np.full(10, start)} for v, x in per.items()
-    }
-
-
-def test_across_tasks_the_report_normalises_only_where_every_task_can_be(tmp_path):
-    from fppo_jax.analysis.study_report import normalised_scores, write_report
-
-    rng = np.random.default_rng(0)
-    plan = {
-        "tasks": ["a", "b"],
-        "candidates": ["spo"],
-        "baseline": "ppo",
-        "primary_endpoint": "final",
-        "secondary_endpoints": ["auc"],
-        "looks": [10],
-        "group_size": 10,
-        "max_seeds": 10,
-        "level": 0.05,
-        "comparisons": [{"task": t, "candidate": "spo", "baseline": "ppo"} for t in "ab"],
-        "test": "a test",
-        "commit": "0" * 40,
-    }
-    rows = [
-        {
-            "task": t,
-            "candidate": "spo",
-            "baseline": "ppo",
-            "decision": "undecided",
-            "final": True,
-            "seeds": 10,
-            "reason": "r",
-        }
-        for t in "ab"
-    ]
-    scores = {"a": _scores(rng, 0.0, 5.0), "b": _scores(rng, 0.0, -5.0)}
-    normalised = normalised_scores(plan, scores)
-    ppo_a = scores["a"]["ppo"]["final"]
-    np.testing.assert_allclose(normalised["ppo"][0], ppo_a / statistics.iqm(ppo_a))
-    write_report(tmp_path / "report.md", plan, rows, scores, True)
-    report = (tmp_path / "report.md").read_text()
-    pairs = [(scores[t]["spo"]["final"], scores[t]["ppo"]["final"]) for t in "ab"]
-    mean = "{:.2f} [{:.2f}, {:.2f}]".format(*statistics.aggregate_improvement(pairs))
-    level = "{:.3f} [{:.3f}, {:.3f}]".format(*statistics.aggregate(normalised["spo"]))
-    assert f"| spo | {mean} | {mean} | {level} |" in report  # the auc here is the final
-
-    # A task whose runs end where they start (every return the same) has no scale.
-    flat = {
-        v: {**x, "final": np.full(10, -200.0), "start": np.full(10, -200.0)}
-        for v, x in scores["b"].items()
-    }
-    assert normalised_scores(plan, {"a": scores["a"], "b": flat}) == {}
-    # Nor one whose baseline ends below where its runs start: the scale would turn round.
-    below = {v: {**x, "start": np.full(10, 500.0)} for v, x in scores["b"].items()}
-    assert normalised_scores(plan, {"a": scores["a"], "b": below}) == {}
-    write_report(tmp_path / "flat.md", plan, rows, {"a": scores["a"], "b": flat}, True)
-    flat_report = (tmp_path / "flat.md").read_text()
-    assert "Normalised scores: not reported" in flat_report and "| ppo | – | – |" in flat_report
 
 
 def test_a_study_of_identical_settings_is_decided_equivalent_within_its_margin(tmp_path, tiny):
@@ -561,85 +440,3 @@ def test_a_study_recorded_before_margins_reads_and_decides_as_it_did(tmp_path, m
     plan = json.loads((recorded / "plan.json").read_text())
     with pytest.raises(ValueError, match=r"planned with margin = none, not 0\.2"):
         check_plan(output, {**plan, "margin": 0.2, "equivalence_test": "two one-sided tests"})
-
-
-def test_the_report_notes_ceilings_ties_and_boundaries_that_holm_moved(tmp_path):
-    # Task a decided worse at its first look; task b, CartPole-like, most runs tied at the
-    # return's cap of 200, then tested at the whole α that a's decision passed on.
-    from fppo_jax.analysis.study_report import write_report
-    from fppo_jax.stats.sequential import boundaries
-
-    rng = np.random.default_rng(1)
-    fractions = (0.5, 1.0)
-    plan = {
-        "tasks": ["a", "b"],
-        "candidates": ["spo"],
-        "baseline": "ppo",
-        "primary_endpoint": "final",
-        "secondary_endpoints": ["auc"],
-        "looks": [10, 20],
-        "group_size": 10,
-        "max_seeds": 20,
-        "level": 0.05,
-        "boundaries_if_none_decided": list(boundaries(0.025, fractions)),
-        "comparisons": [{"task": t, "candidate": "spo", "baseline": "ppo"} for t in "ab"],
-        "test": "a test",
-        "commit": "0" * 40,
-    }
-    moved = boundaries(0.05, fractions)[1]
-    rows = [
-        {
-            "task": "a",
-            "candidate": "spo",
-            "baseline": "ppo",
-            "decision": "worse",
-            "final": True,
-            "seeds": 10,
-            "boundary": plan["boundaries_if_none_decided"][0],
-            "reason": "r",
-        },
-        {
-            "task": "b",
-            "candidate": "spo",
-            "baseline": "ppo",
-            "decision": "undecided",
-            "final": True,
-            "seeds": 20,
-            "boundary": moved,
-            "reason": f"z stayed within ±{moved:.2f}",
-        },
-    ]
-
-    def task(candidate: np.ndarray, baseline: np.ndarray) -> dict:
-        per = {"spo": candidate, "ppo": baseline}
-        return {
-            v: {"final": x, "auc": x, "max": x, "start": np.zeros(x.size)} for v, x in per.items()
-        }
-
-    capped = task(
-        np.concatenate([np.full(12, 200.0), rng.uniform(100, 190, 8)]),
-        np.concatenate([np.full(15, 200.0), rng.uniform(100, 190, 5)]),
-    )
-    plain = task(rng.normal(50, 5, 10), rng.normal(80, 5, 10))
-    write_report(tmp_path / "report.md", plan, rows, {"a": plain, "b": capped}, True)
-    report = (tmp_path / "report.md").read_text()
-    a, b = report.split("\n## a\n")[1].split("\n## b\n")
-    b = b.split("\n## Across")[0]
-    assert "Ceiling" not in a and "Ties" not in a and "Holm's procedure" not in a
-    ceiling = (
-        "Ceiling on final: 12 of 20 runs of spo (60%) and 15 of 20 runs of ppo (75%) sit at "
-        "200, the best any run recorded on this task, tied there"
-    )
-    assert ceiling in b and "Ceiling on auc: 12 of 20 runs" in b  # on each endpoint's table
-    assert "what it 'rules out' above the cap is no evidence" in b
-    # Ties: 12 × 15 of the 400 pairs, on the primary endpoint alone.
-    assert "Ties on final, the primary endpoint, among the pairs of runs (candidate, ppo) " in b
-    assert "each decision used: spo, 180 of 400 pairs (45%). A tie counts ½" in b
-    assert b.count("Ties on") == 1
-    assert f"{moved:.2f} {plan['boundaries_if_none_decided'][1]:.2f}" == "1.97 2.25"
-    assert (
-        "Boundaries moved by Holm's procedure: spo's boundary, ±1.97 at look 2 (20 seeds), is "
-        "not plan.json's ±2.25 (boundaries_if_none_decided, level 0.025 = α/2): Holm's "
-        "procedure passed on the share of α of 1 comparison decided better or worse (decided: spo "
-        "on a, worse), so it was tested at level 0.05 = α/1, whose boundary is lower."
-    ) in b

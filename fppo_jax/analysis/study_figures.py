@@ -1,0 +1,70 @@
+"""A study's figures beside its ``report.md``: each task's learning curves, each comparison's
+probability of improvement and, across tasks, performance profiles of normalised scores."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fppo_jax.analysis.study_report import normalised_scores
+from fppo_jax.analysis.study_sections import Scores
+from fppo_jax.run.results import SweepResult
+from fppo_jax.stats import statistics
+
+
+def profile_label(endpoint: str, baseline: str) -> str:
+    """The x-axis label of ``profiles.png``: in words, with no symbol (τ) that a user's
+    hyperparameter of that name (``tau``) could be taken for."""
+    return f"threshold on the normalised {endpoint} (1 = {baseline}'s IQM on the task)"
+
+
+def write_figures(
+    output: Path,
+    plan: dict[str, Any],
+    rows: Sequence[dict[str, Any]],
+    results: dict[str, SweepResult],
+    scores: dict[str, Scores],
+) -> list[Path]:
+    """In `output`: ``curves.png``, each task's learning curves (IQM over each setting's runs
+    with a 95% bootstrap band), and ``improvement.png``, each comparison's probability of
+    improvement on the primary endpoint over the runs its decision used, with the report's
+    unadjusted 95% interval. Returns the paths written."""
+    import matplotlib.pyplot as plt  # on first use: a study that writes no figure never waits
+
+    from fppo_jax.analysis.plots import plot_curves, plot_improvement, plot_profiles
+
+    tasks = [task for task in plan["tasks"] if task in results]
+    if not tasks:
+        return []
+    figure, axes = plt.subplots(
+        1, len(tasks), figsize=(6 * len(tasks), 4), squeeze=False, layout="constrained"
+    )
+    for ax, task in zip(axes[0], tasks, strict=True):
+        plot_curves(results[task], band="iqm", ax=ax)
+    endpoint, improvements = plan["primary_endpoint"], {}
+    for row in rows:
+        if row["task"] in scores:
+            seeds, task = row["seeds"], scores[row["task"]]
+            candidate, reference = task[row["candidate"]][endpoint], task[row["baseline"]][endpoint]
+            compared = statistics.compare(candidate[:seeds], reference[:seeds])
+            name = f"{row['candidate']}, {row['task']} ({seeds} seeds)"
+            improvements[name] = compared["probability_of_improvement"]
+    charts = {
+        "curves.png": figure,
+        "improvement.png": plot_improvement(improvements, plan["baseline"]),
+    }
+    normalised = normalised_scores(plan, scores) if len(scores) > 1 else {}
+    if normalised:
+        charts["profiles.png"] = plot_profiles(
+            {v: np.concatenate(x) for v, x in normalised.items()},
+            xlabel=profile_label(endpoint, plan["baseline"]),
+        )
+    paths = []
+    for name, chart in charts.items():
+        paths.append(output / name)
+        chart.savefig(paths[-1], dpi=90)
+        plt.close(chart)
+    return paths

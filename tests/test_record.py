@@ -8,6 +8,8 @@ from pathlib import Path
 import pytest
 
 from fppo_jax.core.config import TrainConfig
+from fppo_jax.core.resolution import HYPERPARAMETER_DEFAULTS
+from fppo_jax.run.prepare import prepare
 from fppo_jax.store.files import IncompatibleFormat
 from fppo_jax.store.record import RunRecord
 
@@ -117,3 +119,17 @@ def test_differences_name_each_field_with_both_values():
     assert SWEEP.differences(dataclasses.replace(SWEEP, part=None)) == [
         "part: [1, 2] here, none there"
     ]
+
+
+def test_the_same_settings_make_equal_records():
+    def record(**settings):
+        names = tuple(HYPERPARAMETER_DEFAULTS)
+        run = prepare("cartpole", settings, names, total_steps=None, preset="paper", backend="auto")
+        return run.record()
+
+    assert record(num_envs=4, learning_rate=1e-3) == record(num_envs=4)  # a setting is no protocol
+    assert record(num_envs=4) != record(num_envs=8)
+    assert record(num_envs=4).differences(record(num_envs=8)) == ["num_envs: 4 here, 8 there"]
+    assert record(hidden_sizes=[32, 32]) == RunRecord.from_json(
+        record(hidden_sizes=(32, 32)).to_json()
+    )

@@ -9,7 +9,9 @@ from helpers import sweep_by_hand
 
 from fppo_jax import METRICS, SweepResult, sweep
 from fppo_jax.cli import main
+from fppo_jax.core.config import TrainConfig
 from fppo_jax.run.results import max_average_return, merge
+from fppo_jax.store.record import RunRecord
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2, "total_steps": 256}
 
@@ -28,7 +30,14 @@ def two_settings(shift: float = 100.0, seeds: int = 8) -> SweepResult:
         runs=runs,
         metrics=metrics,
         diverged=np.zeros(len(runs), np.int64),
-        config={"env": "cartpole", "seeds": list(range(seeds)), "runs_per_call": len(runs)},
+        config=RunRecord(
+            "cartpole",
+            "gymnax",
+            "paper",
+            TrainConfig(),
+            seeds=tuple(range(seeds)),
+            runs_per_call=len(runs),
+        ).to_json(),
         compile_seconds=1.0,
         train_seconds=2.0,
     )
@@ -109,7 +118,10 @@ def test_merge_refuses_other_protocols_and_repeated_runs():
     with pytest.raises(ValueError, match="ppo seed 0, ppo seed 1"):
         merge([a, b])
     other = dataclasses.replace(b, config={**b.config, "normalize_rewards": False})
-    with pytest.raises(ValueError, match=r"sweep 2 .* normalize_rewards is False, sweep 1's None"):
+    with pytest.raises(
+        ValueError,
+        match=r"sweep 2 .* sweep 1: normalize_rewards: false in sweep 2, true in sweep 1$",
+    ):
         merge([a, other])
     with pytest.raises(ValueError, match="at least one"):
         merge([])

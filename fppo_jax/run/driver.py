@@ -70,6 +70,7 @@ from fppo_jax.store.checkpoint import (
 )
 from fppo_jax.store.files import DirectoryLock
 from fppo_jax.store.metric_log import LoggedRuns, open_logs, prepare_log_dir
+from fppo_jax.store.record import RunRecord
 
 
 class TrainingDiverged(FppoError, FloatingPointError):
@@ -140,7 +141,7 @@ class Plan:
     trainer: Trainer
     keys: jax.Array
     hps: Hyperparameters
-    record: dict[str, Any]
+    record: RunRecord
     description: str  # a few words, for the progress bar
     header: str  # a line, printed before compiling when progress is shown
     runs: tuple[dict[str, Any], ...] | None = None
@@ -220,7 +221,9 @@ def _drive(plan: Plan, options: Options, signalled: list[int]) -> Outcome:
         if options.log_dir is not None and main:
             resumed = None
             if options.resume:  # the run checkpointed, or this one if nothing was yet
-                resumed = plan.record if checkpointed is None else checkpointed["config"]
+                resumed = plan.record
+                if checkpointed is not None:
+                    resumed = RunRecord.from_json(checkpointed["config"], "the checkpoint's record")
             outputs = prepare_log_dir(options.log_dir, resumed)
         # The group size is the whole sweep's, chosen before a part takes its groups of it.
         size = _group_size(plan, mesh, checkpointed, options.checkpoint_dir)
@@ -614,8 +617,10 @@ class _Training:
                 if saved
                 else "No checkpoint was written before it"
             )
-        variant = self.plan.record.get("variant")
-        own = variant if variant in (self.plan.record.get("surrogates") or {}) else None
+        variant = self.plan.record.setting.get("variant")
+        own = (
+            variant if isinstance(variant, str) and variant in self.plan.record.surrogates else None
+        )
         raise TrainingDiverged(nonfinite + 1, (nonfinite + 1) * self.samples, where, own)
 
 

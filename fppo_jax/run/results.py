@@ -19,6 +19,7 @@ from fppo_jax.envs import Environment, backend_name, resets_itself
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats import statistics
 from fppo_jax.store.files import write_atomically
+from fppo_jax.store.record import RunRecord
 from fppo_jax.store.saved_policy import save_policy
 from fppo_jax.store.sweep_files import read_sweep, write_sweep
 
@@ -335,12 +336,6 @@ class SweepResult:
         )
 
 
-# What may differ between parts of one study: which settings, seeds and share of its runs each
-# ran, how many runs per call (but not between the shares of one split: merge checks it), and
-# which surrogates of one's own (one function per name).
-PART_FIELDS = ("grid", "seeds", "runs_per_call", "part", "surrogates")
-
-
 def merge(parts: Sequence[SweepResult]) -> SweepResult:
     """One sweep of the runs of `parts`, sweeps of the same task and protocol that ran other
     seeds or other settings: what ``table``, ``compare`` and ``plot`` read as if one process had
@@ -382,12 +377,13 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         runs=runs,
         metrics={name: np.concatenate([p.metrics[name] for p in parts]) for name in metrics},
         diverged=np.concatenate([np.asarray(p.diverged, np.int64) for p in parts]),
-        config={
-            **{k: v for k, v in first.config.items() if k not in ("part", "surrogates")},
-            **({"grid": grid} if grid else {}),
-            "seeds": seeds,
-            **({"surrogates": own} if own else {}),
-        },
+        config=dataclasses.replace(
+            RunRecord.from_json(first.config, "sweep 1's record"),
+            grid=grid or None,
+            seeds=tuple(seeds),
+            part=None,
+            surrogates=own,
+        ).to_json(),
         compile_seconds=sum(p.compile_seconds for p in parts),
         train_seconds=sum(p.train_seconds for p in parts),
     )
@@ -404,16 +400,16 @@ def _merged_grid(parts: Sequence[SweepResult]) -> dict[str, list[Any]]:
 
 
 def _check_same_sweep(parts: Sequence[SweepResult]) -> None:
-    """Parts of one sweep differ in their seeds, settings and share alone."""
-    common = {k: v for k, v in parts[0].config.items() if k not in PART_FIELDS}
+    """Parts of one sweep differ in their seeds, settings and share alone: they share one
+    protocol."""
+    first = RunRecord.from_json(parts[0].config, "sweep 1's record").protocol()
     for number, part in enumerate(parts[1:], start=2):
-        other = {k: v for k, v in part.config.items() if k not in PART_FIELDS}
-        differ = sorted(k for k in common.keys() | other.keys() if common.get(k) != other.get(k))
-        if differ:
-            field = differ[0]
+        record = RunRecord.from_json(part.config, f"sweep {number}'s record").protocol()
+        differing = record.differences(first, f"in sweep {number}", "in sweep 1")
+        if differing:
             raise InvalidInput(
-                f"sweep {number} is not a part of the same sweep as sweep 1: its {field} is "
-                f"{other.get(field)!r}, sweep 1's {common.get(field)!r}"
+                f"sweep {number} is not a part of the same sweep as sweep 1: "
+                + "; ".join(differing)
             )
 
 

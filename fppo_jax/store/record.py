@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from typing import Any
+from typing import Any, cast
 
 from fppo_jax.core.config import TrainConfig
-from fppo_jax.store.files import IncompatibleFormat, check_format
+from fppo_jax.store.files import IncompatibleFormat, check_format, json_value
 
 # A hyperparameter's value as a record holds it: the variant's name, or a number.
 Value = str | float | int
@@ -60,21 +60,22 @@ class RunRecord:
         return self.config.num_updates
 
     def to_json(self) -> dict[str, Any]:
-        """The record as its files hold it (absent fields left out, as they always were)."""
+        """The record as its files hold it (absent fields left out, as they always were): a
+        new value, plain JSON, that shares nothing with the record."""
         own = {
             "env": self.env,
             "backend": self.backend,
             "grid": self.grid,
             "seed": self.seed,
-            "seeds": None if self.seeds is None else list(self.seeds),
-            "part": None if self.part is None else list(self.part),
+            "seeds": self.seeds,
+            "part": self.part,
             "surrogates": self.surrogates or None,
             "preset": self.preset,
         }
         shape = dataclasses.asdict(self.config)
-        shape["hidden_sizes"] = list(shape["hidden_sizes"])
         last = {} if self.runs_per_call is None else {"runs_per_call": self.runs_per_call}
-        return {**self.setting, **{k: v for k, v in own.items() if v is not None}, **shape, **last}
+        present = {name: value for name, value in own.items() if value is not None}
+        return cast(dict[str, Any], json_value({**self.setting, **present, **shape, **last}))
 
     @classmethod
     def from_json(cls, value: Any, what: str = "the run's record") -> RunRecord:

@@ -77,6 +77,8 @@ def test_a_record_of_another_format_is_refused_not_misread():
         RunRecord.from_json(lacking, "the sweep's record")
     with pytest.raises(IncompatibleFormat, match="is not a run's record"):
         RunRecord.from_json([1, 2], "the sweep's record")
+    with pytest.raises(IncompatibleFormat, match=r"its seeds \(5\) are not a list"):
+        RunRecord.from_json({**SWEEP.to_json(), "seeds": 5}, "the sweep's record")
 
 
 def test_differences_name_each_field_with_both_values():

@@ -92,6 +92,11 @@ class RunRecord:
             )
         known = {*_BEFORE_SHAPE, *_SHAPE, "runs_per_call", "format"}
         part, seeds = value.get("part"), value.get("seeds")
+        if not isinstance(seeds, list | None) or not (part is None or _is_share(part)):
+            raise IncompatibleFormat(
+                f"{what} is not a run's record: its seeds ({seeds!r}) are not a list, or its "
+                f"part ({part!r}) is not a pair"
+            )
         return cls(
             env=value["env"],
             backend=value.get("backend"),
@@ -125,6 +130,10 @@ class RunRecord:
             else:
                 found.append(f"{name}: {_shown(a)} {here}, {_shown(b)} {there}")
         return found
+
+
+def _is_share(part: Any) -> bool:
+    return isinstance(part, list) and len(part) == 2
 
 
 def _shown(value: Any) -> str:

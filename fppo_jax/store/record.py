@@ -18,9 +18,8 @@ from fppo_jax.store.files import IncompatibleFormat, check_format, json_value
 Value = str | float | int
 
 _SHAPE = [field.name for field in dataclasses.fields(TrainConfig)]
-# The record's own keys, in the order its JSON has them; a train's setting comes first, and
-# TrainConfig's fields follow "preset" (``runs_per_call``, a sweep result's, comes last).
-_BEFORE_SHAPE = ("env", "backend", "grid", "seed", "seeds", "part", "surrogates", "preset")
+# The keys a record's JSON holds beside TrainConfig's fields; any other is a train's setting.
+_OWN = ("env", "backend", "grid", "seed", "seeds", "part", "surrogates", "preset", "runs_per_call")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,8 +32,8 @@ class RunRecord:
     own it ran, by name (:meth:`~fppo_jax.core.surrogates.Surrogate.identity`, whose digest
     tells two functions under one name apart)."""
 
-    # The JSON layout. None written: a record without "format" is of the first, and another
-    # is refused rather than misread.
+    # The JSON layout. The records written so far name none (check_format reads them as the
+    # first); a later layout names its own, which this code refuses rather than misreads.
     FORMAT = 1
 
     env: str
@@ -90,9 +89,10 @@ class RunRecord:
                 f"{what} lacks {', '.join(missing)}: it was written by another version of "
                 "fppo-jax, or is not a run's record"
             )
-        known = {*_BEFORE_SHAPE, *_SHAPE, "runs_per_call", "format"}
+        known = {*_OWN, *_SHAPE, "format"}
         part, seeds = value.get("part"), value.get("seeds")
-        if not isinstance(seeds, list | None) or not (part is None or _is_share(part)):
+        pair = isinstance(part, list) and len(part) == 2
+        if not isinstance(seeds, list | None) or not (part is None or pair):
             raise IncompatibleFormat(
                 f"{what} is not a run's record: its seeds ({seeds!r}) are not a list, or its "
                 f"part ({part!r}) is not a pair"
@@ -130,10 +130,6 @@ class RunRecord:
             else:
                 found.append(f"{name}: {_shown(a)} {here}, {_shown(b)} {there}")
         return found
-
-
-def _is_share(part: Any) -> bool:
-    return isinstance(part, list) and len(part) == 2
 
 
 def _shown(value: Any) -> str:

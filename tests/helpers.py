@@ -17,7 +17,9 @@ import numpy as np
 from conftest import TINY
 
 from fppo_jax import METRICS, SweepResult
+from fppo_jax.core.config import TrainConfig
 from fppo_jax.envs import Step, make_env
+from fppo_jax.store.record import RunRecord
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,7 +140,14 @@ def two_settings(shift: float = 100.0, seeds: int = 8) -> SweepResult:
         runs=runs,
         metrics=metrics,
         diverged=np.zeros(len(runs), np.int64),
-        config={"env": "cartpole", "seeds": list(range(seeds)), "runs_per_call": len(runs)},
+        config=RunRecord(
+            "cartpole",
+            "gymnax",
+            "paper",
+            TrainConfig(),
+            seeds=tuple(range(seeds)),
+            runs_per_call=len(runs),
+        ).to_json(),
         compile_seconds=1.0,
         train_seconds=2.0,
     )

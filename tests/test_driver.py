@@ -108,7 +108,9 @@ def test_going_on_is_refused_where_the_learning_rate_schedule_depends_on_the_bud
     # A run that did not anneal, resumed with annealing: the schedules differ, and are named.
     constant = {**RUN, "total_steps": 128 * 6}
     train(**constant, checkpoint_dir=tmp_path / "constant")
-    with pytest.raises(ConfigMismatch, match=r"anneal_learning_rate \(checkpoint False, now True"):
+    with pytest.raises(
+        ConfigMismatch, match="anneal_learning_rate: false in the checkpoint, true now"
+    ):
         train(
             **{**constant, "total_steps": 128 * 12, "anneal_learning_rate": True},
             checkpoint_dir=tmp_path / "constant",

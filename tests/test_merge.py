@@ -43,7 +43,10 @@ def test_merge_refuses_other_protocols_and_repeated_runs():
     with pytest.raises(ValueError, match="ppo seed 0, ppo seed 1"):
         merge([a, b])
     other = dataclasses.replace(b, config={**b.config, "normalize_rewards": False})
-    with pytest.raises(ValueError, match=r"sweep 2 .* normalize_rewards is False, sweep 1's None"):
+    with pytest.raises(
+        ValueError,
+        match=r"sweep 2 .* sweep 1: normalize_rewards: false in sweep 2, true in sweep 1$",
+    ):
         merge([a, other])
     with pytest.raises(ValueError, match="at least one"):
         merge([])

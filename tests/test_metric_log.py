@@ -2,6 +2,7 @@
 training goes, each update once, and a log directory never shared or overwritten unasked."""
 
 import csv
+import dataclasses
 import json
 import struct
 import sys
@@ -13,6 +14,7 @@ import pytest
 from tensorboardX.proto.event_pb2 import Event
 
 from fppo_jax import train
+from fppo_jax.core.config import TrainConfig
 from fppo_jax.core.trainer import METRICS
 from fppo_jax.errors import FppoError
 from fppo_jax.store.metric_log import (
@@ -23,6 +25,7 @@ from fppo_jax.store.metric_log import (
     prepare_log_dir,
     require_wandb,
 )
+from fppo_jax.store.record import RunRecord
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 20, **TINY}
@@ -152,24 +155,27 @@ def test_a_resumed_log_rewrites_the_csv_from_the_restored_metrics_and_purges_the
     assert purges == [257]
 
 
+RECORD = RunRecord("test", None, "paper", TrainConfig(), seed=3)
+
+
 def test_open_logs_writes_the_config_with_versions_and_devices_at_once(tmp_path):
-    assert open_logs(None, None, {"env": "test"}, None) is None
-    logs = open_logs(tmp_path / "logs", None, {"env": "test", "sizes": (64, 64)}, None)
+    assert open_logs(None, None, RECORD, None) is None
+    logs = open_logs(tmp_path / "logs", None, RECORD, None)
     record = json.loads((tmp_path / "logs" / "config.json").read_text())
     logs.close()
     machine = environment_record()
-    assert record == {"env": "test", "sizes": [64, 64], **json.loads(json.dumps(machine))}
+    assert record == {**RECORD.to_json(), **json.loads(json.dumps(machine))}
     assert {"python", "jax", "jaxlib", "flax", "optax"} <= set(machine["versions"])
     assert machine["platform"] in ("cpu", "gpu", "tpu") and machine["devices"]
 
 
 def test_a_log_directory_holding_a_run_is_refused_unless_it_is_the_run_resumed(tmp_path):
-    config = {"env": "test", "seed": 3}
+    config = RECORD
     open_logs(tmp_path, None, config, None).close()
     with pytest.raises(ValueError, match=r"already holds a run's outputs \(config.json, metrics.c"):
         prepare_log_dir(tmp_path, None)
-    with pytest.raises(ValueError, match="holds the outputs of another run than the one resumed"):
-        prepare_log_dir(tmp_path, {**config, "seed": 4})
+    with pytest.raises(ValueError, match=r"than the one resumed \(seed: 3 in config.json, 4 resu"):
+        prepare_log_dir(tmp_path, dataclasses.replace(config, seed=4))
     # A refusal lets go of the directory: the run resumed may hold it.
     held = prepare_log_dir(tmp_path, config)
     with pytest.raises(ValueError, match=r"another process \(pid \d+\) is writing a run's outp"):

@@ -1,8 +1,6 @@
 """fppo_jax.run.prepare: train's and sweep's settings split, checked and resolved once, before an
 environment is built or anything compiles."""
 
-import dataclasses
-
 import pytest
 
 import fppo_jax.run.prepare
@@ -10,6 +8,7 @@ from fppo_jax.core.config import TrainConfig
 from fppo_jax.core.resolution import HYPERPARAMETER_DEFAULTS
 from fppo_jax.run.options import Options
 from fppo_jax.run.prepare import prepare
+from fppo_jax.store.record import RunRecord
 
 SHAPE = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 
@@ -54,15 +53,7 @@ def test_the_environment_is_built_once_on_first_use(monkeypatch):
 
 def test_the_record_and_header_name_the_environment_backend_and_shape():
     run = prepared(**SHAPE, total_steps=1024)
-    record = run.record(seed=3)
-    assert list(record)[:4] == ["env", "backend", "seed", "preset"]
-    assert record == {
-        "env": "cartpole",
-        "backend": "gymnax",
-        "seed": 3,
-        "preset": "paper",
-        **dataclasses.asdict(run.config),
-    }
+    assert run.record() == RunRecord("cartpole", "gymnax", "paper", run.config)
     assert run.header("ppo on cartpole") == (
         "ppo on cartpole: preset paper, 8 updates × 128 samples (4 envs × 32 steps), "
         "4 minibatches × 2 epochs"

@@ -2,6 +2,7 @@
 taken whole, under the same protocol and setting only, said in the report, and a directory
 that holds none refused before any plan."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -11,8 +12,8 @@ from own_surrogates import frozen
 import fppo_jax
 from fppo_jax.analysis.reuse import Pool
 from fppo_jax.analysis.studies import run_scores
-from fppo_jax.run.merge import PART_FIELDS
 from fppo_jax.run.results import SweepResult
+from fppo_jax.store.record import RunRecord
 
 # As tests/test_studies.py's: PPO learns CartPole in this budget, eight runs per compiled call.
 BUDGET = {"total_steps": 4096, "learning_rate": 0.003, "chunk": 8}
@@ -54,11 +55,12 @@ def test_a_study_takes_the_baseline_s_recorded_runs_instead_of_training_them(tmp
 
     # Taken only whole, and only under the same protocol and setting.
     taken = Pool.read([pool.parent])
-    protocol = {k: v for k, v in recorded.config.items() if k not in PART_FIELDS}
+    protocol = RunRecord.from_json(recorded.config).protocol()
     ppo = recorded.settings[0]
     assert taken.take(protocol, ppo, None, list(range(8, 16))).sources == [pool]
     assert taken.take(protocol, ppo, None, list(range(10, 18))) is None  # seeds 16, 17 missing
-    assert taken.take({**protocol, "num_envs": 8}, ppo, None, [0]) is None
+    wider = dataclasses.replace(protocol.config, num_envs=8)
+    assert taken.take(dataclasses.replace(protocol, config=wider), ppo, None, [0]) is None
     assert taken.take(protocol, {**ppo, "learning_rate": 0.001}, None, [0]) is None
     with pytest.raises(FileNotFoundError, match="no directory of recorded sweeps to reuse"):
         Pool.read([tmp_path / "nowhere"])

@@ -16,7 +16,9 @@ from own_surrogates import clipped, my_clip_higher, my_ppo
 import fppo_jax
 from fppo_jax import objective, surrogate, sweep, train
 from fppo_jax.cli import main
+from fppo_jax.core.config import TrainConfig
 from fppo_jax.core.surrogates import Range, check_in_range
+from fppo_jax.store.record import RunRecord
 
 TINY_STEPS = 512
 
@@ -288,7 +290,10 @@ def test_an_abbreviated_variant_flag_is_refused_rather_than_losing_its_surrogate
 def test_a_rerun_from_a_record_refuses_a_surrogate_changed_since(tmp_path, capsys):
     from fppo_jax.cli.settings import settings_file
 
-    record = {"variant": "my-ppo", "surrogates": {"my-ppo": my_ppo.identity()}}
+    shape = TrainConfig()
+    own = {"my-ppo": my_ppo.identity()}
+    run = RunRecord("cartpole", None, "paper", shape, {"variant": "my-ppo"}, surrogates=own)
+    record = run.to_json()
     (tmp_path / "config.json").write_text(json.dumps(record))
     assert settings_file(tmp_path / "config.json")["variant"] == "own_surrogates:my_ppo"
     record["surrogates"]["my-ppo"]["digest"] = "0123456789abcdef"  # a function edited since

@@ -145,7 +145,7 @@ def test_a_stopped_or_killed_tune_goes_on_bit_for_bit(tuned, tmp_path, monkeypat
     with pytest.raises(KeyboardInterrupt):
         tune("cartpole", ARMS, output=tmp_path, **SMALL)
     assert (tmp_path / "cartpole/rung-1/state.npz").exists()
-    monkeypatch.setattr(tuning, "write_json", real)
+    monkeypatch.setattr(tuning_rungs, "write_json", real)
     result = tune("cartpole", ARMS, output=tmp_path, **SMALL)
     assert result.finished
     assert seed_scores(tmp_path) == seed_scores(whole)
@@ -262,7 +262,9 @@ def test_a_study_refuses_the_tunes_seeds_and_another_protocol(tuned, tmp_path):
     arguments = dict(max_seeds=4, group_size=2, total_steps=8 * 128, progress=False, **TINY)
     with pytest.raises(InvalidInput, match=r"used seeds \[1, 2\] that this study would test on"):
         study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", tuned=copy, **arguments)
-    with pytest.raises(InvalidInput, match="num_envs = 4"):
+    with pytest.raises(
+        InvalidInput, match=r"other protocol than this study \(num_envs: 4 in the tune, 8 in"
+    ):
         study(
             "cartpole",
             "fppo-lp",

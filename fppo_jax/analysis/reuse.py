@@ -3,8 +3,8 @@ sweeps (every ``sweep.json`` under the directories given), searched for one sett
 given seeds.
 
 A recorded run is taken for the study's own only when its sweep ran the same task under the
-same protocol (every field :meth:`~fppo_jax.run.prepare.Prepared.record` records: the environment,
-its backend, the preset, the budget and the run's shape), its setting is the one the study
+same protocol (:meth:`~fppo_jax.store.record.RunRecord.protocol`: the environment, its
+backend, the preset, the budget and the run's shape), its setting is the one the study
 trains (the variant and every hyperparameter it sets), and, for a surrogate of one's own, the
 function is the same (its digest). What this cannot see is the training code that made the
 runs: a pool is only as good as that code, which the regression pins (``tests/test_regression.py``)
@@ -15,7 +15,6 @@ run taken from it, with the sweep it came from.
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -23,8 +22,9 @@ from typing import Any
 import numpy as np
 
 from fppo_jax.errors import MissingFile
-from fppo_jax.run.merge import PART_FIELDS, merge
+from fppo_jax.run.merge import merge
 from fppo_jax.run.results import SweepResult
+from fppo_jax.store.record import RunRecord
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,20 +54,21 @@ class Pool:
 
     def take(
         self,
-        protocol: dict[str, Any],
+        protocol: RunRecord,
         setting: dict[str, Any],
         identity: dict[str, Any] | None,
         seeds: Sequence[int],
     ) -> Taken | None:
-        """`setting`'s runs at every one of `seeds`, from the sweeps of `protocol` (a record's
-        configuration, its part fields aside) that ran `setting` with the surrogate `identity`
+        """`setting`'s runs at every one of `seeds`, from the sweeps of `protocol`
+        (:meth:`RunRecord.protocol`) that ran `setting` with the surrogate `identity`
         (None: a built-in's); a seed found in several sweeps is taken from the first. None
         unless every seed is found: a group is reused whole or trained."""
         chosen: dict[int, tuple[Path, SweepResult, int]] = {}
         for where, recorded in self.sweeps:
-            if _protocol(recorded.config) != protocol or setting not in recorded.settings:
+            record = _record(recorded)
+            if record.protocol() != protocol or setting not in recorded.settings:
                 continue
-            if (recorded.config.get("surrogates") or {}).get(setting["variant"]) != identity:
+            if record.surrogates.get(setting["variant"]) != identity:
                 continue
             index = recorded.settings.index(setting)
             for run, entry in enumerate(recorded.runs):
@@ -83,38 +84,32 @@ class Pool:
         return Taken(merge(parts), list(by_sweep))
 
 
-def protocol_differences(config: dict[str, Any], protocol: dict[str, Any]) -> list[str]:
+def protocol_differences(config: dict[str, Any], protocol: RunRecord) -> list[str]:
     """Where a recorded sweep's `config` and `protocol` differ, field by field, each as
-    ``name: <recorded>, not <protocol's>`` (the part fields aside)."""
-    recorded = _protocol(config)
-    return [
-        f"{name}: {json.dumps(recorded.get(name))}, not {json.dumps(protocol.get(name))}"
-        for name in sorted(set(recorded) | set(protocol))
-        if recorded.get(name) != protocol.get(name)
-    ]
+    ``name: <recorded> there, <protocol's> in this call``."""
+    recorded = RunRecord.from_json(config, "a recorded sweep's record").protocol()
+    return recorded.differences(protocol, "there", "in this call")
 
 
-def _protocol(config: dict[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in config.items() if k not in PART_FIELDS}
+def _record(recorded: SweepResult) -> RunRecord:
+    return RunRecord.from_json(recorded.config, "a recorded sweep's record")
 
 
 def _runs(recorded: SweepResult, runs: list[int]) -> SweepResult:
     """The sweep of `recorded`'s `runs` alone, all of one setting."""
     setting = recorded.settings[recorded.runs[runs[0]]["setting"]]
     seeds = [recorded.runs[run]["seed"] for run in runs]
-    own = (recorded.config.get("surrogates") or {}).get(setting["variant"])
-    config = {k: v for k, v in recorded.config.items() if k not in ("grid", "surrogates")}
+    record = _record(recorded)
+    own = record.surrogates.get(setting["variant"])
+    surrogates = {setting["variant"]: own} if own else {}
+    record = dataclasses.replace(record, grid=None, seeds=tuple(seeds), surrogates=surrogates)
     return SweepResult(
         settings=[setting],
         seeds=seeds,
         runs=[{"setting": 0, "seed": seed} for seed in seeds],
         metrics={name: values[runs] for name, values in recorded.metrics.items()},
         diverged=np.asarray(recorded.diverged)[runs],
-        config={
-            **config,
-            "seeds": seeds,
-            **({"surrogates": {setting["variant"]: own}} if own else {}),
-        },
+        config=record.to_json(),
         compile_seconds=0.0,
         train_seconds=0.0,
     )

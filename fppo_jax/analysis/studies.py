@@ -57,6 +57,7 @@ from fppo_jax.stats.decidable import plan_lines
 from fppo_jax.stats.sequential import Decision, Design, decide
 from fppo_jax.stats.spending import boundaries
 from fppo_jax.store.files import DirectoryLock, json_value, writable_directory, write_json
+from fppo_jax.store.record import RunRecord
 
 ENDPOINTS = statistics.STUDY_ENDPOINTS  # decided on; those not chosen are reported beside it
 # Reported beside the plan's endpoints, never decided on: each run's best return over training
@@ -212,7 +213,7 @@ class _Source:
     shape: dict[str, Any]
     specific: set[str]  # the hyperparameters that only some variants take
     part: tuple[int, int] | None
-    expected: dict[str, tuple[dict[str, Any], dict[str, dict[str, Any]]]]
+    expected: dict[str, tuple[RunRecord, dict[str, dict[str, Any]]]]
     identity: dict[str, Any]
     pool: Pool | None
     tuned: dict[str, Any] | None  # a tune's chosen settings, by task and variant
@@ -344,7 +345,7 @@ def _checked_settings(
     settings: dict[str, Any],
     shape: dict[str, Any],
     tuned: dict[str, dict[str, Any]] | None = None,
-) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+) -> tuple[RunRecord, dict[str, dict[str, Any]]]:
     """Every setting of `task` checked before the plan is written, as a sweep checks them; and
     what a recorded run must match to be reused: the protocol, and each variant's setting (its
     `tuned` one, where a tune chose it)."""
@@ -363,7 +364,7 @@ def _checked_settings(
     for setting in grid:
         values = {k: v for k, v in setting.items() if k != "variant"}
         resolve_hyperparameters(by_name[setting["variant"]], None, **values)
-    return json_value(run.record()), {s["variant"]: s for s in grid}
+    return run.record(), {s["variant"]: s for s in grid}
 
 
 def tuned_settings(
@@ -500,13 +501,13 @@ def _check_tuned_protocol(directory: str | Path, source: _Source) -> None:
     setting tuned for one protocol says little of another."""
     assert source.tuned is not None
     for task, (protocol, _) in source.expected.items():
-        tuned = source.tuned["protocol"][task]
-        differs = [k for k in dict.fromkeys([*protocol, *tuned]) if protocol.get(k) != tuned.get(k)]
-        if differs:
-            key = differs[0]
+        what = f"the tune's protocol of {task} in {directory}"
+        tuned = RunRecord.from_json(source.tuned["protocol"][task], what)
+        differing = tuned.differences(protocol, "in the tune", "in this study")
+        if differing:
             raise InvalidInput(
-                f"the tune in {directory} trained {task} with {key} = {tuned.get(key)!r}, this "
-                f"study with {protocol.get(key)!r}: test a tuned setting under its own protocol"
+                f"the tune in {directory} trained {task} under another protocol than this "
+                f"study ({'; '.join(differing)}): test a tuned setting under its own protocol"
             )
 
 

@@ -404,7 +404,7 @@ def make_plan(
                 "score": SCORE,
                 "selection": SELECTION,
                 "settings": settings,
-                "protocol": {task: run.record() for task, run in runs.items()},
+                "protocol": {task: run.record().to_json() for task, run in runs.items()},
                 **identities(arms),
                 "commit": commit(),
             }

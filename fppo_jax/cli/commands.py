@@ -10,7 +10,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
@@ -32,6 +32,7 @@ from fppo_jax.stats.sequential import Design
 from fppo_jax.stats.statistics import CONFIDENCE, STATISTICS, sample_std
 from fppo_jax.store.checkpoint import Checkpoints
 from fppo_jax.store.files import DirectoryLock, writable_directory
+from fppo_jax.store.record import RunRecord
 from fppo_jax.store.saved_policy import (
     ARRAYS_FILE,
     POLICY_FILE,
@@ -99,9 +100,9 @@ def _holds_final_policy(args: argparse.Namespace) -> bool:
         checkpoints.close()
     if newest is None or newest["kind"] != "train":
         return False
-    config = newest["config"]
-    last = config["total_steps"] // (config["num_envs"] * config["num_steps"])
-    return cast(bool, saved["config"] == config and saved["update"] == newest["update"] == last)
+    run = RunRecord.from_json(newest["config"], f"the newest checkpoint in {checkpoint_dir}")
+    policy_run = RunRecord.from_json(saved["config"], f"the policy in {args.save_policy}")
+    return policy_run == run and saved["update"] == newest["update"] == run.num_updates
 
 
 def _sweep(args: argparse.Namespace) -> int:
@@ -126,11 +127,11 @@ def _sweep(args: argparse.Namespace) -> int:
     )
     if not is_main_process():
         return 0
-    runs = len(result.runs)
+    runs, record = len(result.runs), RunRecord.from_json(result.config)
     share = "" if part is None else f" (part {part[0]} of {part[1]})"
     print(
-        f"{runs} runs{share} on {result.config['env']} in {result.train_seconds:.1f} s "
-        f"(+{result.compile_seconds:.1f} s compiling), {result.config['runs_per_call']} per call"
+        f"{runs} runs{share} on {record.env} in {result.train_seconds:.1f} s "
+        f"(+{result.compile_seconds:.1f} s compiling), {record.runs_per_call} per call"
     )
     print(result.table())
     if args.output:  # written by the sweep as each group of runs finished
@@ -248,21 +249,21 @@ def _eval(args: argparse.Namespace) -> int:
 
         check_render_path(args.render)
     policy, record = read_policy(args.checkpoint)
-    config = record["config"]
-    if config["env"] not in TASKS:
+    run = RunRecord.from_json(record["config"], f"the record of the policy in {args.checkpoint}")
+    if run.env not in TASKS:
         raise InvalidInput(
-            f"the policy's environment {config['env']!r} is not a registered task; load the "
+            f"the policy's environment {run.env!r} is not a registered task; load the "
             "policy with fppo_jax.load_policy and evaluate it on your environment"
         )
     if args.render:
         from fppo_jax.export.render import check_renderable
 
-        check_renderable(config["env"])
-    env = make_env(config["env"], args.backend or config.get("backend", "auto"))
-    steps = record["update"] * config["num_envs"] * config["num_steps"]
+        check_renderable(run.env)
+    env = make_env(run.env, args.backend or run.backend or "auto")
+    steps = record["update"] * run.config.samples_per_update
     source = "saved policy" if record["kind"] == "policy" else "checkpoint"
     print(
-        f"{config['variant']} on {config['env']}, seed {config['seed']}: {source} at update "
+        f"{run.setting['variant']} on {run.env}, seed {run.seed}: {source} at update "
         f"{record['update']} ({steps:,} env steps); {args.episodes} "
         f"episode{'s' if args.episodes > 1 else ''} each"
     )
@@ -277,7 +278,7 @@ def _eval(args: argparse.Namespace) -> int:
         from fppo_jax.export.render import RenderingUnavailable, drawable, render_policy
 
         try:
-            path = render_policy(drawable(env, config["env"]), policy, args.render, seed=args.seed)
+            path = render_policy(drawable(env, run.env), policy, args.render, seed=args.seed)
             print(f"wrote {path}")
         except RenderingUnavailable as error:
             print(f"fppo-jax: not rendered: {error}", file=sys.stderr)

@@ -4,16 +4,21 @@ written by hand, as defaults of a command's flags."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 from typing import Any, cast
 
-from fppo_jax.core.config import PRESETS
+from fppo_jax.core.config import PRESETS, TrainConfig
 from fppo_jax.core.resolution import resolve
 from fppo_jax.errors import InvalidInput
+from fppo_jax.store.record import RunRecord
 
 # What a run's config.json records beside its settings (metric_log.environment_record).
 RECORD_ONLY = ("versions", "platform")
+# What every run's record holds: a file that holds them all is read as one, a file written by
+# hand (flag names, as many as it sets) as it is.
+RECORDED = ("env", "preset", *(field.name for field in dataclasses.fields(TrainConfig)))
 
 
 def settings_file(path: Path) -> dict[str, Any]:
@@ -40,15 +45,28 @@ def settings_file(path: Path) -> dict[str, Any]:
     settings = {k: v for k, v in settings.items() if k not in RECORD_ONLY}
     if isinstance(settings.get("devices"), list):  # the record's device kinds, not a count
         del settings["devices"]
-    settings.update(settings.pop("grid", None) or {})
-    if "runs_per_call" in settings:
-        settings["chunk"] = settings.pop("runs_per_call")
-    if isinstance(settings.get("part"), list):
-        settings["part"] = tuple(settings["part"])
-    own = settings.pop("surrogates", None) or {}
-    if own and "variant" in settings:
-        settings["variant"] = _importable(path, settings["variant"], own)
+    if all(key in settings for key in RECORDED):
+        return _rerun(path, RunRecord.from_json(settings, str(path)))
     return settings
+
+
+def _rerun(path: Path, record: RunRecord) -> dict[str, Any]:
+    """The flags that rerun the run (or the sweep) `record` records, read from `path`: its
+    setting and seed, or a sweep's grid (as the grid's flags), seeds, share and group size."""
+    flags: dict[str, Any] = {"env": record.env, "preset": record.preset, **record.setting}
+    flags |= dataclasses.asdict(record.config) | (record.grid or {})
+    seeds = None if record.seeds is None else list(record.seeds)
+    found = {
+        "backend": record.backend,
+        "seed": record.seed,
+        "seeds": seeds,
+        "part": record.part,
+        "chunk": record.runs_per_call,
+    }
+    flags |= {name: value for name, value in found.items() if value is not None}
+    if record.surrogates and "variant" in flags:
+        flags["variant"] = _importable(path, flags["variant"], record.surrogates)
+    return flags
 
 
 def _importable(path: Path, variant: Any, own: dict[str, Any]) -> Any:

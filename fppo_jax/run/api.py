@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from fppo_jax.core.checks import check_seed
@@ -17,6 +18,7 @@ from fppo_jax.run.execution import batch_of_one_on_device, first_run, first_run_
 from fppo_jax.run.plan import Outcome, Plan
 from fppo_jax.run.prepare import Prepared, prepare
 from fppo_jax.run.train_result import TrainResult
+from fppo_jax.store.record import RunRecord
 
 
 def train(
@@ -56,20 +58,21 @@ def train(
         surrogate, run.task, epsilon=epsilon, alpha=alpha, k=k, delta=delta, **run.hyperparameters
     )
     seed = check_seed(seed)
-    record = {**setting, **run.record(seed=seed, **identities([surrogate]))}
+    own = identities([surrogate]).get("surrogates", {})
+    record = dataclasses.replace(run.record(), setting=setting, seed=seed, surrogates=own)
     description = f"{surrogate.name} on {run.name}"
     keys, hps = run_keys([seed]), batch_of_one_on_device(hp)
     plan = Plan("train", run.trainer, keys, hps, record, description, run.header(description))
     return _result(run, record, drive(plan, run.options))
 
 
-def _result(run: Prepared, record: dict[str, Any], outcome: Outcome) -> TrainResult:
+def _result(run: Prepared, record: RunRecord, outcome: Outcome) -> TrainResult:
     """The run's result, its ``summary.txt`` written beside what the driver wrote in ``log_dir``."""
     metrics, state = first_run(outcome.metrics), first_run_on_device(outcome.state)
     result = TrainResult(
         metrics=metrics,
         params=state.params,
-        config=record,
+        config=record.to_json(),
         state=state,
         policy=make_policy(run.trainer, state),
         compile_seconds=outcome.compile_seconds,

@@ -36,6 +36,7 @@ from fppo_jax.store.checkpoint import (
     open_checkpoints,
 )
 from fppo_jax.store.metric_log import prepare_log_dir
+from fppo_jax.store.record import RunRecord
 
 HOST_BYTES_SHOWN = 2**30  # host-stepped environments' memory, said before compiling from here
 
@@ -74,7 +75,9 @@ def _drive(plan: Plan, options: Options, signalled: list[int]) -> Outcome:
         if options.log_dir is not None and main:
             resumed = None
             if options.resume:  # the run checkpointed, or this one if nothing was yet
-                resumed = plan.record if checkpointed is None else checkpointed["config"]
+                resumed = plan.record
+                if checkpointed is not None:
+                    resumed = RunRecord.from_json(checkpointed["config"], "the checkpoint's record")
             outputs = prepare_log_dir(options.log_dir, resumed)
         # The group size is the whole sweep's, chosen before a part takes its groups of it.
         size = group_size(plan, mesh, checkpointed, options.checkpoint_dir)

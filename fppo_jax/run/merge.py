@@ -3,6 +3,7 @@ joined into one :class:`~fppo_jax.run.results.SweepResult` once shown to be part
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
@@ -10,8 +11,7 @@ import numpy as np
 
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.results import SweepResult, labels
-
-PART_FIELDS = ("grid", "seeds", "runs_per_call", "part", "surrogates")
+from fppo_jax.store.record import RunRecord
 
 
 def merge(parts: Sequence[SweepResult]) -> SweepResult:
@@ -55,12 +55,13 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         runs=runs,
         metrics={name: np.concatenate([p.metrics[name] for p in parts]) for name in metrics},
         diverged=np.concatenate([np.asarray(p.diverged, np.int64) for p in parts]),
-        config={
-            **{k: v for k, v in first.config.items() if k not in ("part", "surrogates")},
-            **({"grid": grid} if grid else {}),
-            "seeds": seeds,
-            **({"surrogates": own} if own else {}),
-        },
+        config=dataclasses.replace(
+            RunRecord.from_json(first.config, "sweep 1's record"),
+            grid=grid or None,
+            seeds=tuple(seeds),
+            part=None,
+            surrogates=own,
+        ).to_json(),
         compile_seconds=sum(p.compile_seconds for p in parts),
         train_seconds=sum(p.train_seconds for p in parts),
     )
@@ -77,16 +78,16 @@ def _merged_grid(parts: Sequence[SweepResult]) -> dict[str, list[Any]]:
 
 
 def _check_same_sweep(parts: Sequence[SweepResult]) -> None:
-    """Parts of one sweep differ in their seeds, settings and share alone."""
-    common = {k: v for k, v in parts[0].config.items() if k not in PART_FIELDS}
+    """Parts of one sweep differ in their seeds, settings and share alone: they share one
+    protocol."""
+    first = RunRecord.from_json(parts[0].config, "sweep 1's record").protocol()
     for number, part in enumerate(parts[1:], start=2):
-        other = {k: v for k, v in part.config.items() if k not in PART_FIELDS}
-        differ = sorted(k for k in common.keys() | other.keys() if common.get(k) != other.get(k))
-        if differ:
-            field = differ[0]
+        record = RunRecord.from_json(part.config, f"sweep {number}'s record").protocol()
+        differing = record.differences(first, f"in sweep {number}", "in sweep 1")
+        if differing:
             raise InvalidInput(
-                f"sweep {number} is not a part of the same sweep as sweep 1: its {field} is "
-                f"{other.get(field)!r}, sweep 1's {common.get(field)!r}"
+                f"sweep {number} is not a part of the same sweep as sweep 1: "
+                + "; ".join(differing)
             )
 
 

@@ -22,6 +22,7 @@ from fppo_jax.core.trainer import Trainer, TrainState
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.execution import one_run
 from fppo_jax.store.checkpoint import ConfigMismatch, RunKind
+from fppo_jax.store.record import RunRecord
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,7 +41,7 @@ class Plan:
     trainer: Trainer
     keys: jax.Array
     hps: Hyperparameters
-    record: dict[str, Any]
+    record: RunRecord
     description: str  # a few words, for the progress bar
     header: str  # a line, printed before compiling when progress is shown
     runs: tuple[dict[str, Any], ...] | None = None

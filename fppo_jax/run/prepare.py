@@ -15,6 +15,7 @@ from fppo_jax.core.trainer import Trainer, make_train
 from fppo_jax.envs import Environment, as_environment, choose_backend, describe_backend, make_env
 from fppo_jax.run import compile_cache
 from fppo_jax.run.options import Options
+from fppo_jax.store.record import RunRecord
 
 
 @dataclasses.dataclass(frozen=True)
@@ -53,11 +54,10 @@ class Prepared:
         """The environment's name, as records show it."""
         return environment_name(self.env, self.environment)
 
-    def record(self, **between: Any) -> dict[str, Any]:
-        """What outputs and checkpoints record of the run: the environment, the backend,
-        `between`, the preset and every :class:`TrainConfig` field."""
-        record = {"env": self.name, "backend": self.backend, **between, "preset": self.preset}
-        return record | dataclasses.asdict(self.config)
+    def record(self) -> RunRecord:
+        """The protocol the run trains under: its environment, backend, preset and shape
+        (``train`` and ``sweep`` add their settings and seeds to it)."""
+        return RunRecord(self.name, self.backend, self.preset, self.config)
 
     def header(self, description: str, runs: str = "") -> str:
         """The line printed before compiling: `description`, the backend, `runs` (a sweep's

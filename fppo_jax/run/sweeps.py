@@ -10,6 +10,7 @@ groups of them, so that the parts merge into the unsplit sweep bit for bit.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import math
@@ -40,6 +41,7 @@ from fppo_jax.run.execution import run_keys
 from fppo_jax.run.plan import Outcome, Plan, part_bounds, part_runs
 from fppo_jax.run.prepare import Prepared, prepare
 from fppo_jax.run.results import SweepResult, labels
+from fppo_jax.store.record import RunRecord
 
 # The most combinations of values a grid may give: far more than a sweep trains (each of them
 # times the seeds), so more is a mistyped grid, refused before its settings are built.
@@ -212,20 +214,22 @@ def _record(
     surrogates: dict[str, Surrogate],
     seeds: list[int],
     part: tuple[int, int] | None,
-) -> dict[str, Any]:
+) -> RunRecord:
     """What the sweep's outputs and checkpoints record of it: its grid, or for a list of
     settings each axis's values in them (as a merged sweep records its parts')."""
     values = {key: _as_list(key, v) for key, v in {**_axes(grid), **run.hyperparameters}.items()}
     if "variant" in values:
         values["variant"] = list(surrogates)
-    shares = {} if part is None else {"part": list(part)}
-    return run.record(grid=values, seeds=seeds, **shares, **identities(surrogates.values()))
+    own = identities(surrogates.values()).get("surrogates", {})
+    return dataclasses.replace(
+        run.record(), grid=values, seeds=tuple(seeds), part=part, surrogates=own
+    )
 
 
 def _result(
     settings: list[dict[str, Any]],
     runs: list[dict[str, int]],
-    record: dict[str, Any],
+    record: RunRecord,
     part: tuple[int, int] | None,
     outcome: Outcome,
 ) -> SweepResult:
@@ -239,7 +243,7 @@ def _result(
         runs=runs[: len(outcome.diverged)],
         metrics=outcome.metrics,
         diverged=outcome.diverged,
-        config={**record, "runs_per_call": outcome.runs_per_call},
+        config=dataclasses.replace(record, runs_per_call=outcome.runs_per_call).to_json(),
         compile_seconds=outcome.compile_seconds,
         train_seconds=outcome.train_seconds,
     )
@@ -250,15 +254,15 @@ def _plan(
     settings: list[dict[str, Any]],
     runs: list[dict[str, int]],
     hps: Hyperparameters,
-    record: dict[str, Any],
+    record: RunRecord,
     **how: Any,
 ) -> Plan:
     """The sweep's runs as the driver's plan, `how` it drives them (the :class:`Plan`'s
     fields)."""
-    seeds = len(record["seeds"])
+    seeds = len(record.seeds or ())
     shape = f"{len(settings)} settings × {seeds} seeds = {len(settings) * seeds} runs"
-    if "part" in record:
-        shape += f", part {record['part'][0]} of {record['part'][1]}"
+    if record.part is not None:
+        shape += f", part {record.part[0]} of {record.part[1]}"
     return Plan(
         "sweep",
         run.trainer,

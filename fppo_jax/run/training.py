@@ -222,8 +222,10 @@ class Training:
                 if saved
                 else "No checkpoint was written before it"
             )
-        variant = self.plan.record.get("variant")
-        own = variant if variant in (self.plan.record.get("surrogates") or {}) else None
+        variant = self.plan.record.setting.get("variant")
+        own = (
+            variant if isinstance(variant, str) and variant in self.plan.record.surrogates else None
+        )
         raise TrainingDiverged(nonfinite + 1, (nonfinite + 1) * self.samples, where, own)
 
 

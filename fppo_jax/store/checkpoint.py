@@ -43,10 +43,10 @@ from fppo_jax.store.files import (
     DirectoryBusy,
     DirectoryLock,
     check_format,
-    json_value,
     tree_digest,
     writable_directory,
 )
+from fppo_jax.store.record import RunRecord
 
 if TYPE_CHECKING:
     import orbax.checkpoint as ocp
@@ -119,7 +119,7 @@ def open_checkpoints(
     resume: bool,
     keep: int,
     kind: RunKind,
-    run_config: dict[str, Any],
+    run_config: RunRecord,
 ) -> tuple[Checkpoints | None, dict[str, Any] | None]:
     """The checkpoints of a `kind` of run ("train" or "sweep") in `directory`, and the newest
     one's record, checked against this run before anything is compiled (None, None without a
@@ -159,10 +159,10 @@ def open_checkpoints(
 
 
 def check_same_run(
-    record: dict[str, Any], kind: RunKind, current: dict[str, Any], directory: Path
+    record: dict[str, Any], kind: RunKind, current: RunRecord, directory: Path
 ) -> None:
     """Raise :class:`ConfigMismatch` unless checkpoint `record` belongs to a `kind` of run
-    configured as `current`, naming every field whose value differs.
+    recorded as `current`, naming every field whose value differs.
 
     A run trained to its end may go on for more steps (a larger ``total_steps``) when nothing
     it did depends on the budget: not when its learning rate anneals over the run, and not
@@ -172,22 +172,22 @@ def check_same_run(
         raise ConfigMismatch(
             f"{directory} holds the checkpoints of a {record.get('kind')}, not of a {kind}"
         )
-    saved, current = json_value(record["config"]), json_value(current)
-    longer = current.get("total_steps", 0) > saved.get("total_steps", 0)
-    annealed = [bool(c.get("anneal_learning_rate")) for c in (saved, current)]
-    if longer and kind == "train" and not any(annealed):
-        saved = {**saved, "total_steps": current["total_steps"]}
-    elif longer and (kind != "train" or all(annealed)):  # else the schedules differ: named below
+    saved = RunRecord.from_json(record["config"], f"the checkpoint's record in {directory}")
+    steps, now = saved.config.total_steps, current.config.total_steps
+    annealed = [r.config.anneal_learning_rate for r in (saved, current)]
+    if now > steps and kind == "train" and not any(annealed):
+        saved = dataclasses.replace(
+            saved, config=dataclasses.replace(saved.config, total_steps=now)
+        )
+    elif now > steps and (
+        kind != "train" or all(annealed)
+    ):  # else the schedules differ: named below
         why = "its learning rate anneals over the run" if kind == "train" else "it is a sweep"
         raise ConfigMismatch(
-            f"{directory} holds a run of {saved['total_steps']:,} steps, which cannot go on to "
-            f"{current['total_steps']:,}: {why}. Use another checkpoint directory."
+            f"{directory} holds a run of {steps:,} steps, which cannot go on to {now:,}: "
+            f"{why}. Use another checkpoint directory."
         )
-    differing = [
-        f"{name} (checkpoint {saved.get(name, '-')!r}, now {current.get(name, '-')!r})"
-        for name in sorted(set(saved) | set(current))
-        if saved.get(name) != current.get(name)
-    ]
+    differing = saved.differences(current, "in the checkpoint", "now")
     if differing:
         raise ConfigMismatch(
             f"{directory} holds a run with a different configuration; differing: "
@@ -267,7 +267,7 @@ class Checkpoints:
         state: Any,
         *,
         kind: RunKind,
-        config: dict[str, Any],
+        config: RunRecord,
         runs_per_call: int,
         num_updates: int,
         policy: Policy | None = None,
@@ -275,8 +275,13 @@ class Checkpoints:
         """Checkpoint a `kind` of run ("train" or "sweep") configured as `config` at `point`,
         with its `state` (and, for one run, its `policy`, which ``load_policy`` reads); the
         record names the point, which :meth:`Restored.point` reads back."""
-        record = {"kind": kind, "config": config, "group": point.group, "update": point.update}
-        record["runs_per_call"] = runs_per_call
+        record = {
+            "kind": kind,
+            "config": config.to_json(),
+            "group": point.group,
+            "update": point.update,
+            "runs_per_call": runs_per_call,
+        }
         curves: dict[str, Any] = {"current": point.current}
         if point.finished:
             curves["finished"] = point.finished

@@ -23,7 +23,8 @@ import numpy as np
 
 from fppo_jax.core.trainer import METRICS
 from fppo_jax.errors import InvalidInput, MissingPackage, first_line, install_hint
-from fppo_jax.store.files import DirectoryLock, json_value, writable_directory, write_json
+from fppo_jax.store.files import DirectoryLock, writable_directory, write_json
+from fppo_jax.store.record import RunRecord
 
 LoggedRuns = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices) and their metrics
 
@@ -56,12 +57,12 @@ def environment_record() -> dict[str, Any]:
     }
 
 
-def prepare_log_dir(directory: str | Path, resumed: dict[str, Any] | None) -> DirectoryLock:
+def prepare_log_dir(directory: str | Path, resumed: RunRecord | None) -> DirectoryLock:
     """Make `directory` for a run's logs and hold it as its one writer, or raise InvalidInput,
     before anything is compiled: if it cannot be written, if another process writes there, or
     if it holds a run's outputs (:data:`OUTPUTS`), which are never overwritten unasked. Only
-    the run resumed, configured as `resumed`, continues there, when the ``config.json`` there
-    records that configuration. The caller releases the lock when the run ends."""
+    the run resumed, recorded as `resumed`, continues there, when the ``config.json`` there
+    records that run. The caller releases the lock when the run ends."""
     directory = writable_directory(directory)
     lock = DirectoryLock(directory, "a run's outputs")
     try:
@@ -72,7 +73,7 @@ def prepare_log_dir(directory: str | Path, resumed: dict[str, Any] | None) -> Di
     return lock
 
 
-def _check_outputs(directory: Path, resumed: dict[str, Any] | None) -> None:
+def _check_outputs(directory: Path, resumed: RunRecord | None) -> None:
     found = [name for name in OUTPUTS if (directory / name).exists()]
     if not found:
         return
@@ -82,22 +83,28 @@ def _check_outputs(directory: Path, resumed: dict[str, Any] | None) -> None:
             "directory, or resume that run (resume=True, --resume) from its checkpoint "
             "directory to continue it"
         )
-    if _recorded(directory) != json_value(resumed):
+    recorded = _recorded(directory)
+    if recorded is None:
+        differing = "config.json records no run"
+    else:
+        differing = "; ".join(recorded.differences(resumed, "in config.json", "resumed"))
+    if differing:
         raise InvalidInput(
-            f"{directory} holds the outputs of another run than the one resumed (its "
-            "config.json records other settings, or none); choose another directory"
+            f"{directory} holds the outputs of another run than the one resumed ({differing}); "
+            "choose another directory"
         )
 
 
-def _recorded(directory: Path) -> dict[str, Any] | None:
-    """The settings ``config.json`` in `directory` records, without the versions and devices,
-    which may change between a run and its resumption (None if there are none)."""
+def _recorded(directory: Path) -> RunRecord | None:
+    """The run ``config.json`` in `directory` records, without the versions and devices,
+    which may change between a run and its resumption (None if it records none)."""
     try:
         record = json.loads((directory / "config.json").read_text())
-    except (OSError, ValueError):
+        machine = environment_record()
+        run = {name: value for name, value in record.items() if name not in machine}
+        return RunRecord.from_json(run, f"{directory / 'config.json'}")
+    except (OSError, ValueError, AttributeError):
         return None
-    machine = environment_record()
-    return {name: value for name, value in record.items() if name not in machine}
 
 
 class MetricLog:
@@ -299,7 +306,7 @@ class Logs:
 def open_logs(
     directory: str | Path | None,
     wandb_project: str | None,
-    config: dict[str, Any],
+    config: RunRecord,
     runs: Sequence[dict[str, Any]] | None,
     previous: Sequence[LoggedRuns] = (),
 ) -> Logs | None:
@@ -307,7 +314,7 @@ def open_logs(
     versions and devices) at once, then ``metrics.csv`` and TensorBoard files as training goes;
     `wandb_project` names a W&B project. `runs` is a sweep's runs (each one's setting and
     seed), None for a single run."""
-    record = {**config, **environment_record()}
+    record = {**config.to_json(), **environment_record()}
     sinks: list[MetricLog | WandbLog] = []
     if directory is not None:
         Path(directory).mkdir(parents=True, exist_ok=True)

@@ -15,7 +15,7 @@ from fppo_jax.core.networks import make_networks
 from fppo_jax.core.policy import Policy
 from fppo_jax.envs import Discrete, Step
 from fppo_jax.errors import InvalidInput
-from fppo_jax.run.evaluation import evaluate, make_evaluator
+from fppo_jax.run.evaluation import evaluate, evaluation_key, make_evaluator
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2}
 RUN = {"env": "cartpole", "variant": "fppo-qp", "seed": 3, "total_steps": 128 * 20, **TINY}
@@ -150,17 +150,24 @@ def test_deterministic_takes_the_most_likely_action_and_stochastic_samples():
     assert not np.array_equal(other, sampled)  # another seed, other episodes
 
 
-def test_an_evaluator_is_a_pure_function_of_the_policy_to_vmap_over_policies():
+def test_an_evaluator_is_a_pure_function_of_the_policy_and_a_key_to_vmap_over_policies():
     run = jax.jit(make_evaluator(Countdown(fixed_length=3), 2))
+    key = evaluation_key()
     policies = [constant_policy([0.0, 10.0]), constant_policy([10.0, 0.0])]
-    np.testing.assert_array_equal(run(policies[0]), [6.0, 6.0])
+    np.testing.assert_array_equal(run(policies[0], key), [6.0, 6.0])
     # Called again, the same episodes: with a stochastic policy, the same draws too.
     stochastic = make_evaluator(Countdown(fixed_length=-1), 8, deterministic=False, max_steps=20)
     sampled = jax.jit(stochastic)
     uniform = constant_policy([0.0, 0.0])
-    np.testing.assert_array_equal(sampled(uniform), sampled(uniform))
+    np.testing.assert_array_equal(sampled(uniform, key), sampled(uniform, key))
+    assert not np.array_equal(sampled(uniform, key), sampled(uniform, evaluation_key(1)))
+    np.testing.assert_array_equal(
+        sampled(uniform, key),
+        evaluate(Countdown(fixed_length=-1), uniform, 8, deterministic=False, max_steps=20),
+    )
     batch = jax.tree.map(lambda *xs: jnp.stack(xs), *policies)
-    np.testing.assert_array_equal(jax.vmap(run)(batch), [[6.0, 6.0], [3.0, 3.0]])
+    keys = jnp.stack([key, key])
+    np.testing.assert_array_equal(jax.vmap(run)(batch, keys), [[6.0, 6.0], [3.0, 3.0]])
 
 
 @pytest.mark.parametrize("episodes", [0, -1, 2.0, True])

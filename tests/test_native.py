@@ -263,3 +263,25 @@ def test_threads_follow_slurm_s_cpus_per_task_on_a_node_left_unbound(monkeypatch
     else:
         monkeypatch.setenv("SLURM_CPUS_PER_TASK", given)
     assert native.usable_cores() == cores
+
+
+def test_a_native_sweep_evaluates_each_run_on_environments_of_its_own():
+    """Evaluating a sweep's runs steps a pool of every run's episodes: runs whose policies are
+    the same (a seed under either setting, as above) score the same episodes alike, where runs
+    sharing one evaluation's environments would step each other's."""
+    result = fppo_jax.sweep(
+        "swimmer",
+        {"variant": ["ppo", "fppo-qp"]},
+        seeds=[0, 1],
+        backend="native",
+        eval_every=2,
+        eval_episodes=2,
+        **TINY,
+    )
+    np.testing.assert_array_equal(
+        result.metrics["policy_loss"][0], result.metrics["policy_loss"][2]
+    )
+    evaluated = result.metrics["eval_return"][:, -1]
+    assert np.isfinite(evaluated).all()
+    assert evaluated[0] == evaluated[2] and evaluated[1] == evaluated[3]
+    assert evaluated[0] != evaluated[1]

@@ -28,27 +28,34 @@ def evaluate(
     """The undiscounted return of each of `episodes` episodes of `policy` on `env`: the most
     likely actions if `deterministic`, sampled ones otherwise. Episodes run in lockstep until
     each ends (terminated or truncated) or `max_steps` have passed."""
-    run = make_evaluator(env, episodes, seed=seed, deterministic=deterministic, max_steps=max_steps)
-    return np.asarray(jax.jit(run)(policy))
+    run = make_evaluator(env, episodes, deterministic=deterministic, max_steps=max_steps)
+    return np.asarray(jax.jit(run)(policy, evaluation_key(seed)))
+
+
+def evaluation_key(seed: int = 0) -> jax.Array:
+    """The key of :func:`evaluate`'s episodes for `seed`: the same key, the same episodes."""
+    return run_keys([check_seed(seed)])[0]
 
 
 def make_evaluator(
     env: Environment,
     episodes: int,
     *,
-    seed: int = 0,
     deterministic: bool = True,
     max_steps: int = 10_000,
-) -> Callable[[Policy], jax.Array]:
-    """:func:`evaluate` as a pure function of the policy, to jit once and call (or vmap over a
-    batch of policies) as often as training goes: the same episodes (same `seed`) each time."""
+) -> Callable[[Policy, jax.Array], jax.Array]:
+    """:func:`evaluate` as a pure function of the policy and the key of its episodes
+    (:func:`evaluation_key`), to jit once and call as often as training goes. To evaluate a
+    batch of policies, vmap it over the policies and over a copy of the key for each: an
+    environment stepped on the host (native MuJoCo, Gymnasium) makes its environments when it
+    resets, and a key closed over, or not batched, would have every policy step the same ones."""
     positive_int("episodes", episodes)
     positive_int("max_steps", max_steps)  # else no step, and returns of 0 that look measured
     if not isinstance(deterministic, bool | np.bool_):
         raise InvalidInput(f"deterministic must be True or False, got {deterministic!r}")
-    reset_key, run_key = jax.random.split(run_keys([check_seed(seed)])[0])
 
-    def run(policy: Policy) -> jax.Array:
+    def run(policy: Policy, key: jax.Array) -> jax.Array:
+        reset_key, run_key = jax.random.split(key)
         state, obs = jax.vmap(env.reset)(jax.random.split(reset_key, episodes))
         ended = jnp.zeros(episodes, bool)
         returns = jnp.zeros(episodes)

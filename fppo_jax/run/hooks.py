@@ -16,13 +16,14 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.core.policy import Policy, make_policy
 from fppo_jax.core.trainer import Trainer, TrainState
 from fppo_jax.envs import Environment
 from fppo_jax.run.distributed import fetch_tree
-from fppo_jax.run.evaluation import make_evaluator
+from fppo_jax.run.evaluation import evaluation_key, make_evaluator
 from fppo_jax.run.execution import concatenate, first_run
 from fppo_jax.run.options import Callback, Snapshot, callback_stops
 from fppo_jax.run.progress import Counter, Progress
@@ -141,10 +142,13 @@ class Evaluation:
         along_runs: Callable[[Callable[..., Any]], Callable[..., Any]],
     ):
         self.evaluate = jax.jit(along_runs(make_evaluator(env, episodes)))
+        self.key = evaluation_key()
         self.every, self.num_updates = every, num_updates
 
     def add_column(self, policy: Policy, chunk: dict[str, np.ndarray], update: int) -> None:
         column = np.full(chunk["env_steps"].shape, np.nan, np.float32)
         if update % self.every == 0 or update == self.num_updates:
-            column[..., -1] = np.asarray(self.evaluate(policy)).mean(axis=-1)
+            # Every run's episodes alike, each run with environments of its own.
+            keys = jnp.broadcast_to(self.key, (len(column), *self.key.shape))
+            column[..., -1] = np.asarray(self.evaluate(policy, keys)).mean(axis=-1)
         chunk["eval_return"] = column

@@ -233,7 +233,7 @@ def test_an_interval_is_at_the_edge_only_within_its_bounds_monte_carlo_error(mon
 
 def test_the_plan_converter_removes_the_rules_module_and_nothing_else(tmp_path):
     """A study recorded when its rule's words named their module goes on once converted."""
-    from fppo_jax.analysis.studies import EQUIVALENCE_TEST, TEST
+    from fppo_jax.analysis.study_plan import EQUIVALENCE_TEST, TEST
 
     plan = tmp_path / "study" / "plan.json"
     plan.parent.mkdir()

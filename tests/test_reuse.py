@@ -11,7 +11,7 @@ from own_surrogates import frozen
 
 import fppo_jax
 from fppo_jax.analysis.reuse import Pool
-from fppo_jax.analysis.studies import run_scores
+from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.run.results import SweepResult
 from fppo_jax.store.record import RunRecord
 

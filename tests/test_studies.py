@@ -12,7 +12,8 @@ from own_surrogates import frozen, my_ppo
 from scipy import stats
 
 import fppo_jax
-from fppo_jax.analysis.studies import check_plan, recorded_group, run_scores
+from fppo_jax.analysis.study_plan import check_plan
+from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.cli import main
 from fppo_jax.run.merge import merge
 from fppo_jax.run.results import SweepResult
@@ -145,38 +146,6 @@ def test_a_study_stops_a_decided_comparison_resumes_and_refuses_a_changed_plan(
     assert "| frozen | 8 | 0 | not reached | 0 | not reached |" in report  # never learns
 
 
-def test_a_group_cut_short_is_not_taken_for_a_recorded_one(tmp_path, tiny):
-    where = tmp_path / "group"
-    fppo_jax.sweep("cartpole", {"variant": ["ppo"]}, [0, 1], total_steps=512, log_dir=where, **tiny)
-    whole = SweepResult.read(where)
-    ppo = fppo_jax.core.resolution.resolve("ppo")
-    assert recorded_group(where, [ppo], [0, 1]) is not None
-    cut = SweepResult(**{**whole.__dict__, "runs": whole.runs[:1], "diverged": whole.diverged[:1]})
-    cut.metrics = {name: values[:1] for name, values in whole.metrics.items()}
-    cut.write(tmp_path / "cut")
-    assert recorded_group(tmp_path / "cut", [ppo], [0, 1]) is None
-    with pytest.raises(ValueError, match="holds a group of ppo on seeds \\[0, 1\\], where"):
-        recorded_group(where, [ppo], [0, 1, 2])
-    # A run that failed ranks below every other.
-    whole.diverged = np.array([3, 0])
-    assert run_scores(whole, "ppo", "final")[0] == -np.inf
-
-
-def test_a_group_of_another_protocol_is_refused_before_anything_trains(tmp_path, tiny):
-    # As where a study planned with backend auto goes on on a machine that chooses another.
-    output = tmp_path / "study"
-    settings = {**tiny, "output": output, "total_steps": 512, "max_seeds": 2, "group_size": 1}
-    fppo_jax.study("cartpole", "fppo-lp", "ppo", groups=1, **settings)
-    record = output / "cartpole" / "group-1" / "sweep.json"
-    written = json.loads(record.read_text())
-    record.write_text(json.dumps({**written, "config": {**written["config"], "backend": "mjx"}}))
-    with pytest.raises(
-        ValueError, match=r'another protocol .*\(backend: "mjx" there, "gymnax" in this call\)'
-    ):
-        fppo_jax.study("cartpole", "fppo-lp", "ppo", **settings)
-    assert not (output / "cartpole" / "group-2").exists()
-
-
 def test_the_command_decides_at_the_first_look_and_refuses_a_changed_plan(tmp_path, capsys):
     output = tmp_path / "study"
     common = ["study", "--candidates", "own_surrogates:frozen", "--baseline", "ppo"]
@@ -274,44 +243,6 @@ def test_no_group_writes_the_plan_alone_and_a_bad_setting_writes_nothing(tmp_pat
         "report.md",
     ]
     assert "No group recorded yet." in (output / "report.md").read_text()
-
-
-def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tmp_path, tiny):
-    output = tmp_path / "study"
-    settings = {**tiny, **BUDGET, "output": output, "max_seeds": 16, "group_size": 8}
-    candidates = [frozen, "fppo-lp"]
-
-    first = fppo_jax.study("cartpole", candidates, "ppo", part=(1, 2), **settings)
-    group_1 = output / "cartpole" / "group-1"
-    assert sorted(p.name for p in group_1.iterdir()) == ["part-1"]
-    assert not first.finished and not (output / "decisions.json").exists()  # nothing decided
-    missing = r"holds shares of its runs .* not all of them: .*part"
-    with pytest.raises(ValueError, match=missing):
-        fppo_jax.study("cartpole", candidates, "ppo", **settings)  # never trained whole over them
-    with pytest.raises(ValueError, match=missing):  # nor decided without them
-        fppo_jax.study("cartpole", candidates, "ppo", groups=0, **settings)
-    assert sorted(p.name for p in group_1.iterdir()) == ["part-1"]
-
-    fppo_jax.study("cartpole", candidates, "ppo", part=(2, 2), groups=1, **settings)
-    shares = [SweepResult.read(group_1 / f"part-{k}") for k in (1, 2)]
-    # 3 settings × 8 seeds in the sweep's 3 groups of 8 runs (chunk): the first share takes 2.
-    assert [len(s.runs) for s in shares] == [16, 8]
-    # The group's record of a run of it whole, cut short, beside the shares: they finish it.
-    cut = merge(shares)
-    cut = SweepResult(**{**cut.__dict__, "runs": cut.runs[:5], "diverged": cut.diverged[:5]})
-    cut.metrics = {name: values[:5] for name, values in cut.metrics.items()}
-    cut.write(group_1)
-    joined = fppo_jax.study("cartpole", candidates, "ppo", groups=0, **settings)
-    merged = joined.results["cartpole"]
-    assert len(merged.runs) == 24 and merged.seeds == list(range(8))
-    scores = [
-        (run_scores(merged, v, "final"), run_scores(merged, "ppo", "final"))
-        for v in ("frozen", "fppo-lp")
-    ]
-    expected = decide(scores, Design(8, 16))
-    assert [row["decision"] for row in joined.decisions] == ["worse", "undecided"]
-    assert [d.decision for d in expected] == ["worse", None]  # fppo-lp awaits the next look
-    assert json.loads((output / "decisions.json").read_text())["comparisons"] == joined.decisions
 
 
 REPOSITORY = Path(__file__).resolve().parent.parent

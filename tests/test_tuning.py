@@ -15,7 +15,8 @@ from helpers import rung_scores
 
 import fppo_jax
 from fppo_jax.analysis import tuning, tuning_rungs
-from fppo_jax.analysis.studies import run_scores, study
+from fppo_jax.analysis.studies import study
+from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.analysis.tuning import TUNING_SEED_START, schedule, tune
 from fppo_jax.analysis.tuning_draws import import_optuna
 from fppo_jax.analysis.tuning_report import across_tasks
@@ -448,12 +449,6 @@ def test_a_study_across_tasks_takes_each_arms_trial_for_every_task(tuned, tmp_pa
             across_tasks=True,
             **arguments,
         )
-
-
-def test_a_tune_not_finished_is_no_source_of_settings(tmp_path):
-    tune("cartpole", ARMS, output=tmp_path / "tune", rungs=0, **SMALL)
-    with pytest.raises(InvalidInput, match="not finished"):
-        study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", tuned=tmp_path / "tune")
 
 
 @pytest.mark.parametrize(

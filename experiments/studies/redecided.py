@@ -37,7 +37,7 @@ import numpy as np
 from study import PROTOCOLS
 
 import fppo_jax
-from fppo_jax.analysis.studies import run_scores
+from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.stats import statistics
 from fppo_jax.stats.decidable import narrowest_half_width
 from fppo_jax.stats.sequential import improvement_estimate

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from fppo_jax import SweepResult, merge
-from fppo_jax.analysis.studies import run_scores
+from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules

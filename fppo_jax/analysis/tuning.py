@@ -42,7 +42,8 @@ from typing import Any, cast
 
 import numpy as np
 
-from fppo_jax.analysis.studies import PART_LOCK_WAIT, check_plan, commit, names_of_tasks
+from fppo_jax.analysis.studies import PART_LOCK_WAIT, names_of_tasks
+from fppo_jax.analysis.study_plan import check_plan, commit
 from fppo_jax.analysis.tuning_draws import draw_population, import_optuna, open_storage
 from fppo_jax.analysis.tuning_rungs import CALLS_A_RUNG, TaskTune
 from fppo_jax.core.checks import check_part, check_seeds, positive_int

@@ -1,0 +1,377 @@
+"""A study's looks: each task's next group of seeds gathered (trained or recorded), the
+sequential rule applied to every comparison still undecided, and what each look leaves:
+``decisions.json``, each task's merged sweep and the report."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+from typing import Any, cast
+
+import numpy as np
+
+from fppo_jax.analysis.reuse import Taken, protocol_differences
+from fppo_jax.analysis.study_figures import write_figures
+from fppo_jax.analysis.study_plan import DECISIONS_FILE, REPORT_FILE, commit
+from fppo_jax.analysis.study_report import beside_defaults, write_report
+from fppo_jax.analysis.study_runs import (
+    Source,
+    recorded_group,
+    refuse_missing_shares,
+    run_scores,
+    runs_of,
+)
+from fppo_jax.analysis.study_sections import SHARES, START, Scores, steps_name
+from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.errors import InvalidInput
+from fppo_jax.run.merge import merge
+from fppo_jax.run.results import SweepResult
+from fppo_jax.stats import statistics
+from fppo_jax.stats.sequential import Decision, Design, decide
+from fppo_jax.store.files import write_json
+
+# Reported beside the plan's endpoints, never decided on: each run's best return over training
+# (the paper's statistic is its like over the seed-mean curve), biased upward.
+REPORTED = "max"
+
+
+# Where each arm's default setting trains beside its tuned one (with_defaults), by task and group.
+DEFAULTS = "defaults"
+
+
+@dataclasses.dataclass
+class StudyResult:
+    """What a study holds so far: its `plan` (as ``plan.json`` has it), one row per comparison
+    in `decisions` (as ``decisions.json`` has them), each task's recorded runs merged into one
+    sweep (`results`, by task), whether every comparison is `finished`, and with
+    ``with_defaults`` each task's runs of each arm's default setting (`defaults`, by task)."""
+
+    plan: dict[str, Any]
+    decisions: list[dict[str, Any]]
+    results: dict[str, SweepResult]
+    finished: bool
+    defaults: dict[str, SweepResult] = dataclasses.field(default_factory=dict)
+
+
+def shown_progress(settings: dict[str, Any]) -> bool:
+    """Whether the study prints its plan, each look's groups and each decision on stderr: where
+    its sweeps show progress as lines or a bar (``progress=True``), not where a callable takes
+    it."""
+    shown = settings.get("progress", False)
+    return isinstance(shown, bool | np.bool_) and bool(shown)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Group:
+    """A task's group of seeds at one look, of the study's settings or (`defaults`) of each
+    arm's default beside them: the `variants` still to train in `where` from `source`
+    (`result`: the group recorded there already, whole) and the runs `taken` from recorded
+    sweeps."""
+
+    task: str
+    look: int
+    seeds: list[int]
+    variants: list[Surrogate]
+    where: Path
+    result: SweepResult | None
+    taken: dict[str, Taken]
+    source: Source
+    defaults: bool
+
+    @property
+    def to_train(self) -> bool:
+        return bool(self.variants) and self.result is None
+
+
+def run_looks(
+    output: Path,
+    plan: dict[str, Any],
+    tasks: list[str],
+    candidates: list[Surrogate],
+    baseline: Surrogate,
+    design: Design,
+    groups: int | None,
+    source: Source,
+) -> StudyResult:
+    """The looks: each task's next group while some comparison awaits seeds, then the rule.
+    With ``source.part``, the first look whose groups are not all recorded has this share of
+    them trained, and the call returns there, writing no decision."""
+    recorded: dict[str, list[SweepResult]] = {task: [] for task in tasks}
+    defaults: dict[str, list[SweepResult]] = {task: [] for task in tasks}  # with_defaults
+    trained: list[dict[str, Any]] = []
+    shown = shown_progress(source.settings)
+    endpoint = plan["primary_endpoint"]
+    decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
+    for look, seeds in enumerate(design.looks):
+        waiting = {key for key, d in decisions.items() if d.decision is None}
+        if not waiting:
+            break
+        group_seeds = list(range(design.looks[look - 1] if look else 0, seeds))
+        found = [
+            _group(output, source, task, look, group_seeds, [*variants, baseline], beside)
+            # each arm's default at the same looks, on the same seeds, as its tuned setting
+            for beside in ((False, True) if source.defaults else (False,))
+            for task in tasks
+            # the baseline only while one of its task's candidates waits
+            if (variants := [c for c in candidates if (task, c.name) in waiting])
+        ]
+        to_train = [group for group in found if group.to_train]
+        if source.part is not None and to_train:
+            for group in to_train:
+                if recorded_group(group.where, group.variants, group.seeds, source.part) is None:
+                    if shown:
+                        _say(_training_line(group, len(design.looks), source.part))
+                    group.source.train(group.task, group.variants, group.seeds, group.where)
+            return StudyResult(plan, _rows(decisions, baseline), {}, False)
+        for group in to_train if source.part is None else []:
+            refuse_missing_shares(group.where)
+        looks_trained = len({entry["group"] for entry in trained if "commit" in entry})
+        if to_train and groups is not None and looks_trained >= groups:
+            break
+        for group in found:
+            if shown:
+                _say(_training_line(group, len(design.looks)))
+            if entry := _gather(group, defaults if group.defaults else recorded):
+                trained.append(entry)
+        before = decisions
+        decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
+        if shown:
+            for (task, name), decision in decisions.items():
+                if decision.decision is not None and before[task, name].decision is None:
+                    _say(_decision_line(task, name, baseline.name, decision))
+        if source.part is None:  # an array task writes no decision: the job after the array does
+            _write_decisions(output, decisions, baseline, trained, plan)  # a killed one keeps them
+            for where, runs in ((output, recorded), (output / DEFAULTS, defaults)):
+                _write_merged(where, runs, [group.task for group in found])
+    return _finish(output, plan, recorded, defaults, decisions, baseline, trained, source.part)
+
+
+def _say(line: str) -> None:
+    """A line of the study's progress, on stderr."""
+    print(f"study: {line}", file=sys.stderr, flush=True)
+
+
+def _training_line(group: _Group, looks: int, part: tuple[int, int] | None = None) -> str:
+    """What a look does on a task: the seeds it trains, of which settings, and those taken."""
+    seeds = f"seeds {group.seeds[0]}–{group.seeds[-1]}"
+    task = f"{group.task}, defaults" if group.defaults else group.task
+    said = []
+    if group.to_train:
+        share = "" if part is None else f" (part {part[0]} of {part[1]})"
+        said.append(f"training {seeds} of {', '.join(v.name for v in group.variants)}{share}")
+    elif group.variants:
+        said.append(f"{seeds} of {', '.join(v.name for v in group.variants)} recorded already")
+    if group.taken:
+        said.append(f"{seeds} of {', '.join(group.taken)} taken from recorded sweeps")
+    return f"look {group.look + 1} of {looks}, {task}: {'; '.join(said)}"
+
+
+def _decision_line(task: str, candidate: str, baseline: str, decision: Decision) -> str:
+    return (
+        f"{task}: {candidate} against {baseline}: {decision.decision} with {decision.seeds} "
+        f"seeds ({decision.reason})"
+    )
+
+
+def _write_merged(output: Path, recorded: dict[str, list[SweepResult]], tasks: list[str]) -> None:
+    """Each of `tasks`' runs so far as one sweep, ``<task>/curves.csv`` and ``sweep.json``
+    merged over its groups (:func:`~fppo_jax.merge`: one ``run`` numbering, where each group's
+    restarts), beside the groups; not for a task whose runs were all taken from recorded
+    sweeps (it has no directory in the study's)."""
+    for task in dict.fromkeys(tasks):
+        where = output / _directory_name(task)
+        if recorded[task] and where.is_dir():
+            merge(recorded[task]).write(where)
+
+
+def _group(
+    output: Path,
+    source: Source,
+    task: str,
+    look: int,
+    seeds: list[int],
+    variants: list[Surrogate],
+    defaults: bool = False,
+) -> _Group:
+    """`task`'s group at `look` (with `defaults`, of each arm's default, in ``defaults/``): of
+    `variants`, those whose runs `source` takes from recorded sweeps, and the others, to train
+    in the study's own directory unless recorded there."""
+    if defaults:
+        source, output = cast(Source, source.defaults), output / DEFAULTS
+    taken = {v.name: t for v in variants if (t := source.take(task, v, seeds))}
+    variants = [v for v in variants if v.name not in taken]
+    where = output / _directory_name(task) / f"group-{look + 1}"
+    result = recorded_group(where, variants, seeds) if variants else None
+    differences = protocol_differences(result.config, source.expected[task][0]) if result else []
+    if differences:
+        raise InvalidInput(
+            f"{where} was trained under another protocol than this call would train "
+            f"({'; '.join(differences)}): a study's groups share one protocol. Go on on a "
+            "machine that trains as this one did (a plan's backend auto is chosen by the machine)"
+        )
+    return _Group(task, look, seeds, variants, where, result, taken, source, defaults)
+
+
+def _gather(group: _Group, recorded: dict[str, list[SweepResult]]) -> dict[str, Any] | None:
+    """`group`'s runs added to `recorded`, trained first where they are not recorded; what
+    ``decisions.json`` says of the group (None when it was recorded by an earlier call)."""
+    said: dict[str, Any] = {}
+    result = group.result
+    if group.to_train:
+        result = group.source.train(group.task, group.variants, group.seeds, group.where)
+        said["commit"] = commit()
+    if result is not None:
+        recorded[group.task].append(result)
+    recorded[group.task] += [t.result for t in group.taken.values()]
+    if group.taken:
+        said["reused"] = {name: [str(s) for s in t.sources] for name, t in group.taken.items()}
+    if not said:
+        return None
+    of = {"defaults": True} if group.defaults else {}
+    return {"task": group.task, "group": group.look + 1, **of, "seeds": group.seeds, **said}
+
+
+def _finish(
+    output: Path,
+    plan: dict[str, Any],
+    recorded: dict[str, list[SweepResult]],
+    defaults: dict[str, list[SweepResult]],
+    decisions: dict[tuple[str, str], Decision],
+    baseline: Surrogate,
+    trained: list[dict[str, Any]],
+    part: tuple[int, int] | None,
+) -> StudyResult:
+    """The study as it stands; unless this call trained a `part`, its decisions, report and
+    figures written, with the comparisons of each arm's default beside them where the plan
+    trains them."""
+    results = {task: merge(parts) for task, parts in recorded.items() if parts}
+    at_defaults = {task: merge(parts) for task, parts in defaults.items() if parts}
+    if part is not None:
+        rows = _rows(decisions, baseline)
+        return StudyResult(plan, rows, results, all(row["final"] for row in rows), at_defaults)
+    scores = {task: _task_scores(result, plan) for task, result in results.items()}
+    variants, endpoint = (*plan["candidates"], plan["baseline"]), plan["primary_endpoint"]
+    beside = None
+    if plan.get("with_defaults"):
+        default_scores = {
+            task: {v: run_scores(result, v, endpoint) for v in variants}
+            for task, result in at_defaults.items()
+        }
+        beside = beside_defaults(plan, scores, default_scores)
+    rows = _write_decisions(output, decisions, baseline, trained, plan, beside)
+    finished = all(row["final"] for row in rows)
+    write_report(output / REPORT_FILE, plan, rows, scores, finished, beside)
+    write_figures(output, plan, rows, results, scores)
+    return StudyResult(plan, rows, results, finished, at_defaults)
+
+
+def _task_scores(result: SweepResult, plan: dict[str, Any]) -> Scores:
+    """What the report shows of a task's runs: each variant's scores by endpoint, and its env
+    steps to each share of the baseline's final IQM (``steps to 50%``; none where that IQM is
+    not positive, where a share of it is no lower bar)."""
+    variants = (*plan["candidates"], plan["baseline"])
+    shown = ("final", plan["primary_endpoint"], *plan["secondary_endpoints"], REPORTED)
+    scores = {v: {e: run_scores(result, v, e) for e in dict.fromkeys(shown)} for v in variants}
+    for variant in variants:  # where each run starts: the untrained policy's first return
+        curves = result.metrics["average_return"][runs_of(result, variant)]
+        scores[variant][START] = np.array([_first_finite(row) for row in curves])
+    final = scores[plan["baseline"]]["final"]
+    target = float(statistics.iqm(final[np.isfinite(final)]))
+    if not target > 0:
+        return scores
+    for variant in variants:
+        runs = runs_of(result, variant)
+        curves, steps = result.metrics["average_return"][runs], result.metrics["env_steps"][runs]
+        for share in SHARES:
+            reached = statistics.steps_to_threshold(curves, steps, share * target)
+            scores[variant][steps_name(share)] = reached
+    return scores
+
+
+def _first_finite(curve: np.ndarray) -> float:
+    finite = curve[np.isfinite(curve)]
+    return float(finite[0]) if finite.size else np.nan
+
+
+def _directory_name(task: str) -> str:
+    """A task's directory in the study: its name, a namespace's slash made a double underscore."""
+    return task.replace("/", "__")
+
+
+def _decide(
+    recorded: dict[str, list[SweepResult]],
+    tasks: list[str],
+    candidates: list[Surrogate],
+    baseline: Surrogate,
+    design: Design,
+    endpoint: str,
+) -> dict[tuple[str, str], Decision]:
+    """The rule on every comparison's scores so far (seeds in order, group after group)."""
+    keys = [(task, c.name) for task in tasks for c in candidates]
+    scores = []
+    for task, candidate in keys:
+        pair = []
+        for variant in (candidate, baseline.name):
+            parts = [
+                run_scores(group, variant, endpoint)
+                for group in recorded[task]
+                if variant in [s["variant"] for s in group.settings]
+            ]
+            pair.append(np.concatenate(parts) if parts else np.zeros(0))
+        scores.append(tuple(pair))
+    # each of `scores` is a (candidate, baseline) pair
+    return dict(
+        zip(keys, decide(cast("list[tuple[np.ndarray, np.ndarray]]", scores), design), strict=True)
+    )
+
+
+def _rows(decisions: dict[tuple[str, str], Decision], baseline: Surrogate) -> list[dict[str, Any]]:
+    return [
+        {
+            "task": task,
+            "candidate": candidate,
+            "baseline": baseline.name,
+            "decision": decision.decision or "undecided",
+            "final": decision.decision is not None,
+            "seeds": decision.seeds,
+            "z": decision.z if np.isfinite(decision.z) else None,
+            "boundary": decision.boundary if np.isfinite(decision.boundary) else None,
+            "reason": decision.reason,
+            # with a margin: the repeated CI of P that the equivalence test held against it
+            **({} if decision.interval is None else {"interval": list(decision.interval)}),
+        }
+        for (task, candidate), decision in decisions.items()
+    ]
+
+
+def _write_decisions(
+    output: Path,
+    decisions: dict[tuple[str, str], Decision],
+    baseline: Surrogate,
+    trained: list[dict[str, Any]],
+    plan: dict[str, Any],
+    beside: dict[str, Any] | None = None,
+) -> list[dict[str, Any]]:
+    """``decisions.json``: the plan's margin where it has one, a row per comparison
+    (returned), what each arm's default measured `beside` them (untested, where given), and
+    every group trained with the commit it ran at, or with the recorded sweeps its runs were
+    taken from, earlier calls' groups kept."""
+    path = output / DECISIONS_FILE
+    earlier = json.loads(path.read_text()).get("groups", []) if path.exists() else []
+    by_group = {(g["task"], g["group"], g.get("defaults", False)): g for g in earlier}
+    for entry in trained:  # a group trained earlier keeps its commit when runs are taken now
+        key = (entry["task"], entry["group"], entry.get("defaults", False))
+        by_group[key] = {**by_group.get(key, {}), **entry}
+    groups = list(by_group.values())
+    rows = _rows(decisions, baseline)
+    record = {
+        "finished": all(row["final"] for row in rows),
+        **({"margin": plan["margin"]} if "margin" in plan else {}),
+        "comparisons": rows,
+        **({} if beside is None else {"beside_defaults": beside}),
+        "groups": sorted(groups, key=lambda g: (g["group"], g.get("defaults", False), g["task"])),
+    }
+    write_json(path, record)
+    return rows

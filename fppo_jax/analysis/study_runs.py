@@ -1,0 +1,247 @@
+"""Where a study's runs come from: each look's group of seeds trained as one sweep, or taken
+from sweeps recorded elsewhere (:mod:`fppo_jax.analysis.reuse`), the shares of a split look
+recorded and joined, and each run's score on an endpoint."""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fppo_jax.analysis.reuse import Pool, Taken
+from fppo_jax.core.objectives import hyperparameter_names, identities, takers
+from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
+from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.variants import BUILTINS
+from fppo_jax.errors import InvalidInput
+from fppo_jax.run.merge import merge
+from fppo_jax.run.plan import part_runs
+from fppo_jax.run.prepare import prepare
+from fppo_jax.run.results import SweepResult
+from fppo_jax.run.sweeps import expand_grid, sweep
+from fppo_jax.stats import statistics
+from fppo_jax.store.record import RunRecord
+
+# What the study sets itself for every group's sweep.
+OWN_SETTINGS = ("log_dir", "checkpoint_dir", "resume", "checkpoint_every", "keep", "callback")
+
+
+@dataclasses.dataclass(frozen=True)
+class Source:
+    """Where a study's groups of runs come from: recorded sweeps in the `pool` of reused
+    directories, where they match the `expected` protocol and setting, else trained (with the
+    study's `settings` and `shape`; by this call, only its `part` of each group)."""
+
+    settings: dict[str, Any]
+    shape: dict[str, Any]
+    specific: set[str]  # the hyperparameters that only some variants take
+    part: tuple[int, int] | None
+    expected: dict[str, tuple[RunRecord, dict[str, dict[str, Any]]]]
+    identity: dict[str, Any]
+    pool: Pool | None
+    tuned: dict[str, Any] | None  # a tune's chosen settings, by task and variant
+    # with_defaults: the source of each arm's default setting, trained beside its tuned one
+    defaults: Source | None = None
+
+    @classmethod
+    def of(
+        cls,
+        tasks: list[str],
+        everyone: list[Surrogate],
+        settings: dict[str, Any],
+        shape: dict[str, Any],
+        chunk: int | None,
+        part: tuple[int, int] | None,
+        reuse: list[str],
+        tuned: dict[str, Any] | None = None,
+    ) -> Source:
+        """The study's source of runs, every setting of every task checked and the recorded
+        sweeps of `reuse` read, all before the plan is written: a mistyped directory or a
+        setting refused leaves no plan behind."""
+        return cls(
+            settings,
+            {**shape, "chunk": chunk},
+            set(hyperparameter_names([*BUILTINS.values(), *everyone])),
+            part,
+            {
+                task: _checked_settings(
+                    task,
+                    everyone,
+                    settings,
+                    shape,
+                    None if tuned is None else tuned["settings"][task],
+                )
+                for task in tasks
+            },
+            identities(everyone).get("surrogates", {}),
+            Pool.read(reuse) if reuse else None,
+            tuned,
+        )
+
+    def train(
+        self, task: str, variants: list[Surrogate], seeds: list[int], where: Path
+    ) -> SweepResult:
+        by_name = {s.name: s for s in variants}
+        fixed = {
+            name: value
+            for name, value in self.settings.items()
+            if name not in self.specific or takers(name, by_name)
+        }
+        grid: dict[str, Any] | list[dict[str, Any]] = {"variant": variants}
+        if self.tuned is not None:
+            chosen = self.tuned["settings"][task]
+            grid = [{"variant": v, **chosen[v.name]} for v in variants]
+        return sweep_group(task, grid, seeds, where, part=self.part, **self.shape, **fixed)
+
+    def at_defaults(self, everyone: list[Surrogate]) -> Source:
+        """The like of this source for each arm's default setting: the settings a study without
+        a tune trains (no hyperparameter given), so that such a study's recorded runs are
+        taken from the pool."""
+        expected = {
+            task: (protocol, {s["variant"]: s for s in expand_grid({"variant": everyone}, task)})
+            for task, (protocol, _) in self.expected.items()
+        }
+        return dataclasses.replace(self, expected=expected, tuned=None)
+
+    def take(self, task: str, variant: Surrogate, seeds: list[int]) -> Taken | None:
+        """`variant`'s runs on `task` at `seeds` from the recorded sweeps, if they hold them
+        all under the study's protocol and setting (and evaluated, where the study evaluates:
+        how often and over how many episodes, a sweep's record does not say)."""
+        if self.pool is None:
+            return None
+        protocol, setting_of = self.expected[task]
+        name = variant.name
+        taken = self.pool.take(protocol, setting_of[name], self.identity.get(name), seeds)
+        if taken is not None and self.settings.get("eval_every") is not None:
+            return taken if "eval_return" in taken.result.metrics else None
+        return taken
+
+
+def _checked_settings(
+    task: str,
+    everyone: list[Surrogate],
+    settings: dict[str, Any],
+    shape: dict[str, Any],
+    tuned: dict[str, dict[str, Any]] | None = None,
+) -> tuple[RunRecord, dict[str, dict[str, Any]]]:
+    """Every setting of `task` checked before the plan is written, as a sweep checks them; and
+    what a recorded run must match to be reused: the protocol, and each variant's setting (its
+    `tuned` one, where a tune chose it)."""
+    run = prepare(task, dict(settings), sweepable(everyone), **shape)
+    several = [k for k, v in run.hyperparameters.items() if isinstance(v, list | tuple)]
+    if several:
+        raise InvalidInput(
+            f"a study compares one setting per variant: give {', '.join(several)} one value "
+            "each (to compare values, sweep them: fppo_jax.sweep)"
+        )
+    by_name = {s.name: s for s in everyone}
+    if tuned is None:
+        grid = expand_grid({"variant": everyone, **run.hyperparameters}, task)
+    else:
+        grid = expand_grid([{"variant": s, **tuned[s.name]} for s in everyone], task)
+    for setting in grid:
+        values = {k: v for k, v in setting.items() if k != "variant"}
+        resolve_hyperparameters(by_name[setting["variant"]], None, **values)
+    return run.record(), {s["variant"]: s for s in grid}
+
+
+def sweep_group(
+    task: str,
+    grid: dict[str, Any] | list[dict[str, Any]],
+    seeds: list[int],
+    where: Path,
+    part: tuple[int, int] | None = None,
+    **settings: Any,
+) -> SweepResult:
+    """One group: the settings of `grid` × `seeds` on `task` as one sweep that records itself
+    in `where` (or its `part`, in ``where/part-<K>``), read back from there (as a resumed study
+    reads it).
+    One cut short (a killed study) is trained again; a group whose shares array tasks began is
+    not trained whole over them."""
+    if part is None:
+        refuse_missing_shares(where)
+    else:
+        where = where / f"part-{part[0]}"
+    if where.exists():
+        shutil.rmtree(where)
+    sweep(task, grid, seeds, log_dir=where, part=part, **settings)
+    return SweepResult.read(where)
+
+
+def recorded_group(
+    where: Path, variants: list[Surrogate], seeds: list[int], part: tuple[int, int] | None = None
+) -> SweepResult | None:
+    """The group in `where` if it holds every run of `variants` × `seeds`, whole or joined from
+    the shares that array tasks recorded in ``part-<K>/``; with `part`, that share alone, if it
+    holds all its runs. None if it holds none or some of them. A group of other runs is
+    refused: the plan did not make it."""
+    runs = len(variants) * len(seeds)
+    if part is not None:
+        where = where / f"part-{part[0]}"
+    found = [SweepResult.read(where)] if (where / "sweep.json").exists() else []
+    shares = sorted(where.glob("part-*/sweep.json"))
+    if shares:
+        try:
+            found.append(merge([SweepResult.read(share.parent) for share in shares]))
+        except InvalidInput:  # some shares are still to come
+            pass
+    for result in found:  # a group trained whole and cut short may have been finished in shares
+        names = [s["variant"] for s in result.settings]
+        if names != [v.name for v in variants] or result.config["seeds"] != seeds:
+            raise InvalidInput(
+                f"{where} holds a group of {', '.join(names)} on seeds {result.config['seeds']}, "
+                f"where the study's plan needs {', '.join(v.name for v in variants)} on {seeds}"
+            )
+        expected = runs
+        if part is not None:  # the share of the group's runs, by the groups they trained in
+            size = result.config.get("runs_per_call")
+            if not isinstance(size, int) or size < 1:
+                continue
+            start, stop = part_runs(part, runs, size)
+            expected = stop - start
+        if len(result.runs) == expected:
+            return result
+    return None
+
+
+def refuse_missing_shares(where: Path) -> None:
+    """Raise if the group in `where`, not recorded whole, holds some of the shares that array
+    tasks train (``part-<K>/``), naming what joining them says is missing: trained whole over
+    them, or decided without them, the shares would be lost."""
+    shares = sorted(where.glob("part-*/sweep.json"))
+    if not shares:
+        return
+    try:
+        merge([SweepResult.read(share.parent) for share in shares])
+    except InvalidInput as error:
+        raise InvalidInput(
+            f"{where} holds shares of its runs trained by array tasks (--part), and not all of "
+            f"them: {error}. Run the missing ones with --part K/N, then this again"
+        ) from None
+
+
+def runs_of(result: SweepResult, variant: str) -> list[int]:
+    """`variant`'s runs in `result` (indices), in seed order."""
+    index = [s["variant"] for s in result.settings].index(variant)
+    runs = [i for i, run in enumerate(result.runs) if run["setting"] == index]
+    return sorted(runs, key=lambda i: result.runs[i]["seed"])
+
+
+def run_scores(result: SweepResult, variant: str, endpoint: str) -> np.ndarray:
+    """`variant`'s score per run in `result`, in seed order; a run that diverged or finished no
+    episode (or, for ``eval``, no evaluation) scores −inf, below every other (a run that
+    failed)."""
+    runs = runs_of(result, variant)
+    metric = "eval_return" if endpoint == "eval" else "average_return"
+    if metric not in result.metrics:
+        raise InvalidInput(
+            f"the eval endpoint needs every run's evaluations, and {variant}'s runs on "
+            f"{result.config['env']} have none: runs taken from recorded sweeps (reuse) that "
+            "were not evaluated cannot be scored on it"
+        )
+    scores = statistics.endpoint(result.metrics[metric][runs], endpoint)
+    failed = (np.asarray(result.diverged)[runs] > 0) | ~np.isfinite(scores)
+    return np.where(failed, -np.inf, scores)

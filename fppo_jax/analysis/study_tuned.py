@@ -1,0 +1,170 @@
+"""A study on a tune's settings (``study(..., tuned=...)``): each arm's chosen setting per
+task or across tasks, read from the tune and checked against the study's own protocol and
+seeds."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from fppo_jax.analysis.study_runs import Source
+from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
+from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.errors import InvalidInput
+from fppo_jax.stats.sequential import Design
+from fppo_jax.store.record import RunRecord
+
+ACROSS_TASKS = (
+    "across tasks: per arm, one trial for every task (a drawn trial is the same point on each; "
+    "trial 0 is each task's default), chosen among the arm's trials that reached the deepest "
+    "rung reached on every task by any of them: the best mean over the tune's tasks of its "
+    "score at that rung, normalised per task by the min and max of every arm's trials scored "
+    "there (a task where they all tie counts 0); ties by trial number; a trial's deepest rung "
+    "on a task is the last where it scored and did not diverge "
+    "(fppo_jax.analysis.tuning_report.across_tasks)"
+)
+
+
+def tuned_settings(
+    directory: str | Path,
+    tasks: list[str],
+    everyone: list[Surrogate],
+    design: Design,
+    settings: dict[str, Any],
+    across_tasks: bool = False,
+    with_defaults: bool = False,
+) -> dict[str, Any]:
+    """What a study on a tune's chosen settings records of the tune in `directory`: where it is,
+    its plan's digest, its tuning seeds and each variant's chosen setting on each task (with
+    `across_tasks`, the trial chosen for all the tune's tasks, and the rule); refused if the
+    tune is not finished, lacks a task or a variant, or used a seed the study would, or, with
+    `with_defaults`, if a trial 0 is not the default this code trains."""
+    from fppo_jax.analysis.tuning import PLAN_FILE as TUNE_PLAN
+    from fppo_jax.analysis.tuning import RESULTS_FILE, plan_digest
+
+    directory = Path(directory)
+    digest = plan_digest(directory)
+    results_path = directory / RESULTS_FILE
+    if not results_path.exists():
+        raise InvalidInput(
+            f"the tune in {directory} is not finished ({RESULTS_FILE} is missing): run it to "
+            "the end first"
+        )
+    tune_plan = json.loads((directory / TUNE_PLAN).read_text())
+    results = json.loads(results_path.read_text())
+    given = sorted(set(settings) & set(sweepable(everyone)))
+    if given:
+        raise InvalidInput(
+            f"a study on a tune's settings takes each arm's from the tune: {', '.join(given)} "
+            "cannot be given beside it"
+        )
+    for task in tasks:
+        if task not in results:
+            raise InvalidInput(f"the tune in {directory} did not tune {task}")
+    for variant in everyone:
+        if variant.name not in tune_plan["variants"]:
+            raise InvalidInput(f"the tune in {directory} did not tune {variant.name}")
+    trials = _across_tasks(directory, tune_plan, results, everyone) if across_tasks else None
+    chosen: dict[str, dict[str, Any]] = {}
+    for task in tasks:
+        for variant in everyone:
+            found = results[task][variant.name]
+            if with_defaults:
+                _check_trial_0(directory, task, variant, found["default"]["setting"])
+            if trials is not None:
+                setting = found["trials"][trials[variant.name]["trial"]]
+            elif found["chosen"] is None:
+                raise InvalidInput(
+                    f"the tune in {directory} chose no setting for {variant.name} on {task}: "
+                    "every trial diverged"
+                )
+            else:
+                setting = found["chosen"]["setting"]
+            chosen.setdefault(task, {})[variant.name] = setting
+    overlap = sorted(set(tune_plan["seeds"]) & set(range(design.max_seeds)))
+    if overlap:
+        raise InvalidInput(
+            f"the tune in {directory} used seeds {overlap} that this study would test on: a "
+            "test needs seeds the tune never saw (tune on others)"
+        )
+    return {
+        "directory": str(directory.absolute()),
+        "plan_digest": digest,
+        "tuning_seeds": tune_plan["seeds"],
+        "protocol": {task: tune_plan["protocol"][task] for task in tasks},
+        # recorded only where chosen across tasks: a plan from before the option is one without
+        **({} if trials is None else {"selection": ACROSS_TASKS, "trials": trials}),
+        "settings": chosen,
+    }
+
+
+def _across_tasks(
+    directory: Path,
+    tune_plan: dict[str, Any],
+    results: dict[str, Any],
+    everyone: list[Surrogate],
+) -> dict[str, dict[str, Any]]:
+    """Each variant's trial chosen for all the tune's tasks by the rule of
+    :func:`~fppo_jax.analysis.tuning_report.across_tasks` (its trial, rung and mean normalised
+    score), from the rungs' scores the tune recorded; refused for a tune of one task, one whose
+    ``results.json`` lacks the trials' settings, and a variant no trial of which scored on
+    every task."""
+    from fppo_jax.analysis.tuning_report import across_tasks
+    from fppo_jax.analysis.tuning_rungs import recorded_rungs
+
+    tuned = tune_plan["tasks"]
+    if len(tuned) < 2:
+        raise InvalidInput(
+            f"the tune in {directory} tuned one task ({tuned[0]}): a setting chosen across "
+            "tasks needs several (without across_tasks the setting is its best on that task)"
+        )
+    if any("trials" not in arms[v.name] for arms in results.values() for v in everyone):
+        raise InvalidInput(
+            f"the tune in {directory} did not record each trial's setting (its results.json "
+            "is from an earlier version): run the same tune command again, which trains nothing "
+            "and records them"
+        )
+    rungs = {task: recorded_rungs(directory / task) for task in tuned}
+    trials = {}
+    for variant in everyone:
+        found = across_tasks(rungs, variant.name)
+        if found is None:
+            raise InvalidInput(
+                f"no trial of {variant.name} scored on every task of the tune in {directory} "
+                "(each diverged or finished no episode on one): no setting can be chosen across "
+                "them"
+            )
+        trials[variant.name] = found
+    return trials
+
+
+def _check_trial_0(directory: Path, task: str, variant: Surrogate, trial_0: dict[str, Any]) -> None:
+    """Refuses a tune whose trial 0 of `variant` on `task` is not the default setting that the
+    study trains beside the tuned one (defaults changed since the tune): the gain from tuning
+    would be measured over another setting than the tune's."""
+    tuned = resolve_hyperparameters(variant, task, **trial_0)[1]
+    here = resolve_hyperparameters(variant, task)[1]
+    differs = [k for k in here if tuned.get(k) != here[k]]
+    if differs:
+        key = differs[0]
+        raise InvalidInput(
+            f"the tune in {directory} tried {variant.name}'s default on {task} with {key} = "
+            f"{tuned.get(key)!r}, and this code's default is {here[key]!r}: its trial 0 is not "
+            "the default that with_defaults would train; tune again with this code"
+        )
+
+
+def check_tuned_protocol(directory: str | Path, source: Source) -> None:
+    """The study's runs trained as the tune's were (the task's shape, backend and budget): a
+    setting tuned for one protocol says little of another."""
+    assert source.tuned is not None
+    for task, (protocol, _) in source.expected.items():
+        what = f"the tune's protocol of {task} in {directory}"
+        tuned = RunRecord.from_json(source.tuned["protocol"][task], what)
+        differing = tuned.differences(protocol, "in the tune", "in this study")
+        if differing:
+            raise InvalidInput(
+                f"the tune in {directory} trained {task} under another protocol than this "
+                f"study ({'; '.join(differing)}): test a tuned setting under its own protocol"
+            )

@@ -546,5 +546,5 @@ def test_orbax_reads_a_flipped_byte_as_other_values_so_checkpoints_keep_their_di
     altered[len(altered) // 2] ^= 0x01
     data.write_bytes(bytes(altered))
     read = manager.restore(1, args=ocp.args.Composite(state=ocp.args.StandardRestore()))
-    assert 0 < np.sum(read.state["x"] != x) < 10
+    assert np.sum(read.state["x"] != x) > 0  # compressed, one byte alters a block of values
     manager.close()

@@ -10,7 +10,7 @@ import pytest
 from fppo_jax import load_policy
 from fppo_jax.store.numpy_policy import NumpyPolicy
 
-MODULE = Path(__file__).resolve().parent.parent / "fppo_jax" / "numpy_policy.py"
+MODULE = Path(__file__).resolve().parent.parent / "fppo_jax" / "store" / "numpy_policy.py"
 
 
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from fppo_jax.core.checks import positive_int
+from fppo_jax.errors import InvalidInput
 from fppo_jax.stats.statistics import CONFIDENCE, RESAMPLES, check_confidence
 from fppo_jax.store.files import write_atomically
 
@@ -60,7 +61,7 @@ def expected_best(
     band at each n is those curves' percentiles at (1 ∓ `confidence`)/2. Seeded: it repeats."""
     scores = np.asarray(scores, dtype=float)
     if not scores.size or not np.isfinite(scores).all():
-        raise ValueError(f"expected_best needs finite scores, got {scores}")
+        raise InvalidInput(f"expected_best needs finite scores, got {scores}")
     confidence = check_confidence(confidence)
     resamples = positive_int("resamples", resamples)
     n = np.arange(1, positive_int("settings", settings) + 1)[:, None]

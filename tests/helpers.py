@@ -151,3 +151,19 @@ def two_settings(shift: float = 100.0, seeds: int = 8) -> SweepResult:
         compile_seconds=1.0,
         train_seconds=2.0,
     )
+
+
+# Seeds that name no distinct valid seeds, each with the refusal: checked once
+# (fppo_jax.core.checks.check_seeds), and before anything is made where a run takes them.
+BAD_SEEDS = [
+    ([1, 1], "seeds must be distinct, got [1, 1]"),
+    (["1"], "a seed must be an integer, got '1'"),
+    ([2**70], "a seed must fit in 64 bits"),
+    ("5", "seeds must be a count or a sequence of integers, got '5'"),
+    (0, "seeds must be a positive integer, got 0"),
+    ([], "seeds must name at least one seed, got []"),
+    (np.array(2), "seeds must be a count or a sequence of integers, got array(2)"),
+    (10**9, "at most 100,000 seeds may be given, got 1,000,000,000"),
+    ([0, 1, 2**32], "seeds 0 and 4294967296 give the same key"),
+    ([-1, 2**32 - 1], "seeds -1 and 4294967295 give the same key"),
+]

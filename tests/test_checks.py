@@ -5,6 +5,7 @@ import re
 
 import numpy as np
 import pytest
+from helpers import BAD_SEEDS
 
 from fppo_jax.core.checks import (
     check_fraction,
@@ -97,18 +98,7 @@ def test_parse_seeds_refuses_what_names_no_distinct_valid_seeds(text, message):
 
 @pytest.mark.parametrize(
     "seeds, message",
-    [
-        ([1, 1], "seeds must be distinct, got [1, 1]"),
-        (["1"], "a seed must be an integer, got '1'"),
-        ([2**70], "a seed must fit in 64 bits"),
-        ("5", "seeds must be a count or a sequence of integers, got '5'"),
-        (0, "seeds must be a positive integer, got 0"),
-        ([], "seeds must name at least one seed, got []"),
-        (np.array(2), "seeds must be a count or a sequence of integers, got array(2)"),
-        (10**9, "at most 100,000 seeds may be given, got 1,000,000,000"),
-        ([0, 1, 2**32], "seeds 0 and 4294967296 give the same key"),
-        ([-1, 2**32 - 1], "seeds -1 and 4294967295 give the same key"),
-    ],
+    BAD_SEEDS,
 )
 def test_check_seeds_refuses_what_names_no_distinct_valid_seeds(seeds, message):
     with pytest.raises(ValueError, match=re.escape(message)):

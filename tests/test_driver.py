@@ -13,7 +13,7 @@ import jax
 import numpy as np
 import pytest
 from conftest import IN_CHUNKS, TINY
-from helpers import assert_bitwise_equal
+from helpers import BAD_SEEDS, assert_bitwise_equal
 
 import fppo_jax
 import fppo_jax.run.driver
@@ -318,18 +318,7 @@ def test_numpy_integers_are_integers():
 
 @pytest.mark.parametrize(
     "seeds, message",
-    [
-        ([1, 1], "seeds must be distinct, got [1, 1]"),
-        (["1"], "a seed must be an integer, got '1'"),
-        ([2**70], "a seed must fit in 64 bits"),
-        ("5", "seeds must be a count or a sequence of integers, got '5'"),
-        (0, "seeds must be a positive integer, got 0"),
-        ([], "seeds must name at least one seed, got []"),
-        (np.array(2), "seeds must be a count or a sequence of integers, got array(2)"),
-        (10**9, "at most 100,000 seeds may be given, got 1,000,000,000"),
-        ([0, 1, 2**32], "seeds 0 and 4294967296 give the same key"),
-        ([-1, 2**32 - 1], "seeds -1 and 4294967295 give the same key"),
-    ],
+    BAD_SEEDS,
 )
 def test_seeds_are_checked_before_anything_is_made(seeds, message):
     with pytest.raises(ValueError, match=re.escape(message)):

@@ -27,6 +27,11 @@ from fppo_jax.errors import InvalidInput
 # The most env steps a run may take: the compiled program counts them in int32.
 MAX_STEPS = 2**31 - 1
 
+# A hyperparameter's value as records and tables hold it: the variant's name, or a number.
+Value = str | float | int
+# One run's setting: its variant and each hyperparameter's value, by name.
+Setting = dict[str, Value]
+
 
 def _field(default: Any, help: str) -> Any:
     """A :class:`TrainConfig` field and its help text (which the command line shows)."""

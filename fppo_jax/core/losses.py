@@ -9,7 +9,7 @@ import jax.numpy as jnp
 
 from fppo_jax.core.config import Hyperparameters
 from fppo_jax.core.distributions import Distribution
-from fppo_jax.core.networks import Networks
+from fppo_jax.core.networks import Networks, Params
 from fppo_jax.core.variants import negative_regions, outside_clip_range
 
 
@@ -35,7 +35,7 @@ class LossInfo(NamedTuple):
 
 
 def ppo_loss(
-    params: dict[str, Any],
+    params: Params,
     batch: Batch,
     hp: Hyperparameters,
     networks: Networks,

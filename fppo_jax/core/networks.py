@@ -9,11 +9,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import Any, cast
+from typing import Any, TypedDict, cast
 
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
+from flax.typing import VariableDict
 
 from fppo_jax.core.distributions import Categorical, DiagonalGaussian, Distribution
 from fppo_jax.envs import Box, Discrete
@@ -79,13 +80,20 @@ class ValueFunction(nn.Module):
         return MLP(self.hidden_sizes, 1, 1.0)(obs)[..., 0]
 
 
+class Params(TypedDict):
+    """Both networks' parameters, each as flax's ``init`` gives it."""
+
+    policy: VariableDict
+    value: VariableDict
+
+
 @dataclasses.dataclass(frozen=True)
 class Networks:
     policy: nn.Module
     value: nn.Module
     action_space: Discrete | Box
 
-    def init(self, key: jax.Array, observation_size: int) -> dict[str, Any]:
+    def init(self, key: jax.Array, observation_size: int) -> Params:
         policy_key, value_key = jax.random.split(key)
         dummy = jnp.zeros((1, observation_size))
         return {
@@ -93,10 +101,10 @@ class Networks:
             "value": self.value.init(value_key, dummy),
         }
 
-    def distribution(self, params: dict[str, Any], obs: jax.Array) -> Distribution:
+    def distribution(self, params: Params, obs: jax.Array) -> Distribution:
         return cast(Distribution, self.policy.apply(params["policy"], obs))
 
-    def values(self, params: dict[str, Any], obs: jax.Array) -> jax.Array:
+    def values(self, params: Params, obs: jax.Array) -> jax.Array:
         return cast(jax.Array, self.value.apply(params["value"], obs))
 
     def action_noise(self, key: jax.Array, batch_shape: tuple[int, ...]) -> jax.Array:
@@ -106,7 +114,7 @@ class Networks:
         return DiagonalGaussian.noise(key, (*batch_shape, self.action_space.size))
 
 
-def policy_layers(params: dict[str, Any]) -> list[dict[str, jax.Array]]:
+def policy_layers(params: VariableDict) -> list[dict[str, jax.Array]]:
     """The policy network's dense layers in order, hidden ones first, each its ``kernel`` and
     ``bias``, from the policy's parameters, where flax names them ``MLP_0/Dense_<i>`` (as
     checkpoints and saved policies keep them; numpy_policy reads the same names without JAX)."""

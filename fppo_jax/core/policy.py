@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, cast
 import jax
 import jax.numpy as jnp
 import numpy as np
+from flax.typing import VariableDict
 
 from fppo_jax.core.networks import make_networks, policy_layers
 from fppo_jax.core.normalization import RunningStats
@@ -29,7 +30,7 @@ class Policy:
     ended with (when it normalised them); continuous actions are clipped to the action bounds,
     as in training. :meth:`act` is the same function, pure, to use inside ``jit``."""
 
-    params: dict[str, Any]  # the policy network's
+    params: VariableDict  # the policy network's
     obs_stats: RunningStats | None  # None: observations are used raw
     action_space: Discrete | Box = dataclasses.field(metadata={"static": True})
     hidden_sizes: tuple[int, ...] = dataclasses.field(metadata={"static": True})

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 
 from fppo_jax.core.config import Hyperparameters, TrainConfig
 from fppo_jax.core.distributions import Distribution
-from fppo_jax.core.networks import Networks
+from fppo_jax.core.networks import Networks, Params
 from fppo_jax.envs import Box, Environment, Step, draw_resets, resets_itself, where_done
 
 
@@ -100,7 +100,7 @@ def rollout(
     config: TrainConfig,
     env: Environment,
     networks: Networks,
-    params: dict[str, Any],
+    params: Params,
     observe: Callable[[jax.Array], jax.Array],
     envs: Envs,
     hp: Hyperparameters,

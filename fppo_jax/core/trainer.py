@@ -25,7 +25,7 @@ import optax
 from fppo_jax.core.config import Hyperparameters, TrainConfig, run_length
 from fppo_jax.core.gae import gae
 from fppo_jax.core.losses import Batch, LossInfo, ppo_loss
-from fppo_jax.core.networks import Networks, make_networks
+from fppo_jax.core.networks import Networks, Params, make_networks
 from fppo_jax.core.normalization import RunningStats
 from fppo_jax.core.objectives import Objective
 from fppo_jax.core.permutation import permutation
@@ -44,7 +44,7 @@ RETURN_WINDOW = 100  # episodes in `average_return` (the paper's average return)
 class TrainState:
     """Everything a run carries from one update to the next."""
 
-    params: dict[str, Any]
+    params: Params
     opt_state: optax.OptState
     obs_stats: RunningStats
     return_stats: RunningStats
@@ -327,7 +327,7 @@ class Trainer:
         return stats.normalize(obs) if self.config.normalize_observations else obs
 
     def _escape(
-        self, params: dict[str, Any], batch: Batch, objective: Objective
+        self, params: Params, batch: Batch, objective: Objective
     ) -> tuple[jax.Array, jax.Array]:
         """The fraction of the batch in R+ ∪ R- under `params`, and how far past the bound those
         samples sit on average (the escape speed's measures), by the surrogate's clip range."""

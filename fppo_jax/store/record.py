@@ -11,11 +11,8 @@ import dataclasses
 import json
 from typing import Any, cast
 
-from fppo_jax.core.config import TrainConfig
+from fppo_jax.core.config import Setting, TrainConfig, Value
 from fppo_jax.store.files import IncompatibleFormat, check_format, json_value
-
-# A hyperparameter's value as a record holds it: the variant's name, or a number.
-Value = str | float | int
 
 _SHAPE = [field.name for field in dataclasses.fields(TrainConfig)]
 # The keys a record's JSON holds beside TrainConfig's fields; any other is a train's setting.
@@ -40,7 +37,7 @@ class RunRecord:
     backend: str | None
     preset: str
     config: TrainConfig
-    setting: dict[str, Value] = dataclasses.field(default_factory=dict)
+    setting: Setting = dataclasses.field(default_factory=dict)
     seed: int | None = None
     grid: dict[str, list[Value]] | None = None
     seeds: tuple[int, ...] | None = None

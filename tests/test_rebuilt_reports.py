@@ -1,7 +1,8 @@
 """The reports built from recorded curves, rebuilt here by their own scripts and compared with
 the committed files: the seed study's (``verdict.py``: ``study.md`` and the three
 ``study-command/<family>/report.md``), the planned verdicts (``planned_verdict.py``:
-``spo-dpo.md``, ``baseline-shape.md``) and the dose-response (``dose_response.py``). Nothing
+``spo-dpo.md``, ``baseline-shape.md``), the dose-response (``dose_response.py``) and the tuned
+verdict (``tuned_verdict.py``: ``tuned.md``). Nothing
 is trained; the bootstrap and permutation seeds are the scripts' own, fixed, so a rebuild is
 the committed text line for line but for what names when, where and at which commit it was
 made. A number or decision edited by hand, or a report left stale by a change to its script,
@@ -28,6 +29,7 @@ REPORTS = (
     "spo-dpo.md",
     "baseline-shape.md",
     "dose_response.md",
+    "tuned.md",
 )
 # What a rebuild may write differently without any result changing: the header's machine, date,
 # command and commit, the commit a study's plan was written at, and where its parts were read.
@@ -75,6 +77,9 @@ def rebuilt(tmp_path_factory) -> Path:
             "--output",
             str(out / "dose_response.md"),
             cwd=EXPERIMENTS,
+        ),
+        run_script(
+            studies / "tuned_verdict.py", "--output", str(out / "tuned.md"), cwd=EXPERIMENTS
         ),
     ]
     for done in runs:

@@ -4,9 +4,10 @@ read from their records, with what tuning gained over each arm's default.
     python experiments/studies/tuned_verdict.py              # results/tuned.md
     python experiments/studies/tuned_verdict.py --results /tmp/r --output /tmp/tuned.md
 
-Per family recorded under <results>/tuned/<family>/ (``tune/`` by ``fppo-jax tune``,
-``study/`` by ``fppo-jax study --tuned``): the budget every arm had, the study's decisions
-(better, worse, equivalent or undecided against tuned PPO) with the seeds each took and
+Per part recorded under <results>/tuned/ (the classic tasks' ``classic/tune/`` by ``fppo-jax
+tune`` and ``classic/study/`` by ``fppo-jax study --tuned``; each MuJoCo task's
+``mujoco/tune-<task>/`` and ``mujoco/study-<task>/``): the budget every arm had, the study's
+decisions (better, worse, equivalent or undecided against tuned PPO) with the seeds each took and
 P(candidate > PPO) on the primary endpoint with a 95% percentile bootstrap interval over the
 runs the decision used; then each arm's tuned setting against its default on the test seeds, on
 the final training return (the defaults' runs are the seed study's, recorded at seeds 0–49 under
@@ -37,7 +38,11 @@ PUBLISHED = {
     "cartpole": "500.0 (CartPole-v1, capped at 500, 100k steps)",
     "acrobot": "−73.5 (1M steps)",
     "mountaincar": "−110.4 (1M steps)",
+    "hopper": "2410 (Hopper-v3, 1M steps)",
+    "halfcheetah": "5819 (HalfCheetah-v3, 1M steps)",
+    "swimmer": "282 (Swimmer-v3, 1M steps, γ = 0.9999)",
 }
+MUJOCO = ("hopper", "halfcheetah", "swimmer")  # the plan's MuJoCo tasks, in its order
 
 
 def _listed(names: list[str]) -> str:
@@ -58,22 +63,29 @@ def study_runs(study: Path, task: str) -> SweepResult:
     return merge([SweepResult.read(p.parent) for p in groups])
 
 
-def family_lines(results: Path, family: str) -> list[str]:
-    where = results / "tuned" / family
-    tune_plan = json.loads((where / "tune" / "tune.json").read_text())
-    tuned = json.loads((where / "tune" / "results.json").read_text())
-    lines = [f"## {family.capitalize()} tasks", ""]
+def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
+    """One part of the plan: the tune recorded in `tune` and its study in `study`."""
+    tune_plan = json.loads((tune / "tune.json").read_text())
+    tuned = json.loads((tune / "results.json").read_text())
+    lines = []
     budget = ", ".join(
         f"{task} {b['env_steps_per_arm']:,}" for task, b in tune_plan["budget"].items()
     )
     lines += [
-        f"Tune ([report](tuned/{family}/tune/report.md), at {tune_plan['commit'][:7]}): "
+        f"Tune ([report]({tune.relative_to(results)}/report.md), at {tune_plan['commit'][:7]}): "
         f"{tune_plan['trials']} trials per arm and task, {len(tune_plan['seeds'])} tuning seeds "
         f"per trial, η = {tune_plan['eta']}; every arm trained the same env steps per task "
         f"({budget}).",
         "",
     ]
     for task, arms in tuned.items():
+        best = ", ".join(
+            f"{arm} {found['chosen']['score']:.1f} (trial {found['chosen']['trial']}; its default "
+            f"{found['default']['first_rung_score']:.1f} at the first rung)"
+            for arm, found in arms.items()
+            if found["chosen"] and found["chosen"]["score"] is not None
+        )
+        lines += [f"Best trial per arm on {task}'s tuning seeds at the full budget: {best}.", ""]
         tied = [arm for arm, found in arms.items() if found.get("tied_rungs")]
         if tied:
             lines += [
@@ -82,15 +94,15 @@ def family_lines(results: Path, family: str) -> list[str]:
                 "chose among those alone.",
                 "",
             ]
-    study = where / "study"
     if not (study / "decisions.json").exists():
-        return [*lines, "The study on fresh seeds has not run yet.", ""]
+        started = "has not decided its first look yet" if study.exists() else "has not run yet"
+        return [*lines, f"The study on fresh seeds {started}.", ""]
     plan = json.loads((study / "plan.json").read_text())
     decided = json.loads((study / "decisions.json").read_text())
     endpoint = plan["primary_endpoint"]
     state = "finished" if decided["finished"] else "**not finished** (some comparisons await seeds)"
     lines += [
-        f"Study on test seeds ([report](tuned/{family}/study/report.md), at "
+        f"Study on test seeds ([report]({study.relative_to(results)}/report.md), at "
         f"{plan['commit'][:7]}): {state}; primary endpoint {endpoint}, margin "
         f"{plan.get('margin')}, family-wise level {plan['level']} over "
         f"{len(plan['comparisons'])} comparisons.",
@@ -153,34 +165,26 @@ def family_lines(results: Path, family: str) -> list[str]:
 
 
 def mujoco_lines(results: Path) -> list[str]:
-    """The MuJoCo family's parts so far: each task's tune (its own part) and what is left."""
+    """The MuJoCo family, a part per task (its tune, then its study), and what is left."""
+    where = results / "tuned" / "mujoco"
     lines = ["## MuJoCo tasks", ""]
-    tunes = sorted((results / "tuned" / "mujoco").glob("tune-*/results.json"))
-    for path in tunes:
-        task = path.parent.name.removeprefix("tune-")
-        found = json.loads(path.read_text())[task]
-        plan = json.loads((path.parent / "tune.json").read_text())
-        scores = ", ".join(
-            f"{arm} {arm_found['chosen']['score']:.1f} (trial {arm_found['chosen']['trial']}, "
-            f"default {arm_found['default']['first_rung_score']:.1f} at the first rung)"
-            for arm, arm_found in found.items()
-            if arm_found["chosen"] and arm_found["chosen"]["score"] is not None
-        )
-        lines += [
-            f"- {task}: tuned ([report](tuned/mujoco/{path.parent.name}/report.md), at "
-            f"{plan['commit'][:7]}), every arm "
-            f"{plan['budget'][task]['env_steps_per_arm']:,} env steps; best trial per arm on the "
-            f"tuning seeds at the full budget: {scores}. Its study on fresh seeds has not run.",
-        ]
-    done = {path.parent.name.removeprefix("tune-") for path in tunes}
-    left = [task for task in ("hopper", "halfcheetah", "swimmer") if task not in done]
+    done = [task for task in MUJOCO if (where / f"tune-{task}" / "results.json").exists()]
+    for task in done:
+        lines += [f"### {task}", ""]
+        lines += part_lines(results, where / f"tune-{task}", where / f"study-{task}")
+    left = [f"the tune of {task}" for task in MUJOCO if task not in done]
+    for task in MUJOCO:
+        decisions = where / f"study-{task}" / "decisions.json"
+        if not decisions.exists():
+            left.append(f"the study of {task}")
+        elif not json.loads(decisions.read_text())["finished"]:
+            left.append(f"the rest of {task}'s study")
     lines += [
-        "",
-        f"Not run yet: {', '.join(f'the tune of {t}' for t in left) or 'no tune'}"
-        f"{'; ' if left else ''}every MuJoCo study. The plan's estimate: each task's tune trains "
-        "6 arms × 4.65M env steps (about 15 minutes at native MuJoCo's ~30k env steps/s on 2 "
-        "cores), its study up to 50 seeds × 6 arms × 1M env steps (about 3 hours per task at "
-        "that rate).",
+        f"Not run yet: {', '.join(left)}. The plan's estimate: each task's tune trains 6 arms "
+        "× 4.65M env steps (about 15 minutes at native MuJoCo's ~30k env steps/s on 2 cores), "
+        "its study up to 50 seeds × 6 arms × 1M env steps (about 3 hours per task at that rate)."
+        if left
+        else "Every MuJoCo task the plan names is recorded.",
         "",
     ]
     return lines
@@ -191,11 +195,6 @@ def main() -> None:
     parser.add_argument("--results", type=Path, default=RESULTS, help="where the records are")
     parser.add_argument("--output", type=Path, help="the write-up (default: <results>/tuned.md)")
     args = parser.parse_args()
-    families = [
-        family
-        for family in ("classic", "mujoco")
-        if (args.results / "tuned" / family / "tune" / "results.json").exists()
-    ]
     lines = [
         *header("Tuned against tuned: does a variant beat PPO when every arm is tuned?"),
         "",
@@ -207,8 +206,10 @@ def main() -> None:
         "(the decisions are; the studies' reports give the repeated intervals).",
         "",
     ]
-    for family in families:
-        lines += family_lines(args.results, family)
+    classic = args.results / "tuned" / "classic"
+    if (classic / "tune" / "results.json").exists():
+        lines += ["## Classic tasks", ""]
+        lines += part_lines(args.results, classic / "tune", classic / "study")
     lines += mujoco_lines(args.results)
     output = args.output or args.results / "tuned.md"
     write_result(output, lines)

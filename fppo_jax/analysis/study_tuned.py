@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fppo_jax.analysis.study_runs import Source
 from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
@@ -14,6 +14,9 @@ from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats.sequential import Design
 from fppo_jax.store.record import RunRecord
+
+if TYPE_CHECKING:
+    from fppo_jax.analysis.tuning_report import TrialAcrossTasks
 
 ACROSS_TASKS = (
     "across tasks: per arm, one trial for every task (a drawn trial is the same point on each; "
@@ -104,7 +107,7 @@ def _across_tasks(
     tune_plan: dict[str, Any],
     results: dict[str, Any],
     everyone: list[Surrogate],
-) -> dict[str, dict[str, Any]]:
+) -> dict[str, TrialAcrossTasks]:
     """Each variant's trial chosen for all the tune's tasks by the rule of
     :func:`~fppo_jax.analysis.tuning_report.across_tasks` (its trial, rung and mean normalised
     score), from the rungs' scores the tune recorded; refused for a tune of one task, one whose

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import shutil
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,6 +24,9 @@ from fppo_jax.run.results import SweepResult
 from fppo_jax.run.sweeps import expand_grid, sweep
 from fppo_jax.stats import statistics
 from fppo_jax.store.record import RunRecord
+
+if TYPE_CHECKING:
+    from fppo_jax.analysis.study_tuned import TunedSettings
 
 # What the study sets itself for every group's sweep.
 OWN_SETTINGS = ("log_dir", "checkpoint_dir", "resume", "checkpoint_every", "keep", "callback")
@@ -42,7 +45,7 @@ class Source:
     expected: dict[str, tuple[RunRecord, dict[str, dict[str, Any]]]]
     identity: dict[str, Any]
     pool: Pool | None
-    tuned: dict[str, Any] | None  # a tune's chosen settings, by task and variant
+    tuned: TunedSettings | None  # a tune's chosen settings, by task and variant
     # with_defaults: the source of each arm's default setting, trained beside its tuned one
     defaults: Source | None = None
 
@@ -56,7 +59,7 @@ class Source:
         chunk: int | None,
         part: tuple[int, int] | None,
         reuse: list[str],
-        tuned: dict[str, Any] | None = None,
+        tuned: TunedSettings | None = None,
     ) -> Source:
         """The study's source of runs, every setting of every task checked and the recorded
         sweeps of `reuse` read, all before the plan is written: a mistyped directory or a

@@ -5,8 +5,9 @@ seeds."""
 from __future__ import annotations
 
 import json
+from collections.abc import Collection
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, NotRequired, TypedDict, cast
 
 from fppo_jax.analysis.study_runs import Source
 from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
@@ -14,6 +15,10 @@ from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats.sequential import Design
 from fppo_jax.store.record import RunRecord
+
+if TYPE_CHECKING:
+    from fppo_jax.analysis.tuning import TunePlan
+    from fppo_jax.analysis.tuning_report import ArmResults, TrialAcrossTasks
 
 ACROSS_TASKS = (
     "across tasks: per arm, one trial for every task (a drawn trial is the same point on each; "
@@ -26,15 +31,30 @@ ACROSS_TASKS = (
 )
 
 
+class TunedSettings(TypedDict):
+    """What a study on a tune's settings records of the tune (its plan's ``tuned``): where it
+    is, its plan's digest, its tuning seeds, each task's protocol (a run record's JSON,
+    :meth:`RunRecord.to_json`), the setting of each variant on each task, and where chosen
+    across tasks, the rule and each variant's trial."""
+
+    directory: str
+    plan_digest: str
+    tuning_seeds: list[int]
+    protocol: dict[str, dict[str, Any]]
+    selection: NotRequired[str]
+    trials: NotRequired[dict[str, TrialAcrossTasks]]
+    settings: dict[str, dict[str, dict[str, float]]]
+
+
 def tuned_settings(
     directory: str | Path,
     tasks: list[str],
     everyone: list[Surrogate],
     design: Design,
-    settings: dict[str, Any],
+    settings: Collection[str],
     across_tasks: bool = False,
     with_defaults: bool = False,
-) -> dict[str, Any]:
+) -> TunedSettings:
     """What a study on a tune's chosen settings records of the tune in `directory`: where it is,
     its plan's digest, its tuning seeds and each variant's chosen setting on each task (with
     `across_tasks`, the trial chosen for all the tune's tasks, and the rule); refused if the
@@ -51,8 +71,8 @@ def tuned_settings(
             f"the tune in {directory} is not finished ({RESULTS_FILE} is missing): run it to "
             "the end first"
         )
-    tune_plan = json.loads((directory / TUNE_PLAN).read_text())
-    results = json.loads(results_path.read_text())
+    tune_plan = cast("TunePlan", json.loads((directory / TUNE_PLAN).read_text()))
+    results = cast("dict[str, dict[str, ArmResults]]", json.loads(results_path.read_text()))
     given = sorted(set(settings) & set(sweepable(everyone)))
     if given:
         raise InvalidInput(
@@ -66,7 +86,7 @@ def tuned_settings(
         if variant.name not in tune_plan["variants"]:
             raise InvalidInput(f"the tune in {directory} did not tune {variant.name}")
     trials = _across_tasks(directory, tune_plan, results, everyone) if across_tasks else None
-    chosen: dict[str, dict[str, Any]] = {}
+    chosen: dict[str, dict[str, dict[str, float]]] = {}
     for task in tasks:
         for variant in everyone:
             found = results[task][variant.name]
@@ -88,23 +108,34 @@ def tuned_settings(
             f"the tune in {directory} used seeds {overlap} that this study would test on: a "
             "test needs seeds the tune never saw (tune on others)"
         )
+    where, protocol = str(directory.absolute()), {t: tune_plan["protocol"][t] for t in tasks}
+    if trials is None:
+        return {
+            "directory": where,
+            "plan_digest": digest,
+            "tuning_seeds": tune_plan["seeds"],
+            "protocol": protocol,
+            "settings": chosen,
+        }
+    # The rule recorded only where chosen across tasks: a plan from before the option is one
+    # without.
     return {
-        "directory": str(directory.absolute()),
+        "directory": where,
         "plan_digest": digest,
         "tuning_seeds": tune_plan["seeds"],
-        "protocol": {task: tune_plan["protocol"][task] for task in tasks},
-        # recorded only where chosen across tasks: a plan from before the option is one without
-        **({} if trials is None else {"selection": ACROSS_TASKS, "trials": trials}),
+        "protocol": protocol,
+        "selection": ACROSS_TASKS,
+        "trials": trials,
         "settings": chosen,
     }
 
 
 def _across_tasks(
     directory: Path,
-    tune_plan: dict[str, Any],
-    results: dict[str, Any],
+    tune_plan: TunePlan,
+    results: dict[str, dict[str, ArmResults]],
     everyone: list[Surrogate],
-) -> dict[str, dict[str, Any]]:
+) -> dict[str, TrialAcrossTasks]:
     """Each variant's trial chosen for all the tune's tasks by the rule of
     :func:`~fppo_jax.analysis.tuning_report.across_tasks` (its trial, rung and mean normalised
     score), from the rungs' scores the tune recorded; refused for a tune of one task, one whose
@@ -139,7 +170,9 @@ def _across_tasks(
     return trials
 
 
-def _check_trial_0(directory: Path, task: str, variant: Surrogate, trial_0: dict[str, Any]) -> None:
+def _check_trial_0(
+    directory: Path, task: str, variant: Surrogate, trial_0: dict[str, float]
+) -> None:
     """Refuses a tune whose trial 0 of `variant` on `task` is not the default setting that the
     study trains beside the tuned one (defaults changed since the tune): the gain from tuning
     would be measured over another setting than the tune's."""

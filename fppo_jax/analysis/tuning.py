@@ -38,13 +38,14 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, NotRequired, TypedDict, cast
 
 import numpy as np
 
 from fppo_jax.analysis.studies import PART_LOCK_WAIT, names_of_tasks
 from fppo_jax.analysis.study_plan import check_plan, commit
 from fppo_jax.analysis.tuning_draws import draw_population, import_optuna, open_storage
+from fppo_jax.analysis.tuning_report import ArmResults, write_report
 from fppo_jax.analysis.tuning_rungs import CALLS_A_RUNG, TaskTune
 from fppo_jax.core.checks import check_part, check_seeds, positive_int
 from fppo_jax.core.config import CONFIG_FIELDS
@@ -97,6 +98,67 @@ SELECTION = "per task and arm: the trial with the best score at the last rung (t
 _RECORDED_ONLY = frozenset({"commit", "sampler.package"})
 
 
+# A run-shape setting's value, as a tune's plan records it for every run: a TrainConfig field's
+# (hidden_sizes a sequence), total_steps's (None: the task's budget), the preset, the backend or
+# the chunk.
+RunShapeValue = int | bool | str | Sequence[int] | None
+
+
+class RungPlan(TypedDict):
+    """A rung in ``tune.json``: its live trials per arm, the update it ends at and the env steps
+    a run has trained by then."""
+
+    trials: int
+    ends_at_update: int
+    env_steps_per_run: int
+
+
+class TaskBudget(TypedDict):
+    """A task's budget in ``tune.json``: the env steps every arm trains over the rungs, those
+    of one full run, and the rungs."""
+
+    env_steps_per_arm: int
+    env_steps_per_full_run: int
+    rungs: list[RungPlan]
+
+
+class Axis(TypedDict):
+    """An axis of a search space in ``tune.json`` (:meth:`Interval.to_json`)."""
+
+    low: float
+    high: float
+    scale: str
+
+
+class SamplerRecord(TypedDict):
+    """The sampler in ``tune.json``: its name, its seed and the Optuna release that ran it."""
+
+    name: str
+    seed: int
+    package: str
+
+
+class TunePlan(TypedDict):
+    """A tune's plan, ``tune.json`` (:func:`make_plan`)."""
+
+    tasks: list[str]
+    variants: list[str]
+    baseline: str
+    trials: int
+    trial_0: str
+    seeds: list[int]
+    eta: int
+    budget: dict[str, TaskBudget]
+    space: dict[str, dict[str, Axis]]  # per arm, its axes by hyperparameter
+    sampler: SamplerRecord
+    score: str
+    selection: str
+    settings: dict[str, RunShapeValue]
+    protocol: dict[str, dict[str, Any]]  # per task, its run record's JSON (RunRecord.to_json)
+    surrogates: NotRequired[dict[str, dict[str, Any]]]  # own surrogates' identities, if any
+    commit: str
+
+
 @dataclasses.dataclass(frozen=True)
 class Rungs:
     """A successive-halving schedule: the live `trials` of each arm at each rung, the update
@@ -117,7 +179,7 @@ class Rungs:
             else 1
         )
 
-    def to_json(self, samples_per_update: int) -> list[dict[str, int]]:
+    def to_json(self, samples_per_update: int) -> list[RungPlan]:
         return [
             {"trials": n, "ends_at_update": end, "env_steps_per_run": end * samples_per_update}
             for n, end in zip(self.trials, self.ends, strict=True)
@@ -155,14 +217,20 @@ class TuneResult:
     """A tune's `plan` (as ``tune.json`` has it), `results` (as ``results.json``: per task and
     arm, the chosen setting and what the rungs measured) and whether it is `finished`."""
 
-    plan: dict[str, Any]
-    results: dict[str, dict[str, Any]]
+    plan: TunePlan
+    results: dict[str, dict[str, ArmResults]]
     finished: bool
     directory: Path
 
-    def chosen(self, task: str, arm: str) -> dict[str, Any]:
-        """The setting chosen for `arm` on `task`."""
-        return cast(dict[str, Any], self.results[task][arm]["chosen"]["setting"])
+    def chosen(self, task: str, arm: str) -> dict[str, float]:
+        """The setting chosen for `arm` on `task` (refused where every trial diverged)."""
+        chosen = self.results[task][arm]["chosen"]
+        if chosen is None:
+            raise InvalidInput(
+                f"the tune in {self.directory} chose no setting for {arm} on {task}: every "
+                "trial diverged"
+            )
+        return chosen["setting"]
 
 
 def tune(
@@ -273,7 +341,12 @@ def tune(
         optuna.logging.set_verbosity(optuna.logging.WARNING)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-            plan = check_plan(output, plan, "a tune", PLAN_FILE, _RECORDED_ONLY)
+            # check_plan takes and gives plans as JSON; the one recorded equals this one but
+            # for the fields recorded only.
+            recorded = check_plan(
+                output, cast(dict[str, Any], plan), "a tune", PLAN_FILE, _RECORDED_ONLY
+            )
+            plan = cast(TunePlan, recorded)
             store = open_storage(
                 optuna, storage or f"sqlite:///{(output / STORAGE_FILE).absolute()}"
             )
@@ -308,8 +381,6 @@ def tune(
     results = {each.task: each.results(baseline) for each in tuned if each.finished}
     finished = len(results) == len(tasks)
     if finished and part is None:
-        from fppo_jax.analysis.tuning_report import write_report
-
         write_json(output / RESULTS_FILE, results)
         write_report(output, plan, results)
     return TuneResult(plan, results, finished, output)
@@ -370,12 +441,12 @@ def make_plan(
     baseline: str,
     sampler: str,
     sampler_seed: int,
-    settings: dict[str, Any],
-) -> dict[str, Any]:
+    settings: dict[str, RunShapeValue],
+) -> TunePlan:
     """What ``tune.json`` records, before any run."""
     from importlib.metadata import version
 
-    budget = {}
+    budget: dict[str, TaskBudget] = {}
     for task, run in runs.items():
         samples = run.config.samples_per_update
         updates = schedules[task].updates_per_arm(len(seeds))
@@ -385,7 +456,7 @@ def make_plan(
             "rungs": schedules[task].to_json(samples),
         }
     return cast(
-        dict[str, Any],
+        TunePlan,
         json_value(
             {
                 "tasks": list(runs),

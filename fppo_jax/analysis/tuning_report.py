@@ -5,7 +5,9 @@ default (Jordan et al., "Evaluating the Performance of Reinforcement Learning Al
 ICML 2020), the spread of the first rung's scores over the space (the arm's sensitivity to its
 setting: quartiles, sample std and range), the trials that diverged, and Eimer et al.'s
 reporting checklist (space, budget, seeds, selection, test) filled in from the plan.
-``tuning_curves.png`` draws the curves.
+``tuning_curves.png`` draws the curves. The types here are the shapes of the files a tune
+records for them: a rung's ``scores.json`` (:class:`RungScores`) and ``results.json``'s per task
+and arm (:class:`ArmResults`).
 
 The band on the tuning curve is the first rung's, where every trial has trained the same
 length on a setting drawn from the space: the expected best of n settings drawn from those
@@ -21,7 +23,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
 
@@ -30,8 +32,134 @@ from fppo_jax.errors import InvalidInput
 from fppo_jax.stats.statistics import CONFIDENCE, RESAMPLES, check_confidence
 from fppo_jax.store.files import write_atomically
 
+if TYPE_CHECKING:
+    from fppo_jax.analysis.tuning import Rungs, TunePlan
 
-def ranked(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+
+class TrialScore(TypedDict):
+    """A trial's row in a rung's ``scores.json``: its score (the mean over the tuning seeds;
+    None where a run finished no episode), each seed's, and whether a run diverged."""
+
+    trial: int
+    score: float | None
+    seed_scores: list[float | None]
+    diverged: bool
+
+
+class ArmRung(TypedDict):
+    """An arm's part of a rung's ``scores.json``: its live trials' rows, and the trials that go
+    on to the next rung."""
+
+    trials: list[TrialScore]
+    survivors: list[int]
+
+
+class RungScores(TypedDict):
+    """A rung's ``scores.json``: each arm's part, and the seconds the rung trained and
+    compiled."""
+
+    arms: dict[str, ArmRung]
+    seconds: float
+    compile_seconds: float
+
+
+class Chosen(TypedDict):
+    """The trial chosen for an arm on a task, its score at the last rung and its setting."""
+
+    trial: int
+    score: float | None
+    setting: dict[str, float]
+
+
+class DefaultResult(TypedDict):
+    """Trial 0, the arm's default: its setting, its first rung's score, and the last rung it
+    reached with its score there."""
+
+    setting: dict[str, float]
+    first_rung_score: float | None
+    last_rung_reached: int
+    score_there: float | None
+
+
+class CurvePoint(TypedDict):
+    """A point of the tuning curve: the best score at `rung`, of its `trials`, against the env
+    steps the arm had spent by its end."""
+
+    rung: int
+    env_steps: int
+    best: float | None
+    trials: int
+
+
+class BaselineBeaten(TypedDict):
+    """How many of the arm's `sampled` settings scored above the baseline's default on the
+    first rung."""
+
+    baseline: str
+    baseline_default_score: float | None
+    sampled: int
+    beat: int
+
+
+class Spread(TypedDict):
+    """The first rung's scores over the space: quartiles, range and sample std (None where no
+    trial scored; the std also for one score)."""
+
+    min: float | None
+    q1: float | None
+    median: float | None
+    q3: float | None
+    max: float | None
+    sample_std: NotRequired[float | None]  # tunes from before it lack it
+
+
+class ExpectedBestPoint(TypedDict):
+    """:func:`expected_best` at n = `settings`, with its band, at the env steps they cost."""
+
+    settings: int
+    env_steps: int
+    expected_best: float
+    low: float
+    high: float
+
+
+class ExpectedBestCurve(TypedDict):
+    """The expected best of 1 … trials first-rung settings, from the `scored_trials`, with the
+    bootstrap band's level, replicates and seed."""
+
+    scored_trials: int
+    confidence: float
+    resamples: int
+    seed: int
+    points: list[ExpectedBestPoint]
+
+
+class ArmResults(TypedDict):
+    """What ``results.json`` holds of an arm on one task (see the module). Tunes from before
+    `trials`, `expected_best` and `tied_rungs` were recorded lack them."""
+
+    chosen: Chosen | None  # None: every trial diverged
+    default: DefaultResult
+    curve: list[CurvePoint]
+    env_steps: int
+    beat_baseline_default: BaselineBeaten
+    trials: NotRequired[list[dict[str, float]]]  # each trial's setting, by number
+    first_rung_spread: Spread
+    expected_best: NotRequired[ExpectedBestCurve | None]  # None: no trial scored
+    diverged_trials: list[int]
+    tied_rungs: NotRequired[list[int]]
+
+
+class TrialAcrossTasks(TypedDict):
+    """An arm's trial chosen for all of a tune's tasks (:func:`across_tasks`): the rung its
+    trials were compared at and its mean normalised score there."""
+
+    trial: int
+    rung: int
+    normalised_score: float
+
+
+def ranked(rows: list[TrialScore]) -> list[TrialScore]:
     """A rung's trials best first, those that diverged left out: by score, then those without
     one (no episode finished), ties by trial number."""
     alive = [row for row in rows if not row["diverged"]]
@@ -74,7 +202,7 @@ def expected_best(
     return weights @ np.sort(scores), low, high
 
 
-def _score(rows: list[dict[str, Any]], trial: int) -> float | None:
+def _score(rows: list[TrialScore], trial: int) -> float | None:
     found = [row for row in rows if row["trial"] == trial]
     return found[0]["score"] if found else None
 
@@ -82,12 +210,12 @@ def _score(rows: list[dict[str, Any]], trial: int) -> float | None:
 def arm_results(
     arm: str,
     baseline: str,
-    rungs_scores: list[dict[str, Any]],
+    rungs_scores: list[RungScores],
     settings: dict[str, list[dict[str, float]]],
-    rungs: Any,
+    rungs: Rungs,
     seeds: int,
     samples_per_update: int,
-) -> dict[str, Any]:
+) -> ArmResults:
     """What ``results.json`` holds of `arm` on one task (see the module)."""
     first = rungs_scores[0]["arms"][arm]["trials"]
     finite = np.array([row["score"] for row in first if row["score"] is not None], float)
@@ -98,7 +226,8 @@ def arm_results(
         for row in sampled
         if row["score"] is not None and base is not None and row["score"] > base
     ]
-    curve, reached, spent = [], {"rung": 0, "score": _score(first, 0)}, 0
+    curve: list[CurvePoint] = []
+    reached, score_there, spent = 0, _score(first, 0), 0
     starts = (0, *rungs.ends[:-1])
     for r, scores in enumerate(rungs_scores):
         rows = scores["arms"][arm]["trials"]
@@ -106,12 +235,16 @@ def arm_results(
         best = max((row["score"] for row in rows if row["score"] is not None), default=None)
         curve.append({"rung": r, "env_steps": spent, "best": best, "trials": len(rows)})
         if _score(rows, 0) is not None:
-            reached = {"rung": r, "score": _score(rows, 0)}
-    best = ranked(rungs_scores[-1]["arms"][arm]["trials"])
-    chosen = None
-    if best:
-        trial = best[0]["trial"]
-        chosen = {"trial": trial, "score": best[0]["score"], "setting": settings[arm][trial]}
+            reached, score_there = r, _score(rows, 0)
+    last_rung = ranked(rungs_scores[-1]["arms"][arm]["trials"])
+    chosen: Chosen | None = None
+    if last_rung:
+        top = last_rung[0]
+        chosen = {
+            "trial": top["trial"],
+            "score": top["score"],
+            "setting": settings[arm][top["trial"]],
+        }
     diverged = sorted(
         {row["trial"] for s in rungs_scores for row in s["arms"][arm]["trials"] if row["diverged"]}
     )
@@ -120,8 +253,8 @@ def arm_results(
         "default": {
             "setting": settings[arm][0],
             "first_rung_score": _score(first, 0),
-            "last_rung_reached": reached["rung"],
-            "score_there": reached["score"],
+            "last_rung_reached": reached,
+            "score_there": score_there,
         },
         "curve": curve,
         "env_steps": spent,
@@ -139,7 +272,7 @@ def arm_results(
     }
 
 
-def across_tasks(rungs: dict[str, list[dict[str, Any]]], arm: str) -> dict[str, Any] | None:
+def across_tasks(rungs: dict[str, list[RungScores]], arm: str) -> TrialAcrossTasks | None:
     """`arm`'s one trial for all the tasks of `rungs` (each task's rungs' scores, as
     ``scores.json`` records them), as Patterson, Neumann, White and White ("Empirical Design in
     Reinforcement Learning", 2024) choose one setting across environments: on scores normalised
@@ -153,15 +286,16 @@ def across_tasks(rungs: dict[str, list[dict[str, Any]]], arm: str) -> dict[str, 
     apart), and the best mean over the tasks wins, ties by trial number. Returns the trial, the
     rung and its mean normalised score; None if no trial of `arm` scored on every task."""
 
-    def scored(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-        return [row for row in rows if row["score"] is not None and not row["diverged"]]
+    def scored(rows: list[TrialScore]) -> dict[int, float]:
+        """The trials of `rows` that scored and did not diverge, with their scores."""
+        return {
+            row["trial"]: row["score"]
+            for row in rows
+            if row["score"] is not None and not row["diverged"]
+        }
 
     deepest_by_task = [
-        {
-            row["trial"]: r
-            for r, rung in enumerate(task)
-            for row in scored(rung["arms"][arm]["trials"])
-        }
+        {trial: r for r, rung in enumerate(task) for trial in scored(rung["arms"][arm]["trials"])}
         for task in rungs.values()
     ]
     everyone = {trial for deepest in deepest_by_task for trial in deepest}
@@ -174,36 +308,46 @@ def across_tasks(rungs: dict[str, list[dict[str, Any]]], arm: str) -> dict[str, 
         normalised = []
         for task in rungs.values():
             every = [
-                row["score"] for a in task[rung]["arms"].values() for row in scored(a["trials"])
+                score for a in task[rung]["arms"].values() for score in scored(a["trials"]).values()
             ]
             low, high = min(every), max(every)
-            own = next(r["score"] for r in task[rung]["arms"][arm]["trials"] if r["trial"] == trial)
+            own = scored(task[rung]["arms"][arm]["trials"])[trial]
             normalised.append((own - low) / (high - low) if high > low else 0.0)
         means[trial] = float(np.mean(normalised))
     best = max(means, key=lambda t: (means[t], -t))
     return {"trial": best, "rung": rung, "normalised_score": means[best]}
 
 
-def _tied(rung: dict[str, Any]) -> bool:
+def _tied(rung: ArmRung) -> bool:
     """Whether a rung kept some of its trials and scored them all alike, so that the trial
     numbers chose its survivors."""
     scores = {row["score"] for row in rung["trials"] if not row["diverged"]}
     return len(rung["trials"]) > len(rung["survivors"]) and len(scores) == 1
 
 
-def _spread(x: np.ndarray) -> dict[str, float | None]:
+def _spread(x: np.ndarray) -> Spread:
     """The quartiles and the sample std of scores `x` (None for the std of one score)."""
     if not x.size:
-        return {name: None for name in ("min", "q1", "median", "q3", "max", "sample_std")}
-    q = np.percentile(x, [0, 25, 50, 75, 100])
-    spread: dict[str, float | None] = dict(
-        zip(("min", "q1", "median", "q3", "max"), map(float, q), strict=True)
-    )
-    spread["sample_std"] = float(np.std(x, ddof=1)) if x.size > 1 else None
-    return spread
+        return {
+            "min": None,
+            "q1": None,
+            "median": None,
+            "q3": None,
+            "max": None,
+            "sample_std": None,
+        }
+    low, q1, median, q3, high = map(float, np.percentile(x, [0, 25, 50, 75, 100]))
+    return {
+        "min": low,
+        "q1": q1,
+        "median": median,
+        "q3": q3,
+        "max": high,
+        "sample_std": float(np.std(x, ddof=1)) if x.size > 1 else None,
+    }
 
 
-def _expected_best_curve(x: np.ndarray, trials: int, env_steps: int) -> dict[str, Any] | None:
+def _expected_best_curve(x: np.ndarray, trials: int, env_steps: int) -> ExpectedBestCurve | None:
     """:func:`expected_best` of the first rung's finite scores `x` for 1 … `trials` settings,
     each point at the env steps its settings cost on the first rung (`env_steps` for all
     `trials`). Trials without a score (diverged, or no episode) are not among the draws: the
@@ -233,7 +377,7 @@ def _number(x: float | None) -> str:
     return "—" if x is None or not math.isfinite(x) else f"{x:.1f}"
 
 
-def write_report(output: Path, plan: dict[str, Any], results: dict[str, Any]) -> None:
+def write_report(output: Path, plan: TunePlan, results: dict[str, dict[str, ArmResults]]) -> None:
     """``report.md`` and ``tuning_curves.png`` in `output`."""
     lines = [
         "# Tune",
@@ -317,7 +461,7 @@ def write_report(output: Path, plan: dict[str, Any], results: dict[str, Any]) ->
     _figure(output, results)
 
 
-def _first_rung_lines(trials: int, arms: dict[str, Any]) -> list[str]:
+def _first_rung_lines(trials: int, arms: dict[str, ArmResults]) -> list[str]:
     """The first rung's table: each arm's sensitivity (the spread of its scores over the
     space) and the expected best of `trials` settings with its band, and which bands are wide."""
     lines = [
@@ -334,7 +478,8 @@ def _first_rung_lines(trials: int, arms: dict[str, Any]) -> list[str]:
     wide = []
     for arm, found in arms.items():
         spread, band = found["first_rung_spread"], found["expected_best"]
-        width = None if spread["min"] is None else spread["max"] - spread["min"]
+        low, high = spread["min"], spread["max"]
+        width = None if low is None or high is None else high - low
         shown, scored = "—", 0
         if band is not None:
             first, last = band["points"][0], band["points"][-1]
@@ -368,7 +513,7 @@ def _seed_text(seeds: list[int]) -> str:
     return ", ".join(map(str, seeds))
 
 
-def _space_text(plan: dict[str, Any]) -> str:
+def _space_text(plan: TunePlan) -> str:
     spaces = plan["space"]
     first = next(iter(spaces.values()))
     own = {
@@ -384,7 +529,7 @@ def _space_text(plan: dict[str, Any]) -> str:
     return "; ".join(parts)
 
 
-def _figure(output: Path, results: dict[str, Any]) -> None:
+def _figure(output: Path, results: dict[str, dict[str, ArmResults]]) -> None:
     import matplotlib.pyplot as plt
 
     tasks = list(results)

@@ -11,8 +11,9 @@ import json
 import math
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any, TypedDict, cast
 
 import jax
 import numpy as np
@@ -21,7 +22,7 @@ from fppo_jax.analysis.tuning_draws import setting_of
 
 if TYPE_CHECKING:
     from fppo_jax.analysis.tuning import Rungs
-from fppo_jax.analysis.tuning_report import ranked
+from fppo_jax.analysis.tuning_report import ArmResults, ArmRung, RungScores, TrialScore, ranked
 from fppo_jax.core.config import (
     stack_hyperparameters,
     with_budget,
@@ -44,6 +45,19 @@ _STATE, _SCORES = "state.npz", "scores.json"
 
 
 CALLS_A_RUNG = 10  # compiled calls the first rung is split into, at least, for progress
+
+
+class ShareScores(TypedDict):
+    """A share's ``part-<K>/scores.json``: which `part` (K, N) of the rung it is, its runs
+    (arm, trial, seed, in the rung's order), each run's score (None where no episode finished)
+    and whether it diverged, and the seconds it trained and compiled."""
+
+    part: list[int]
+    runs: Sequence[Sequence[str | int]]
+    scores: list[float | None]
+    diverged: list[bool]
+    seconds: float
+    compile_seconds: float
 
 
 @dataclasses.dataclass
@@ -88,7 +102,7 @@ class TaskTune:
             progress,
         )
         self.live = {arm.name: list(range(len(self.settings[arm.name]))) for arm in arms}
-        self.scores: list[dict[str, Any]] = []  # each recorded rung's
+        self.scores: list[RungScores] = []  # each recorded rung's
 
     @property
     def finished(self) -> bool:
@@ -101,7 +115,7 @@ class TaskTune:
         while not self.finished:
             where = self._where(len(self.scores))
             if (where / _SCORES).exists():
-                self._recorded(json.loads((where / _SCORES).read_text()))
+                self._recorded(cast(RungScores, json.loads((where / _SCORES).read_text())))
             elif join and any(where.glob(f"part-*/{_SCORES}")):
                 self._record(self._read_shares())
             else:
@@ -140,7 +154,7 @@ class TaskTune:
         size = min(self.chunk or runs, runs)
         return size, -(-runs // size)
 
-    def _recorded(self, scores: dict[str, Any]) -> None:
+    def _recorded(self, scores: RungScores) -> None:
         """A rung's scores: told to Optuna (again, if a kill came between), and its survivors
         made the live trials."""
         rung = len(self.scores)
@@ -185,7 +199,7 @@ class TaskTune:
             _save_leaves(where / _STATE, [np.concatenate(leaf)[keep] for leaf in leaves])
         seconds = sum(share.seconds for share in shares)
         compile_seconds = sum(share.compile_seconds for share in shares)
-        scores = {"arms": arms, "seconds": seconds, "compile_seconds": compile_seconds}
+        scores: RungScores = {"arms": arms, "seconds": seconds, "compile_seconds": compile_seconds}
         write_json(where / _SCORES, scores)
         self._recorded(scores)
         best = ", ".join(
@@ -217,7 +231,7 @@ class TaskTune:
         where.mkdir(parents=True, exist_ok=True)
         if share.leaves:
             _save_leaves(where / _STATE, share.leaves)
-        recorded = {
+        recorded: ShareScores = {
             "part": [k, n],
             "runs": share.runs,
             "scores": [float(v) if math.isfinite(v) else None for v in share.last],
@@ -233,9 +247,9 @@ class TaskTune:
         each checked to hold its runs; a missing one is refused by name."""
         rung, order = len(self.scores), self._order()
         where = self._where(rung)
-        found = {}
+        found: dict[tuple[int, ...], ShareScores] = {}
         for path in where.glob(f"part-*/{_SCORES}"):
-            recorded = json.loads(path.read_text())
+            recorded = cast(ShareScores, json.loads(path.read_text()))
             found[tuple(recorded["part"])] = recorded
         splits = sorted({n for _, n in found})
         if len(splits) > 1:
@@ -392,12 +406,12 @@ class TaskTune:
         last: np.ndarray | None,
         diverged: np.ndarray,
         rung: int,
-    ) -> dict[str, Any]:
+    ) -> dict[str, ArmRung]:
         """Each arm's live trials' scores at the end of `rung`, and those that go on."""
-        scores: dict[str, Any] = {}
+        scores: dict[str, ArmRung] = {}
         going_on = self.rungs.trials[min(rung + 1, len(self.rungs.trials) - 1)]
         for arm, trials in self.live.items():
-            rows: list[dict[str, Any]] = []
+            rows: list[TrialScore] = []
             for trial in trials:
                 runs = [i for i, (a, t, _) in enumerate(order) if a == arm and t == trial]
                 values = np.asarray(last)[runs].astype(float)
@@ -417,7 +431,7 @@ class TaskTune:
             }
         return scores
 
-    def results(self, baseline: str) -> dict[str, Any]:
+    def results(self, baseline: str) -> dict[str, ArmResults]:
         """Per arm: the chosen setting, trial 0's and the rungs' scores, the steps used."""
         from fppo_jax.analysis.tuning_report import arm_results
 
@@ -439,12 +453,12 @@ class TaskTune:
             print(line, file=sys.stderr, flush=True)
 
 
-def recorded_rungs(directory: Path) -> list[dict[str, Any]]:
+def recorded_rungs(directory: Path) -> list[RungScores]:
     """The scores of a task's rungs recorded in `directory` (``rung-<r>/scores.json``), in
     order, up to the first rung not recorded."""
-    found: list[dict[str, Any]] = []
+    found: list[RungScores] = []
     while (path := directory / f"rung-{len(found)}" / _SCORES).exists():
-        found.append(json.loads(path.read_text()))
+        found.append(cast(RungScores, json.loads(path.read_text())))
     return found
 
 

@@ -15,12 +15,12 @@ run taken from it, with the sweep it came from.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from fppo_jax.core.config import Setting
 from fppo_jax.errors import MissingFile
 from fppo_jax.run.merge import merge
 from fppo_jax.run.results import SweepResult
@@ -55,8 +55,8 @@ class Pool:
     def take(
         self,
         protocol: RunRecord,
-        setting: dict[str, Any],
-        identity: dict[str, Any] | None,
+        setting: Setting,
+        identity: Mapping[str, object] | None,
         seeds: Sequence[int],
     ) -> Taken | None:
         """`setting`'s runs at every one of `seeds`, from the sweeps of `protocol`
@@ -68,7 +68,7 @@ class Pool:
             record = _record(recorded)
             if record.protocol() != protocol or setting not in recorded.settings:
                 continue
-            if record.surrogates.get(setting["variant"]) != identity:
+            if record.surrogates.get(str(setting["variant"])) != identity:
                 continue
             index = recorded.settings.index(setting)
             for run, entry in enumerate(recorded.runs):
@@ -84,7 +84,7 @@ class Pool:
         return Taken(merge(parts), list(by_sweep))
 
 
-def protocol_differences(config: dict[str, Any], protocol: RunRecord) -> list[str]:
+def protocol_differences(config: Mapping[str, object], protocol: RunRecord) -> list[str]:
     """Where a recorded sweep's `config` and `protocol` differ, field by field, each as
     ``name: <recorded> there, <protocol's> in this call``."""
     recorded = RunRecord.from_json(config, "a recorded sweep's record").protocol()

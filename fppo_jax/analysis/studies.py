@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +35,7 @@ import numpy as np
 
 from fppo_jax.analysis.study_looks import StudyResult, run_looks, shown_progress
 from fppo_jax.analysis.study_plan import ENDPOINTS, check_plan, make_plan
-from fppo_jax.analysis.study_runs import OWN_SETTINGS, Source
+from fppo_jax.analysis.study_runs import OWN_SETTINGS, Shape, Source
 from fppo_jax.analysis.study_tuned import check_tuned_protocol, tuned_settings
 from fppo_jax.core.checks import check_part, positive_int
 from fppo_jax.core.objectives import union
@@ -45,10 +45,15 @@ from fppo_jax.errors import InvalidInput
 from fppo_jax.run.options import Options
 from fppo_jax.stats.decidable import plan_lines
 from fppo_jax.stats.sequential import Design
-from fppo_jax.store.files import DirectoryLock, json_value, writable_directory
+from fppo_jax.store.files import DirectoryLock, writable_directory
 
 # The options a plan records: evaluations make the eval endpoint, and change what runs record.
 EVALUATION = ("eval_every", "eval_episodes")
+
+
+# A study's candidates: one variant (a built-in's name, "module:attribute" or a surrogate) or
+# several.
+Variants = str | Surrogate | Sequence[str | Surrogate]
 
 
 # Seconds an array task waits for the others that started with it to check the plan: each
@@ -58,7 +63,7 @@ PART_LOCK_WAIT = 60.0
 
 def study(
     tasks: str | Sequence[str],
-    candidates: Any,
+    candidates: Variants,
     baseline: str | Surrogate = "ppo",
     *,
     output: str | Path,
@@ -108,7 +113,7 @@ def study(
     design = Design(group_size, max_seeds, level, margin)
     _check_arguments(endpoint, groups, chunk, part, settings)
     sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
-    shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
+    shape: Shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
     everyone = [*candidates, baseline]
     chosen = None
     if tuned is not None:
@@ -125,12 +130,10 @@ def study(
         check_tuned_protocol(tuned, source)
     if with_defaults:
         source = dataclasses.replace(source, defaults=source.at_defaults(everyone))
-    planned = {**shape, **_planned_settings(settings)}
-    plan = make_plan(tasks, candidates, baseline, design, endpoint, planned, sources)
-    if chosen is not None:
-        plan["tuned"] = json_value(chosen)
-    if with_defaults:  # recorded only where given: a plan from before the option is one without
-        plan["with_defaults"] = True
+    planned: dict[str, object] = {**shape, **_planned_settings(settings)}
+    plan = make_plan(
+        tasks, candidates, baseline, design, endpoint, planned, sources, chosen, bool(with_defaults)
+    )
     output = writable_directory(output)
     # Array tasks that start together take turns to check the plan (each holds the lock briefly).
     lock = DirectoryLock(output, "a study", wait=PART_LOCK_WAIT if part is not None else 0.0)
@@ -151,7 +154,7 @@ def _check_arguments(
     groups: int | None,
     chunk: int | None,
     part: tuple[int, int] | None,
-    settings: dict[str, Any],
+    settings: Mapping[str, object],
 ) -> None:
     if endpoint not in ENDPOINTS:
         raise InvalidInput(f"a study decides on {', '.join(ENDPOINTS)}, got endpoint {endpoint!r}")
@@ -175,7 +178,7 @@ def _check_arguments(
         raise InvalidInput(f"a study sets {', '.join(taken)} itself, for each group's sweep")
 
 
-def _planned_settings(settings: dict[str, Any]) -> dict[str, Any]:
+def _planned_settings(settings: Mapping[str, object]) -> dict[str, object]:
     """What the plan records of the settings: all but how runs are driven, and the
     evaluations' where the runs are evaluated (they make the eval endpoint)."""
     evaluated = settings.get("eval_every") is not None
@@ -193,17 +196,17 @@ def names_of_tasks(tasks: str | Sequence[str], what: str = "a study") -> list[st
     return tasks
 
 
-def _variants(candidates: Any, baseline: str | Surrogate) -> tuple[list[Surrogate], Surrogate]:
+def _variants(candidates: Variants, baseline: str | Surrogate) -> tuple[list[Surrogate], Surrogate]:
     """The candidates and the baseline resolved (a name or a surrogate each), checked."""
-    one = isinstance(candidates, str | Surrogate)
-    candidates = [resolve(c) for c in ([candidates] if one else candidates)]
-    baseline = resolve(baseline)
-    if not candidates:
+    listed = [candidates] if isinstance(candidates, str | Surrogate) else candidates
+    arms = [resolve(c) for c in listed]
+    against = resolve(baseline)
+    if not arms:
         raise InvalidInput("a study needs at least one candidate")
-    union([*candidates, baseline])  # two different surrogates under one name are refused
-    names = [c.name for c in candidates]
-    if baseline.name in names:
-        raise InvalidInput(f"the baseline {baseline.name} is also a candidate")
+    union([*arms, against])  # two different surrogates under one name are refused
+    names = [c.name for c in arms]
+    if against.name in names:
+        raise InvalidInput(f"the baseline {against.name} is also a candidate")
     if len(set(names)) < len(names):
         raise InvalidInput(f"a candidate is named twice among {', '.join(names)}")
-    return candidates, baseline
+    return arms, against

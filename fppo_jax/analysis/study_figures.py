@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from fppo_jax.analysis.study_plan import DecisionRow, StudyPlan
 from fppo_jax.analysis.study_report import normalised_scores
 from fppo_jax.analysis.study_sections import Scores
 from fppo_jax.run.results import SweepResult
@@ -23,8 +23,8 @@ def profile_label(endpoint: str, baseline: str) -> str:
 
 def write_figures(
     output: Path,
-    plan: dict[str, Any],
-    rows: Sequence[dict[str, Any]],
+    plan: StudyPlan,
+    rows: Sequence[DecisionRow],
     results: dict[str, SweepResult],
     scores: dict[str, Scores],
 ) -> list[Path]:
@@ -44,11 +44,13 @@ def write_figures(
     )
     for ax, task in zip(axes[0], tasks, strict=True):
         plot_curves(results[task], band="iqm", ax=ax)
-    endpoint, improvements = plan["primary_endpoint"], {}
+    endpoint = plan["primary_endpoint"]
+    improvements: dict[str, tuple[float, float, float]] = {}
     for row in rows:
         if row["task"] in scores:
-            seeds, task = row["seeds"], scores[row["task"]]
-            candidate, reference = task[row["candidate"]][endpoint], task[row["baseline"]][endpoint]
+            seeds, of_task = row["seeds"], scores[row["task"]]
+            candidate = of_task[row["candidate"]][endpoint]
+            reference = of_task[row["baseline"]][endpoint]
             compared = statistics.compare(candidate[:seeds], reference[:seeds])
             name = f"{row['candidate']}, {row['task']} ({seeds} seeds)"
             improvements[name] = compared["probability_of_improvement"]

@@ -7,14 +7,24 @@ from __future__ import annotations
 import dataclasses
 import json
 import sys
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, cast
+from typing import TypedDict, cast
 
 import numpy as np
 
 from fppo_jax.analysis.reuse import Taken, protocol_differences
 from fppo_jax.analysis.study_figures import write_figures
-from fppo_jax.analysis.study_plan import DECISIONS_FILE, REPORT_FILE, commit
+from fppo_jax.analysis.study_plan import (
+    DECISIONS_FILE,
+    REPORT_FILE,
+    BesideDefaults,
+    DecisionRow,
+    Decisions,
+    GroupEntry,
+    StudyPlan,
+    commit,
+)
 from fppo_jax.analysis.study_report import beside_defaults, write_report
 from fppo_jax.analysis.study_runs import (
     Source,
@@ -48,14 +58,14 @@ class StudyResult:
     sweep (`results`, by task), whether every comparison is `finished`, and with
     ``with_defaults`` each task's runs of each arm's default setting (`defaults`, by task)."""
 
-    plan: dict[str, Any]
-    decisions: list[dict[str, Any]]
+    plan: StudyPlan
+    decisions: list[DecisionRow]
     results: dict[str, SweepResult]
     finished: bool
     defaults: dict[str, SweepResult] = dataclasses.field(default_factory=dict)
 
 
-def shown_progress(settings: dict[str, Any]) -> bool:
+def shown_progress(settings: Mapping[str, object]) -> bool:
     """Whether the study prints its plan, each look's groups and each decision on stderr: where
     its sweeps show progress as lines or a bar (``progress=True``), not where a callable takes
     it."""
@@ -87,7 +97,7 @@ class _Group:
 
 def run_looks(
     output: Path,
-    plan: dict[str, Any],
+    plan: StudyPlan,
     tasks: list[str],
     candidates: list[Surrogate],
     baseline: Surrogate,
@@ -100,7 +110,7 @@ def run_looks(
     them trained, and the call returns there, writing no decision."""
     recorded: dict[str, list[SweepResult]] = {task: [] for task in tasks}
     defaults: dict[str, list[SweepResult]] = {task: [] for task in tasks}  # with_defaults
-    trained: list[dict[str, Any]] = []
+    trained: list[GroupEntry] = []
     shown = shown_progress(source.settings)
     endpoint = plan["primary_endpoint"]
     decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
@@ -214,10 +224,19 @@ def _group(
     return _Group(task, look, seeds, variants, where, result, taken, source, defaults)
 
 
-def _gather(group: _Group, recorded: dict[str, list[SweepResult]]) -> dict[str, Any] | None:
+class _Said(TypedDict, total=False):
+    """What ``decisions.json`` says of some groups only (:class:`GroupEntry`'s keys that not
+    every entry has), spread each in its place."""
+
+    defaults: bool
+    commit: str
+    reused: dict[str, list[str]]
+
+
+def _gather(group: _Group, recorded: dict[str, list[SweepResult]]) -> GroupEntry | None:
     """`group`'s runs added to `recorded`, trained first where they are not recorded; what
     ``decisions.json`` says of the group (None when it was recorded by an earlier call)."""
-    said: dict[str, Any] = {}
+    said: _Said = {}
     result = group.result
     if group.to_train:
         result = group.source.train(group.task, group.variants, group.seeds, group.where)
@@ -229,18 +248,18 @@ def _gather(group: _Group, recorded: dict[str, list[SweepResult]]) -> dict[str, 
         said["reused"] = {name: [str(s) for s in t.sources] for name, t in group.taken.items()}
     if not said:
         return None
-    of = {"defaults": True} if group.defaults else {}
+    of: _Said = {"defaults": True} if group.defaults else {}
     return {"task": group.task, "group": group.look + 1, **of, "seeds": group.seeds, **said}
 
 
 def _finish(
     output: Path,
-    plan: dict[str, Any],
+    plan: StudyPlan,
     recorded: dict[str, list[SweepResult]],
     defaults: dict[str, list[SweepResult]],
     decisions: dict[tuple[str, str], Decision],
     baseline: Surrogate,
-    trained: list[dict[str, Any]],
+    trained: list[GroupEntry],
     part: tuple[int, int] | None,
 ) -> StudyResult:
     """The study as it stands; unless this call trained a `part`, its decisions, report and
@@ -267,7 +286,7 @@ def _finish(
     return StudyResult(plan, rows, results, finished, at_defaults)
 
 
-def _task_scores(result: SweepResult, plan: dict[str, Any]) -> Scores:
+def _task_scores(result: SweepResult, plan: StudyPlan) -> Scores:
     """What the report shows of a task's runs: each variant's scores by endpoint, and its env
     steps to each share of the baseline's final IQM (``steps to 50%``; none where that IQM is
     not positive, where a share of it is no lower bar)."""
@@ -327,50 +346,68 @@ def _decide(
     )
 
 
-def _rows(decisions: dict[tuple[str, str], Decision], baseline: Surrogate) -> list[dict[str, Any]]:
+def _rows(decisions: dict[tuple[str, str], Decision], baseline: Surrogate) -> list[DecisionRow]:
     return [
-        {
-            "task": task,
-            "candidate": candidate,
-            "baseline": baseline.name,
-            "decision": decision.decision or "undecided",
-            "final": decision.decision is not None,
-            "seeds": decision.seeds,
-            "z": decision.z if np.isfinite(decision.z) else None,
-            "boundary": decision.boundary if np.isfinite(decision.boundary) else None,
-            "reason": decision.reason,
-            # with a margin: the repeated CI of P that the equivalence test held against it
-            **({} if decision.interval is None else {"interval": list(decision.interval)}),
-        }
+        _row(task, candidate, baseline.name, decision)
         for (task, candidate), decision in decisions.items()
     ]
+
+
+def _row(task: str, candidate: str, baseline: str, decision: Decision) -> DecisionRow:
+    row: DecisionRow = {
+        "task": task,
+        "candidate": candidate,
+        "baseline": baseline,
+        "decision": decision.decision or "undecided",
+        "final": decision.decision is not None,
+        "seeds": decision.seeds,
+        "z": decision.z if np.isfinite(decision.z) else None,
+        "boundary": decision.boundary if np.isfinite(decision.boundary) else None,
+        "reason": decision.reason,
+    }
+    if decision.interval is not None:  # with a margin: the repeated CI of P it was held to
+        row["interval"] = list(decision.interval)
+    return row
+
+
+class _Recorded(TypedDict, total=False):
+    """The keys of :class:`Decisions` that only some studies record, spread each in its
+    place."""
+
+    margin: float
+    beside_defaults: BesideDefaults
 
 
 def _write_decisions(
     output: Path,
     decisions: dict[tuple[str, str], Decision],
     baseline: Surrogate,
-    trained: list[dict[str, Any]],
-    plan: dict[str, Any],
-    beside: dict[str, Any] | None = None,
-) -> list[dict[str, Any]]:
+    trained: list[GroupEntry],
+    plan: StudyPlan,
+    beside: BesideDefaults | None = None,
+) -> list[DecisionRow]:
     """``decisions.json``: the plan's margin where it has one, a row per comparison
     (returned), what each arm's default measured `beside` them (untested, where given), and
     every group trained with the commit it ran at, or with the recorded sweeps its runs were
     taken from, earlier calls' groups kept."""
     path = output / DECISIONS_FILE
     earlier = json.loads(path.read_text()).get("groups", []) if path.exists() else []
-    by_group = {(g["task"], g["group"], g.get("defaults", False)): g for g in earlier}
+    by_group: dict[tuple[str, int, bool], GroupEntry] = {
+        (g["task"], g["group"], g.get("defaults", False)): g for g in earlier
+    }
     for entry in trained:  # a group trained earlier keeps its commit when runs are taken now
         key = (entry["task"], entry["group"], entry.get("defaults", False))
-        by_group[key] = {**by_group.get(key, {}), **entry}
+        before = by_group.get(key)
+        by_group[key] = entry if before is None else {**before, **entry}
     groups = list(by_group.values())
     rows = _rows(decisions, baseline)
-    record = {
+    margin: _Recorded = {"margin": plan["margin"]} if "margin" in plan else {}
+    measured: _Recorded = {} if beside is None else {"beside_defaults": beside}
+    record: Decisions = {
         "finished": all(row["final"] for row in rows),
-        **({"margin": plan["margin"]} if "margin" in plan else {}),
+        **margin,
         "comparisons": rows,
-        **({} if beside is None else {"beside_defaults": beside}),
+        **measured,
         "groups": sorted(groups, key=lambda g: (g["group"], g.get("defaults", False), g["task"])),
     }
     write_json(path, record)

@@ -1,14 +1,18 @@
 """A study's plan: what ``plan.json`` preregisters before any run (the comparisons, the
 endpoints, the test in words, the seed schedule, the settings and the commit), and the check
-that a study, or a tune, goes on only under the plan it started with."""
+that a study, or a tune, goes on only under the plan it started with. With the shapes of the
+JSON a study records: ``plan.json``'s (:class:`StudyPlan`) and ``decisions.json``'s
+(:class:`Decisions`, a row per comparison a :class:`DecisionRow`)."""
 
 from __future__ import annotations
 
 import json
 import subprocess
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, cast
+from typing import NotRequired, TypedDict, TypeVar, cast
 
+from fppo_jax.core.config import Setting
 from fppo_jax.core.objectives import identities
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
@@ -41,6 +45,150 @@ EQUIVALENCE_TEST = (
 PLAN_FILE, DECISIONS_FILE, REPORT_FILE = "plan.json", "decisions.json", "report.md"
 
 
+class Comparison(TypedDict):
+    """One comparison the plan makes: `candidate` against `baseline` on `task`."""
+
+    task: str
+    candidate: str
+    baseline: str
+
+
+class TunedChoice(TypedDict):
+    """What a study on a tune's settings records of the tune (``plan.json``'s ``tuned``,
+    :func:`~fppo_jax.analysis.study_tuned.tuned_settings`): where it is, its plan's digest, its
+    tuning seeds, each task's protocol (a :class:`~fppo_jax.store.record.RunRecord`'s JSON) and
+    each variant's chosen setting on each task (without the variant); chosen across tasks,
+    also the rule in words and each variant's trial (its trial, rung and mean normalised
+    score, :func:`~fppo_jax.analysis.tuning_report.across_tasks`)."""
+
+    directory: str
+    plan_digest: str
+    tuning_seeds: list[int]
+    protocol: Mapping[str, Mapping[str, object]]  # by task
+    selection: NotRequired[str]
+    trials: NotRequired[Mapping[str, Mapping[str, object]]]  # by variant
+    settings: dict[str, dict[str, Setting]]  # by task, then variant
+
+
+class StudyPlan(TypedDict):
+    """``plan.json``: the preregistration (:func:`make_plan`), as :func:`check_plan` holds a
+    study to it. The keys a plan lacks where it was recorded before they existed, or where the
+    study has none: the equivalence margin and its test, the directories of recorded sweeps to
+    `reuse`, the `surrogates` of one's own (each one's identity,
+    :meth:`~fppo_jax.core.surrogates.Surrogate.identity`), the `tuned` settings and whether
+    each arm's default trains beside them (`with_defaults`). Its `settings`: the run shape
+    (``total_steps``, ``preset``, ``backend``) and the sweeps' other keyword arguments that
+    make runs differ (hyperparameters, run-shape fields, evaluations), as JSON, by name."""
+
+    tasks: list[str]
+    baseline: str
+    candidates: list[str]
+    comparisons: list[Comparison]
+    primary_endpoint: str
+    secondary_endpoints: list[str]
+    test: str
+    level: float
+    margin: NotRequired[float]
+    equivalence_test: NotRequired[str]
+    group_size: int
+    max_seeds: int
+    looks: list[int]
+    boundaries_if_none_decided: list[float]
+    settings: dict[str, object]
+    reuse: NotRequired[list[str]]
+    surrogates: NotRequired[Mapping[str, Mapping[str, object]]]
+    commit: str
+    tuned: NotRequired[TunedChoice]
+    with_defaults: NotRequired[bool]
+
+
+class DecisionRow(TypedDict):
+    """One comparison's row of ``decisions.json`` (and of
+    :attr:`~fppo_jax.analysis.study_looks.StudyResult.decisions`): its `decision` (``better``,
+    ``worse``, ``equivalent``, or ``undecided`` while it awaits seeds or where the seeds ran
+    out), whether it is `final`, the `seeds` per setting it used, its latest statistic `z` and
+    the `boundary` held against it (None before any look), why it stopped in words, and with a
+    margin the repeated confidence `interval` of P(candidate > baseline) that the equivalence
+    test held against ½ ± δ."""
+
+    task: str
+    candidate: str
+    baseline: str
+    decision: str
+    final: bool
+    seeds: int
+    z: float | None
+    boundary: float | None
+    reason: str
+    interval: NotRequired[list[float]]
+
+
+class GroupEntry(TypedDict):
+    """What ``decisions.json`` says of one group of a task's seeds: the `commit` it trained at,
+    or the recorded sweeps its runs were taken from, by variant (`reused`), or both; `defaults`
+    where it is of each arm's default setting (with_defaults)."""
+
+    task: str
+    group: int
+    defaults: NotRequired[bool]
+    seeds: list[int]
+    commit: NotRequired[str]
+    reused: NotRequired[dict[str, list[str]]]
+
+
+# An interval as decisions.json records it: [point, low, high], None where no run has a score.
+Interval = list[float | None]
+
+
+class Compared(TypedDict):
+    """One setting's runs against another's over the first `seeds` both ran, untested."""
+
+    seeds: int
+    probability_of_improvement: Interval
+    iqm_difference: Interval
+
+
+class TuningGain(Compared):
+    """An `arm`'s tuned setting against its default on `task`: what tuning gained."""
+
+    task: str
+    arm: str
+
+
+class DefaultsCompared(Compared):
+    """A `candidate`'s default against the `baseline`'s default on `task`."""
+
+    task: str
+    candidate: str
+    baseline: str
+
+
+class BesideDefaults(TypedDict):
+    """What each arm's default measures beside the decisions on the primary `endpoint`, never
+    `tested` (:func:`~fppo_jax.analysis.study_report.beside_defaults`)."""
+
+    endpoint: str
+    tested: bool
+    tuned_against_default: list[TuningGain]
+    default_against_default: list[DefaultsCompared]
+
+
+class Decisions(TypedDict):
+    """``decisions.json``: whether every comparison is `finished`, the plan's margin where it
+    has one, a row per comparison, what each arm's default measured beside them (with_defaults)
+    and every group recorded."""
+
+    finished: bool
+    margin: NotRequired[float]
+    comparisons: list[DecisionRow]
+    beside_defaults: NotRequired[BesideDefaults]
+    groups: list[GroupEntry]
+
+
+# Any plan check_plan holds to: a study's, a tune's, as JSON.
+Plan = TypeVar("Plan", bound=Mapping[str, object])
+
+
 def commit() -> str:
     """The commit of the code that runs (``git rev-parse HEAD`` in the package's directory), or
     ``unknown`` outside a git checkout."""
@@ -58,53 +206,70 @@ def commit() -> str:
     return done.stdout.strip() or "unknown"
 
 
+class _Optional(TypedDict, total=False):
+    """The keys of :class:`StudyPlan` that only some plans have, as :func:`make_plan` spreads
+    each in its place."""
+
+    margin: float
+    equivalence_test: str
+    reuse: list[str]
+    surrogates: Mapping[str, Mapping[str, object]]
+    tuned: TunedChoice
+    with_defaults: bool
+
+
 def make_plan(
     tasks: list[str],
     candidates: list[Surrogate],
     baseline: Surrogate,
     design: Design,
     endpoint: str,
-    settings: dict[str, Any],
+    settings: dict[str, object],
     reuse: list[str],
-) -> dict[str, Any]:
-    """What ``plan.json`` records: the preregistration, decided before any run."""
-    return cast(
-        dict[str, Any],
-        json_value(
-            {
-                "tasks": tasks,
-                "baseline": baseline.name,
-                "candidates": [c.name for c in candidates],
-                "comparisons": [
-                    {"task": task, "candidate": c.name, "baseline": baseline.name}
-                    for task in tasks
-                    for c in candidates
-                ],
-                "primary_endpoint": endpoint,
-                "secondary_endpoints": [
-                    e
-                    for e in ENDPOINTS
-                    if e != endpoint and (e != "eval" or "eval_every" in settings)
-                ],
-                "test": TEST,
-                "level": design.level,
-                **_equivalence_plan(design),
-                "group_size": design.group_size,
-                "max_seeds": design.max_seeds,
-                "looks": list(design.looks),
-                "boundaries_if_none_decided": list(
-                    boundaries(design.level / (len(tasks) * len(candidates)), _fractions(design))
-                ),
-                "settings": settings,
-                **({"reuse": reuse} if reuse else {}),
-                **identities([*candidates, baseline]),
-                "commit": commit(),
-            }
+    tuned: TunedChoice | None = None,
+    with_defaults: bool = False,
+) -> StudyPlan:
+    """What ``plan.json`` records: the preregistration, decided before any run (as JSON: what
+    :func:`check_plan` compares with the file's). What only some plans record is left out where
+    the study has none: a plan from before it existed is one without."""
+    own = identities([*candidates, baseline]).get("surrogates")
+    reused: _Optional = {"reuse": reuse} if reuse else {}
+    surrogates: _Optional = {"surrogates": own} if own else {}
+    on_tune: _Optional = {} if tuned is None else {"tuned": tuned}
+    if with_defaults:
+        on_tune["with_defaults"] = True
+    plan: StudyPlan = {
+        "tasks": tasks,
+        "baseline": baseline.name,
+        "candidates": [c.name for c in candidates],
+        "comparisons": [
+            {"task": task, "candidate": c.name, "baseline": baseline.name}
+            for task in tasks
+            for c in candidates
+        ],
+        "primary_endpoint": endpoint,
+        "secondary_endpoints": [
+            e for e in ENDPOINTS if e != endpoint and (e != "eval" or "eval_every" in settings)
+        ],
+        "test": TEST,
+        "level": design.level,
+        **_equivalence_plan(design),
+        "group_size": design.group_size,
+        "max_seeds": design.max_seeds,
+        "looks": list(design.looks),
+        "boundaries_if_none_decided": list(
+            boundaries(design.level / (len(tasks) * len(candidates)), _fractions(design))
         ),
-    )
+        "settings": settings,
+        **reused,
+        **surrogates,
+        "commit": commit(),
+        **on_tune,
+    }
+    return cast(StudyPlan, json_value(plan))
 
 
-def _equivalence_plan(design: Design) -> dict[str, Any]:
+def _equivalence_plan(design: Design) -> _Optional:
     """What the plan records of the equivalence test: nothing without a margin (a plan
     recorded before margins existed is one without), else the margin and the test."""
     if design.margin is None:
@@ -118,15 +283,15 @@ def _fractions(design: Design) -> tuple[float, ...]:
 
 def check_plan(
     output: Path,
-    plan: dict[str, Any],
+    plan: Plan,
     what: str = "a study",
     name: str = PLAN_FILE,
     recorded_only: frozenset[str] = frozenset({"commit"}),
-) -> dict[str, Any]:
+) -> Plan:
     """Write `plan` as `name` in `output`, or check it against the one there: `what` (a study,
     a tune) goes on only under the plan it started with, the fields in `recorded_only` aside
     (the commit: a group records its own). Returns the plan as recorded, with the commit it was
-    made at."""
+    made at (of `plan`'s shape: the file's fields are compared with it, one by one)."""
     path = output / name
     if not path.exists():
         write_json(path, plan)
@@ -152,8 +317,8 @@ def check_plan(
             f"{output} holds {what} planned with {field} = {_shown(was)}, not {_shown(now)}: "
             f"{what} goes on only under its plan (start another in a new directory)"
         )
-    return cast(dict[str, Any], recorded)
+    return cast(Plan, recorded)
 
 
-def _shown(value: Any) -> str:
+def _shown(value: object) -> str:
     return "none" if value is None else json.dumps(value)

@@ -12,10 +12,18 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from fppo_jax.analysis.study_plan import (
+    BesideDefaults,
+    Compared,
+    DecisionRow,
+    DefaultsCompared,
+    Interval,
+    StudyPlan,
+    TuningGain,
+)
 from fppo_jax.analysis.study_sections import START, Scores, interval_cell, task_section
 from fppo_jax.stats import statistics
 from fppo_jax.store.files import write_atomically
@@ -23,11 +31,11 @@ from fppo_jax.store.files import write_atomically
 
 def write_report(
     path: Path,
-    plan: dict[str, Any],
-    rows: Sequence[dict[str, Any]],
+    plan: StudyPlan,
+    rows: Sequence[DecisionRow],
     scores: dict[str, Scores],
     finished: bool,
-    beside: dict[str, Any] | None = None,
+    beside: BesideDefaults | None = None,
 ) -> None:
     """``report.md`` at `path`: the plan in a paragraph, then a section per task, from each
     comparison's row of ``decisions.json`` and each task's `scores` so far, and what each arm's
@@ -47,8 +55,8 @@ def write_report(
 
 
 def beside_defaults(
-    plan: dict[str, Any], scores: dict[str, Scores], defaults: dict[str, dict[str, np.ndarray]]
-) -> dict[str, Any]:
+    plan: StudyPlan, scores: dict[str, Scores], defaults: dict[str, dict[str, np.ndarray]]
+) -> BesideDefaults:
     """What each arm's default setting (a tune's trial 0), trained beside its tuned one on the
     same seeds, measures on the primary endpoint, untested: per task, each arm's tuned setting
     against its default (the gain from tuning, on the test seeds) and each candidate's default
@@ -57,7 +65,8 @@ def beside_defaults(
     report gives the decided comparisons'. `defaults`: each task's default runs' scores on the
     primary endpoint, by variant, in seed order."""
     endpoint, baseline = plan["primary_endpoint"], plan["baseline"]
-    gains, compared = [], []
+    gains: list[TuningGain] = []
+    compared: list[DefaultsCompared] = []
     for task in plan["tasks"]:
         if task not in defaults or task not in scores:
             continue
@@ -77,19 +86,25 @@ def beside_defaults(
     }
 
 
-def _compared(x: np.ndarray, y: np.ndarray) -> dict[str, Any]:
+def _compared(x: np.ndarray, y: np.ndarray) -> Compared:
     """`x`'s runs against `y`'s over the first seeds both ran: their count, P(x > y) and the IQM
     difference, each ``[point, low, high]`` (None where no run of a side has a score)."""
     seeds = min(len(x), len(y))
     found = statistics.compare(x[:seeds], y[:seeds])
     return {
         "seeds": seeds,
-        **{name: [None if np.isnan(v) else v for v in values] for name, values in found.items()},
+        "probability_of_improvement": _recorded(found["probability_of_improvement"]),
+        "iqm_difference": _recorded(found["iqm_difference"]),
     }
 
 
+def _recorded(values: tuple[float, float, float]) -> Interval:
+    """An interval as ``decisions.json`` records it: a list, None for each NaN."""
+    return [None if np.isnan(v) else v for v in values]
+
+
 def _defaults_tables(
-    task: str, beside: dict[str, Any], task_rows: Sequence[dict[str, Any]]
+    task: str, beside: BesideDefaults, task_rows: Sequence[DecisionRow]
 ) -> list[str]:
     """The task's tables of :func:`beside_defaults`: each arm's tuned setting against its
     default, and each candidate's default against the baseline's beside the decision."""
@@ -109,10 +124,10 @@ def _defaults_tables(
         "| arm | seeds | P(tuned > default) | IQM difference, tuned − default |",
         "|---|---|---|---|",
     ]
-    for row in gains:
-        cells = [row["arm"], str(row["seeds"])]
-        cells += [_cell(row["probability_of_improvement"], ".2f")]
-        cells += [_cell(row["iqm_difference"], ".1f")]
+    for gain in gains:
+        cells = [gain["arm"], str(gain["seeds"])]
+        cells += [_cell(gain["probability_of_improvement"], ".2f")]
+        cells += [_cell(gain["iqm_difference"], ".1f")]
         lines.append("| " + " | ".join(cells) + " |")
     lines += [
         "",
@@ -132,9 +147,7 @@ def _defaults_tables(
     return lines
 
 
-def normalised_scores(
-    plan: dict[str, Any], scores: dict[str, Scores]
-) -> dict[str, list[np.ndarray]]:
+def normalised_scores(plan: StudyPlan, scores: dict[str, Scores]) -> dict[str, list[np.ndarray]]:
     """Each setting's primary-endpoint scores per task on a common scale: 0 is where the task's
     runs start (the mean over all of them of their first recorded average return), 1 the
     baseline's IQM on the task. Empty unless every task with runs can be put on it: finite ends,
@@ -155,7 +168,7 @@ def normalised_scores(
 
 
 def _mean_improvement(
-    variant: str, baseline: str, on: str, rows: Sequence[dict[str, Any]], scores: dict[str, Scores]
+    variant: str, baseline: str, on: str, rows: Sequence[DecisionRow], scores: dict[str, Scores]
 ) -> str:
     """`variant`'s probability of improvement over `baseline` on endpoint `on`, averaged over
     the tasks where a decision compared the two, each over the runs that decision used ("–"
@@ -172,7 +185,7 @@ def _mean_improvement(
 
 
 def _across_tasks(
-    plan: dict[str, Any], rows: Sequence[dict[str, Any]], scores: dict[str, Scores]
+    plan: StudyPlan, rows: Sequence[DecisionRow], scores: dict[str, Scores]
 ) -> list[str]:
     """Across the tasks with runs (two or more): each candidate's probability of improvement
     averaged over tasks, on each endpoint over the runs its decisions used, and each setting's
@@ -214,7 +227,7 @@ def _across_tasks(
     return lines
 
 
-def _preamble(plan: dict[str, Any], comparisons: int, finished: bool) -> list[str]:
+def _preamble(plan: StudyPlan, comparisons: int, finished: bool) -> list[str]:
     """The report's title and its plan, status and intervals in words."""
     looks = ", ".join(map(str, plan["looks"]))
     status = (

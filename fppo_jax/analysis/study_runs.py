@@ -6,12 +6,15 @@ from __future__ import annotations
 
 import dataclasses
 import shutil
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, TypedDict
 
 import numpy as np
 
 from fppo_jax.analysis.reuse import Pool, Taken
+from fppo_jax.analysis.study_plan import TunedChoice
+from fppo_jax.core.config import Setting
 from fppo_jax.core.objectives import hyperparameter_names, identities, takers
 from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
 from fppo_jax.core.surrogates import Surrogate
@@ -25,27 +28,44 @@ from fppo_jax.run.sweeps import expand_grid, sweep
 from fppo_jax.stats import statistics
 from fppo_jax.store.record import RunRecord
 
-if TYPE_CHECKING:
-    from fppo_jax.analysis.study_tuned import TunedSettings
-
 # What the study sets itself for every group's sweep.
 OWN_SETTINGS = ("log_dir", "checkpoint_dir", "resume", "checkpoint_every", "keep", "callback")
+
+
+# A grid as :func:`~fppo_jax.sweep` takes it: each axis's values (the variants themselves, not
+# their names), or a list of settings.
+Grid = Mapping[str, object] | Sequence[Mapping[str, object]]
+
+
+class Shape(TypedDict):
+    """The run shape that every sweep of a study shares, as :func:`~fppo_jax.sweep` takes it."""
+
+    total_steps: int | None
+    preset: str
+    backend: str
+
+
+class GroupShape(Shape):
+    """A study's :class:`Shape` and the runs per compiled call of each group's sweep."""
+
+    chunk: int | None
 
 
 @dataclasses.dataclass(frozen=True)
 class Source:
     """Where a study's groups of runs come from: recorded sweeps in the `pool` of reused
     directories, where they match the `expected` protocol and setting, else trained (with the
-    study's `settings` and `shape`; by this call, only its `part` of each group)."""
+    study's `settings`, the sweeps' other keyword arguments, and `shape`; by this call, only
+    its `part` of each group)."""
 
-    settings: dict[str, Any]
-    shape: dict[str, Any]
+    settings: dict[str, object]
+    shape: GroupShape
     specific: set[str]  # the hyperparameters that only some variants take
     part: tuple[int, int] | None
-    expected: dict[str, tuple[RunRecord, dict[str, dict[str, Any]]]]
-    identity: dict[str, Any]
+    expected: dict[str, tuple[RunRecord, dict[str, Setting]]]  # by task, then variant
+    identity: Mapping[str, Mapping[str, object]]  # each surrogate of one's own's, by name
     pool: Pool | None
-    tuned: TunedSettings | None  # a tune's chosen settings, by task and variant
+    tuned: TunedChoice | None  # a tune's chosen settings, by task and variant
     # with_defaults: the source of each arm's default setting, trained beside its tuned one
     defaults: Source | None = None
 
@@ -54,12 +74,12 @@ class Source:
         cls,
         tasks: list[str],
         everyone: list[Surrogate],
-        settings: dict[str, Any],
-        shape: dict[str, Any],
+        settings: dict[str, object],
+        shape: Shape,
         chunk: int | None,
         part: tuple[int, int] | None,
         reuse: list[str],
-        tuned: TunedSettings | None = None,
+        tuned: TunedChoice | None = None,
     ) -> Source:
         """The study's source of runs, every setting of every task checked and the recorded
         sweeps of `reuse` read, all before the plan is written: a mistyped directory or a
@@ -93,7 +113,7 @@ class Source:
             for name, value in self.settings.items()
             if name not in self.specific or takers(name, by_name)
         }
-        grid: dict[str, Any] | list[dict[str, Any]] = {"variant": variants}
+        grid: Grid = {"variant": variants}
         if self.tuned is not None:
             chosen = self.tuned["settings"][task]
             grid = [{"variant": v, **chosen[v.name]} for v in variants]
@@ -126,10 +146,10 @@ class Source:
 def _checked_settings(
     task: str,
     everyone: list[Surrogate],
-    settings: dict[str, Any],
-    shape: dict[str, Any],
-    tuned: dict[str, dict[str, Any]] | None = None,
-) -> tuple[RunRecord, dict[str, dict[str, Any]]]:
+    settings: dict[str, object],
+    shape: Shape,
+    tuned: dict[str, Setting] | None = None,
+) -> tuple[RunRecord, dict[str, Setting]]:
     """Every setting of `task` checked before the plan is written, as a sweep checks them; and
     what a recorded run must match to be reused: the protocol, and each variant's setting (its
     `tuned` one, where a tune chose it)."""
@@ -153,7 +173,7 @@ def _checked_settings(
 
 def sweep_group(
     task: str,
-    grid: dict[str, Any] | list[dict[str, Any]],
+    grid: Grid,
     seeds: list[int],
     where: Path,
     part: tuple[int, int] | None = None,

@@ -9,10 +9,10 @@ the baseline's final IQM. With the scores' keys that a study records for it."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
+from fppo_jax.analysis.study_plan import DecisionRow, StudyPlan
 from fppo_jax.stats import statistics
 from fppo_jax.stats.sequential import Design, repeated_confidence
 from fppo_jax.stats.spending import boundaries
@@ -37,7 +37,7 @@ def steps_name(share: float) -> str:
 
 
 def task_section(
-    scores: Scores, task: str, rows: Sequence[dict[str, Any]], plan: dict[str, Any]
+    scores: Scores, task: str, rows: Sequence[DecisionRow], plan: StudyPlan
 ) -> list[str]:
     """The lines of `task`'s section of ``report.md``, below its heading, from its `scores`
     so far and every comparison's row of ``decisions.json`` (`rows`, every task's: a boundary
@@ -56,7 +56,7 @@ def task_section(
 
 
 def _table(
-    scores: Scores, rows: Sequence[dict[str, Any]], endpoint: str, plan: dict[str, Any] | None
+    scores: Scores, rows: Sequence[DecisionRow], endpoint: str, plan: StudyPlan | None
 ) -> list[str]:
     """A row per comparison on `endpoint`; the primary one's (given its `plan`) with the
     decision and the repeated confidence interval."""
@@ -109,7 +109,7 @@ def _repeated_interval(
     candidate: np.ndarray,
     reference: np.ndarray,
     design: Design,
-    plan: dict[str, Any],
+    plan: StudyPlan,
     seeds: int,
 ) -> str:
     """The probability of improvement with its repeated confidence interval at the look of
@@ -123,7 +123,7 @@ def _repeated_interval(
     return interval_cell(repeated["probability_of_improvement"], ".2f")
 
 
-def _ceiling(scores: Scores, plan: dict[str, Any], endpoint: str) -> list[str]:
+def _ceiling(scores: Scores, plan: StudyPlan, endpoint: str) -> list[str]:
     """A note where a large share (:data:`CEILING_SHARE`) of some setting's recorded runs on
     the task sit at the best score any run recorded on `endpoint`: a task's maximum return
     (CartPole's cap), where runs tie and a gain cannot show, so that what an interval rules out
@@ -165,7 +165,7 @@ def _ceiling(scores: Scores, plan: dict[str, Any], endpoint: str) -> list[str]:
     ]
 
 
-def _ties(scores: Scores, rows: Sequence[dict[str, Any]], endpoint: str) -> list[str]:
+def _ties(scores: Scores, rows: Sequence[DecisionRow], endpoint: str) -> list[str]:
     """A note of the comparisons with many ties on `endpoint` over the runs each decision used
     (at least :data:`TIE_SHARE` of the (candidate run, baseline run) pairs with the same score),
     each tie counted ½ in the probability of improvement and the test. Nothing otherwise."""
@@ -191,7 +191,7 @@ def _ties(scores: Scores, rows: Sequence[dict[str, Any]], endpoint: str) -> list
 
 
 def _moved_boundaries(
-    task_rows: Sequence[dict[str, Any]], rows: Sequence[dict[str, Any]], plan: dict[str, Any]
+    task_rows: Sequence[DecisionRow], rows: Sequence[DecisionRow], plan: StudyPlan
 ) -> list[str]:
     """Where a comparison's boundary (in its reason) is not plan.json's
     ``boundaries_if_none_decided``: Holm's procedure tested it at a larger level once others
@@ -237,7 +237,7 @@ def _moved_boundaries(
     return ["", "Boundaries moved by Holm's procedure: " + " ".join(said)]
 
 
-def _speed_table(scores: Scores, plan: dict[str, Any]) -> list[str]:
+def _speed_table(scores: Scores, plan: StudyPlan) -> list[str]:
     """Env steps until a run's curve first reaches 50% and 80% of the baseline's final IQM,
     per setting over all its recorded runs: how many did, and the median (reported, not
     tested)."""

@@ -7,9 +7,11 @@ from __future__ import annotations
 import json
 from collections.abc import Collection
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NotRequired, TypedDict, cast
+from typing import TYPE_CHECKING, cast
 
+from fppo_jax.analysis.study_plan import TunedChoice
 from fppo_jax.analysis.study_runs import Source
+from fppo_jax.core.config import Setting
 from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
@@ -31,21 +33,6 @@ ACROSS_TASKS = (
 )
 
 
-class TunedSettings(TypedDict):
-    """What a study on a tune's settings records of the tune (its plan's ``tuned``): where it
-    is, its plan's digest, its tuning seeds, each task's protocol (a run record's JSON,
-    :meth:`RunRecord.to_json`), the setting of each variant on each task, and where chosen
-    across tasks, the rule and each variant's trial."""
-
-    directory: str
-    plan_digest: str
-    tuning_seeds: list[int]
-    protocol: dict[str, dict[str, Any]]
-    selection: NotRequired[str]
-    trials: NotRequired[dict[str, TrialAcrossTasks]]
-    settings: dict[str, dict[str, dict[str, float]]]
-
-
 def tuned_settings(
     directory: str | Path,
     tasks: list[str],
@@ -54,7 +41,7 @@ def tuned_settings(
     settings: Collection[str],
     across_tasks: bool = False,
     with_defaults: bool = False,
-) -> TunedSettings:
+) -> TunedChoice:
     """What a study on a tune's chosen settings records of the tune in `directory`: where it is,
     its plan's digest, its tuning seeds and each variant's chosen setting on each task (with
     `across_tasks`, the trial chosen for all the tune's tasks, and the rule); refused if the
@@ -86,7 +73,7 @@ def tuned_settings(
         if variant.name not in tune_plan["variants"]:
             raise InvalidInput(f"the tune in {directory} did not tune {variant.name}")
     trials = _across_tasks(directory, tune_plan, results, everyone) if across_tasks else None
-    chosen: dict[str, dict[str, dict[str, float]]] = {}
+    chosen: dict[str, dict[str, Setting]] = {}
     for task in tasks:
         for variant in everyone:
             found = results[task][variant.name]
@@ -101,7 +88,7 @@ def tuned_settings(
                 )
             else:
                 setting = found["chosen"]["setting"]
-            chosen.setdefault(task, {})[variant.name] = setting
+            chosen.setdefault(task, {})[variant.name] = {**setting}
     overlap = sorted(set(tune_plan["seeds"]) & set(range(design.max_seeds)))
     if overlap:
         raise InvalidInput(

@@ -7,20 +7,17 @@ from __future__ import annotations
 import json
 from collections.abc import Collection
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import cast
 
 from fppo_jax.analysis.study_plan import TunedChoice
 from fppo_jax.analysis.study_runs import Source
+from fppo_jax.analysis.tuning_records import ArmResults, TrialAcrossTasks, TunePlan
 from fppo_jax.core.config import Setting
 from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats.sequential import Design
 from fppo_jax.store.record import RunRecord
-
-if TYPE_CHECKING:
-    from fppo_jax.analysis.tuning import TunePlan
-    from fppo_jax.analysis.tuning_report import ArmResults, TrialAcrossTasks
 
 ACROSS_TASKS = (
     "across tasks: per arm, one trial for every task (a drawn trial is the same point on each; "

@@ -38,14 +38,21 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, NotRequired, TypedDict, cast
+from typing import Any, cast
 
 import numpy as np
 
 from fppo_jax.analysis.studies import PART_LOCK_WAIT, names_of_tasks
 from fppo_jax.analysis.study_plan import check_plan, commit
 from fppo_jax.analysis.tuning_draws import draw_population, import_optuna, open_storage
-from fppo_jax.analysis.tuning_report import ArmResults, write_report
+from fppo_jax.analysis.tuning_records import (
+    ArmResults,
+    RungPlan,
+    RunShapeValue,
+    TaskBudget,
+    TunePlan,
+)
+from fppo_jax.analysis.tuning_report import write_report
 from fppo_jax.analysis.tuning_rungs import CALLS_A_RUNG, TaskTune
 from fppo_jax.core.checks import check_part, check_seeds, positive_int
 from fppo_jax.core.config import CONFIG_FIELDS
@@ -96,67 +103,6 @@ SELECTION = "per task and arm: the trial with the best score at the last rung (t
 # Every trial is drawn before the first rung trains, so a tune goes on under another Optuna
 # release as under another commit: both are recorded, neither compared.
 _RECORDED_ONLY = frozenset({"commit", "sampler.package"})
-
-
-# A run-shape setting's value, as a tune's plan records it for every run: a TrainConfig field's
-# (hidden_sizes a sequence), total_steps's (None: the task's budget), the preset, the backend or
-# the chunk.
-RunShapeValue = int | bool | str | Sequence[int] | None
-
-
-class RungPlan(TypedDict):
-    """A rung in ``tune.json``: its live trials per arm, the update it ends at and the env steps
-    a run has trained by then."""
-
-    trials: int
-    ends_at_update: int
-    env_steps_per_run: int
-
-
-class TaskBudget(TypedDict):
-    """A task's budget in ``tune.json``: the env steps every arm trains over the rungs, those
-    of one full run, and the rungs."""
-
-    env_steps_per_arm: int
-    env_steps_per_full_run: int
-    rungs: list[RungPlan]
-
-
-class Axis(TypedDict):
-    """An axis of a search space in ``tune.json`` (:meth:`Interval.to_json`)."""
-
-    low: float
-    high: float
-    scale: str
-
-
-class SamplerRecord(TypedDict):
-    """The sampler in ``tune.json``: its name, its seed and the Optuna release that ran it."""
-
-    name: str
-    seed: int
-    package: str
-
-
-class TunePlan(TypedDict):
-    """A tune's plan, ``tune.json`` (:func:`make_plan`)."""
-
-    tasks: list[str]
-    variants: list[str]
-    baseline: str
-    trials: int
-    trial_0: str
-    seeds: list[int]
-    eta: int
-    budget: dict[str, TaskBudget]
-    space: dict[str, dict[str, Axis]]  # per arm, its axes by hyperparameter
-    sampler: SamplerRecord
-    score: str
-    selection: str
-    settings: dict[str, RunShapeValue]
-    protocol: dict[str, dict[str, Any]]  # per task, its run record's JSON (RunRecord.to_json)
-    surrogates: NotRequired[dict[str, dict[str, Any]]]  # own surrogates' identities, if any
-    commit: str
 
 
 @dataclasses.dataclass(frozen=True)

@@ -5,9 +5,8 @@ default (Jordan et al., "Evaluating the Performance of Reinforcement Learning Al
 ICML 2020), the spread of the first rung's scores over the space (the arm's sensitivity to its
 setting: quartiles, sample std and range), the trials that diverged, and Eimer et al.'s
 reporting checklist (space, budget, seeds, selection, test) filled in from the plan.
-``tuning_curves.png`` draws the curves. The types here are the shapes of the files a tune
-records for them: a rung's ``scores.json`` (:class:`RungScores`) and ``results.json``'s per task
-and arm (:class:`ArmResults`).
+``tuning_curves.png`` draws the curves. What they are read from and written to has its shape
+in :mod:`fppo_jax.analysis.tuning_records`.
 
 The band on the tuning curve is the first rung's, where every trial has trained the same
 length on a setting drawn from the space: the expected best of n settings drawn from those
@@ -23,140 +22,29 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, NotRequired, TypedDict
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from fppo_jax.analysis.tuning_records import (
+    ArmResults,
+    ArmRung,
+    Chosen,
+    CurvePoint,
+    ExpectedBestCurve,
+    RungScores,
+    Spread,
+    TrialAcrossTasks,
+    TrialScore,
+    TunePlan,
+)
 from fppo_jax.core.checks import positive_int
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats.statistics import CONFIDENCE, RESAMPLES, check_confidence
 from fppo_jax.store.files import write_atomically
 
 if TYPE_CHECKING:
-    from fppo_jax.analysis.tuning import Rungs, TunePlan
-
-
-class TrialScore(TypedDict):
-    """A trial's row in a rung's ``scores.json``: its score (the mean over the tuning seeds;
-    None where a run finished no episode), each seed's, and whether a run diverged."""
-
-    trial: int
-    score: float | None
-    seed_scores: list[float | None]
-    diverged: bool
-
-
-class ArmRung(TypedDict):
-    """An arm's part of a rung's ``scores.json``: its live trials' rows, and the trials that go
-    on to the next rung."""
-
-    trials: list[TrialScore]
-    survivors: list[int]
-
-
-class RungScores(TypedDict):
-    """A rung's ``scores.json``: each arm's part, and the seconds the rung trained and
-    compiled."""
-
-    arms: dict[str, ArmRung]
-    seconds: float
-    compile_seconds: float
-
-
-class Chosen(TypedDict):
-    """The trial chosen for an arm on a task, its score at the last rung and its setting."""
-
-    trial: int
-    score: float | None
-    setting: dict[str, float]
-
-
-class DefaultResult(TypedDict):
-    """Trial 0, the arm's default: its setting, its first rung's score, and the last rung it
-    reached with its score there."""
-
-    setting: dict[str, float]
-    first_rung_score: float | None
-    last_rung_reached: int
-    score_there: float | None
-
-
-class CurvePoint(TypedDict):
-    """A point of the tuning curve: the best score at `rung`, of its `trials`, against the env
-    steps the arm had spent by its end."""
-
-    rung: int
-    env_steps: int
-    best: float | None
-    trials: int
-
-
-class BaselineBeaten(TypedDict):
-    """How many of the arm's `sampled` settings scored above the baseline's default on the
-    first rung."""
-
-    baseline: str
-    baseline_default_score: float | None
-    sampled: int
-    beat: int
-
-
-class Spread(TypedDict):
-    """The first rung's scores over the space: quartiles, range and sample std (None where no
-    trial scored; the std also for one score)."""
-
-    min: float | None
-    q1: float | None
-    median: float | None
-    q3: float | None
-    max: float | None
-    sample_std: NotRequired[float | None]  # tunes from before it lack it
-
-
-class ExpectedBestPoint(TypedDict):
-    """:func:`expected_best` at n = `settings`, with its band, at the env steps they cost."""
-
-    settings: int
-    env_steps: int
-    expected_best: float
-    low: float
-    high: float
-
-
-class ExpectedBestCurve(TypedDict):
-    """The expected best of 1 … trials first-rung settings, from the `scored_trials`, with the
-    bootstrap band's level, replicates and seed."""
-
-    scored_trials: int
-    confidence: float
-    resamples: int
-    seed: int
-    points: list[ExpectedBestPoint]
-
-
-class ArmResults(TypedDict):
-    """What ``results.json`` holds of an arm on one task (see the module). Tunes from before
-    `trials`, `expected_best` and `tied_rungs` were recorded lack them."""
-
-    chosen: Chosen | None  # None: every trial diverged
-    default: DefaultResult
-    curve: list[CurvePoint]
-    env_steps: int
-    beat_baseline_default: BaselineBeaten
-    trials: NotRequired[list[dict[str, float]]]  # each trial's setting, by number
-    first_rung_spread: Spread
-    expected_best: NotRequired[ExpectedBestCurve | None]  # None: no trial scored
-    diverged_trials: list[int]
-    tied_rungs: NotRequired[list[int]]
-
-
-class TrialAcrossTasks(TypedDict):
-    """An arm's trial chosen for all of a tune's tasks (:func:`across_tasks`): the rung its
-    trials were compared at and its mean normalised score there."""
-
-    trial: int
-    rung: int
-    normalised_score: float
+    from fppo_jax.analysis.tuning import Rungs
 
 
 def ranked(rows: list[TrialScore]) -> list[TrialScore]:

@@ -11,22 +11,22 @@ import json
 import math
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypedDict, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import jax
 import numpy as np
 
 from fppo_jax.analysis.tuning_draws import setting_of
-
-if TYPE_CHECKING:
-    from fppo_jax.analysis.tuning import Rungs
-from fppo_jax.analysis.tuning_report import ArmResults, ArmRung, RungScores, TrialScore, ranked
-from fppo_jax.core.config import (
-    stack_hyperparameters,
-    with_budget,
+from fppo_jax.analysis.tuning_records import (
+    ArmResults,
+    ArmRung,
+    RungScores,
+    ShareScores,
+    TrialScore,
 )
+from fppo_jax.analysis.tuning_report import ranked
+from fppo_jax.core.config import stack_hyperparameters, with_budget
 from fppo_jax.core.resolution import resolve_hyperparameters
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.trainer import TrainState
@@ -36,28 +36,15 @@ from fppo_jax.run.execution import compile_program, run_keys
 from fppo_jax.run.memory import check_host_memory
 from fppo_jax.run.plan import share_bounds
 from fppo_jax.run.prepare import Prepared
-from fppo_jax.store.files import (
-    write_atomically,
-    write_json,
-)
+from fppo_jax.store.files import write_atomically, write_json
+
+if TYPE_CHECKING:
+    from fppo_jax.analysis.tuning import Rungs
 
 _STATE, _SCORES = "state.npz", "scores.json"
 
 
 CALLS_A_RUNG = 10  # compiled calls the first rung is split into, at least, for progress
-
-
-class ShareScores(TypedDict):
-    """A share's ``part-<K>/scores.json``: which `part` (K, N) of the rung it is, its runs
-    (arm, trial, seed, in the rung's order), each run's score (None where no episode finished)
-    and whether it diverged, and the seconds it trained and compiled."""
-
-    part: list[int]
-    runs: Sequence[Sequence[str | int]]
-    scores: list[float | None]
-    diverged: list[bool]
-    seconds: float
-    compile_seconds: float
 
 
 @dataclasses.dataclass

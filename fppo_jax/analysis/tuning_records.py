@@ -1,0 +1,206 @@
+"""The shapes of the JSON files a tune records (:mod:`fppo_jax.analysis.tuning`): its plan,
+``tune.json`` (:class:`TunePlan`); each rung's ``scores.json`` (:class:`RungScores`) and each
+share's (:class:`ShareScores`); ``results.json``, per task and arm (:class:`ArmResults`); and
+the trial an arm chooses for all tasks (:class:`TrialAcrossTasks`). Keys that tunes recorded
+before they existed lack are ``NotRequired``; ``tests/test_tuning_records.py`` holds every
+recorded tune's files to these shapes. The annotations are evaluated (no ``from __future__
+import annotations``), so that ``NotRequired`` keys are known at run time too."""
+
+from collections.abc import Sequence
+from typing import Any, NotRequired, TypedDict
+
+# A run-shape setting's value, as a tune's plan records it for every run: a TrainConfig field's
+# (hidden_sizes a sequence), total_steps's (None: the task's budget), the preset, the backend or
+# the chunk.
+RunShapeValue = int | bool | str | Sequence[int] | None
+
+
+class RungPlan(TypedDict):
+    """A rung in ``tune.json``: its live trials per arm, the update it ends at and the env steps
+    a run has trained by then."""
+
+    trials: int
+    ends_at_update: int
+    env_steps_per_run: int
+
+
+class TaskBudget(TypedDict):
+    """A task's budget in ``tune.json``: the env steps every arm trains over the rungs, those
+    of one full run, and the rungs."""
+
+    env_steps_per_arm: int
+    env_steps_per_full_run: int
+    rungs: list[RungPlan]
+
+
+class Axis(TypedDict):
+    """An axis of a search space in ``tune.json`` (:meth:`Interval.to_json`)."""
+
+    low: float
+    high: float
+    scale: str
+
+
+class SamplerRecord(TypedDict):
+    """The sampler in ``tune.json``: its name, its seed and the Optuna release that ran it."""
+
+    name: str
+    seed: int
+    package: str
+
+
+class TunePlan(TypedDict):
+    """A tune's plan, ``tune.json`` (:func:`make_plan`)."""
+
+    tasks: list[str]
+    variants: list[str]
+    baseline: str
+    trials: int
+    trial_0: str
+    seeds: list[int]
+    eta: int
+    budget: dict[str, TaskBudget]
+    space: dict[str, dict[str, Axis]]  # per arm, its axes by hyperparameter
+    sampler: SamplerRecord
+    score: str
+    selection: str
+    settings: dict[str, RunShapeValue]
+    protocol: dict[str, dict[str, Any]]  # per task, its run record's JSON (RunRecord.to_json)
+    surrogates: NotRequired[dict[str, dict[str, Any]]]  # own surrogates' identities, if any
+    commit: str
+
+
+class TrialScore(TypedDict):
+    """A trial's row in a rung's ``scores.json``: its score (the mean over the tuning seeds;
+    None where a run finished no episode), each seed's, and whether a run diverged."""
+
+    trial: int
+    score: float | None
+    seed_scores: list[float | None]
+    diverged: bool
+
+
+class ArmRung(TypedDict):
+    """An arm's part of a rung's ``scores.json``: its live trials' rows, and the trials that go
+    on to the next rung."""
+
+    trials: list[TrialScore]
+    survivors: list[int]
+
+
+class RungScores(TypedDict):
+    """A rung's ``scores.json``: each arm's part, and the seconds the rung trained and
+    compiled."""
+
+    arms: dict[str, ArmRung]
+    seconds: float
+    compile_seconds: float
+
+
+class Chosen(TypedDict):
+    """The trial chosen for an arm on a task, its score at the last rung and its setting."""
+
+    trial: int
+    score: float | None
+    setting: dict[str, float]
+
+
+class DefaultResult(TypedDict):
+    """Trial 0, the arm's default: its setting, its first rung's score, and the last rung it
+    reached with its score there."""
+
+    setting: dict[str, float]
+    first_rung_score: float | None
+    last_rung_reached: int
+    score_there: float | None
+
+
+class CurvePoint(TypedDict):
+    """A point of the tuning curve: the best score at `rung`, of its `trials`, against the env
+    steps the arm had spent by its end."""
+
+    rung: int
+    env_steps: int
+    best: float | None
+    trials: int
+
+
+class BaselineBeaten(TypedDict):
+    """How many of the arm's `sampled` settings scored above the baseline's default on the
+    first rung."""
+
+    baseline: str
+    baseline_default_score: float | None
+    sampled: int
+    beat: int
+
+
+class Spread(TypedDict):
+    """The first rung's scores over the space: quartiles, range and sample std (None where no
+    trial scored; the std also for one score)."""
+
+    min: float | None
+    q1: float | None
+    median: float | None
+    q3: float | None
+    max: float | None
+    sample_std: NotRequired[float | None]  # tunes from before it lack it
+
+
+class ExpectedBestPoint(TypedDict):
+    """:func:`expected_best` at n = `settings`, with its band, at the env steps they cost."""
+
+    settings: int
+    env_steps: int
+    expected_best: float
+    low: float
+    high: float
+
+
+class ExpectedBestCurve(TypedDict):
+    """The expected best of 1 … trials first-rung settings, from the `scored_trials`, with the
+    bootstrap band's level, replicates and seed."""
+
+    scored_trials: int
+    confidence: float
+    resamples: int
+    seed: int
+    points: list[ExpectedBestPoint]
+
+
+class ArmResults(TypedDict):
+    """What ``results.json`` holds of an arm on one task (see the module). Tunes from before
+    `trials`, `expected_best` and `tied_rungs` were recorded lack them."""
+
+    chosen: Chosen | None  # None: every trial diverged
+    default: DefaultResult
+    curve: list[CurvePoint]
+    env_steps: int
+    beat_baseline_default: BaselineBeaten
+    trials: NotRequired[list[dict[str, float]]]  # each trial's setting, by number
+    first_rung_spread: Spread
+    expected_best: NotRequired[ExpectedBestCurve | None]  # None: no trial scored
+    diverged_trials: list[int]
+    tied_rungs: NotRequired[list[int]]
+
+
+class TrialAcrossTasks(TypedDict):
+    """An arm's trial chosen for all of a tune's tasks (:func:`across_tasks`): the rung its
+    trials were compared at and its mean normalised score there."""
+
+    trial: int
+    rung: int
+    normalised_score: float
+
+
+class ShareScores(TypedDict):
+    """A share's ``part-<K>/scores.json``: which `part` (K, N) of the rung it is, its runs
+    (arm, trial, seed, in the rung's order), each run's score (None where no episode finished)
+    and whether it diverged, and the seconds it trained and compiled."""
+
+    part: list[int]
+    runs: Sequence[Sequence[str | int]]
+    scores: list[float | None]
+    diverged: list[bool]
+    seconds: float
+    compile_seconds: float

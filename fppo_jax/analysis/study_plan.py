@@ -2,9 +2,9 @@
 endpoints, the test in words, the seed schedule, the settings and the commit), and the check
 that a study, or a tune, goes on only under the plan it started with. With the shapes of the
 JSON a study records: ``plan.json``'s (:class:`StudyPlan`) and ``decisions.json``'s
-(:class:`Decisions`, a row per comparison a :class:`DecisionRow`)."""
-
-from __future__ import annotations
+(:class:`Decisions`, a row per comparison a :class:`DecisionRow`). The annotations are
+evaluated (no ``from __future__ import annotations``), so that ``NotRequired`` keys are known at
+run time too."""
 
 import json
 import subprocess

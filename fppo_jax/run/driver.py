@@ -28,13 +28,8 @@ from fppo_jax.run.plan import Outcome, Plan, group_inputs, group_size, part_plan
 from fppo_jax.run.progress import PROGRESS_LINES, reporter
 from fppo_jax.run.stop_signals import STOP_SIGNALS, StoppedBySignal, caught
 from fppo_jax.run.training import Training
-from fppo_jax.store.checkpoint import (
-    Checkpoints,
-    CheckpointsUnavailable,
-    Restored,
-    check_same_run,
-    open_checkpoints,
-)
+from fppo_jax.store.checkpoint import Checkpoints, Restored, check_same_run, open_checkpoints
+from fppo_jax.store.checkpoint_writes import CheckpointsUnavailable
 from fppo_jax.store.metric_log import prepare_log_dir
 from fppo_jax.store.record import RunRecord
 

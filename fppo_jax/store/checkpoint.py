@@ -17,8 +17,10 @@ in (:data:`FORMAT`): a checkpoint of another layout is refused as
 
 Nothing here changes the process: orbax logs through absl at its own levels, and reports its own
 failures (a damaged checkpoint read, a write storage refused) as it does; what this module says of
-them is one warning per damaged checkpoint and one error (:class:`CheckpointNotWritten`,
-:class:`CheckpointsUnavailable`).
+them is one warning per damaged checkpoint and one error (a
+:class:`~fppo_jax.store.checkpoint_writes.CheckpointsUnavailable`; for a write refused, the
+:class:`~fppo_jax.store.checkpoint_writes.CheckpointNotWritten` that
+:mod:`~fppo_jax.store.checkpoint_writes` raises).
 
 Saved policies, a trained policy on its own, are :mod:`fppo_jax.store.saved_policy`'s.
 """
@@ -27,7 +29,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import re
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -37,8 +38,9 @@ import jax
 import numpy as np
 
 from fppo_jax.core.policy import Policy
-from fppo_jax.errors import FppoError, InvalidInput, MissingFile, first_line
+from fppo_jax.errors import InvalidInput, MissingFile, first_line
 from fppo_jax.store import artifact
+from fppo_jax.store.checkpoint_writes import CheckpointsUnavailable, Writes, committed_steps
 from fppo_jax.store.files import (
     DirectoryBusy,
     DirectoryLock,
@@ -66,18 +68,8 @@ class DamagedCheckpoint(UserWarning):
     """A checkpoint could not be read back intact and was set aside."""
 
 
-class CheckpointsUnavailable(FppoError, RuntimeError):
-    """A checkpoint directory cannot be used: another process writes there, or none of its
-    checkpoints is intact."""
-
-
 class ConfigMismatch(InvalidInput):
     """A checkpoint belongs to a run with a different configuration."""
-
-
-class CheckpointNotWritten(CheckpointsUnavailable):
-    """A checkpoint could not be written (a full disk, a file size limit, storage gone); the
-    checkpoints before it are intact."""
 
 
 @dataclasses.dataclass
@@ -209,11 +201,11 @@ class Checkpoints:
                 "that leads to none)"
             )
         self._manager = _manager(self.directory, keep)
-        self._writes = _Writes(self._manager, self.directory)
+        self._writes = Writes(self._manager, self.directory)
 
     def steps(self) -> list[int]:
         """Steps of the complete checkpoints, oldest first."""
-        return _steps(self._manager)
+        return committed_steps(self._manager)
 
     def latest_record(self) -> dict[str, Any] | None:
         """The record of the newest checkpoint whose record can be read (no arrays are read:
@@ -352,12 +344,13 @@ class Checkpoints:
         return self._manager.restore(step, args=_args(**items))
 
     def wait(self) -> None:
-        """Block until the checkpoint being written is complete; :class:`CheckpointNotWritten`
-        if it could not be."""
+        """Block until the checkpoint being written is complete;
+        :class:`~fppo_jax.store.checkpoint_writes.CheckpointNotWritten` if it could not be."""
         self._writes.wait()
 
     def lock(self) -> None:
-        """Make this the directory's one writer, or raise :class:`CheckpointsUnavailable`
+        """Make this the directory's one writer, or raise
+        :class:`~fppo_jax.store.checkpoint_writes.CheckpointsUnavailable`
         naming the process that is (:class:`~fppo_jax.store.files.DirectoryLock`)."""
         try:
             self._lock = DirectoryLock(self.directory, "checkpoints")
@@ -384,60 +377,6 @@ class Checkpoints:
         target = artifact.set_aside(self.directory / str(step))
         self._manager.reload()
         _warn(self.directory, step, error, "is damaged", f"moved to {target}, ")
-
-
-class _Writes:
-    """Orbax's writes of `directory`'s checkpoints, each finished in a background thread: a
-    write that storage refuses, at once or in that thread, is :class:`CheckpointNotWritten`,
-    naming the newest intact checkpoint."""
-
-    def __init__(self, manager: ocp.CheckpointManager, directory: Path):
-        self.manager, self.directory = manager, directory
-        self.pending: int | None = None  # the step being written, until it is on disk
-
-    def start(self, step: int, args: ocp.args.Composite) -> None:
-        if not self._written(lambda: self.manager.save(step, args=args)):
-            raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
-        self.pending = step
-
-    def wait(self) -> None:
-        self._written(self.manager.wait_until_finished)
-        self._check_written()
-
-    def _written(self, write: Callable[[], Any]) -> Any:
-        """`write`'s result, or :class:`CheckpointNotWritten` where it, or the checkpoint written
-        before it in the background, failed to write (orbax raises what storage said, as an
-        ``OSError`` or tensorstore's ``ValueError``); then whether that earlier one is on disk."""
-        try:
-            result = write()
-        except Exception as error:
-            if not _storage_failure(error):
-                raise
-            raise self._not_written(_storage_reason(error)) from error
-        self._check_written()
-        return result
-
-    def _check_written(self) -> None:
-        """Raise :class:`CheckpointNotWritten` if the step last started is not on disk now that
-        orbax says it has finished: a failure in one of its background threads is logged there,
-        not raised, and would otherwise pass for a checkpoint."""
-        if self.pending is not None and not self.manager.is_saving_in_progress():
-            step, self.pending = self.pending, None
-            if step not in _steps(self.manager):
-                raise self._not_written(f"step {step} is not on disk after writing it")
-
-    def _not_written(self, why: str) -> CheckpointNotWritten:
-        kept = _steps(self.manager)
-        before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
-        return CheckpointNotWritten(
-            f"could not write a checkpoint in {self.directory} ({why}); {before}. Free space, "
-            "or choose another checkpoint directory, and resume (--resume)"
-        )
-
-
-def _steps(manager: ocp.CheckpointManager) -> list[int]:
-    manager.reload()
-    return sorted(manager.all_steps())
 
 
 def _manager(directory: Path, keep: int) -> ocp.CheckpointManager:
@@ -467,20 +406,6 @@ def _warn(directory: Path, step: int, error: Exception, what: str, done: str = "
         DamagedCheckpoint,
         stacklevel=4,
     )
-
-
-def _storage_failure(error: BaseException) -> bool:
-    """Whether `error` is storage refusing a write, as orbax passes it on: an ``OSError``, or
-    tensorstore's ``ValueError`` that carries the operating system's error code."""
-    return isinstance(error, OSError) or "os_error_code" in str(error)
-
-
-def _storage_reason(error: Exception) -> str:
-    """What storage said, in the operating system's words where it gave its error code."""
-    if isinstance(error, OSError) and error.strerror:
-        return error.strerror
-    code = re.search(r"os_error_code='(\d+)'", str(error))
-    return os.strerror(int(code.group(1))) if code else first_line(error)
 
 
 def _args(**items: Any) -> ocp.args.Composite:

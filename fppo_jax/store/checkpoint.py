@@ -32,12 +32,12 @@ import os
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, NotRequired, TypedDict, cast
 
 import jax
 import numpy as np
 
-from fppo_jax.core.policy import Policy
+from fppo_jax.core.policy import Policy, PolicyDescription
 from fppo_jax.errors import InvalidInput, MissingFile, first_line
 from fppo_jax.store import artifact
 from fppo_jax.store.checkpoint_writes import CheckpointsUnavailable, Writes, committed_steps
@@ -72,6 +72,48 @@ class ConfigMismatch(InvalidInput):
     """A checkpoint belongs to a run with a different configuration."""
 
 
+class CheckpointedRun(TypedDict):
+    """What a run's checkpoints record of it beside each point (:meth:`Checkpoints.save_point`'s
+    keywords): its kind, its record, its runs per compiled call and its updates per run."""
+
+    kind: RunKind
+    config: RunRecord
+    runs_per_call: int
+    num_updates: int
+
+
+class PointRecord(TypedDict):
+    """What a checkpoint records of its run and point (JSON): the kind of run, the run's record
+    (:meth:`~fppo_jax.store.record.RunRecord.to_json`), the group and the update it holds, and
+    the runs per compiled call."""
+
+    kind: RunKind
+    config: dict[str, Any]
+    group: int
+    update: int
+    runs_per_call: int
+
+
+class CheckpointRecord(PointRecord):
+    """A checkpoint's ``record`` item as written: its :class:`PointRecord`, its layout (which
+    the first format's lack), the policy's description (a single run's; None for a sweep) and
+    the digest of each array item, by name."""
+
+    format: NotRequired[int]
+    policy: PolicyDescription | None
+    digests: dict[str, str]
+
+
+class Curves(TypedDict):
+    """A checkpoint's ``curves`` item: the metrics of the group in training so far ([run,
+    update], by name) and, once one of a sweep's groups is done, the finished groups' metrics and
+    the update each of their runs diverged at (from 1) or 0."""
+
+    current: dict[str, np.ndarray]
+    finished: NotRequired[dict[str, np.ndarray]]
+    finished_diverged: NotRequired[np.ndarray]
+
+
 @dataclasses.dataclass
 class Restored:
     """A checkpoint read back: its step, the state (in the structure asked for), the metrics
@@ -79,8 +121,8 @@ class Restored:
 
     step: int
     state: Any
-    curves: dict[str, Any]
-    record: dict[str, Any]
+    curves: Curves
+    record: CheckpointRecord
 
     def point(self) -> ResumePoint:
         """Where the checkpoint says training stopped."""
@@ -112,7 +154,7 @@ def open_checkpoints(
     keep: int,
     kind: RunKind,
     run_config: RunRecord,
-) -> tuple[Checkpoints | None, dict[str, Any] | None]:
+) -> tuple[Checkpoints | None, CheckpointRecord | None]:
     """The checkpoints of a `kind` of run ("train" or "sweep") in `directory`, and the newest
     one's record, checked against this run before anything is compiled (None, None without a
     directory)."""
@@ -141,17 +183,18 @@ def open_checkpoints(
                 f"{checkpoints.directory} already holds checkpoints; pass resume=True (--resume) "
                 "to continue that run, or choose another directory"
             )
+        newest = None
         if record is not None:
-            check_format(record, f"the newest checkpoint in {checkpoints.directory}", FORMAT)
-            check_same_run(record, kind, run_config, checkpoints.directory)
+            newest = _checked(record, f"the newest checkpoint in {checkpoints.directory}")
+            check_same_run(newest, kind, run_config, checkpoints.directory)
     except Exception:
         checkpoints.close()
         raise
-    return checkpoints, record
+    return checkpoints, newest
 
 
 def check_same_run(
-    record: dict[str, Any], kind: RunKind, current: RunRecord, directory: Path
+    record: CheckpointRecord, kind: RunKind, current: RunRecord, directory: Path
 ) -> None:
     """Raise :class:`ConfigMismatch` unless checkpoint `record` belongs to a `kind` of run
     recorded as `current`, naming every field whose value differs.
@@ -208,8 +251,9 @@ class Checkpoints:
         return committed_steps(self._manager)
 
     def latest_record(self) -> dict[str, Any] | None:
-        """The record of the newest checkpoint whose record can be read (no arrays are read:
-        for checks before compiling); None if there is none."""
+        """The record of the newest checkpoint whose record can be read, as JSON reads it, in
+        whatever layout (no arrays are read: for checks before compiling); None if there is
+        none."""
         import orbax.checkpoint as ocp
 
         for step in reversed(self.steps()):
@@ -220,7 +264,7 @@ class Checkpoints:
         return None
 
     def restore(
-        self, like: Any, check: Callable[[dict[str, Any]], None] | None = None
+        self, like: Any, check: Callable[[CheckpointRecord], None] | None = None
     ) -> Restored | None:
         """The newest intact checkpoint, its state in the structure of `like` (arrays or
         ``jax.ShapeDtypeStruct``\\ s); damaged ones are reported and set aside. `check` sees
@@ -232,11 +276,11 @@ class Checkpoints:
         abstract = {_name(i): _storable_shape(leaf) for i, leaf in enumerate(leaves)}
         for step in reversed(self.steps()):
             try:
-                record = self._read(step, record=ocp.args.JsonRestore()).record
+                read = self._read(step, record=ocp.args.JsonRestore()).record
             except Exception as error:  # an unreadable record is damage
                 self._set_aside(step, error)
                 continue
-            check_format(record, f"checkpoint at step {step} in {self.directory}", FORMAT)
+            record = _checked(read, f"checkpoint at step {step} in {self.directory}")
             try:
                 names = ["state", "curves"] + (["policy"] if record["policy"] else [])
                 restore = {name: ocp.args.StandardRestore() for name in names}
@@ -267,14 +311,14 @@ class Checkpoints:
         """Checkpoint a `kind` of run ("train" or "sweep") configured as `config` at `point`,
         with its `state` (and, for one run, its `policy`, which ``load_policy`` reads); the
         record names the point, which :meth:`Restored.point` reads back."""
-        record = {
+        record: PointRecord = {
             "kind": kind,
             "config": config.to_json(),
             "group": point.group,
             "update": point.update,
             "runs_per_call": runs_per_call,
         }
-        curves: dict[str, Any] = {"current": point.current}
+        curves = Curves(current=point.current)
         if point.finished:
             curves["finished"] = point.finished
             curves["finished_diverged"] = point.finished_diverged
@@ -284,8 +328,8 @@ class Checkpoints:
         self,
         step: int,
         state: Any,
-        curves: dict[str, Any],
-        record: dict[str, Any],
+        curves: Curves,
+        record: PointRecord,
         policy: Policy | None = None,
     ) -> None:
         """Start writing checkpoint `step`; it completes in the background, and then the
@@ -302,7 +346,7 @@ class Checkpoints:
         arrays = {"state": host, "curves": jax.device_get(curves)}
         if policy is not None:
             arrays["policy"] = jax.device_get(policy.arrays())
-        record = artifact.seal(
+        sealed = artifact.seal(
             record,
             FORMAT,
             policy=policy.describe() if policy is not None else None,
@@ -310,34 +354,36 @@ class Checkpoints:
         )
         # Orbax waits for the previous save to finish before it starts this one.
         items = {name: ocp.args.StandardSave(value) for name, value in arrays.items()}
-        args = _args(**items, record=ocp.args.JsonSave(record))
+        args = _args(**items, record=ocp.args.JsonSave(sealed))
         self.wait()  # the one before, on disk: orbax would wait for it here anyway
         self._writes.start(step, args)
 
-    def policy(self) -> tuple[Policy, dict[str, Any]]:
+    def policy(self) -> tuple[Policy, CheckpointRecord]:
         """The policy of the newest readable checkpoint, and its record."""
         import orbax.checkpoint as ocp
 
         for step in reversed(self.steps()):
             try:
-                record = self._read(step, record=ocp.args.JsonRestore()).record
+                read = self._read(step, record=ocp.args.JsonRestore()).record
             except Exception as error:  # try the previous one
                 _warn(self.directory, step, error, "could not be read")
                 continue
-            check_format(record, f"checkpoint at step {step} in {self.directory}", POLICY_FORMATS)
+            where = f"checkpoint at step {step} in {self.directory}"
+            record = _checked(read, where, POLICY_FORMATS)
+            described = record.get("policy")
             try:
-                if record.get("policy") is not None:
+                if described is not None:
                     arrays = self._read(step, policy=ocp.args.StandardRestore()).policy
                     _verify("policy", arrays, record)
             except Exception as error:  # try the previous one
                 _warn(self.directory, step, error, "could not be read")
                 continue
-            if record.get("policy") is None:
+            if described is None:
                 raise InvalidInput(
                     f"{self.directory} holds the checkpoints of a {record.get('kind')}, not of "
                     "one policy: load_policy reads the checkpoints of train()"
                 )
-            return Policy.from_parts(record["policy"], arrays), record
+            return Policy.from_parts(described, arrays), record
         raise MissingFile(f"no readable checkpoint in {self.directory}")
 
     def _read(self, step: int, **items: Any) -> Any:
@@ -436,5 +482,14 @@ def _from_storable(x: np.ndarray, like: Any) -> Any:
     return jax.random.wrap_key_data(x) if _is_key(like) else x  # type: ignore[arg-type]  # host key data is a valid argument
 
 
-def _verify(name: str, arrays: Any, record: dict[str, Any]) -> None:
+def _checked(
+    record: dict[str, Any], what: str, formats: int | tuple[int, ...] = FORMAT
+) -> CheckpointRecord:
+    """`record`, a checkpoint's record item as JSON reads it (of `what`, in words), once shown
+    to be in a layout of `formats` (:func:`~fppo_jax.store.files.check_format`)."""
+    check_format(record, what, formats)
+    return cast(CheckpointRecord, record)
+
+
+def _verify(name: str, arrays: Any, record: CheckpointRecord) -> None:
     artifact.verify(arrays, record["digests"][name], name)

@@ -300,7 +300,7 @@ def _runs(num_settings: int, seeds: list[int], part: tuple[int, int] | None) -> 
 
 def _settings(
     grid: Mapping[str, Any] | Sequence[Mapping[str, Any]],
-    fixed: Setting,
+    fixed: dict[str, Any],
     surrogates: dict[str, Surrogate],
     task: str | None,
 ) -> tuple[list[Setting], Hyperparameters]:

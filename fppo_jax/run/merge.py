@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from fppo_jax.core.config import Setting
+from fppo_jax.core.surrogates import SurrogateIdentity
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.results import SweepResult, labels
 from fppo_jax.store.record import RunRecord
@@ -119,10 +120,10 @@ def _check_each_run_once(settings: list[Setting], runs: list[SweepRun]) -> None:
         raise InvalidInput(f"more than one part holds the run {', '.join(repeated[:5])}")
 
 
-def _own_surrogates(parts: Sequence[SweepResult]) -> dict[str, Any]:
+def _own_surrogates(parts: Sequence[SweepResult]) -> dict[str, SurrogateIdentity]:
     """The surrogates of one's own that `parts` ran, by name; two functions under one name
     (their records' digests differ) are refused."""
-    own: dict[str, Any] = {}
+    own: dict[str, SurrogateIdentity] = {}
     for number, part in enumerate(parts, start=1):
         for name, identity in (part.config.get("surrogates") or {}).items():
             first = own.setdefault(name, identity)

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from fppo_jax.core.networks import Params
 from fppo_jax.core.policy import Policy
 from fppo_jax.core.resolution import VARIANT_SPECIFIC
 from fppo_jax.core.trainer import TrainState
@@ -27,7 +28,7 @@ class TrainResult:
     """
 
     metrics: dict[str, np.ndarray]
-    params: dict[str, Any]
+    params: Params
     config: dict[str, Any]
     state: TrainState
     policy: Policy

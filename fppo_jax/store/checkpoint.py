@@ -96,8 +96,8 @@ class PointRecord(TypedDict):
 
 class CheckpointRecord(PointRecord):
     """A checkpoint's ``record`` item as written: its :class:`PointRecord`, its layout (which
-    the first format's lack), the policy's description (a single run's; None for a sweep) and
-    the digest of each array item, by name."""
+    records of the first format lack), the policy's description (a single run's; None for a
+    sweep) and the digest of each array item, by name."""
 
     format: NotRequired[int]
     policy: PolicyDescription | None

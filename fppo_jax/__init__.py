@@ -31,12 +31,8 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
 # Where each public name is defined.
 _MODULES = {
     "fppo_jax.run.api": ("train",),
-    "fppo_jax.store.checkpoint": (
-        "CheckpointNotWritten",
-        "CheckpointsUnavailable",
-        "ConfigMismatch",
-        "DamagedCheckpoint",
-    ),
+    "fppo_jax.store.checkpoint": ("ConfigMismatch", "DamagedCheckpoint"),
+    "fppo_jax.store.checkpoint_writes": ("CheckpointNotWritten", "CheckpointsUnavailable"),
     "fppo_jax.core.config": ("Hyperparameters", "TrainConfig", "stack_hyperparameters"),
     "fppo_jax.core.resolution": ("hyperparameters", "objective"),
     "fppo_jax.run.divergence": ("TrainingDiverged",),

@@ -236,7 +236,7 @@ def plot_ablation(
         )
         axes = axes[0]
     for ax, key in zip(axes, keys, strict=True):
-        for variant in dict.fromkeys(s["variant"] for s in result.settings):
+        for variant in dict.fromkeys(str(s["variant"]) for s in result.settings):
             chosen = sorted(
                 (i for i, s in enumerate(result.settings) if s["variant"] == variant and key in s),
                 key=lambda i: result.settings[i][key],

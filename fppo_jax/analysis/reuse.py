@@ -100,8 +100,9 @@ def _runs(recorded: SweepResult, runs: list[int]) -> SweepResult:
     setting = recorded.settings[recorded.runs[runs[0]]["setting"]]
     seeds = [recorded.runs[run]["seed"] for run in runs]
     record = _record(recorded)
-    own = record.surrogates.get(setting["variant"])
-    surrogates = {setting["variant"]: own} if own else {}
+    variant = str(setting["variant"])
+    own = record.surrogates.get(variant)
+    surrogates = {variant: own} if own else {}
     record = dataclasses.replace(record, grid=None, seeds=tuple(seeds), surrogates=surrogates)
     return SweepResult(
         settings=[setting],

@@ -124,7 +124,10 @@ class Source:
         a tune trains (no hyperparameter given), so that such a study's recorded runs are
         taken from the pool."""
         expected = {
-            task: (protocol, {s["variant"]: s for s in expand_grid({"variant": everyone}, task)})
+            task: (
+                protocol,
+                {str(s["variant"]): s for s in expand_grid({"variant": everyone}, task)},
+            )
             for task, (protocol, _) in self.expected.items()
         }
         return dataclasses.replace(self, expected=expected, tuned=None)
@@ -167,8 +170,8 @@ def _checked_settings(
         grid = expand_grid([{"variant": s, **tuned[s.name]} for s in everyone], task)
     for setting in grid:
         values = {k: v for k, v in setting.items() if k != "variant"}
-        resolve_hyperparameters(by_name[setting["variant"]], None, **values)
-    return run.record(), {s["variant"]: s for s in grid}
+        resolve_hyperparameters(by_name[str(setting["variant"])], None, **values)
+    return run.record(), {str(s["variant"]): s for s in grid}
 
 
 def sweep_group(
@@ -212,7 +215,7 @@ def recorded_group(
         except InvalidInput:  # some shares are still to come
             pass
     for result in found:  # a group trained whole and cut short may have been finished in shares
-        names = [s["variant"] for s in result.settings]
+        names = [str(s["variant"]) for s in result.settings]
         if names != [v.name for v in variants] or result.config["seeds"] != seeds:
             raise InvalidInput(
                 f"{where} holds a group of {', '.join(names)} on seeds {result.config['seeds']}, "

@@ -10,7 +10,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -139,7 +139,14 @@ def _sweep(args: argparse.Namespace) -> int:
     return 0
 
 
-def _evaluation(args: argparse.Namespace) -> dict[str, Any]:
+class Evaluation(TypedDict, total=False):
+    """A study's evaluation keywords: how often its runs are evaluated, over how many episodes."""
+
+    eval_every: int
+    eval_episodes: int
+
+
+def _evaluation(args: argparse.Namespace) -> Evaluation:
     """A study's evaluation flags, given only where its runs are evaluated: the plan records
     them then, and only then."""
     if args.eval_every is None:

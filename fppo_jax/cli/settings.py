@@ -11,6 +11,7 @@ from typing import Any, cast
 
 from fppo_jax.core.config import PRESETS, TrainConfig
 from fppo_jax.core.resolution import resolve
+from fppo_jax.core.surrogates import SurrogateIdentity
 from fppo_jax.errors import InvalidInput
 from fppo_jax.store.record import RunRecord
 
@@ -69,7 +70,7 @@ def _rerun(path: Path, record: RunRecord) -> dict[str, Any]:
     return flags
 
 
-def _importable(path: Path, variant: Any, own: dict[str, Any]) -> Any:
+def _importable(path: Path, variant: Any, own: dict[str, SurrogateIdentity]) -> Any:
     """`variant` (a name or a list of them) with each surrogate of one's own replaced by
     where its record says an import finds it."""
     if isinstance(variant, list):

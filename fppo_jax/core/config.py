@@ -112,7 +112,7 @@ class TrainConfig:
         return self.total_steps // self.samples_per_update
 
 
-PRESETS: dict[str, dict[str, Any]] = {
+PRESETS: dict[str, dict[str, int]] = {
     # baselines' ppo2 batch: 2048 samples per update, 32 minibatches, 10 epochs. Its MuJoCo runs
     # collect them from 1 environment × 2048 steps; here 8 × 256, the same batch in shorter unrolls.
     "paper": {"num_envs": 8, "num_steps": 256, "num_minibatches": 32, "num_epochs": 10},
@@ -136,7 +136,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 ANNEALED_IN_PAPER: tuple[str, ...] = MUJOCO_TASKS
 
 
-def task_preset(preset: str, task: str | None) -> dict[str, Any]:
+def task_preset(preset: str, task: str | None) -> dict[str, bool]:
     """What `preset` sets for `task` beyond its shape: the paper's learning-rate schedule."""
     return {"anneal_learning_rate": True} if preset == "paper" and task in ANNEALED_IN_PAPER else {}
 

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any, cast
+from typing import cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.surrogates import Surrogate, SurrogateIdentity
 from fppo_jax.core.variants import BUILTINS, PAPERS, VARIANTS
 from fppo_jax.errors import InvalidInput
 
@@ -183,7 +183,7 @@ def takers(name: str, surrogates: Mapping[str, Surrogate] = BUILTINS) -> list[st
     return [key for key, s in surrogates.items() if name in s.defaults]
 
 
-def identities(surrogates: Iterable[Surrogate]) -> dict[str, dict[str, dict[str, Any]]]:
+def identities(surrogates: Iterable[Surrogate]) -> dict[str, dict[str, SurrogateIdentity]]:
     """What a record keeps of `surrogates` beyond their names: ``{"surrogates": {name:
     identity}}`` for those of one's own (:meth:`Surrogate.identity`), nothing for built-ins
     (their names pin them), so records of built-ins alone are as before."""

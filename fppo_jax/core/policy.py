@@ -4,7 +4,7 @@ trainer and no environment, so that it can be saved, loaded and run anywhere."""
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, NotRequired, TypedDict, cast, final
 
 import jax
 import jax.numpy as jnp
@@ -20,6 +20,38 @@ from fppo_jax.errors import InvalidInput
 
 if TYPE_CHECKING:
     from fppo_jax.core.distributions import Distribution
+
+
+@final  # so that a key tells the two apart
+class DiscreteSpace(TypedDict):
+    """A discrete action space as a policy's description records it: its number of actions."""
+
+    discrete: int
+
+
+@final
+class BoxSpace(TypedDict):
+    """A continuous action space as a policy's description records it: each action's bounds."""
+
+    low: list[float]
+    high: list[float]
+
+
+class PolicyDescription(TypedDict):
+    """A policy but its arrays, as saved policies and checkpoints record it (JSON): its action
+    space, its network's hidden layer sizes and whether it normalises observations."""
+
+    action_space: DiscreteSpace | BoxSpace
+    hidden_sizes: list[int]
+    normalize_observations: bool
+
+
+class PolicyArrays(TypedDict):
+    """A policy's arrays: its network's parameters and, where it normalises observations, their
+    statistics (:class:`~fppo_jax.core.normalization.RunningStats`' fields, by name)."""
+
+    params: VariableDict
+    obs_stats: NotRequired[dict[str, jax.Array]]
 
 
 @jax.tree_util.register_dataclass
@@ -72,26 +104,26 @@ class Policy:
                 )
         return cast(jax.Array, _act(self, obs, key))
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> PolicyDescription:
         """Everything but the arrays, as JSON-ready values (see :meth:`from_parts`)."""
         space = self.action_space
         return {
-            "action_space": {"discrete": space.n}
+            "action_space": DiscreteSpace(discrete=space.n)
             if isinstance(space, Discrete)
-            else {"low": list(space.low), "high": list(space.high)},
+            else BoxSpace(low=list(space.low), high=list(space.high)),
             "hidden_sizes": list(self.hidden_sizes),
             "normalize_observations": self.obs_stats is not None,
         }
 
-    def arrays(self) -> dict[str, Any]:
+    def arrays(self) -> PolicyArrays:
         """The arrays (see :meth:`from_parts`)."""
-        arrays: dict[str, Any] = {"params": self.params}
+        arrays = PolicyArrays(params=self.params)
         if self.obs_stats is not None:
             arrays["obs_stats"] = dataclasses.asdict(self.obs_stats)
         return arrays
 
     @classmethod
-    def from_parts(cls, description: dict[str, Any], arrays: dict[str, Any]) -> Policy:
+    def from_parts(cls, description: PolicyDescription, arrays: PolicyArrays) -> Policy:
         """The policy that :meth:`describe` and :meth:`arrays` describe."""
         space = description["action_space"]
         action_space = (

@@ -21,7 +21,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from fppo_jax.core.config import Hyperparameters
+from fppo_jax.core.config import Hyperparameters, Setting
 from fppo_jax.core.objectives import Objective, hyperparameter_names, union
 from fppo_jax.core.surrogates import Range, Surrogate, check_in_range, probe
 from fppo_jax.core.variants import BUILTINS, DEFAULT_VARIANT, EPSILON, VARIANTS
@@ -74,7 +74,7 @@ _RANGES: dict[str, Range] = {
 
 def resolve_hyperparameters(
     variant: str | Surrogate, task: str | None = None, **values: Any
-) -> tuple[Hyperparameters, dict[str, Any]]:
+) -> tuple[Hyperparameters, Setting]:
     """Checked hyperparameters of one setting, with Table 2's α or k for a registered `task`,
     and the setting as plain values (the variant's name, ε, its own hyperparameters, the
     optimisation settings), as records and tables show it."""
@@ -82,7 +82,7 @@ def resolve_hyperparameters(
     given = {name: value for name, value in values.items() if value is not None}
     hp = hyperparameters(surrogate, **{**table2(task, surrogate.name), **given})
     o = hp.objective
-    settings: dict[str, Any] = {"variant": surrogate.name, "epsilon": as_float(o.epsilon)}
+    settings: Setting = {"variant": surrogate.name, "epsilon": as_float(o.epsilon)}
     settings.update({name: as_float(value) for name, value in o.values.items()})
     settings.update({name: as_float(getattr(hp, name)) for name in HYPERPARAMETER_DEFAULTS})
     return hp, settings

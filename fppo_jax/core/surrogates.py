@@ -36,7 +36,7 @@ import re
 import sys
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
-from typing import Any
+from typing import Any, TypedDict
 
 import jax
 import jax.numpy as jnp
@@ -129,6 +129,15 @@ def float32_note(value: float) -> str:
     return f"which training's float32 holds as {as_trained(value):g}"
 
 
+# What records keep of a surrogate of one's own (:meth:`Surrogate.identity`, JSON): its name,
+# its hyperparameters' defaults, the digest of its function and where an import finds it (None
+# for one made in a script or a notebook). "import" is a keyword: hence the functional form.
+SurrogateIdentity = TypedDict(
+    "SurrogateIdentity",
+    {"name": str, "hyperparameters": dict[str, float], "digest": str, "import": str | None},
+)
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Surrogate:
     """A declared surrogate (see the module's docstring); build one with
@@ -168,7 +177,7 @@ class Surrogate:
         """`value` of hyperparameter `name` as a float, if it is a finite number in its range."""
         return check_in_range(name, value, self.ranges.get(name), self.name)
 
-    def identity(self) -> dict[str, Any]:
+    def identity(self) -> SurrogateIdentity:
         """What records keep of a surrogate of one's own, so that two functions under one name
         are told apart: its name, its defaults and a digest of its function's source and of the
         values it reads (:func:`function_digest`)."""

@@ -80,13 +80,13 @@ def initialize() -> None:
     detected by JAX from the cluster (SLURM, Open MPI, Kubernetes). CPU devices talk through
     gloo.
     """
-    variables = {"num_processes": "JAX_NUM_PROCESSES", "process_id": "JAX_PROCESS_ID"}
-    options: dict[str, Any] = {
-        name: int(os.environ[v]) for name, v in variables.items() if v in os.environ
-    }
+    num_processes, process_id = (
+        int(os.environ[v]) if v in os.environ else None
+        for v in ("JAX_NUM_PROCESSES", "JAX_PROCESS_ID")
+    )
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
     try:
-        jax.distributed.initialize(**options)
+        jax.distributed.initialize(num_processes=num_processes, process_id=process_id)
     except ValueError as error:  # what JAX could not detect, such as the coordinator
         raise InvalidInput(
             f"cannot join a multi-process run: {str(error).rstrip('.')}; set "

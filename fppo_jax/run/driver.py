@@ -29,12 +29,13 @@ from fppo_jax.run.progress import PROGRESS_LINES, reporter
 from fppo_jax.run.stop_signals import STOP_SIGNALS, StoppedBySignal, caught
 from fppo_jax.run.training import Training
 from fppo_jax.store.checkpoint import (
+    CheckpointRecord,
     Checkpoints,
-    CheckpointsUnavailable,
     Restored,
     check_same_run,
     open_checkpoints,
 )
+from fppo_jax.store.checkpoint_writes import CheckpointsUnavailable
 from fppo_jax.store.metric_log import prepare_log_dir
 from fppo_jax.store.record import RunRecord
 
@@ -60,7 +61,7 @@ def _drive(plan: Plan, options: Options, signalled: list[int]) -> Outcome:
     main = is_main_process()
     checkpoints: Checkpoints | None = None
 
-    def open_on_main() -> dict[str, Any] | None:
+    def open_on_main() -> CheckpointRecord | None:
         nonlocal checkpoints
         checkpoints, newest = open_checkpoints(
             options.checkpoint_dir, options.resume, options.keep, plan.kind, plan.record

@@ -27,7 +27,7 @@ from fppo_jax.run.evaluation import evaluation_key, make_evaluator
 from fppo_jax.run.execution import concatenate, first_run
 from fppo_jax.run.options import Callback, Snapshot, callback_stops
 from fppo_jax.run.progress import Counter, Progress
-from fppo_jax.store.checkpoint import Checkpoints, ResumePoint
+from fppo_jax.store.checkpoint import CheckpointedRun, Checkpoints, ResumePoint
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,7 +70,7 @@ class Finished:
 class Checkpoint:
     """Saves the point each chunk reached, beside the groups finished before it. Every process
     fetches the state (a collective); the one given `checkpoints` (None on the others) writes.
-    `record` is what each checkpoint records with the point (its kind, configuration, runs per
+    `run` is what each checkpoint records with the point (its kind, configuration, runs per
     call and updates); a single run's (`single_run` is its trainer) also carries its policy,
     for ``load_policy``.
     `saved` lists the updates checkpointed, from the one a resumed run started at."""
@@ -79,11 +79,11 @@ class Checkpoint:
         self,
         checkpoints: Checkpoints | None,
         finished: Finished,
-        record: dict[str, Any],
+        run: CheckpointedRun,
         single_run: Trainer | None,
         resumed_from: int | None,
     ):
-        self.checkpoints, self.finished, self.record = checkpoints, finished, record
+        self.checkpoints, self.finished, self.run = checkpoints, finished, run
         self.single_run = single_run
         self.saved: list[int] = [] if resumed_from is None else [resumed_from]
 
@@ -97,7 +97,7 @@ class Checkpoint:
             policy = None
             if self.single_run is not None:
                 policy = make_policy(self.single_run, first_run(host))
-            self.checkpoints.save_point(point, host, **self.record, policy=policy)
+            self.checkpoints.save_point(point, host, **self.run, policy=policy)
         self.saved.append(chunk.update)
         return False
 

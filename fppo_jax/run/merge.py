@@ -9,9 +9,12 @@ from typing import Any
 
 import numpy as np
 
+from fppo_jax.core.config import Setting
+from fppo_jax.core.surrogates import SurrogateIdentity
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.results import SweepResult, labels
 from fppo_jax.store.record import RunRecord
+from fppo_jax.store.sweep_files import SweepRun
 
 
 def merge(parts: Sequence[SweepResult]) -> SweepResult:
@@ -34,16 +37,15 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         # a shell lists part-10 before part-2, and the order of the runs is the order of curves.csv.
         parts = sorted(parts, key=lambda part: part.config["part"][0])
         _check_one_group_size(parts)
-    settings: list[dict[str, Any]] = []
-    runs: list[dict[str, Any]] = []
-    setting: dict[str, Any] | int  # a setting, then a setting's index
+    settings: list[Setting] = []
+    runs: list[SweepRun] = []
     for part in parts:
         for setting in part.settings:
             if setting not in settings:
                 settings.append(setting)
         for run in part.runs:
-            setting = settings.index(part.settings[run["setting"]])
-            runs.append({"setting": setting, "seed": run["seed"]})
+            index = settings.index(part.settings[run["setting"]])
+            runs.append(SweepRun(setting=index, seed=run["seed"]))
     _check_each_run_once(settings, runs)
     _check_shares(parts, settings, runs)
     metrics = [name for name in first.metrics if all(name in p.metrics for p in parts)]
@@ -107,7 +109,7 @@ def _check_one_group_size(parts: Sequence[SweepResult]) -> None:
         )
 
 
-def _check_each_run_once(settings: list[dict[str, Any]], runs: list[dict[str, Any]]) -> None:
+def _check_each_run_once(settings: list[Setting], runs: list[SweepRun]) -> None:
     seen: dict[tuple[int, int], int] = {}
     for run in runs:
         key = (run["setting"], run["seed"])
@@ -118,10 +120,10 @@ def _check_each_run_once(settings: list[dict[str, Any]], runs: list[dict[str, An
         raise InvalidInput(f"more than one part holds the run {', '.join(repeated[:5])}")
 
 
-def _own_surrogates(parts: Sequence[SweepResult]) -> dict[str, Any]:
+def _own_surrogates(parts: Sequence[SweepResult]) -> dict[str, SurrogateIdentity]:
     """The surrogates of one's own that `parts` ran, by name; two functions under one name
     (their records' digests differ) are refused."""
-    own: dict[str, Any] = {}
+    own: dict[str, SurrogateIdentity] = {}
     for number, part in enumerate(parts, start=1):
         for name, identity in (part.config.get("surrogates") or {}).items():
             first = own.setdefault(name, identity)
@@ -135,7 +137,7 @@ def _own_surrogates(parts: Sequence[SweepResult]) -> dict[str, Any]:
 
 
 def _check_shares(
-    parts: Sequence[SweepResult], settings: list[dict[str, Any]], runs: list[dict[str, Any]]
+    parts: Sequence[SweepResult], settings: list[Setting], runs: list[SweepRun]
 ) -> None:
     """For shares of one sweep (``part`` in their configurations): all of one split, and every
     run of the whole sweep there."""

@@ -40,7 +40,7 @@ class Snapshot(NamedTuple):
 Callback = Callable[[Snapshot], bool | None]
 
 
-def _flag(help: str, metavar: str | None = None, flag: str | None = None) -> dict[str, Any]:
+def _flag(help: str, metavar: str | None = None, flag: str | None = None) -> dict[str, str | None]:
     """An :class:`Options` field's command-line flag: its help, its metavar, and its name if it
     is not the field's (``log_dir``'s is ``--output``)."""
     return {"help": help, "metavar": metavar, "flag": flag}

@@ -17,11 +17,11 @@ import numpy as np
 from jax.sharding import Mesh
 
 from fppo_jax.core.checks import check_part
-from fppo_jax.core.config import Hyperparameters
+from fppo_jax.core.config import Hyperparameters, Setting
 from fppo_jax.core.trainer import Trainer, TrainState
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.execution import one_run
-from fppo_jax.store.checkpoint import ConfigMismatch, RunKind
+from fppo_jax.store.checkpoint import CheckpointRecord, ConfigMismatch, RunKind
 from fppo_jax.store.record import RunRecord
 
 
@@ -44,7 +44,7 @@ class Plan:
     record: RunRecord
     description: str  # a few words, for the progress bar
     header: str  # a line, printed before compiling when progress is shown
-    runs: tuple[dict[str, Any], ...] | None = None
+    runs: tuple[Setting, ...] | None = None
     runs_per_call: int | None = None
     data_parallel: int | None = None
     after_group: Callable[[Outcome], None] | None = None
@@ -99,7 +99,7 @@ def group_inputs(plan: Plan, group: int, size: int) -> tuple[jax.Array, Hyperpar
 def group_size(
     plan: Plan,
     mesh: Mesh | None,
-    checkpointed: dict[str, Any] | None,
+    checkpointed: CheckpointRecord | None,
     checkpoint_dir: str | Path | None,
 ) -> int:
     """Runs per compiled call: the sweep's chunk, or its recorded one when resuming, rounded
@@ -135,7 +135,7 @@ def part_plan(plan: Plan, size: int, across: int) -> Plan:
         plan,
         keys=plan.keys[index],
         hps=jax.tree.map(lambda x: x[index], plan.hps),
-        runs=cast(tuple[dict[str, Any], ...], plan.runs)[index],
+        runs=cast(tuple[Setting, ...], plan.runs)[index],
         share=None,
     )
 

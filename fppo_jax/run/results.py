@@ -13,11 +13,12 @@ from typing import Any, cast
 
 import numpy as np
 
+from fppo_jax.core.config import Setting
 from fppo_jax.core.resolution import SYMBOLS, VARIANT_SPECIFIC
 from fppo_jax.core.trainer import METRICS
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats import statistics
-from fppo_jax.store.sweep_files import read_sweep, write_sweep
+from fppo_jax.store.sweep_files import SweepRecord, SweepRun, read_sweep, write_sweep
 
 
 def labels(settings: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -37,9 +38,9 @@ class SweepResult:
     """Every run of a sweep: `runs[i]` is run i's setting and seed, `metrics[name][i]` its
     per-update values, `diverged[i]` the update (from 1) where it diverged, or 0."""
 
-    settings: list[dict[str, Any]]
+    settings: list[Setting]
     seeds: list[int]
-    runs: list[dict[str, Any]]
+    runs: list[SweepRun]
     metrics: dict[str, np.ndarray]
     diverged: np.ndarray
     config: dict[str, Any]
@@ -215,7 +216,7 @@ class SweepResult:
             )
         if "env_steps" not in metrics:  # every curve's x axis, which a reader needs
             metrics = ["env_steps", *metrics]
-        record = {
+        record: SweepRecord = {
             "settings": self.settings,
             "seeds": self.seeds,
             "runs": self.runs,

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fppo_jax.core.checks import check_seeds, positive_int, real_number
-from fppo_jax.core.config import Hyperparameters, stack_hyperparameters
+from fppo_jax.core.config import Hyperparameters, Setting, stack_hyperparameters
 from fppo_jax.core.objectives import hyperparameter_names, identities, takers, union
 from fppo_jax.core.resolution import (
     HYPERPARAMETER_DEFAULTS,
@@ -42,6 +42,7 @@ from fppo_jax.run.plan import Outcome, Plan, part_bounds, part_runs
 from fppo_jax.run.prepare import Prepared, prepare
 from fppo_jax.run.results import SweepResult, labels
 from fppo_jax.store.record import RunRecord
+from fppo_jax.store.sweep_files import SweepRun
 
 # The most combinations of values a grid may give: far more than a sweep trains (each of them
 # times the seeds), so more is a mistyped grid, refused before its settings are built.
@@ -50,7 +51,7 @@ MAX_SETTINGS = 10_000
 
 def expand_grid(
     grid: Mapping[str, Any] | Sequence[Mapping[str, Any]], task: str | None = None
-) -> list[dict[str, Any]]:
+) -> list[Setting]:
     """The distinct settings of a grid, in order: every combination of its values.
 
     Its variants are built-ins' names or surrogates of one's own; a setting names its variant.
@@ -82,9 +83,9 @@ def expand_grid(
                 f"no variant of the grid ({', '.join(surrogates)}) takes {name}; "
                 f"it is taken by {', '.join(takers(name, everyone))}"
             )
-    settings: list[dict[str, Any]] = []
+    settings: list[Setting] = []
     for (variant, surrogate), *combo in itertools.product(surrogates.items(), *values.values()):
-        setting: dict[str, Any] = {"variant": variant}
+        setting: Setting = {"variant": variant}
         for name, value in zip(values, combo, strict=True):
             if name not in specific or name in surrogate.defaults:
                 setting[name] = real_number(name, value)
@@ -95,13 +96,11 @@ def expand_grid(
     return settings
 
 
-def _listed_settings(
-    settings: Sequence[Mapping[str, Any]], task: str | None
-) -> list[dict[str, Any]]:
+def _listed_settings(settings: Sequence[Mapping[str, Any]], task: str | None) -> list[Setting]:
     """A list of settings checked: each names its variant and only values that variant takes,
     Table 2's α or k filled in for a registered `task`; no setting twice."""
     surrogates = grid_surrogates(settings)
-    listed: list[dict[str, Any]] = []
+    listed: list[Setting] = []
     for given in settings:
         surrogate = surrogates[resolve(given["variant"]).name]
         taken = ("epsilon", *surrogate.defaults, *HYPERPARAMETER_DEFAULTS)
@@ -111,7 +110,7 @@ def _listed_settings(
                 f"a setting of {surrogate.name} gives {', '.join(stray)}, which it does not "
                 f"take (it takes: {', '.join(taken)})"
             )
-        setting: dict[str, Any] = {"variant": surrogate.name}
+        setting: Setting = {"variant": surrogate.name}
         setting |= {k: real_number(k, v) for k, v in given.items() if k != "variant"}
         setting |= {k: v for k, v in table2(task, surrogate.name).items() if k not in setting}
         if setting in listed:
@@ -227,8 +226,8 @@ def _record(
 
 
 def _result(
-    settings: list[dict[str, Any]],
-    runs: list[dict[str, int]],
+    settings: list[Setting],
+    runs: list[SweepRun],
     record: RunRecord,
     part: tuple[int, int] | None,
     outcome: Outcome,
@@ -251,8 +250,8 @@ def _result(
 
 def _plan(
     run: Prepared,
-    settings: list[dict[str, Any]],
-    runs: list[dict[str, int]],
+    settings: list[Setting],
+    runs: list[SweepRun],
     hps: Hyperparameters,
     record: RunRecord,
     **how: Any,
@@ -290,12 +289,10 @@ def _axes(grid: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> dict[str, An
     return axes
 
 
-def _runs(
-    num_settings: int, seeds: list[int], part: tuple[int, int] | None
-) -> list[dict[str, int]]:
+def _runs(num_settings: int, seeds: list[int], part: tuple[int, int] | None) -> list[SweepRun]:
     """The whole sweep's runs (settings × seeds, in that order), with its `part` checked (the
     driver takes the part's share of the runs once it knows their group size)."""
-    runs = [{"setting": i, "seed": seed} for i in range(num_settings) for seed in seeds]
+    runs = [SweepRun(setting=i, seed=seed) for i in range(num_settings) for seed in seeds]
     if part is not None:
         part_bounds(part, len(runs))
     return runs
@@ -306,7 +303,7 @@ def _settings(
     fixed: dict[str, Any],
     surrogates: dict[str, Surrogate],
     task: str | None,
-) -> tuple[list[dict[str, Any]], Hyperparameters]:
+) -> tuple[list[Setting], Hyperparameters]:
     """The grid's settings with the `fixed` values, and their hyperparameters stacked."""
     if "variant" in fixed:  # the grid's variants are what its surrogates were made for
         raise InvalidInput(
@@ -322,7 +319,7 @@ def _settings(
     # expand_grid applied Table 2 to each setting: resolved as given, not again per task.
     hps = stack_hyperparameters(
         [
-            resolve_hyperparameters(surrogates[setting["variant"]], None, **values)[0]
+            resolve_hyperparameters(surrogates[str(setting["variant"])], None, **values)[0]
             for setting in settings
             for values in [{k: v for k, v in setting.items() if k != "variant"}]
         ]

@@ -9,12 +9,13 @@ from typing import Any
 
 import numpy as np
 
+from fppo_jax.core.networks import Params
 from fppo_jax.core.policy import Policy
 from fppo_jax.core.resolution import VARIANT_SPECIFIC
 from fppo_jax.core.trainer import TrainState
 from fppo_jax.envs import Environment, backend_name, resets_itself
 from fppo_jax.store.files import write_atomically
-from fppo_jax.store.saved_policy import save_policy
+from fppo_jax.store.saved_policy import PolicyOrigin, save_policy
 
 
 @dataclasses.dataclass
@@ -27,7 +28,7 @@ class TrainResult:
     """
 
     metrics: dict[str, np.ndarray]
-    params: dict[str, Any]
+    params: Params
     config: dict[str, Any]
     state: TrainState
     policy: Policy
@@ -49,7 +50,7 @@ class TrainResult:
         :func:`fppo_jax.load_policy` and ``fppo-jax eval --checkpoint`` (see
         :func:`fppo_jax.store.saved_policy.save_policy`); a saved policy already there is refused
         unless `overwrite`. Returns the directory."""
-        record = {"config": self.config, "update": len(self.metrics["env_steps"])}
+        record = PolicyOrigin(config=self.config, update=len(self.metrics["env_steps"]))
         return save_policy(directory, self.policy, record, overwrite=overwrite)
 
     def render(self, path: str | Path, *, seed: int = 0, max_steps: int = 1000) -> Path:

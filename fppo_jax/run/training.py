@@ -33,7 +33,7 @@ from fppo_jax.run.options import Options
 from fppo_jax.run.plan import Outcome, Plan, group_inputs
 from fppo_jax.run.progress import Counter, Progress
 from fppo_jax.run.stop_signals import StoppedBySignal
-from fppo_jax.store.checkpoint import Checkpoints, Restored
+from fppo_jax.store.checkpoint import CheckpointedRun, Checkpoints, Restored
 from fppo_jax.store.files import DirectoryLock
 from fppo_jax.store.metric_log import LoggedRuns, open_logs
 
@@ -82,15 +82,15 @@ class Training:
         hooks: list[Hook] = []
         if self.options.checkpoint_dir is not None:
             plan = self.plan
-            record = {
-                "kind": plan.kind,
-                "config": plan.record,
-                "runs_per_call": self.size,
-                "num_updates": self.num_updates,
-            }
+            run = CheckpointedRun(
+                kind=plan.kind,
+                config=plan.record,
+                runs_per_call=self.size,
+                num_updates=self.num_updates,
+            )
             single_run = plan.trainer if plan.kind == "train" else None
             self.checkpoint = Checkpoint(
-                self.checkpoints, self.finished, record, single_run, resumed_from
+                self.checkpoints, self.finished, run, single_run, resumed_from
             )
             hooks.append(self.checkpoint)
         if self.outputs:  # after the checkpoint, so that a lost directory loses no state

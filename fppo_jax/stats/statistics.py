@@ -24,9 +24,10 @@ Spreads are sample standard deviations (``ddof=1``). Every interval is seeded, s
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Callable, Sequence
-from typing import Any, cast
+from typing import cast
 
 import numpy as np
 
@@ -265,12 +266,12 @@ def compare(
 ) -> dict[str, tuple[float, float, float]]:
     """`x`'s runs against `y`'s: the probability of improvement and the difference in IQM
     (x − y), each ``(point, low, high)`` with a bootstrap interval over both settings' runs."""
-    kwargs: dict[str, Any] = {"confidence": confidence, "resamples": resamples, "seed": seed}
+    of_both = functools.partial(
+        bootstrap, [x, y], confidence=confidence, resamples=resamples, seed=seed
+    )
     return {
-        "probability_of_improvement": bootstrap([x, y], probability_of_improvement, **kwargs),
-        "iqm_difference": bootstrap(
-            [x, y], lambda a, b, axis=-1: iqm(a, axis) - iqm(b, axis), **kwargs
-        ),
+        "probability_of_improvement": of_both(probability_of_improvement),
+        "iqm_difference": of_both(lambda a, b, axis=-1: iqm(a, axis) - iqm(b, axis)),
     }
 
 

@@ -17,8 +17,10 @@ in (:data:`FORMAT`): a checkpoint of another layout is refused as
 
 Nothing here changes the process: orbax logs through absl at its own levels, and reports its own
 failures (a damaged checkpoint read, a write storage refused) as it does; what this module says of
-them is one warning per damaged checkpoint and one error (:class:`CheckpointNotWritten`,
-:class:`CheckpointsUnavailable`).
+them is one warning per damaged checkpoint and one error (a
+:class:`~fppo_jax.store.checkpoint_writes.CheckpointsUnavailable`; for a write refused, the
+:class:`~fppo_jax.store.checkpoint_writes.CheckpointNotWritten` that
+:mod:`~fppo_jax.store.checkpoint_writes` raises).
 
 Saved policies, a trained policy on its own, are :mod:`fppo_jax.store.saved_policy`'s.
 """
@@ -27,18 +29,18 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import re
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, NamedTuple, cast
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, NotRequired, TypedDict, cast
 
 import jax
 import numpy as np
 
-from fppo_jax.core.policy import Policy
-from fppo_jax.errors import FppoError, InvalidInput, MissingFile, first_line
+from fppo_jax.core.policy import Policy, PolicyDescription
+from fppo_jax.errors import InvalidInput, MissingFile, first_line
 from fppo_jax.store import artifact
+from fppo_jax.store.checkpoint_writes import CheckpointsUnavailable, Writes, committed_steps
 from fppo_jax.store.files import (
     DirectoryBusy,
     DirectoryLock,
@@ -66,18 +68,50 @@ class DamagedCheckpoint(UserWarning):
     """A checkpoint could not be read back intact and was set aside."""
 
 
-class CheckpointsUnavailable(FppoError, RuntimeError):
-    """A checkpoint directory cannot be used: another process writes there, or none of its
-    checkpoints is intact."""
-
-
 class ConfigMismatch(InvalidInput):
     """A checkpoint belongs to a run with a different configuration."""
 
 
-class CheckpointNotWritten(CheckpointsUnavailable):
-    """A checkpoint could not be written (a full disk, a file size limit, storage gone); the
-    checkpoints before it are intact."""
+class CheckpointedRun(TypedDict):
+    """What a run's checkpoints record of it beside each point (:meth:`Checkpoints.save_point`'s
+    keywords): its kind, its record, its runs per compiled call and its updates per run."""
+
+    kind: RunKind
+    config: RunRecord
+    runs_per_call: int
+    num_updates: int
+
+
+class PointRecord(TypedDict):
+    """What a checkpoint records of its run and point (JSON): the kind of run, the run's record
+    (:meth:`~fppo_jax.store.record.RunRecord.to_json`), the group and the update it holds, and
+    the runs per compiled call."""
+
+    kind: RunKind
+    config: dict[str, Any]
+    group: int
+    update: int
+    runs_per_call: int
+
+
+class CheckpointRecord(PointRecord):
+    """A checkpoint's ``record`` item as written: its :class:`PointRecord`, its layout (which
+    records of the first format lack), the policy's description (a single run's; None for a
+    sweep) and the digest of each array item, by name."""
+
+    format: NotRequired[int]
+    policy: PolicyDescription | None
+    digests: dict[str, str]
+
+
+class Curves(TypedDict):
+    """A checkpoint's ``curves`` item: the metrics of the group in training so far ([run,
+    update], by name) and, once one of a sweep's groups is done, the finished groups' metrics and
+    the update each of their runs diverged at (from 1) or 0."""
+
+    current: dict[str, np.ndarray]
+    finished: NotRequired[dict[str, np.ndarray]]
+    finished_diverged: NotRequired[np.ndarray]
 
 
 @dataclasses.dataclass
@@ -87,8 +121,8 @@ class Restored:
 
     step: int
     state: Any
-    curves: dict[str, Any]
-    record: dict[str, Any]
+    curves: Curves
+    record: CheckpointRecord
 
     def point(self) -> ResumePoint:
         """Where the checkpoint says training stopped."""
@@ -120,7 +154,7 @@ def open_checkpoints(
     keep: int,
     kind: RunKind,
     run_config: RunRecord,
-) -> tuple[Checkpoints | None, dict[str, Any] | None]:
+) -> tuple[Checkpoints | None, CheckpointRecord | None]:
     """The checkpoints of a `kind` of run ("train" or "sweep") in `directory`, and the newest
     one's record, checked against this run before anything is compiled (None, None without a
     directory)."""
@@ -149,17 +183,18 @@ def open_checkpoints(
                 f"{checkpoints.directory} already holds checkpoints; pass resume=True (--resume) "
                 "to continue that run, or choose another directory"
             )
+        newest = None
         if record is not None:
-            check_format(record, f"the newest checkpoint in {checkpoints.directory}", FORMAT)
-            check_same_run(record, kind, run_config, checkpoints.directory)
+            newest = _checked(record, f"the newest checkpoint in {checkpoints.directory}")
+            check_same_run(newest, kind, run_config, checkpoints.directory)
     except Exception:
         checkpoints.close()
         raise
-    return checkpoints, record
+    return checkpoints, newest
 
 
 def check_same_run(
-    record: dict[str, Any], kind: RunKind, current: RunRecord, directory: Path
+    record: CheckpointRecord, kind: RunKind, current: RunRecord, directory: Path
 ) -> None:
     """Raise :class:`ConfigMismatch` unless checkpoint `record` belongs to a `kind` of run
     recorded as `current`, naming every field whose value differs.
@@ -209,15 +244,16 @@ class Checkpoints:
                 "that leads to none)"
             )
         self._manager = _manager(self.directory, keep)
-        self._writes = _Writes(self._manager, self.directory)
+        self._writes = Writes(self._manager, self.directory)
 
     def steps(self) -> list[int]:
         """Steps of the complete checkpoints, oldest first."""
-        return _steps(self._manager)
+        return committed_steps(self._manager)
 
     def latest_record(self) -> dict[str, Any] | None:
-        """The record of the newest checkpoint whose record can be read (no arrays are read:
-        for checks before compiling); None if there is none."""
+        """The record of the newest checkpoint whose record can be read, as JSON reads it, in
+        whatever layout (no arrays are read: for checks before compiling); None if there is
+        none."""
         import orbax.checkpoint as ocp
 
         for step in reversed(self.steps()):
@@ -228,7 +264,7 @@ class Checkpoints:
         return None
 
     def restore(
-        self, like: Any, check: Callable[[dict[str, Any]], None] | None = None
+        self, like: Any, check: Callable[[CheckpointRecord], None] | None = None
     ) -> Restored | None:
         """The newest intact checkpoint, its state in the structure of `like` (arrays or
         ``jax.ShapeDtypeStruct``\\ s); damaged ones are reported and set aside. `check` sees
@@ -240,11 +276,11 @@ class Checkpoints:
         abstract = {_name(i): _storable_shape(leaf) for i, leaf in enumerate(leaves)}
         for step in reversed(self.steps()):
             try:
-                record = self._read(step, record=ocp.args.JsonRestore()).record
+                read = self._read(step, record=ocp.args.JsonRestore()).record
             except Exception as error:  # an unreadable record is damage
                 self._set_aside(step, error)
                 continue
-            check_format(record, f"checkpoint at step {step} in {self.directory}", FORMAT)
+            record = _checked(read, f"checkpoint at step {step} in {self.directory}")
             try:
                 names = ["state", "curves"] + (["policy"] if record["policy"] else [])
                 restore = {name: ocp.args.StandardRestore() for name in names}
@@ -275,14 +311,14 @@ class Checkpoints:
         """Checkpoint a `kind` of run ("train" or "sweep") configured as `config` at `point`,
         with its `state` (and, for one run, its `policy`, which ``load_policy`` reads); the
         record names the point, which :meth:`Restored.point` reads back."""
-        record = {
+        record: PointRecord = {
             "kind": kind,
             "config": config.to_json(),
             "group": point.group,
             "update": point.update,
             "runs_per_call": runs_per_call,
         }
-        curves: dict[str, Any] = {"current": point.current}
+        curves = Curves(current=point.current)
         if point.finished:
             curves["finished"] = point.finished
             curves["finished_diverged"] = point.finished_diverged
@@ -292,8 +328,8 @@ class Checkpoints:
         self,
         step: int,
         state: Any,
-        curves: dict[str, Any],
-        record: dict[str, Any],
+        curves: Curves,
+        record: PointRecord,
         policy: Policy | None = None,
     ) -> None:
         """Start writing checkpoint `step`; it completes in the background, and then the
@@ -310,7 +346,7 @@ class Checkpoints:
         arrays = {"state": host, "curves": jax.device_get(curves)}
         if policy is not None:
             arrays["policy"] = jax.device_get(policy.arrays())
-        record = artifact.seal(
+        sealed = artifact.seal(
             record,
             FORMAT,
             policy=policy.describe() if policy is not None else None,
@@ -318,46 +354,49 @@ class Checkpoints:
         )
         # Orbax waits for the previous save to finish before it starts this one.
         items = {name: ocp.args.StandardSave(value) for name, value in arrays.items()}
-        args = _args(**items, record=ocp.args.JsonSave(record))
+        args = _args(**items, record=ocp.args.JsonSave(sealed))
         self.wait()  # the one before, on disk: orbax would wait for it here anyway
         self._writes.start(step, args)
 
-    def policy(self) -> tuple[Policy, dict[str, Any]]:
+    def policy(self) -> tuple[Policy, CheckpointRecord]:
         """The policy of the newest readable checkpoint, and its record."""
         import orbax.checkpoint as ocp
 
         for step in reversed(self.steps()):
             try:
-                record = self._read(step, record=ocp.args.JsonRestore()).record
+                read = self._read(step, record=ocp.args.JsonRestore()).record
             except Exception as error:  # try the previous one
                 _warn(self.directory, step, error, "could not be read")
                 continue
-            check_format(record, f"checkpoint at step {step} in {self.directory}", POLICY_FORMATS)
+            where = f"checkpoint at step {step} in {self.directory}"
+            record = _checked(read, where, POLICY_FORMATS)
+            described = record.get("policy")
             try:
-                if record.get("policy") is not None:
+                if described is not None:
                     arrays = self._read(step, policy=ocp.args.StandardRestore()).policy
                     _verify("policy", arrays, record)
             except Exception as error:  # try the previous one
                 _warn(self.directory, step, error, "could not be read")
                 continue
-            if record.get("policy") is None:
+            if described is None:
                 raise InvalidInput(
                     f"{self.directory} holds the checkpoints of a {record.get('kind')}, not of "
                     "one policy: load_policy reads the checkpoints of train()"
                 )
-            return Policy.from_parts(record["policy"], arrays), record
+            return Policy.from_parts(described, arrays), record
         raise MissingFile(f"no readable checkpoint in {self.directory}")
 
     def _read(self, step: int, **items: Any) -> Any:
         return self._manager.restore(step, args=_args(**items))
 
     def wait(self) -> None:
-        """Block until the checkpoint being written is complete; :class:`CheckpointNotWritten`
-        if it could not be."""
+        """Block until the checkpoint being written is complete;
+        :class:`~fppo_jax.store.checkpoint_writes.CheckpointNotWritten` if it could not be."""
         self._writes.wait()
 
     def lock(self) -> None:
-        """Make this the directory's one writer, or raise :class:`CheckpointsUnavailable`
+        """Make this the directory's one writer, or raise
+        :class:`~fppo_jax.store.checkpoint_writes.CheckpointsUnavailable`
         naming the process that is (:class:`~fppo_jax.store.files.DirectoryLock`)."""
         try:
             self._lock = DirectoryLock(self.directory, "checkpoints")
@@ -384,60 +423,6 @@ class Checkpoints:
         target = artifact.set_aside(self.directory / str(step))
         self._manager.reload()
         _warn(self.directory, step, error, "is damaged", f"moved to {target}, ")
-
-
-class _Writes:
-    """Orbax's writes of `directory`'s checkpoints, each finished in a background thread: a
-    write that storage refuses, at once or in that thread, is :class:`CheckpointNotWritten`,
-    naming the newest intact checkpoint."""
-
-    def __init__(self, manager: ocp.CheckpointManager, directory: Path):
-        self.manager, self.directory = manager, directory
-        self.pending: int | None = None  # the step being written, until it is on disk
-
-    def start(self, step: int, args: ocp.args.Composite) -> None:
-        if not self._written(lambda: self.manager.save(step, args=args)):
-            raise RuntimeError(f"orbax refused to write checkpoint step {step} in {self.directory}")
-        self.pending = step
-
-    def wait(self) -> None:
-        self._written(self.manager.wait_until_finished)
-        self._check_written()
-
-    def _written(self, write: Callable[[], Any]) -> Any:
-        """`write`'s result, or :class:`CheckpointNotWritten` where it, or the checkpoint written
-        before it in the background, failed to write (orbax raises what storage said, as an
-        ``OSError`` or tensorstore's ``ValueError``); then whether that earlier one is on disk."""
-        try:
-            result = write()
-        except Exception as error:
-            if not _storage_failure(error):
-                raise
-            raise self._not_written(_storage_reason(error)) from error
-        self._check_written()
-        return result
-
-    def _check_written(self) -> None:
-        """Raise :class:`CheckpointNotWritten` if the step last started is not on disk now that
-        orbax says it has finished: a failure in one of its background threads is logged there,
-        not raised, and would otherwise pass for a checkpoint."""
-        if self.pending is not None and not self.manager.is_saving_in_progress():
-            step, self.pending = self.pending, None
-            if step not in _steps(self.manager):
-                raise self._not_written(f"step {step} is not on disk after writing it")
-
-    def _not_written(self, why: str) -> CheckpointNotWritten:
-        kept = _steps(self.manager)
-        before = f"the newest intact one is step {kept[-1]}" if kept else "none is intact"
-        return CheckpointNotWritten(
-            f"could not write a checkpoint in {self.directory} ({why}); {before}. Free space, "
-            "or choose another checkpoint directory, and resume (--resume)"
-        )
-
-
-def _steps(manager: ocp.CheckpointManager) -> list[int]:
-    manager.reload()
-    return sorted(manager.all_steps())
 
 
 def _manager(directory: Path, keep: int) -> ocp.CheckpointManager:
@@ -469,20 +454,6 @@ def _warn(directory: Path, step: int, error: Exception, what: str, done: str = "
     )
 
 
-def _storage_failure(error: BaseException) -> bool:
-    """Whether `error` is storage refusing a write, as orbax passes it on: an ``OSError``, or
-    tensorstore's ``ValueError`` that carries the operating system's error code."""
-    return isinstance(error, OSError) or "os_error_code" in str(error)
-
-
-def _storage_reason(error: Exception) -> str:
-    """What storage said, in the operating system's words where it gave its error code."""
-    if isinstance(error, OSError) and error.strerror:
-        return error.strerror
-    code = re.search(r"os_error_code='(\d+)'", str(error))
-    return os.strerror(int(code.group(1))) if code else first_line(error)
-
-
 def _args(**items: Any) -> ocp.args.Composite:
     import orbax.checkpoint as ocp
 
@@ -511,5 +482,14 @@ def _from_storable(x: np.ndarray, like: Any) -> Any:
     return jax.random.wrap_key_data(x) if _is_key(like) else x  # type: ignore[arg-type]  # host key data is a valid argument
 
 
-def _verify(name: str, arrays: Any, record: dict[str, Any]) -> None:
+def _checked(
+    record: dict[str, Any], what: str, formats: int | tuple[int, ...] = FORMAT
+) -> CheckpointRecord:
+    """`record`, a checkpoint's record item as JSON reads it (of `what`, in words), once shown
+    to be in a layout of `formats` (:func:`~fppo_jax.store.files.check_format`)."""
+    check_format(record, what, formats)
+    return cast(CheckpointRecord, record)
+
+
+def _verify(name: str, arrays: Any, record: CheckpointRecord) -> None:
     artifact.verify(arrays, record["digests"][name], name)

@@ -16,11 +16,12 @@ import secrets
 from collections.abc import Sequence
 from importlib import metadata
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, TypedDict
 
 import jax
 import numpy as np
 
+from fppo_jax.core.config import Setting
 from fppo_jax.core.trainer import METRICS
 from fppo_jax.errors import InvalidInput, MissingPackage, first_line, install_hint
 from fppo_jax.store.files import DirectoryLock, writable_directory, write_json
@@ -32,7 +33,17 @@ LoggedRuns = tuple[range, dict[str, np.ndarray]]  # runs (a range of run indices
 OUTPUTS = ("config.json", "metrics.csv", "curves.csv", "sweep.json", "summary.txt")
 
 
-def environment_record() -> dict[str, Any]:
+class EnvironmentRecord(TypedDict):
+    """Where a run ran, as its ``config.json`` records it beside the run's record: the versions
+    of Python and of the packages installed of those it may use, JAX's platform and the kinds of
+    its devices."""
+
+    versions: dict[str, str]
+    platform: str
+    devices: list[str]
+
+
+def environment_record() -> EnvironmentRecord:
     """Versions and devices, for the record of a run."""
     versions = {}
     for package in (
@@ -217,7 +228,7 @@ class WandbLog:
         self,
         project: str,
         config: dict[str, Any],
-        runs: Sequence[dict[str, Any]] | None,
+        runs: Sequence[Setting] | None,
         directory: Any,
     ):
         self._wandb = require_wandb()
@@ -307,7 +318,7 @@ def open_logs(
     directory: str | Path | None,
     wandb_project: str | None,
     config: RunRecord,
-    runs: Sequence[dict[str, Any]] | None,
+    runs: Sequence[Setting] | None,
     previous: Sequence[LoggedRuns] = (),
 ) -> Logs | None:
     """The logs asked for (None if none): `directory` gets ``config.json`` (`config` with the

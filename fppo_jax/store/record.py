@@ -12,6 +12,7 @@ import json
 from typing import Any, cast
 
 from fppo_jax.core.config import Setting, TrainConfig, Value
+from fppo_jax.core.surrogates import SurrogateIdentity
 from fppo_jax.store.files import IncompatibleFormat, check_format, json_value
 
 _SHAPE = [field.name for field in dataclasses.fields(TrainConfig)]
@@ -42,7 +43,7 @@ class RunRecord:
     grid: dict[str, list[Value]] | None = None
     seeds: tuple[int, ...] | None = None
     part: tuple[int, int] | None = None
-    surrogates: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
+    surrogates: dict[str, SurrogateIdentity] = dataclasses.field(default_factory=dict)
     runs_per_call: int | None = None
 
     def protocol(self) -> RunRecord:

@@ -9,16 +9,16 @@ policy, or the policy of a run's newest readable checkpoint (:mod:`fppo_jax.stor
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, TypedDict, cast
 
 import jax
 from flax.traverse_util import flatten_dict, unflatten_dict
 
-from fppo_jax.core.policy import Policy
+from fppo_jax.core.policy import Policy, PolicyDescription
 from fppo_jax.errors import InvalidInput, MissingFile, first_line
 from fppo_jax.store import artifact
 from fppo_jax.store.artifact import DamagedArtifact
-from fppo_jax.store.checkpoint import Checkpoints
+from fppo_jax.store.checkpoint import CheckpointRecord, Checkpoints
 from fppo_jax.store.files import tree_digest
 
 POLICY_FILE, ARRAYS_FILE = "policy.json", "policy.npz"
@@ -26,10 +26,28 @@ POLICY_FILE, ARRAYS_FILE = "policy.json", "policy.npz"
 FORMAT = 1
 
 
+class PolicyOrigin(TypedDict):
+    """The run a saved policy comes from: its record as JSON
+    (:meth:`~fppo_jax.store.record.RunRecord.to_json`) and the update it ended at."""
+
+    config: dict[str, Any]
+    update: int
+
+
+class SavedPolicyRecord(PolicyOrigin):
+    """``policy.json``: the :class:`PolicyOrigin`, its kind (``"policy"``), its layout, the
+    policy's description and the digest of its arrays."""
+
+    kind: Literal["policy"]
+    format: int
+    policy: PolicyDescription
+    digest: str
+
+
 def save_policy(
     directory: str | Path,
     policy: Policy,
-    record: dict[str, Any],
+    record: PolicyOrigin,
     *,
     overwrite: bool = False,
 ) -> Path:
@@ -71,7 +89,7 @@ def load_policy(directory: str | Path) -> Policy:
     return read_policy(directory)[0]
 
 
-def read_policy(directory: str | Path) -> tuple[Policy, dict[str, Any]]:
+def read_policy(directory: str | Path) -> tuple[Policy, SavedPolicyRecord | CheckpointRecord]:
     """The policy in `directory` and the record of its run (``config``, ``update``, ``kind``:
     ``"policy"`` for a saved policy, ``"train"`` for a checkpoint)."""
     directory = Path(directory)
@@ -96,7 +114,7 @@ def read_policy(directory: str | Path) -> tuple[Policy, dict[str, Any]]:
         checkpoints.close()
 
 
-def _read_saved_policy(directory: Path) -> tuple[Policy, dict[str, Any]]:
+def _read_saved_policy(directory: Path) -> tuple[Policy, SavedPolicyRecord]:
     what = f"the saved policy in {directory}"
     try:
         saved = artifact.read_record(directory / POLICY_FILE, what, FORMAT)
@@ -107,7 +125,7 @@ def _read_saved_policy(directory: Path) -> tuple[Policy, dict[str, Any]]:
         policy = Policy.from_parts(saved["policy"], unflatten_dict(arrays, sep="/"))
     except Exception as error:  # any failure to read back is damage
         raise _damaged(directory, error) from error
-    return policy, saved
+    return policy, cast(SavedPolicyRecord, saved)
 
 
 def _damaged(directory: Path, error: Exception) -> DamagedArtifact:

@@ -15,10 +15,11 @@ import json
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict, cast
 
 import numpy as np
 
+from fppo_jax.core.config import Setting
 from fppo_jax.core.trainer import METRICS
 from fppo_jax.errors import InvalidInput, MissingFile
 from fppo_jax.store import artifact
@@ -29,8 +30,40 @@ from fppo_jax.store.numpy_policy import digest
 FORMAT = 1
 
 
+class SweepRun(TypedDict):
+    """One run of a sweep: its setting (an index into the sweep's settings) and its seed."""
+
+    setting: int
+    seed: int
+
+
+class SweepRecord(TypedDict):
+    """What a sweep's ``sweep.json`` says of it: its settings, its seeds, each run's setting and
+    seed, the update each run diverged at (from 1) or 0, the sweep's record as JSON
+    (:meth:`~fppo_jax.store.record.RunRecord.to_json`) and its compile and train times."""
+
+    settings: list[Setting]
+    seeds: list[int]
+    runs: list[SweepRun]
+    diverged: list[int]
+    config: dict[str, Any]
+    compile_seconds: float
+    train_seconds: float
+
+
+class SealedSweepRecord(SweepRecord):
+    """``sweep.json`` as written and read back: the :class:`SweepRecord`, its layout, the digest
+    of its ``curves.csv`` and each run's (which files written before them lack) over the
+    metrics of ``digest_columns``."""
+
+    format: NotRequired[int]
+    curves_sha256: str
+    digest_columns: NotRequired[list[str]]
+    run_digests: NotRequired[list[str]]
+
+
 def write_sweep(
-    directory: str | Path, record: dict[str, Any], metrics: Mapping[str, np.ndarray]
+    directory: str | Path, record: SweepRecord, metrics: Mapping[str, np.ndarray]
 ) -> None:
     """`curves.csv` with a column per name of `metrics` ([run, update] each), then
     `sweep.json`: `record` (``settings``, ``seeds``, ``runs``, ``diverged``, ``config``,
@@ -52,7 +85,7 @@ def write_sweep(
         _run_digest(np.array([[float(repr(x)) for x in metrics[m][i].tolist()] for m in metrics]).T)
         for i in range(len(record["runs"]))
     ]
-    record = artifact.seal(
+    sealed = artifact.seal(
         record,
         FORMAT,
         curves_sha256=hashlib.sha256(curves).hexdigest(),
@@ -61,10 +94,12 @@ def write_sweep(
     )
     # sweep.json last, naming the curves it goes with: a process stopped between the two
     # renames leaves a pair that reading refuses, never one that reads as a wrong sweep.
-    artifact.write(directory, "sweep.json", record, {"curves.csv": curves})
+    artifact.write(directory, "sweep.json", sealed, {"curves.csv": curves})
 
 
-def read_sweep(directory: str | Path) -> tuple[dict[str, Any], dict[str, np.ndarray], list[int]]:
+def read_sweep(
+    directory: str | Path,
+) -> tuple[SealedSweepRecord, dict[str, np.ndarray], list[int]]:
     """What :func:`write_sweep` wrote: its record, the metrics its `curves.csv` holds
     ([run, update]) and the indices of the runs it holds among the record's.
 
@@ -180,7 +215,7 @@ def _digest(value: Any) -> bool:
     return isinstance(value, str) and len(value) == 64 and set(value) <= set("0123456789abcdef")
 
 
-def _read_record(path: Path) -> dict[str, Any]:
+def _read_record(path: Path) -> SealedSweepRecord:
     """``sweep.json`` at `path`, checked against :data:`RECORD`; an ``InvalidInput`` naming the
     file says what is wrong with it."""
     what = f"the sweep record {path}"
@@ -194,7 +229,7 @@ def _read_record(path: Path) -> dict[str, Any]:
             found = json.dumps(record[key])
             found = found if len(found) <= 60 else found[:57] + "..."
             raise InvalidInput(f"{path}: {key} is {found}, not {expected}")
-    return record
+    return cast(SealedSweepRecord, record)
 
 
 # The columns every reader of a sweep needs; the other metrics are read when they are there.
@@ -204,7 +239,7 @@ CURVES_NEEDED = ("run", "update", "env_steps", "average_return")
 def _read_curves(
     path: Path,
     text: str,
-    runs: Sequence[Mapping[str, Any]],
+    runs: Sequence[SweepRun],
     keys: set[str],
     *,
     every_run: bool = True,
@@ -285,7 +320,7 @@ def _run_digest(values: np.ndarray) -> str:
 def _check_run_digests(
     path: Path,
     record_path: Path,
-    record: Mapping[str, Any],
+    record: SealedSweepRecord,
     metrics: Mapping[str, np.ndarray],
     present: Sequence[int],
 ) -> None:

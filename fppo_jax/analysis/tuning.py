@@ -287,12 +287,7 @@ def tune(
         optuna.logging.set_verbosity(optuna.logging.WARNING)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-            # check_plan takes and gives plans as JSON; the one recorded equals this one but
-            # for the fields recorded only.
-            recorded = check_plan(
-                output, cast(dict[str, Any], plan), "a tune", PLAN_FILE, _RECORDED_ONLY
-            )
-            plan = cast(TunePlan, recorded)
+            plan = check_plan(output, plan, "a tune", PLAN_FILE, _RECORDED_ONLY)
             store = open_storage(
                 optuna, storage or f"sqlite:///{(output / STORAGE_FILE).absolute()}"
             )

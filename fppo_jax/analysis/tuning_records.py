@@ -9,6 +9,9 @@ import annotations``), so that ``NotRequired`` keys are known at run time too.""
 from collections.abc import Sequence
 from typing import Any, NotRequired, TypedDict
 
+from fppo_jax.core.search_space import Axis
+from fppo_jax.core.surrogates import SurrogateIdentity
+
 # A run-shape setting's value, as a tune's plan records it for every run: a TrainConfig field's
 # (hidden_sizes a sequence), total_steps's (None: the task's budget), the preset, the backend or
 # the chunk.
@@ -31,14 +34,6 @@ class TaskBudget(TypedDict):
     env_steps_per_arm: int
     env_steps_per_full_run: int
     rungs: list[RungPlan]
-
-
-class Axis(TypedDict):
-    """An axis of a search space in ``tune.json`` (:meth:`Interval.to_json`)."""
-
-    low: float
-    high: float
-    scale: str
 
 
 class SamplerRecord(TypedDict):
@@ -66,7 +61,7 @@ class TunePlan(TypedDict):
     selection: str
     settings: dict[str, RunShapeValue]
     protocol: dict[str, dict[str, Any]]  # per task, its run record's JSON (RunRecord.to_json)
-    surrogates: NotRequired[dict[str, dict[str, Any]]]  # own surrogates' identities, if any
+    surrogates: NotRequired[dict[str, SurrogateIdentity]]  # own surrogates', if any
     commit: str
 
 

@@ -72,7 +72,7 @@ def _source(function: types.FunctionType) -> bytes:
         return code.co_code + repr(code.co_consts).encode()
 
 
-def _reads(function: types.FunctionType) -> dict[str, Any]:
+def _reads(function: types.FunctionType) -> dict[str, object]:
     """The globals and closure variables `function` reads, by name, with their values."""
     read = {
         name: function.__globals__[name]

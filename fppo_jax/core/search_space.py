@@ -27,7 +27,7 @@ import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from fppo_jax.core.resolution import HYPERPARAMETER_DEFAULTS, hyperparameters, table2
 from fppo_jax.core.surrogates import Surrogate
@@ -35,6 +35,14 @@ from fppo_jax.core.variants import EPSILON
 from fppo_jax.errors import InvalidInput
 
 SCALES = ("linear", "log", "log1m")
+
+
+class Axis(TypedDict):
+    """An interval as records hold it (a tune's ``tune.json``)."""
+
+    low: float
+    high: float
+    scale: str
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,7 +53,7 @@ class Interval:
     high: float
     scale: str = "linear"
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> Axis:
         return {"low": self.low, "high": self.high, "scale": self.scale}
 
     def contains(self, value: float) -> bool:
@@ -129,7 +137,7 @@ class SearchSpace:
     def axes(self) -> dict[str, Interval]:
         return {**self.shared, **self.own}
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, Axis]:
         return {name: axis.to_json() for name, axis in self.axes.items()}
 
 

@@ -37,14 +37,16 @@ class DamagedArtifact(InvalidInput):
     do not match the digest written with them."""
 
 
-def seal(record: Mapping[str, Any], format: int, **written: Any) -> dict[str, Any]:
+def seal(record: Mapping[str, object], format: int, **written: object) -> dict[str, object]:
     """`record` as written: its layout (``format``) first, then `written` (the digests of its
     data, by name, and what else the writer adds), as JSON reads it back (tuples as lists,
     numpy scalars as numbers)."""
-    return cast(dict[str, Any], json_value({"format": format, **record, **written}))
+    return cast(dict[str, object], json_value({"format": format, **record, **written}))
 
 
-def write(directory: Path, name: str, record: dict[str, Any], data: Mapping[str, bytes]) -> None:
+def write(
+    directory: Path, name: str, record: Mapping[str, object], data: Mapping[str, bytes]
+) -> None:
     """The files `data` (by name) in `directory`, then the `record` (:func:`seal`-ed) as `name`,
     each under a temporary name, flushed and renamed; the record last."""
     directory.mkdir(parents=True, exist_ok=True)
@@ -71,10 +73,10 @@ def read_record(
     return record
 
 
-def arrays_file(arrays: dict[str, Any]) -> bytes:
+def arrays_file(arrays: Mapping[str, np.ndarray]) -> bytes:
     """Named arrays as a ``.npz`` file's bytes (readable with ``numpy.load``)."""
     buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
+    np.savez(buffer, allow_pickle=True, **arrays)  # numpy's default, named: no array takes it
     return buffer.getvalue()
 
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, NamedTuple, NotRequired, TypedDict, cast
 
@@ -483,7 +483,7 @@ def _from_storable(x: np.ndarray, like: Any) -> Any:
 
 
 def _checked(
-    record: dict[str, Any], what: str, formats: int | tuple[int, ...] = FORMAT
+    record: Mapping[str, object], what: str, formats: int | tuple[int, ...] = FORMAT
 ) -> CheckpointRecord:
     """`record`, a checkpoint's record item as JSON reads it (of `what`, in words), once shown
     to be in a layout of `formats` (:func:`~fppo_jax.store.files.check_format`)."""

@@ -10,6 +10,7 @@ import json
 import os
 import tempfile
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +50,7 @@ class IncompatibleFormat(InvalidInput):
     """A checkpoint or saved policy was written in another layout than this code reads."""
 
 
-def check_format(record: dict[str, Any], what: str, reads: int | tuple[int, ...]) -> None:
+def check_format(record: Mapping[str, object], what: str, reads: int | tuple[int, ...]) -> None:
     """Raise :class:`IncompatibleFormat` unless `record` (of `what`, in words: "checkpoint at
     step 4 in …") is in layout `reads` (or one of them); a record without a ``format`` is in the
     first layout, written before layouts were recorded. Such a file is intact, so it is refused

@@ -13,7 +13,7 @@ import json
 import os
 import platform
 import secrets
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from importlib import metadata
 from pathlib import Path
 from typing import Any, Protocol, TypedDict
@@ -130,7 +130,7 @@ class MetricLog:
     def __init__(
         self,
         directory: str | Path,
-        config: dict[str, Any],
+        config: Mapping[str, object],
         sweep: bool,
         previous: Sequence[LoggedRuns] = (),
     ):
@@ -227,7 +227,7 @@ class WandbLog:
     def __init__(
         self,
         project: str,
-        config: dict[str, Any],
+        config: Mapping[str, object],
         runs: Sequence[Setting] | None,
         directory: Any,
     ):

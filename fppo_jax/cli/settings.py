@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, cast
 
@@ -51,10 +52,10 @@ def settings_file(path: Path) -> dict[str, Any]:
     return settings
 
 
-def _rerun(path: Path, record: RunRecord) -> dict[str, Any]:
+def _rerun(path: Path, record: RunRecord) -> dict[str, object]:
     """The flags that rerun the run (or the sweep) `record` records, read from `path`: its
     setting and seed, or a sweep's grid (as the grid's flags), seeds, share and group size."""
-    flags: dict[str, Any] = {"env": record.env, "preset": record.preset, **record.setting}
+    flags: dict[str, object] = {"env": record.env, "preset": record.preset, **record.setting}
     flags |= dataclasses.asdict(record.config) | (record.grid or {})
     seeds = None if record.seeds is None else list(record.seeds)
     found = {
@@ -100,7 +101,9 @@ def _importable(path: Path, variant: Any, own: dict[str, SurrogateIdentity]) -> 
     return found
 
 
-def check_settings(path: Path, settings: dict[str, Any], command: argparse.ArgumentParser) -> None:
+def check_settings(
+    path: Path, settings: Mapping[str, object], command: argparse.ArgumentParser
+) -> None:
     """Raise InvalidInput naming any key of `settings` (from `path`) that `command` has no flag
     for."""
     valid = set(vars(command.parse_args([]))) - {
@@ -124,7 +127,7 @@ def check_settings(path: Path, settings: dict[str, Any], command: argparse.Argum
                 raise InvalidInput(f"{path}: {action.dest} must be true or false, got {value!r}")
 
 
-def check_preset(path: Path, settings: dict[str, Any], preset: str | None) -> None:
+def check_preset(path: Path, settings: Mapping[str, object], preset: str | None) -> None:
     """Refuse `preset`, given on the command line, beside a file that records a run of another
     preset with that preset's run shape: the file's shape would win and the run would be
     labelled `preset` without having its shape."""

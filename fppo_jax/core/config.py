@@ -12,7 +12,7 @@ defaults and checks in :mod:`fppo_jax.run.options`.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, cast
 
 import jax
@@ -194,12 +194,13 @@ def stack_hyperparameters(hps: Sequence[Hyperparameters]) -> Hyperparameters:
 def resolve_config(
     env: Any,
     total_steps: int | None,
-    overrides: dict[str, Any],
+    overrides: Mapping[str, object],
     also_valid: tuple[str, ...] = (),
     preset: str = "paper",
 ) -> TrainConfig:
-    """The checked TrainConfig of `preset` and `overrides`, with the task's step budget and
-    the preset's learning-rate schedule for it (:func:`task_preset`) by default."""
+    """The checked TrainConfig of `preset` and `overrides` (values given for its fields, as
+    yet unchecked), with the task's step budget and the preset's learning-rate schedule for it
+    (:func:`task_preset`) by default."""
     task = lookup(env) if isinstance(env, str) else None  # an unknown name is refused here
     unknown = sorted(set(overrides) - set(CONFIG_FIELDS))
     if unknown:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -205,8 +205,11 @@ class Options:
         return tuple(field.name for field in dataclasses.fields(cls))
 
     @classmethod
-    def split(cls, settings: dict[str, Any]) -> tuple[Options, dict[str, Any]]:
-        """The options among a run's keyword `settings`, and the settings left."""
+    def split(cls, settings: Mapping[str, object]) -> tuple[Options, dict[str, object]]:
+        """The options among a run's keyword `settings` (as given, unchecked), and the
+        settings left."""
         names = cls.names()
-        options = cls(**{name: value for name, value in settings.items() if name in names})
+        given = {name: value for name, value in settings.items() if name in names}
+        # Options checks each value when made (__post_init__), whatever its type.
+        options = cls(**given)  # type: ignore[arg-type]
         return options, {name: value for name, value in settings.items() if name not in names}

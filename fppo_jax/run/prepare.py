@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Mapping
 from typing import Any
 
 from fppo_jax.core.config import TrainConfig, describe, environment_name, resolve_config
@@ -20,10 +21,11 @@ from fppo_jax.store.record import RunRecord
 
 @dataclasses.dataclass(frozen=True)
 class Prepared:
-    """A run's (or a sweep's) settings, checked: `config`, `options`, the hyperparameter
-    values given (`hyperparameters`, still to be resolved per variant), the registered `task`
-    (None for an environment object) and the `backend` chosen (`why`: how "auto" chose it).
-    The environment and the trainer are built on first use."""
+    """A run's (or a sweep's) settings: `config` and `options`, checked; the hyperparameter
+    values given (`hyperparameters`, by name, as given: checked as they are resolved per
+    variant; a sweep's may be lists of values); the registered `task` (None for an environment
+    object) and the `backend` chosen (`why`: how "auto" chose it). The environment and the
+    trainer are built on first use."""
 
     env: Any
     task: str | None
@@ -32,7 +34,7 @@ class Prepared:
     preset: str
     config: TrainConfig
     options: Options
-    hyperparameters: dict[str, Any]
+    hyperparameters: Mapping[str, object]
 
     @functools.cached_property
     def environment(self) -> Environment:
@@ -68,7 +70,7 @@ class Prepared:
 
 def prepare(
     env: str | Environment | Any,
-    settings: dict[str, Any],
+    settings: Mapping[str, object],
     hyperparameters: tuple[str, ...],
     *,
     total_steps: int | None,

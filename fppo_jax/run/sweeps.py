@@ -277,10 +277,12 @@ def _plan(
     )
 
 
-def _axes(grid: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+def _axes(grid: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> Mapping[str, object]:
+    """The grid's names and their values: a grid's own (a value or a list of them), or for a
+    list of settings the values they give each name, in order."""
     if isinstance(grid, Mapping):
-        return dict(grid)
-    axes: dict[str, list[Any]] = {}
+        return grid
+    axes: dict[str, list[object]] = {}
     for setting in grid:
         for key, value in setting.items():
             known = axes.setdefault(key, [])
@@ -300,11 +302,13 @@ def _runs(num_settings: int, seeds: list[int], part: tuple[int, int] | None) -> 
 
 def _settings(
     grid: Mapping[str, Any] | Sequence[Mapping[str, Any]],
-    fixed: dict[str, Any],
+    fixed: Mapping[str, object],
     surrogates: dict[str, Surrogate],
     task: str | None,
 ) -> tuple[list[Setting], Hyperparameters]:
-    """The grid's settings with the `fixed` values, and their hyperparameters stacked."""
+    """The grid's settings with the `fixed` values (the sweep's keyword arguments that name
+    hyperparameters, as given: a value or a list of them each), and their hyperparameters
+    stacked."""
     if "variant" in fixed:  # the grid's variants are what its surrogates were made for
         raise InvalidInput(
             "a sweep's variants are the grid's: give {'variant': ...} in the grid, not variant="

@@ -10,7 +10,7 @@ tune`` and ``classic/study/`` by ``fppo-jax study --tuned``; each MuJoCo task's
 decisions (better, worse, equivalent or undecided against tuned PPO) with the seeds each took and
 P(candidate > PPO) on the primary endpoint with a 95% percentile bootstrap interval over the
 runs the decision used; then each arm's tuned setting against its default on the test seeds, on
-the final training return (the defaults' runs are the seed study's, recorded at seeds 0–49 under
+the final training return (the defaults' runs are the seed study's, recorded from seed 0 under
 <results>/study/<task>/paper/, which were not evaluated), and tuned PPO against the published
 tuned PPO. A family whose study is not finished is reported as far as it went, and says so.
 Nothing is trained.
@@ -59,8 +59,17 @@ def recorded_defaults(results: Path, task: str) -> SweepResult | None:
 
 
 def study_runs(study: Path, task: str) -> SweepResult:
-    groups = sorted((study / task).glob("group-*/sweep.json"))
-    return merge([SweepResult.read(p.parent) for p in groups])
+    """A task's runs in `study`, each group read whole or, where it trained in shares
+    (``--part``), from its shares joined."""
+    groups = []
+    for group in sorted((study / task).glob("group-*")):
+        if (group / "sweep.json").exists():
+            groups.append(SweepResult.read(group))
+        else:
+            groups.append(
+                merge([SweepResult.read(p.parent) for p in group.glob("part-*/sweep.json")])
+            )
+    return merge(groups)
 
 
 def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
@@ -129,10 +138,12 @@ def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
     lines += [
         "",
         "What tuning gained, on the final training return at the test seeds (IQM with its 95% "
-        "interval; the default's runs are the seed study's, at seeds 0–49):",
+        "interval; the default's runs are the seed study's, at its seeds from 0, as many as it "
+        "recorded; the runs of each, those with a finite final return):",
         "",
-        "| task | arm | tuned trial | tuned IQM | default IQM | P(tuned > default) |",
-        "|---|---|---|---|---|---|",
+        "| task | arm | tuned trial | tuned runs | tuned IQM | default runs | default IQM | "
+        "P(tuned > default) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for task in plan["tasks"]:
         defaults = recorded_defaults(results, task)
@@ -140,18 +151,19 @@ def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
             tuned_final = run_scores(runs[task], arm, "final")
             tuned_final = tuned_final[np.isfinite(tuned_final)]
             chosen = tuned[task][arm]["chosen"]["trial"]
-            cells = ["not recorded", "—"]
+            cells = ["—", "not recorded", "—"]
             names = [] if defaults is None else [s["variant"] for s in defaults.settings]
             if defaults is not None and arm in names:
                 default_final = run_scores(defaults, arm, "final")
                 default_final = default_final[np.isfinite(default_final)]
                 compared = statistics.compare(tuned_final, default_final)
                 cells = [
+                    str(len(default_final)),
                     interval(statistics.interval(default_final, "iqm"), 1),
                     interval(compared["probability_of_improvement"]),
                 ]
             lines.append(
-                f"| {task} | {arm} | {chosen} | "
+                f"| {task} | {arm} | {chosen} | {len(tuned_final)} | "
                 f"{interval(statistics.interval(tuned_final, 'iqm'), 1)} | {' | '.join(cells)} |"
             )
     lines += [

@@ -111,6 +111,15 @@ def test_runs_that_diverged_are_left_out_of_the_curves_and_counted_as_the_table_
         assert row.split(" | ")[1] == result.setting_seeds(index)
 
 
+def test_curves_take_the_names_they_are_given_and_still_say_their_seeds():
+    ax = plot_curves(sweep_by_hand(), names=["a", "b", "c"]).axes[0]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == [
+        "a, seeds 1 of 3 (2 diverged)",
+        "b, seeds 0 of 3 (3 diverged)",
+        "c",
+    ]
+
+
 def test_settings_with_fewer_seeds_say_how_many_in_the_legend_and_the_title():
     whole = sweep_by_hand()
     kept = list(range(8))  # tr-ppo's last seed not run

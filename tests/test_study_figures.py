@@ -2,11 +2,13 @@
 comparison's probability of improvement, and across tasks the performance profiles, drawn
 only where every task's scores can be normalised."""
 
+import dataclasses
+
 import numpy as np
 from helpers import two_settings
 from PIL import Image
 
-from fppo_jax.analysis.study_figures import profile_label, write_figures
+from fppo_jax.analysis.study_figures import arm_names, profile_label, write_figures
 
 PLAN = {"tasks": ["a", "b", "c"], "candidates": ["fppo-lp"], "baseline": "ppo"}
 PLAN["primary_endpoint"] = "final"
@@ -39,6 +41,19 @@ def test_curves_improvements_and_profiles_are_written_for_the_tasks_with_runs(tm
     flat = {v: {**x, "start": np.full(8, 1e6)} for v, x in scores["b"].items()}
     both = write_figures(tmp_path, PLAN, rows, results, {"a": scores["a"], "b": flat})
     assert [p.name for p in both] == ["curves.png", "improvement.png"]
+
+
+def test_a_tasks_curves_are_named_by_their_arms_where_the_variants_tell_them_apart():
+    tuned = two_settings()
+    tuned.settings = [
+        {"variant": "ppo", "learning_rate": 3.4e-4, "gamma": 0.9948, "gae_lambda": 0.9927},
+        {"variant": "fppo-lp", "alpha": 1.3, "learning_rate": 1.0e-4, "gamma": 0.9971},
+    ]
+    assert arm_names(tuned) == ["ppo", "fppo-lp"]
+    # Two settings of one variant: its hyperparameters are what tells them apart.
+    alphas = [{"variant": "fppo-lp", "alpha": a} for a in (1.3, 2.0)]
+    same = dataclasses.replace(tuned, settings=alphas)
+    assert arm_names(same) is None
 
 
 def test_the_profiles_axis_is_named_in_words():

@@ -112,9 +112,11 @@ def plot_curves(
     *,
     band: str = "std",
     confidence: float = statistics.CONFIDENCE,
+    names: Sequence[str] | None = None,
     ax: Axes | None = None,
 ) -> Figure:
-    """`metric` (the average return unless told) against env steps, one line per setting.
+    """`metric` (the average return unless told) against env steps, one line per setting,
+    named in the legend by `names` (by :func:`~fppo_jax.run.results.labels` unless told).
     ``band="std"``: the mean over seeds ± one sample std; ``"iqm"``, ``"mean"`` or ``"median"``:
     that statistic over seeds with its percentile bootstrap band at level `confidence`
     (:func:`fppo_jax.stats.statistics.curve_interval`). Runs that diverged are left out, as the
@@ -124,7 +126,7 @@ def plot_curves(
         statistics.estimator(band)
     ax = _axes(ax, (7, 4.5))
     run_counts = {result.setting_run_count(i) for i in range(len(result.settings))}
-    for index, name in enumerate(labels(result.settings)):
+    for index, name in enumerate(labels(result.settings) if names is None else names):
         if len(run_counts) > 1 or result.setting_runs(index)[1].size:
             name += f", seeds {result.setting_seeds(index)}"
         m = result.setting_metrics(index)

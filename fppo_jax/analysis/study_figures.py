@@ -21,6 +21,13 @@ def profile_label(endpoint: str, baseline: str) -> str:
     return f"threshold on the normalised {endpoint} (1 = {baseline}'s IQM on the task)"
 
 
+def arm_names(result: SweepResult) -> list[str] | None:
+    """Each setting of a study's task by its variant alone, where that tells them apart: a
+    tuned arm's every hyperparameter would overflow the legend, and the report lists them."""
+    variants = [str(setting["variant"]) for setting in result.settings]
+    return variants if len(set(variants)) == len(variants) else None
+
+
 def write_figures(
     output: Path,
     plan: StudyPlan,
@@ -43,7 +50,7 @@ def write_figures(
         1, len(tasks), figsize=(6 * len(tasks), 4), squeeze=False, layout="constrained"
     )
     for ax, task in zip(axes[0], tasks, strict=True):
-        plot_curves(results[task], band="iqm", ax=ax)
+        plot_curves(results[task], band="iqm", names=arm_names(results[task]), ax=ax)
     endpoint = plan["primary_endpoint"]
     improvements: dict[str, tuple[float, float, float]] = {}
     for row in rows:

@@ -185,6 +185,20 @@ def test_a_study_tests_the_chosen_settings_on_fresh_seeds_with_the_defaults_besi
         arm: result.chosen("cartpole", arm) for arm in ["fppo-lp", "ppo"]
     }
     assert plan["plan_digest"] == tuning.plan_digest(output)
+    # Copied elsewhere (another clone, another node), the study goes on: a tune is known by its
+    # plan's digest, not where it lay; a tune of another plan is refused.
+    moved = tmp_path / "moved"
+    shutil.copytree(output, moved / "tune")
+    shutil.copytree(tmp_path / "study", moved / "study")
+    again = study(
+        "cartpole", "fppo-lp", "ppo", output=moved / "study", tuned=moved / "tune", **arguments
+    )
+    assert again.decisions == found.decisions
+    (moved / "tune/tune.json").write_text((moved / "tune/tune.json").read_text() + "\n")
+    with pytest.raises(InvalidInput, match=r"planned with tuned\.plan_digest = "):
+        study(
+            "cartpole", "fppo-lp", "ppo", output=moved / "study", tuned=moved / "tune", **arguments
+        )
     trained = found.results["cartpole"]
     assert trained.seeds == [0, 1]
     for setting in trained.settings:

@@ -138,7 +138,7 @@ def study(
     # Array tasks that start together take turns to check the plan (each holds the lock briefly).
     lock = DirectoryLock(output, "a study", wait=PART_LOCK_WAIT if part is not None else 0.0)
     try:
-        plan = check_plan(output, plan)
+        plan = check_plan(output, plan, recorded_only=_RECORDED_ONLY)
         if part is not None:  # the array's tasks train their shares side by side
             lock.release()
         if shown_progress(settings):
@@ -184,6 +184,11 @@ def _planned_settings(settings: Mapping[str, object]) -> dict[str, object]:
     evaluated = settings.get("eval_every") is not None
     recorded = {k: v for k, v in settings.items() if k not in Options.names()}
     return {**recorded, **{k: settings[k] for k in EVALUATION if evaluated and k in settings}}
+
+
+# A tune is known by its plan's digest: the study goes on where the tune and the study were
+# copied or cloned to, as under another commit.
+_RECORDED_ONLY = frozenset({"commit", "tuned.directory"})
 
 
 def names_of_tasks(tasks: str | Sequence[str], what: str = "a study") -> list[str]:

@@ -7,6 +7,7 @@ import pytest
 from own_surrogates import frozen
 
 import fppo_jax
+from fppo_jax.analysis.study_plan import commit
 from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.run.merge import merge
 from fppo_jax.run.results import SweepResult
@@ -14,6 +15,7 @@ from fppo_jax.stats.sequential import Design, decide
 
 # As tests/test_studies.py's: PPO learns CartPole in this budget, eight runs per compiled call.
 BUDGET = {"total_steps": 4096, "learning_rate": 0.003, "chunk": 8}
+HEAD = commit()
 
 
 def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tmp_path, tiny):
@@ -51,4 +53,12 @@ def test_a_look_split_over_array_tasks_is_joined_and_decided_by_the_job_after(tm
     expected = decide(scores, Design(8, 16))
     assert [row["decision"] for row in joined.decisions] == ["worse", "undecided"]
     assert [d.decision for d in expected] == ["worse", None]  # fppo-lp awaits the next look
-    assert json.loads((output / "decisions.json").read_text())["comparisons"] == joined.decisions
+    record = json.loads((output / "decisions.json").read_text())
+    assert record["comparisons"] == joined.decisions
+    # A share writes no decision: the join records the commit each share trained at.
+    (group,) = record["groups"]
+    assert group == {"task": "cartpole", "group": 1, "seeds": list(range(8)), "shares": [HEAD] * 2}
+    (group_1 / "part-2" / "share.json").unlink()  # a share trained before shares recorded one
+    fppo_jax.study("cartpole", candidates, "ppo", groups=0, **settings)
+    (group,) = json.loads((output / "decisions.json").read_text())["groups"]
+    assert group["shares"] == [HEAD, ""]

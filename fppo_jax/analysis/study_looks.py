@@ -32,6 +32,7 @@ from fppo_jax.analysis.study_runs import (
     refuse_missing_shares,
     run_scores,
     runs_of,
+    share_commits,
 )
 from fppo_jax.analysis.study_sections import SHARES, START, Scores, steps_name
 from fppo_jax.core.surrogates import Surrogate
@@ -230,6 +231,7 @@ class _Said(TypedDict, total=False):
 
     defaults: bool
     commit: str
+    shares: list[str]
     reused: dict[str, list[str]]
 
 
@@ -241,6 +243,8 @@ def _gather(group: _Group, recorded: dict[str, list[SweepResult]]) -> GroupEntry
     if group.to_train:
         result = group.source.train(group.task, group.variants, group.seeds, group.where)
         said["commit"] = commit()
+    elif shares := share_commits(group.where):
+        said["shares"] = shares
     if result is not None:
         recorded[group.task].append(result)
     recorded[group.task] += [t.result for t in group.taken.values()]

@@ -125,14 +125,17 @@ class DecisionRow(TypedDict):
 
 class GroupEntry(TypedDict):
     """What ``decisions.json`` says of one group of a task's seeds: the `commit` it trained at,
-    or the recorded sweeps its runs were taken from, by variant (`reused`), or both; `defaults`
-    where it is of each arm's default setting (with_defaults)."""
+    or, trained in shares by array tasks, the commit of each share (`shares`, ``""`` for one
+    that recorded none), or the recorded sweeps its runs were taken from, by variant
+    (`reused`), or these together; `defaults` where it is of each arm's default setting
+    (with_defaults)."""
 
     task: str
     group: int
     defaults: NotRequired[bool]
     seeds: list[int]
     commit: NotRequired[str]
+    shares: NotRequired[list[str]]
     reused: NotRequired[dict[str, list[str]]]
 
 

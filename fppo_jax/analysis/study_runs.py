@@ -5,6 +5,7 @@ recorded and joined, and each run's score on an endpoint."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import shutil
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -13,7 +14,7 @@ from typing import Any, TypedDict
 import numpy as np
 
 from fppo_jax.analysis.reuse import Pool, Taken
-from fppo_jax.analysis.study_plan import TunedChoice
+from fppo_jax.analysis.study_plan import TunedChoice, commit
 from fppo_jax.core.config import Setting
 from fppo_jax.core.objectives import hyperparameter_names, identities, takers
 from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
@@ -26,6 +27,7 @@ from fppo_jax.run.prepare import prepare
 from fppo_jax.run.results import SweepResult
 from fppo_jax.run.sweeps import expand_grid, sweep
 from fppo_jax.stats import statistics
+from fppo_jax.store.files import write_json
 from fppo_jax.store.record import RunRecord
 
 # What the study sets itself for every group's sweep.
@@ -174,6 +176,10 @@ def _checked_settings(
     return run.record(), {str(s["variant"]): s for s in grid}
 
 
+# A share writes no decision (array tasks train side by side): the join records its commit.
+SHARE_FILE = "share.json"
+
+
 def sweep_group(
     task: str,
     grid: Grid,
@@ -194,7 +200,22 @@ def sweep_group(
     if where.exists():
         shutil.rmtree(where)
     sweep(task, grid, seeds, log_dir=where, part=part, **settings)
+    if part is not None:
+        write_json(where / SHARE_FILE, {"commit": commit()})
     return SweepResult.read(where)
+
+
+def share_commits(where: Path) -> list[str]:
+    """The commit each share of the group in `where` trained at, in part order (``""`` for a
+    share that recorded none); empty for a group that did not train in shares."""
+    shares = sorted(
+        (p.parent for p in where.glob("part-*/sweep.json")),
+        key=lambda share: int(share.name.removeprefix("part-")),
+    )
+    return [
+        json.loads(path.read_text())["commit"] if (path := share / SHARE_FILE).exists() else ""
+        for share in shares
+    ]
 
 
 def recorded_group(

@@ -322,7 +322,8 @@ def test_the_tie_tells_a_figure_quoted_for_the_wrong_task_variant_or_endpoint():
     assert _untied_p_values("DPO on Ant, Holm p 8.3e-05.", rows)  # baseline-shape's Swimmer
     sources = _sources()
     assert _untied_counts("On HalfCheetah PPO 11 of 20 reach 80%.", rows, sources) == []
-    assert _untied_counts("On HalfCheetah PPO 12 of 20 reach 80%.", rows, sources)
+    # A count no report can hold, so that recording more results never ties it.
+    assert _untied_counts("On HalfCheetah PPO 21 of 20 reach 80%.", rows, sources)
 
 
 # The statements over many intervals ("every", "none", "16 of 18") that the READMEs make, each

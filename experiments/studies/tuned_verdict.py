@@ -200,8 +200,10 @@ def mujoco_lines(results: Path) -> list[str]:
     lines += [
         f"Not run yet: {', '.join(left)}. Each task's tune trains 6 arms × 4.65M env steps "
         "(33 to 57 minutes each here, on a shared 2-core machine), its study up to 5 looks of "
-        "60 runs × 1M env steps; a share of 15 runs took about 19 minutes here (about 13,500 "
-        "env steps/s), so a look takes about 80 minutes and a task's study up to about 7 hours."
+        "60 runs × 1M env steps; a share of 15 runs took 10 to 21 minutes here (about 16 on "
+        "Hopper, 10.5 on HalfCheetah with the machine to itself), so a look of 60 runs takes "
+        "45 to 85 minutes and a task's study up to 4 to 7 hours (Hopper's, which stopped arms "
+        "at its second look, took under 4)."
         if left
         else "Every MuJoCo task the plan names is recorded.",
         "",

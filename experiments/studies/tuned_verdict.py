@@ -59,11 +59,13 @@ def recorded_defaults(results: Path, task: str) -> SweepResult | None:
     return merge([SweepResult.read(p.parent) for p in parts]) if parts else None
 
 
-def study_runs(study: Path, task: str) -> SweepResult:
-    """A task's runs in `study`, each group read whole or, where it trained in shares
-    (``--part``), from its shares joined."""
+def study_runs(study: Path, task: str, decided: dict) -> SweepResult:
+    """A task's runs in `study` that its decisions used (``decisions.json``'s groups: a look
+    still training in shares is left out), each group read whole or, where it trained in
+    shares (``--part``), from its shares joined."""
     groups = []
-    for group in sorted((study / task).glob("group-*")):
+    used = (g["group"] for g in decided["groups"] if g["task"] == task)
+    for group in (study / task / f"group-{number}" for number in sorted(used)):
         if (group / "sweep.json").exists():
             groups.append(SweepResult.read(group))
         else:
@@ -127,7 +129,7 @@ def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
         f"P(candidate > PPO), {endpoint} |",
         "|---|---|---|---|---|",
     ]
-    runs = {task: study_runs(study, task) for task in plan["tasks"]}
+    runs = {task: study_runs(study, task, decided) for task in plan["tasks"]}
     for row in decided["comparisons"]:
         task, seeds = row["task"], row["seeds"]
         candidate = run_scores(runs[task], row["candidate"], endpoint)[:seeds]

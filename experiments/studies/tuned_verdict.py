@@ -59,6 +59,12 @@ def recorded_defaults(results: Path, task: str) -> SweepResult | None:
     return merge([SweepResult.read(p.parent) for p in parts]) if parts else None
 
 
+def finite_final(runs: SweepResult, arm: str) -> np.ndarray:
+    """An arm's final training returns, the runs that ended with a finite one."""
+    final = run_scores(runs, arm, "final")
+    return final[np.isfinite(final)]
+
+
 def study_runs(study: Path, task: str, decided: dict) -> SweepResult:
     """A task's runs in `study` that its decisions used (``decisions.json``'s groups: a look
     still training in shares is left out), each group read whole or, where it trained in
@@ -152,14 +158,12 @@ def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
     for task in plan["tasks"]:
         defaults = recorded_defaults(results, task)
         for arm in [plan["baseline"], *plan["candidates"]]:
-            tuned_final = run_scores(runs[task], arm, "final")
-            tuned_final = tuned_final[np.isfinite(tuned_final)]
+            tuned_final = finite_final(runs[task], arm)
             chosen = tuned[task][arm]["chosen"]["trial"]
             cells = ["—", "not recorded", "—"]
             names = [] if defaults is None else [s["variant"] for s in defaults.settings]
             if defaults is not None and arm in names:
-                default_final = run_scores(defaults, arm, "final")
-                default_final = default_final[np.isfinite(default_final)]
+                default_final = finite_final(defaults, arm)
                 gain = statistics.compare(tuned_final, default_final)["probability_of_improvement"]
                 cells = [
                     str(len(default_final)),
@@ -186,8 +190,7 @@ def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
         "|---|---|---|",
     ]
     for task in plan["tasks"]:
-        final = run_scores(runs[task], plan["baseline"], "final")
-        final = final[np.isfinite(final)]
+        final = finite_final(runs[task], plan["baseline"])
         iqm = interval(statistics.interval(final, "iqm"), 1)
         lines.append(f"| {task} | {iqm} | {PUBLISHED.get(task, '—')} |")
     return [*lines, ""]
@@ -215,8 +218,7 @@ def weakened_baseline(
         return [f"{said}."]
     against = []
     for row in rows:
-        final = run_scores(runs, row["candidate"], "final")
-        final = final[np.isfinite(final)]
+        final = finite_final(runs, row["candidate"])
         p = statistics.compare(final, default_final)["probability_of_improvement"]
         against.append(f"{row['candidate']} {interval(p)}")
     decisions = ", ".join(f"{r['candidate']} {r['decision']}" for r in rows)

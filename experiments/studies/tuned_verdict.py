@@ -35,13 +35,23 @@ from common import RESULTS, argument_parser, header, write_result
 
 # RL Baselines3 Zoo's tuned PPO (benchmark.md: one run, deterministic evaluation), with the
 # budget it trained; CartPole-v1 there ends episodes at 500 steps, this project's at 200.
-PUBLISHED = {
+ZOO = {
     "cartpole": "500.0 (CartPole-v1, capped at 500, 100k steps)",
     "acrobot": "−73.5 (1M steps)",
     "mountaincar": "−110.4 (1M steps)",
     "hopper": "2410 (Hopper-v3, 1M steps)",
     "halfcheetah": "5819 (HalfCheetah-v3, 1M steps)",
     "swimmer": "282 (Swimmer-v3, 1M steps, γ = 0.9999)",
+}
+# CleanRL's PPO at OpenAI baselines' settings, not tuned per task (docs/rl-algorithms/ppo.md
+# and docs/benchmark/ppo_continuous_action.md: the mean ± std of 3 seeds' episodic returns as
+# reported), with its budget; it reports no Swimmer.
+CLEANRL = {
+    "cartpole": "490.04 ± 6.12 (CartPole-v1, capped at 500; 4 × 128, 500k steps)",
+    "acrobot": "−86.36 ± 1.32 (4 × 128, 500k steps)",
+    "mountaincar": "−200.00 ± 0.00 (4 × 128, 500k steps)",
+    "hopper": "2382.86 ± 271.74 (Hopper-v4, 1 × 2,048, 1M steps)",
+    "halfcheetah": "1442.64 ± 46.03 (HalfCheetah-v4, 1 × 2,048, 1M steps)",
 }
 MUJOCO = ("hopper", "halfcheetah", "swimmer")  # the plan's MuJoCo tasks, in its order
 
@@ -183,16 +193,18 @@ def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
         ]
     lines += [
         "",
-        "Tuned PPO beside the published tuned PPO (RL Baselines3 Zoo `benchmark.md`, one run "
-        "each, its own budgets and task versions; not a comparison at equal budget):",
+        "Tuned PPO beside the published PPO: RL Baselines3 Zoo's tuned PPO (`benchmark.md`, one "
+        "run each) and CleanRL's PPO at OpenAI baselines' settings, not tuned per task (3 seeds, "
+        "mean ± std as CleanRL reports it); each at its own budgets and task versions, so not "
+        "a comparison at equal budget:",
         "",
-        "| task | tuned PPO here, IQM of the final return | RL Zoo's tuned PPO |",
-        "|---|---|---|",
+        "| task | tuned PPO here, IQM of the final return | RL Zoo's tuned PPO | CleanRL's PPO |",
+        "|---|---|---|---|",
     ]
     for task in plan["tasks"]:
         final = finite_final(runs[task], plan["baseline"])
         iqm = interval(statistics.interval(final, "iqm"), 1)
-        lines.append(f"| {task} | {iqm} | {PUBLISHED.get(task, '—')} |")
+        lines.append(f"| {task} | {iqm} | {ZOO.get(task, '—')} | {CLEANRL.get(task, '—')} |")
     return [*lines, ""]
 
 

@@ -12,9 +12,9 @@ P(candidate > PPO) on the primary endpoint with a 95% percentile bootstrap inter
 runs the decision used; then each arm's tuned setting against its default on the test seeds, on
 the final training return (the defaults' runs are the seed study's, recorded from seed 0 under
 <results>/study/<task>/paper/, which were not evaluated), where tuning left PPO below its own
-default each decided arm against default PPO's runs, and tuned PPO against the published tuned
-PPO. A family whose study is not finished is reported as far as it went, and says so.
-Nothing is trained.
+default each decided arm against default PPO's runs, and tuned PPO beside the published PPO
+(RL Zoo's tuned, CleanRL's at OpenAI baselines' settings). A family whose study is not
+finished is reported as far as it went, and says so. Nothing is trained.
 """
 
 from __future__ import annotations

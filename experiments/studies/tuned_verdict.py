@@ -105,6 +105,9 @@ def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
         f"per trial, η = {tune_plan['eta']}; every arm trained the same env steps per task "
         f"({budget}).",
         "",
+        f"![Best score against env steps per arm, {', '.join(tuned)}]"
+        f"({tune.relative_to(results)}/tuning_curves.png)",
+        "",
     ]
     for task, arms in tuned.items():
         best = ", ".join(

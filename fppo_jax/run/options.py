@@ -187,7 +187,9 @@ class Options:
                 )
         if self.checkpoint_dir is None and (self.resume or self.checkpoint_every is not None):
             flag = "resume" if self.resume else "checkpoint_every"
-            raise InvalidInput(f"{flag} needs a checkpoint directory")
+            raise InvalidInput(
+                f"{flag} needs a checkpoint directory: checkpoint_dir (--checkpoint-dir DIR)"
+            )
         if self.wandb_project is not None:
             if not isinstance(self.wandb_project, str):
                 raise InvalidInput(f"wandb_project must be a name, got {self.wandb_project!r}")

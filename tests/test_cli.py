@@ -1,11 +1,12 @@
 import errno
 import os
+from types import SimpleNamespace
 
 import pytest
 
 import fppo_jax.cli.commands
 import fppo_jax.store.metric_log
-from fppo_jax.cli import main
+from fppo_jax.cli import _without_closed_loop_reports, main
 from fppo_jax.errors import InvalidInput, MissingFile, MissingPackage, NotEnoughMemory
 
 TINY_FLAGS = ["--num-envs", "4", "--num-steps", "32", "--minibatches", "4", "--epochs", "2"]
@@ -53,3 +54,14 @@ def test_a_project_error_is_one_line(error, monkeypatch, capsys):
     monkeypatch.setattr(fppo_jax.cli.commands, "COMMANDS", {"list": refused})
     assert main(["list"]) == 2
     assert capsys.readouterr().err == "fppo-jax: error: what to do instead\n"
+
+
+def test_the_command_drops_a_closed_event_loop_s_reports_and_passes_every_other_on():
+    reported = []
+    hook = _without_closed_loop_reports(reported.append)
+    closed = SimpleNamespace(exc_value=RuntimeError("Event loop is closed"))
+    other_message = SimpleNamespace(exc_value=RuntimeError("Event loop is running"))
+    other_type = SimpleNamespace(exc_value=ValueError("Event loop is closed"))
+    for unraisable in (closed, other_message, other_type):
+        hook(unraisable)
+    assert reported == [other_message, other_type]

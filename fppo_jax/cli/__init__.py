@@ -15,8 +15,8 @@ import contextlib
 import gc
 import sys
 import warnings
-from collections.abc import Iterator, Sequence
-from typing import Any, NoReturn
+from collections.abc import Callable, Iterator, Sequence
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from fppo_jax.cli.flags import own_surrogates, surrogates_named
 from fppo_jax.cli.parser import build_parser
@@ -24,6 +24,9 @@ from fppo_jax.cli.settings import check_preset, check_settings, settings_file
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import FppoError
 from fppo_jax.run.stop_signals import STOP_SIGNALS, caught
+
+if TYPE_CHECKING:
+    from sys import UnraisableHookArgs
 
 __all__ = ["build_parser", "entry_point", "main"]
 
@@ -34,7 +37,28 @@ def entry_point() -> NoReturn:
     # collector's full passes, which tracing a program sets off, and of those at the exit:
     # together a tenth of a short run's wall time.
     gc.freeze()
+    sys.unraisablehook = _without_closed_loop_reports(sys.unraisablehook)
     sys.exit(main())
+
+
+def _without_closed_loop_reports(
+    report: Callable[[UnraisableHookArgs], object],
+) -> Callable[[UnraisableHookArgs], None]:
+    """`report` for every unraisable exception but a closed event loop's.
+
+    A checkpoint read that fails ends orbax's event loop while TensorStore still completes the
+    reads it had started; each completion finds the loop closed, and Python would print a
+    traceback for it, dozens in all, interleaved with the one line that says the checkpoint is
+    damaged. Only the command, which owns its process, drops them; the library leaves the hook
+    as it finds it (docs/checkpoints.md)."""
+
+    def hook(unraisable: UnraisableHookArgs) -> None:
+        error = unraisable.exc_value
+        if isinstance(error, RuntimeError) and str(error) == "Event loop is closed":
+            return
+        report(unraisable)
+
+    return hook
 
 
 def main(argv: Sequence[str] | None = None) -> int:

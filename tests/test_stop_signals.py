@@ -13,7 +13,7 @@ import pytest
 import fppo_jax
 import fppo_jax.run.training as training
 from fppo_jax import train
-from fppo_jax.cli import main
+from fppo_jax.cli import INTERRUPTED, main
 from fppo_jax.run.stop_signals import STOP_SIGNALS
 from fppo_jax.store.saved_policy import read_policy
 
@@ -144,3 +144,41 @@ def test_a_signal_in_the_last_chunk_lets_the_run_finish(tmp_path, tiny):
             callback=lambda s: os.kill(os.getpid(), signal.SIGTERM),
             **tiny,
         )
+
+
+# Ctrl-C in a terminal: the process sends itself SIGINT once the first chunk of updates is
+# logged, with Python's own handler installed as a terminal leaves it.
+INTERRUPTED_AFTER_FIRST_CHUNK = textwrap.dedent("""
+    import os, signal, sys
+    import fppo_jax.run.training as training
+    from fppo_jax.cli import entry_point
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    run_chunks = training.run_chunks
+
+    def chunks_then_interrupt(*args):
+        for index, chunk in enumerate(run_chunks(*args)):
+            if index == 1:
+                os.kill(os.getpid(), signal.SIGINT)
+            yield chunk
+
+    training.run_chunks = chunks_then_interrupt
+    sys.argv[1:] = sys.argv[2:]
+    entry_point()
+""")
+
+
+def test_ctrl_c_ends_the_command_in_a_line_keeping_what_it_wrote(tmp_path):
+    flags = [*FLAGS[:-2], "--steps", "4096", "--output", str(tmp_path / "run")]
+    done = subprocess.run(
+        [sys.executable, "-c", INTERRUPTED_AFTER_FIRST_CHUNK, "--", *flags],
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 128 + signal.SIGINT, done.stderr[-3000:]
+    assert "Traceback" not in done.stderr, done.stderr[-3000:]
+    assert done.stderr.splitlines()[-1] == INTERRUPTED
+    logged = (tmp_path / "run" / "metrics.csv").read_text().splitlines()
+    assert 2 <= len(logged) < 1 + 4096 // 128  # a header and whole rows, stopped mid-run
+    assert all(row.count(",") == logged[0].count(",") for row in logged)

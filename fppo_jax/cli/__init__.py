@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
+import signal
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -38,7 +39,19 @@ def entry_point() -> NoReturn:
     # together a tenth of a short run's wall time.
     gc.freeze()
     sys.unraisablehook = _without_closed_loop_reports(sys.unraisablehook)
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:
+        print(INTERRUPTED, file=sys.stderr)
+        sys.exit(128 + signal.SIGINT)  # what a shell reports for a program Ctrl-C ended
+
+
+# What a command writes is written as it goes (a run's metrics.csv update by update, each
+# checkpoint committed whole by orbax), so an interrupted one keeps it; summaries come at the end.
+INTERRUPTED = (
+    "fppo-jax: interrupted; what it wrote so far is kept (a checkpointed run goes on from its "
+    "newest checkpoint with --resume; a tune or study, run again, from what it recorded)"
+)
 
 
 def _without_closed_loop_reports(

@@ -95,6 +95,8 @@ def test_unsupported_spaces_and_unknown_ids_are_refused_naming_what_to_do():
         as_environment(Several)
     with pytest.raises(ValueError, match="no environment 'NoSuchEnv-v0' registered"):
         make_env("gymnasium/NoSuchEnv-v0")
+    with pytest.raises(ValueError, match=r"'CartPol-v1' registered; did you mean CartPole-v1 or"):
+        make_env("gymnasium/CartPol-v1")
 
 
 @pytest.mark.parametrize("mode", list(gymnasium.vector.AutoresetMode), ids=lambda m: m.name)

@@ -187,6 +187,7 @@ def test_auto_picks_native_on_a_cpu_and_says_why(monkeypatch):
         ("cartpole", "native", r"cartpole has no native version; tasks with one: hopper, "),
         ("cartpole", "mjx", r"cartpole runs on gymnax, not MJX"),
         ("hopper", "physx", r"unknown backend 'physx'; valid backends: auto, mjx, native"),
+        ("native/Hopper-v9", "native", r"no task 'Hopper-v9'; did you mean Hopper-v\d or "),
     ],
 )
 def test_a_backend_that_cannot_run_the_task_is_refused(env, backend, message):

@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import difflib
 import importlib
 import importlib.util
 import threading
@@ -463,9 +464,11 @@ def _registered(env_id: str, kwargs: tuple[tuple[str, Any], ...]) -> GymnasiumEn
                 ) from None
         if registered_id not in gymnasium.registry:
             imported = f" once {module!r} is imported" if module else ""
+            near = difflib.get_close_matches(registered_id, list(gymnasium.registry), n=3)
             raise InvalidInput(
-                f"Gymnasium has no environment {registered_id!r} registered{imported} "
-                "(gymnasium.pprint_registry() lists them; an environment of one's own is "
+                f"Gymnasium has no environment {registered_id!r} registered{imported}"
+                + (f"; did you mean {' or '.join(near)}?" if near else "")
+                + " (gymnasium.pprint_registry() lists them; an environment of one's own is "
                 "registered by its module, named as gymnasium/module:id)"
             )
         arguments = ", ".join(f"{name}={value!r}" for name, value in kwargs)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import difflib
 import importlib.util
 import os
 import threading
@@ -110,8 +111,12 @@ class NativeEnvironment(OnHost):
     def of(cls, task_id: str) -> NativeEnvironment:
         """envpool's `task_id`, refused unless envpool has it as a MuJoCo task."""
         envpool = import_envpool()
-        if task_id not in envpool.list_all_envs():
-            raise InvalidInput(f"envpool has no task {task_id!r}")
+        if task_id not in (tasks := envpool.list_all_envs()):
+            near = difflib.get_close_matches(task_id, tasks, n=3)
+            raise InvalidInput(
+                f"envpool has no task {task_id!r}"
+                + (f"; did you mean {' or '.join(near)}?" if near else "")
+            )
         spec = envpool.make_spec(task_id)
         space = spec.action_space
         if len(spec.observation_space.shape) != 1 or not hasattr(space, "low"):

@@ -99,3 +99,9 @@ def test_a_settings_file_that_is_a_directory_or_not_text_is_one_line(tmp_path, c
         err = capsys.readouterr().err
         assert err.startswith(f"fppo-jax: error: {path} cannot be read as settings: ")
         assert len(err.splitlines()) == 1
+
+
+def test_a_settings_file_that_is_not_there_is_named_in_one_line(tmp_path, capsys):
+    assert main(["train", "--config", str(tmp_path / "nothere.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"fppo-jax: error: settings file {tmp_path / 'nothere.yaml'} not found\n"

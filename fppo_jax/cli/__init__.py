@@ -88,7 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if getattr(args, "config", None) is not None:
         try:
             args = _with_settings_file(parser, argv, args, surrogates)
-        except (FppoError, FileNotFoundError) as error:
+        except FppoError as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
     # A checkpointed command, in one process, catches a cluster's stop signals from its start:

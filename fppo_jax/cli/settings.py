@@ -13,7 +13,7 @@ from typing import Any, cast
 from fppo_jax.core.config import PRESETS, TrainConfig
 from fppo_jax.core.resolution import resolve
 from fppo_jax.core.surrogates import SurrogateIdentity
-from fppo_jax.errors import InvalidInput
+from fppo_jax.errors import InvalidInput, MissingFile
 from fppo_jax.store.record import RunRecord
 
 # What a run's config.json records beside its settings (metric_log.environment_record).
@@ -31,6 +31,8 @@ def settings_file(path: Path) -> dict[str, Any]:
     be found, and is refused with what to pass instead."""
     try:
         text = Path(path).read_text()
+    except FileNotFoundError:
+        raise MissingFile(f"settings file {path} not found") from None
     except (IsADirectoryError, UnicodeDecodeError) as error:  # not a settings file at all
         raise InvalidInput(f"{path} cannot be read as settings: {error}") from None
     try:

@@ -10,6 +10,9 @@ working.
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
+
 
 class FppoError(Exception):
     """An expected failure, told in one line that names the problem and what to do."""
@@ -42,3 +45,14 @@ def first_line(error: Exception) -> str:
     """An error's message, its first line, for a report of what could not be read."""
     text = str(error).strip()
     return text.splitlines()[0][:200] if text else "no message"
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """The end of a message refusing `name`: the nearest of `known` (up to three, by
+    :func:`difflib.get_close_matches`) as "; did you mean a or b?", or nothing."""
+    return suggested(difflib.get_close_matches(name, list(known), n=3))
+
+
+def suggested(names: list[str]) -> str:
+    """`names` offered as "; did you mean a or b?" at a message's end, or nothing."""
+    return f"; did you mean {' or '.join(names)}?" if names else ""

@@ -58,7 +58,6 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-import difflib
 import importlib
 import importlib.util
 import threading
@@ -70,7 +69,13 @@ import numpy as np
 
 from fppo_jax.envs.core import Box, Discrete, HostState, OnHost, Step, seeds_of
 from fppo_jax.envs.gymnasium_api import CheckedApi
-from fppo_jax.errors import InvalidInput, MissingPackage, first_line, install_hint
+from fppo_jax.errors import (
+    InvalidInput,
+    MissingPackage,
+    did_you_mean,
+    first_line,
+    install_hint,
+)
 
 if TYPE_CHECKING:
     import jax
@@ -464,11 +469,10 @@ def _registered(env_id: str, kwargs: tuple[tuple[str, Any], ...]) -> GymnasiumEn
                 ) from None
         if registered_id not in gymnasium.registry:
             imported = f" once {module!r} is imported" if module else ""
-            near = difflib.get_close_matches(registered_id, list(gymnasium.registry), n=3)
             raise InvalidInput(
                 f"Gymnasium has no environment {registered_id!r} registered{imported}"
-                + (f"; did you mean {' or '.join(near)}?" if near else "")
-                + " (gymnasium.pprint_registry() lists them; an environment of one's own is "
+                f"{did_you_mean(registered_id, gymnasium.registry)} "
+                "(gymnasium.pprint_registry() lists them; an environment of one's own is "
                 "registered by its module, named as gymnasium/module:id)"
             )
         arguments = ", ".join(f"{name}={value!r}" for name, value in kwargs)

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-import difflib
 import importlib.util
 import os
 import threading
@@ -33,7 +32,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from fppo_jax.envs.core import Box, HostState, OnHost, Step, seeds_of
-from fppo_jax.errors import InvalidInput, install_hint
+from fppo_jax.errors import InvalidInput, did_you_mean, install_hint
 
 if TYPE_CHECKING:
     import jax
@@ -112,11 +111,7 @@ class NativeEnvironment(OnHost):
         """envpool's `task_id`, refused unless envpool has it as a MuJoCo task."""
         envpool = import_envpool()
         if task_id not in (tasks := envpool.list_all_envs()):
-            near = difflib.get_close_matches(task_id, tasks, n=3)
-            raise InvalidInput(
-                f"envpool has no task {task_id!r}"
-                + (f"; did you mean {' or '.join(near)}?" if near else "")
-            )
+            raise InvalidInput(f"envpool has no task {task_id!r}{did_you_mean(task_id, tasks)}")
         spec = envpool.make_spec(task_id)
         space = spec.action_space
         if len(spec.observation_space.shape) != 1 or not hasattr(space, "low"):

@@ -18,7 +18,7 @@ from typing import Any
 import jax
 
 from fppo_jax.envs.core import Environment
-from fppo_jax.errors import InvalidInput
+from fppo_jax.errors import InvalidInput, suggested
 
 
 def _gymnax(env_id: str, max_steps: int | None = None) -> Callable[[], Environment]:
@@ -201,7 +201,7 @@ def _suggestion(name: str) -> str:
 
         if name in gymnasium.registry:
             found.append(f"gymnasium/{name}")
-    return f"; did you mean {' or '.join(found)}?" if found else ""
+    return suggested(found)
 
 
 BACKENDS: dict[str, str] = {

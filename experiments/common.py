@@ -204,14 +204,16 @@ def folder_entry_point(doc: str, folder: Path, smoke: dict[str, str]) -> None:
     the first line of its docstring; with ``--smoke``, runs each (or those of ``--scripts``)
     tiny, in a process of its own, with its arguments in `smoke`, into a new temporary
     directory (``{tmp}`` there), and exits 1 if any failed. `smoke` names every script of the
-    folder: a new script is refused until it has its smoke arguments."""
+    folder (each ``*.py`` but a helper's ``_*.py``): a new script is refused until it has its
+    smoke arguments."""
     parser = argument_parser(doc)
     parser.add_argument("--smoke", action="store_true", help="run each script tiny")
     parser.add_argument(
         "--scripts", nargs="+", default=list(smoke), choices=list(smoke), metavar="SCRIPT"
     )
     args = parser.parse_args()
-    scripts = sorted(path.name for path in folder.glob("*.py") if path.name != "__main__.py")
+    # A module named with a leading underscore is a script's helper, not a script.
+    scripts = sorted(path.name for path in folder.glob("[!_]*.py"))
     if scripts != sorted(smoke):
         differ = sorted(set(scripts) ^ set(smoke))
         sys.exit(f"{folder.name}/__main__.py does not name the folder's scripts: {differ}")

@@ -252,3 +252,82 @@ def test_the_plan_converter_removes_the_rules_module_and_nothing_else(tmp_path):
     assert other.read_text() == '{"note": "x (fppo_jax.sequential)"}'  # only plans
     again = run_script(EXPERIMENTS / "convert_plans.py", str(tmp_path), cwd=EXPERIMENTS)
     assert again.returncode == 0 and again.stdout == ""
+
+
+def _tuned_families(monkeypatch):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    monkeypatch.syspath_prepend(str(EXPERIMENTS / "studies"))
+    return importlib.import_module("_tuned_families")
+
+
+def test_the_tuned_write_up_decides_the_mujoco_family_the_plan_names_as_one(monkeypatch):
+    # The plan's MuJoCo family is 15 comparisons; each task's study decided its 5 alone.
+    families = _tuned_families(monkeypatch)
+    plan = json.loads((EXPERIMENTS / "plans" / "tuned.json").read_text())
+    tasks = families.planned_families(plan)["mujoco"]
+    family = families.decide_family(EXPERIMENTS / "results", "mujoco", tasks)
+    assert family.split and len(family.replayed) == 15
+    # Each study replayed alone gives what it recorded: the replay is the rule the studies ran.
+    assert all(families.same_as_recorded(one.alone, one.row) for one in family.replayed)
+    lost = {
+        (one.task, one.candidate): one.planned
+        for one in family.replayed
+        if families.standing(one) != "stands"
+    }
+    assert sorted(lost) == [("hopper", "fppo-lp"), ("hopper", "fppo-qp"), ("swimmer", "spo")]
+    # Each is undecided at the seeds its study ran: the study stopped it there.
+    assert [(d.decision, d.seeds) for d in lost.values()] == [(None, 20), (None, 40), (None, 30)]
+    fppo_lp, fppo_qp, spo = lost.values()
+    assert (round(fppo_lp.z, 2), round(fppo_lp.boundary, 2)) == (-4.46, 4.53)
+    assert [round(bound, 2) for bound in fppo_qp.interval] == [0.31, 0.71]
+    assert (round(spo.z, 2), round(spo.boundary, 2)) == (3.52, 3.64)
+    kept = [one for one in family.replayed if (one.task, one.candidate) not in lost]
+    assert len(kept) == 12
+    assert all(
+        (one.planned.decision, one.planned.seeds) == (one.alone.decision, one.alone.seeds)
+        for one in kept
+    )
+
+
+def test_the_tuned_write_up_decides_the_classic_family_as_its_one_study_did(monkeypatch):
+    families = _tuned_families(monkeypatch)
+    tasks = ["cartpole", "acrobot", "mountaincar"]
+    family = families.decide_family(EXPERIMENTS / "results", "classic", tasks)
+    assert not family.split and len(family.replayed) == 15
+    assert all(families.same_as_recorded(one.planned, one.row) for one in family.replayed)
+
+
+def test_a_planned_family_with_a_task_not_recorded_is_not_decided(monkeypatch, tmp_path):
+    # Hopper's and HalfCheetah's studies without Swimmer's: 10 of the family's 15 comparisons,
+    # which would be decided at a larger share of the level than the plan's family gives them.
+    families = _tuned_families(monkeypatch)
+    recorded = EXPERIMENTS / "results" / "tuned" / "mujoco"
+    (tmp_path / "tuned" / "mujoco").mkdir(parents=True)
+    for task in ("hopper", "halfcheetah"):
+        (tmp_path / "tuned" / "mujoco" / f"study-{task}").symlink_to(recorded / f"study-{task}")
+    tasks = ["hopper", "halfcheetah", "swimmer"]
+    with pytest.raises(families.FamilyNotAssembled, match="swimmer has no study with its decis"):
+        families.decide_family(tmp_path, "mujoco", tasks)
+    report = tmp_path / "tuned.md"
+    script = EXPERIMENTS / "studies" / "tuned_verdict.py"
+    done = run_script(script, "--results", str(tmp_path), "--output", str(report), cwd=EXPERIMENTS)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert (
+        "Not decided here: the plan's MuJoCo family (hopper, halfcheetah and swimmer) cannot be "
+        "decided as one: swimmer has no study"
+    ) in report.read_text()
+
+
+def test_a_replay_that_does_not_give_a_study_s_recorded_decisions_is_refused(monkeypatch, tmp_path):
+    # Hopper's study with one recorded z moved in its last digits: the replay no longer matches.
+    families = _tuned_families(monkeypatch)
+    recorded = EXPERIMENTS / "results" / "tuned" / "mujoco" / "study-hopper"
+    study = tmp_path / "tuned" / "mujoco" / "study-hopper"
+    study.mkdir(parents=True)
+    (study / "hopper").symlink_to(recorded / "hopper")
+    (study / "plan.json").write_text((recorded / "plan.json").read_text())
+    decisions = json.loads((recorded / "decisions.json").read_text())
+    decisions["comparisons"][3]["z"] += 1e-6  # fppo-lp's
+    (study / "decisions.json").write_text(json.dumps(decisions))
+    with pytest.raises(SystemExit, match="does not give its recorded decision of hopper fppo-lp"):
+        families.decide_family(tmp_path, "mujoco", ["hopper"])

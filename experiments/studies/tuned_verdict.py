@@ -1,20 +1,28 @@
 """The tuned verdict's write-up (experiments/plans/tuned.json): each family's tune and study,
-read from their records, with what tuning gained over each arm's default.
+read from their records, the plan's families decided as it names them, and what tuning gained
+over each arm's default.
 
     python experiments/studies/tuned_verdict.py              # results/tuned.md
     python experiments/studies/tuned_verdict.py --results /tmp/r --output /tmp/tuned.md
 
-Per part recorded under <results>/tuned/ (the classic tasks' ``classic/tune/`` by ``fppo-jax
+First the plan's families (``_tuned_families.py``): each family the plan names decided as one
+by the library's sequential rule replayed on the runs its studies recorded, Holm's procedure
+over the whole family, a comparison holding only the seeds its study ran. Where a family's
+tasks ran as studies of their own (the MuJoCo tasks, one study each), each comparison's
+decision in its study beside the family's, with z against its boundary or P's repeated
+interval; a family whose studies are not all recorded is not decided, and says why. Then per
+part recorded under <results>/tuned/ (the classic tasks' ``classic/tune/`` by ``fppo-jax
 tune`` and ``classic/study/`` by ``fppo-jax study --tuned``; each MuJoCo task's
-``mujoco/tune-<task>/`` and ``mujoco/study-<task>/``): the budget every arm had, the study's
-decisions (better, worse, equivalent or undecided against tuned PPO) with the seeds each took and
-P(candidate > PPO) on the primary endpoint with a 95% percentile bootstrap interval over the
-runs the decision used; then each arm's tuned setting against its default on the test seeds, on
-the final training return (the defaults' runs are the seed study's, recorded from seed 0 under
-<results>/study/<task>/paper/, which were not evaluated), where tuning left PPO below its own
-default each decided arm against default PPO's runs, and tuned PPO beside the published PPO
-(RL Zoo's tuned, CleanRL's at OpenAI baselines' settings). A family whose study is not
-finished is reported as far as it went, and says so. Nothing is trained.
+``mujoco/tune-<task>/`` and ``mujoco/study-<task>/``): the budget every arm had, the family's
+decisions (better, worse, equivalent or undecided against tuned PPO) with the seeds each holds
+and P(candidate > PPO) on the primary endpoint with a 95% percentile bootstrap interval over
+those runs, and on a task with a capped return how many runs reach the cap; then each arm's
+tuned setting against its default on the test seeds, on the final training return (the
+defaults' runs are the seed study's, recorded from seed 0 under <results>/study/<task>/paper/,
+which were not evaluated), where tuning left PPO below its own default each decided arm
+against default PPO's runs, and tuned PPO beside the published PPO (RL Zoo's tuned, CleanRL's
+at OpenAI baselines' settings). A family whose study is not finished is reported as far as it
+went, and says so. Nothing is trained.
 """
 
 from __future__ import annotations
@@ -31,7 +39,18 @@ from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
+from _tuned_families import (
+    Family,
+    FamilyNotAssembled,
+    decide_family,
+    families_lines,
+    listed,
+    planned_families,
+    recorded_runs,
+)
 from common import RESULTS, argument_parser, header, write_result
+
+PLAN = RESULTS.parent / "plans" / "tuned.json"
 
 # RL Baselines3 Zoo's tuned PPO (benchmark.md: one run, deterministic evaluation), with the
 # budget it trained; CartPole-v1 there ends episodes at 500 steps, this project's at 200.
@@ -53,11 +72,9 @@ CLEANRL = {
     "hopper": "2382.86 ± 271.74 (Hopper-v4, 1 × 2,048, 1M steps)",
     "halfcheetah": "1442.64 ± 46.03 (HalfCheetah-v4, 1 × 2,048, 1M steps)",
 }
-MUJOCO = ("hopper", "halfcheetah", "swimmer")  # the plan's MuJoCo tasks, in its order
-
-
-def _listed(names: list[str]) -> str:
-    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+# The most a run can return: this project's CartPole ends an episode at 200 steps, each worth
+# 1. Where most runs end there, a decision says little of how well an arm learns.
+CAPS = {"cartpole": 200.0}
 
 
 def interval(point: tuple[float, float, float], digits: int = 2) -> str:
@@ -75,31 +92,34 @@ def finite_final(runs: SweepResult, arm: str) -> np.ndarray:
     return final[np.isfinite(final)]
 
 
-def study_runs(study: Path, task: str, decided: dict) -> SweepResult:
-    """A task's runs in `study` that its decisions used (``decisions.json``'s groups: a look
-    still training in shares is left out), each group read whole or, where it trained in
-    shares (``--part``), from its shares joined."""
-    groups = []
-    used = (g["group"] for g in decided["groups"] if g["task"] == task)
-    for group in (study / task / f"group-{number}" for number in sorted(used)):
-        if (group / "sweep.json").exists():
-            groups.append(SweepResult.read(group))
-        else:
-            groups.append(
-                merge([SweepResult.read(p.parent) for p in group.glob("part-*/sweep.json")])
-            )
-    return merge(groups)
+def part_lines(results: Path, tune: Path, study: Path, family: Family | None) -> list[str]:
+    """One part of the plan: the tune recorded in `tune` and its study in `study`, whose
+    comparisons are decided in the plan's `family` (None where it could not be assembled:
+    then the study's own decisions, and the lines say so)."""
+    lines = tune_lines(results, tune)
+    if not (study / "decisions.json").exists():
+        return [*lines, not_started(results, study), ""]
+    plan = json.loads((study / "plan.json").read_text())
+    decided = json.loads((study / "decisions.json").read_text())
+    tuned = json.loads((tune / "results.json").read_text())
+    runs = {task: recorded_runs(study, task) for task in plan["tasks"]}
+    rows = planned_rows(decided, family)
+    lines += study_lines(results, study, plan, decided, family)
+    lines += decisions_table(plan, rows, runs)
+    lines += capped_lines(plan, runs)
+    lines += gains_lines(results, plan, tuned, runs, rows)
+    lines += published_lines(plan, runs)
+    return [*lines, ""]
 
 
-def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
-    """One part of the plan: the tune recorded in `tune` and its study in `study`."""
+def tune_lines(results: Path, tune: Path) -> list[str]:
+    """The tune recorded in `tune`: its budget, its curves and each arm's chosen trial."""
     tune_plan = json.loads((tune / "tune.json").read_text())
     tuned = json.loads((tune / "results.json").read_text())
-    lines = []
     budget = ", ".join(
         f"{task} {b['env_steps_per_arm']:,}" for task, b in tune_plan["budget"].items()
     )
-    lines += [
+    lines = [
         f"Tune ([report]({tune.relative_to(results)}/report.md), at {tune_plan['commit'][:7]}): "
         f"{tune_plan['trials']} trials per arm and task, {len(tune_plan['seeds'])} tuning seeds "
         f"per trial, η = {tune_plan['eta']}; every arm trained the same env steps per task "
@@ -120,44 +140,114 @@ def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
         tied = [arm for arm, found in arms.items() if found.get("tied_rungs")]
         if tied:
             lines += [
-                f"On {task} the first rung scored every trial of {_listed(tied)} alike, so the "
+                f"On {task} the first rung scored every trial of {listed(tied)} alike, so the "
                 "trials that went on were the first by number, not the best: there the tune "
                 "chose among those alone.",
                 "",
             ]
-    if not (study / "decisions.json").exists():
-        shares = len(list(study.glob("*/group-*/part-*/sweep.json")))
-        started = (
-            f"has not decided a look yet ({shares} share{'s' * (shares != 1)} of a look recorded "
-            f"under {study.relative_to(results)}/)"
-            if study.exists()
-            else "has not run yet"
-        )
-        return [*lines, f"The study on fresh seeds {started}.", ""]
-    plan = json.loads((study / "plan.json").read_text())
-    decided = json.loads((study / "decisions.json").read_text())
-    endpoint = plan["primary_endpoint"]
+    return lines
+
+
+def not_started(results: Path, study: Path) -> str:
+    """A study that has decided no look yet: how far it went."""
+    shares = len(list(study.glob("*/group-*/part-*/sweep.json")))
+    started = (
+        f"has not decided a look yet ({shares} share{'s' * (shares != 1)} of a look recorded "
+        f"under {study.relative_to(results)}/)"
+        if study.exists()
+        else "has not run yet"
+    )
+    return f"The study on fresh seeds {started}."
+
+
+def planned_rows(decided: dict, family: Family | None) -> list[dict]:
+    """The study's comparisons with the plan's family's decision and the seeds it holds, and
+    (`own`) the study's own decision where the family's differs; the study's as recorded
+    where the family could not be assembled."""
+    if family is None:
+        return [{**row, "own": None} for row in decided["comparisons"]]
+    by_key = {(one.task, one.candidate): one for one in family.replayed}
+    rows = []
+    for row in decided["comparisons"]:
+        planned = by_key[row["task"], row["candidate"]].planned
+        decision = planned.decision or "undecided"
+        own = row["decision"] if row["decision"] != decision else None
+        rows.append({**row, "decision": decision, "seeds": planned.seeds, "own": own})
+    return rows
+
+
+def study_lines(
+    results: Path, study: Path, plan: dict, decided: dict, family: Family | None
+) -> list[str]:
+    """The study's record, design and levels, and which family its table's decisions are."""
     state = "finished" if decided["finished"] else "**not finished** (some comparisons await seeds)"
-    lines += [
+    count, level = len(plan["comparisons"]), plan["level"]
+    said = (
         f"Study on test seeds ([report]({study.relative_to(results)}/report.md), at "
-        f"{plan['commit'][:7]}): {state}; primary endpoint {endpoint}, margin "
-        f"{plan.get('margin')}, family-wise level {plan['level']} over "
-        f"{len(plan['comparisons'])} comparisons.",
-        "",
+        f"{plan['commit'][:7]}): {state}; primary endpoint {plan['primary_endpoint']}, margin "
+        f"{plan.get('margin')}, level {level} for each of two kinds of error over its {count} "
+        f"comparisons (a wrong better or worse, a wrong equivalent), so a chance up to "
+        f"{2 * level:.2f} of one or the other"
+    )
+    if family is None:
+        said += ". Its decisions are its own: the plan's family is not decided here (above)."
+    elif family.split:
+        said += (
+            f". It decided {plan['tasks'][0]} alone, where the plan's family is the "
+            f"{len(family.replayed)} comparisons of {listed(family.tasks)}: the table gives "
+            "that family's decision (above), and this study's own where it differs."
+        )
+    else:
+        said += ": the plan's family, whole."
+    return [said, ""]
+
+
+def decisions_table(plan: dict, rows: list[dict], runs: dict[str, SweepResult]) -> list[str]:
+    """Each comparison's decision against tuned PPO with the seeds it holds, and P(candidate >
+    PPO) on the primary endpoint over those seeds."""
+    endpoint = plan["primary_endpoint"]
+    lines = [
         "| task | candidate | decision against tuned PPO | seeds | "
         f"P(candidate > PPO), {endpoint} |",
         "|---|---|---|---|---|",
     ]
-    runs = {task: study_runs(study, task, decided) for task in plan["tasks"]}
-    for row in decided["comparisons"]:
+    for row in rows:
         task, seeds = row["task"], row["seeds"]
         candidate = run_scores(runs[task], row["candidate"], endpoint)[:seeds]
         baseline = run_scores(runs[task], row["baseline"], endpoint)[:seeds]
         p = statistics.compare(candidate, baseline)["probability_of_improvement"]
-        lines.append(
-            f"| {task} | {row['candidate']} | {row['decision']} | {seeds} | {interval(p)} |"
-        )
-    lines += [
+        decision = row["decision"] + (f" (its study alone: {row['own']})" if row["own"] else "")
+        lines.append(f"| {task} | {row['candidate']} | {decision} | {seeds} | {interval(p)} |")
+    return lines
+
+
+def capped_lines(plan: dict, runs: dict[str, SweepResult]) -> list[str]:
+    """On a task whose return has a cap, how many of each arm's runs reach it on the primary
+    endpoint: where most do, the decisions there say little of how well an arm learns."""
+    endpoint, lines = plan["primary_endpoint"], []
+    for task in [task for task in plan["tasks"] if task in CAPS]:
+        counts = []
+        for arm in [plan["baseline"], *plan["candidates"]]:
+            scores = run_scores(runs[task], arm, endpoint)
+            counts.append(f"{arm} {int(np.sum(scores >= CAPS[task]))} of {len(scores)}")
+        lines += [
+            "",
+            f"On {task} the return cannot exceed {CAPS[task]:g}; the runs at that cap on the "
+            f"primary endpoint ({endpoint}): {', '.join(counts)}.",
+        ]
+    return lines
+
+
+def gains_lines(
+    results: Path,
+    plan: dict,
+    tuned: dict,
+    runs: dict[str, SweepResult],
+    rows: list[dict],
+) -> list[str]:
+    """What tuning gained: each arm's tuned runs against its default's on the final return,
+    and where tuning left PPO below its default, each decided arm against default PPO."""
+    lines = [
         "",
         "What tuning gained, on the final training return at the test seeds (IQM with its 95% "
         "interval; the default's runs are the seed study's, at its seeds from 0, as many as it "
@@ -171,30 +261,43 @@ def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
     for task in plan["tasks"]:
         defaults = recorded_defaults(results, task)
         for arm in [plan["baseline"], *plan["candidates"]]:
+            cells, gain = gain_cells(runs[task], defaults, arm)
+            if arm == plan["baseline"] and gain is not None and gain[0][2] < 0.5:
+                weakened.append((task, *gain))
             tuned_final = finite_final(runs[task], arm)
-            chosen = tuned[task][arm]["chosen"]["trial"]
-            cells = ["—", "not recorded", "—"]
-            names = [] if defaults is None else [s["variant"] for s in defaults.settings]
-            if defaults is not None and arm in names:
-                default_final = finite_final(defaults, arm)
-                gain = statistics.compare(tuned_final, default_final)["probability_of_improvement"]
-                cells = [
-                    str(len(default_final)),
-                    interval(statistics.interval(default_final, "iqm"), 1),
-                    interval(gain),
-                ]
-                if arm == plan["baseline"] and gain[2] < 0.5:
-                    weakened.append((task, gain, default_final))
             lines.append(
-                f"| {task} | {arm} | {chosen} | {len(tuned_final)} | "
+                f"| {task} | {arm} | {tuned[task][arm]['chosen']['trial']} | {len(tuned_final)} | "
                 f"{interval(statistics.interval(tuned_final, 'iqm'), 1)} | {' | '.join(cells)} |"
             )
     for task, gain, default_final in weakened:
         lines += [
             "",
-            *weakened_baseline(task, plan["baseline"], gain, default_final, runs[task], decided),
+            *weakened_baseline(task, plan["baseline"], gain, default_final, runs[task], rows),
         ]
-    lines += [
+    return lines
+
+
+def gain_cells(
+    runs: SweepResult, defaults: SweepResult | None, arm: str
+) -> tuple[list[str], tuple[tuple[float, float, float], np.ndarray] | None]:
+    """An arm's default runs, their IQM and P(tuned > default) as table cells, and that P with
+    the default's final returns (None where its default is not recorded)."""
+    names = [] if defaults is None else [s["variant"] for s in defaults.settings]
+    if defaults is None or arm not in names:
+        return ["—", "not recorded", "—"], None
+    default_final = finite_final(defaults, arm)
+    gain = statistics.compare(finite_final(runs, arm), default_final)["probability_of_improvement"]
+    cells = [
+        str(len(default_final)),
+        interval(statistics.interval(default_final, "iqm"), 1),
+        interval(gain),
+    ]
+    return cells, (gain, default_final)
+
+
+def published_lines(plan: dict, runs: dict[str, SweepResult]) -> list[str]:
+    """Tuned PPO's IQM beside RL Zoo's tuned PPO and CleanRL's."""
+    lines = [
         "",
         "Tuned PPO beside the published PPO: RL Baselines3 Zoo's tuned PPO (`benchmark.md`, one "
         "run each) and CleanRL's PPO at OpenAI baselines' settings, not tuned per task (3 seeds, "
@@ -208,7 +311,7 @@ def part_lines(results: Path, tune: Path, study: Path) -> list[str]:
         final = finite_final(runs[task], plan["baseline"])
         iqm = interval(statistics.interval(final, "iqm"), 1)
         lines.append(f"| {task} | {iqm} | {ZOO.get(task, '—')} | {CLEANRL.get(task, '—')} |")
-    return [*lines, ""]
+    return lines
 
 
 def weakened_baseline(
@@ -217,18 +320,18 @@ def weakened_baseline(
     gain: tuple[float, float, float],
     default_final: np.ndarray,
     runs: SweepResult,
-    decided: dict,
+    rows: list[dict],
 ) -> list[str]:
     """Where tuning left the baseline below its own default on the test seeds, what the task's
-    decisions are not: decisions against the baseline at its default. Beside each decided
-    candidate, its tuned runs against the baseline's default ones on the final return
-    (descriptive: outside the planned family, not adjusted for the looks)."""
+    decisions (the plan's family's, `rows`) are not: decisions against the baseline at its
+    default. Beside each decided candidate, its tuned runs against the baseline's default ones
+    on the final return (descriptive: outside the planned family, not adjusted for the looks)."""
     said = (
         f"On {task} tuning left {baseline} below its own default on the test seeds "
         f"(P(tuned > default) = {interval(gain)} on the final return, an interval outside the "
         "planned family and not adjusted for the looks)"
     )
-    rows = [r for r in decided["comparisons"] if r["task"] == task and r["decision"] != "undecided"]
+    rows = [r for r in rows if r["task"] == task and r["decision"] != "undecided"]
     if not rows:
         return [f"{said}."]
     against = []
@@ -245,22 +348,28 @@ def weakened_baseline(
     ]
 
 
-def mujoco_lines(results: Path) -> list[str]:
+def mujoco_lines(results: Path, tasks: list[str], family: Family | None) -> list[str]:
     """The MuJoCo family, a part per task (its tune, then its study), and what is left."""
     where = results / "tuned" / "mujoco"
     lines = ["## MuJoCo tasks", ""]
-    done = [task for task in MUJOCO if (where / f"tune-{task}" / "results.json").exists()]
+    done = [task for task in tasks if (where / f"tune-{task}" / "results.json").exists()]
     for task in done:
         lines += [f"### {task}", ""]
-        lines += part_lines(results, where / f"tune-{task}", where / f"study-{task}")
-    left = [f"the tune of {task}" for task in MUJOCO if task not in done]
-    for task in MUJOCO:
+        lines += part_lines(results, where / f"tune-{task}", where / f"study-{task}", family)
+    left = [f"the tune of {task}" for task in tasks if task not in done]
+    for task in tasks:
         decisions = where / f"study-{task}" / "decisions.json"
         if not decisions.exists():
             left.append(f"the study of {task}")
         elif not json.loads(decisions.read_text())["finished"]:
             left.append(f"the rest of {task}'s study")
-    lines += [
+    return [*lines, *left_lines(left)]
+
+
+def left_lines(left: list[str]) -> list[str]:
+    """What of the MuJoCo family is not run yet, with what it would take, and what the plan
+    leaves out."""
+    return [
         f"Not run yet: {', '.join(left)}. Each task's tune trains 6 arms × 4.65M env steps "
         "(33 to 57 minutes each here, on a shared 2-core machine), its study up to 5 looks of "
         "60 runs × 1M env steps; a share of 15 runs took 10 to 21 minutes here (about 16 on "
@@ -278,14 +387,27 @@ def mujoco_lines(results: Path) -> list[str]:
         "a day in all), Reacher at most Hopper's (its physics is fast; the update bounds it).",
         "",
     ]
-    return lines
+
+
+def decided_families(results: Path, plan: dict) -> dict[str, Family | str]:
+    """Each family the plan names decided as one, or why it cannot be (in words)."""
+    families: dict[str, Family | str] = {}
+    for name, tasks in planned_families(plan).items():
+        try:
+            families[name] = decide_family(results, name, tasks)
+        except FamilyNotAssembled as refused:
+            families[name] = str(refused)
+    return families
 
 
 def main() -> None:
     parser = argument_parser(__doc__)
     parser.add_argument("--results", type=Path, default=RESULTS, help="where the records are")
+    parser.add_argument("--plan", type=Path, default=PLAN, help="the plan (its families)")
     parser.add_argument("--output", type=Path, help="the write-up (default: <results>/tuned.md)")
     args = parser.parse_args()
+    plan = json.loads(args.plan.read_text())
+    families = decided_families(args.results, plan)
     lines = [
         *header("Tuned against tuned: does a variant beat PPO when every arm is tuned?"),
         "",
@@ -294,17 +416,27 @@ def main() -> None:
         "each arm's chosen setting tested on seeds the tune never used by `fppo-jax study "
         "--tuned`. Intervals here are 95% percentile bootstrap intervals over the runs; they "
         "describe those runs and are not adjusted for stopping early or for the comparisons "
-        "(the decisions are; the studies' reports give the repeated intervals).",
+        "(the decisions are, and so are the repeated intervals in the MuJoCo family's table "
+        "below and in the studies' reports).",
         "",
+        *families_lines(args.results, plan, families),
     ]
     classic = args.results / "tuned" / "classic"
     if (classic / "tune" / "results.json").exists():
         lines += ["## Classic tasks", ""]
-        lines += part_lines(args.results, classic / "tune", classic / "study")
-    lines += mujoco_lines(args.results)
+        lines += part_lines(
+            args.results, classic / "tune", classic / "study", _of(families, "classic")
+        )
+    mujoco = planned_families(plan)["mujoco"]
+    lines += mujoco_lines(args.results, mujoco, _of(families, "mujoco"))
     output = args.output or args.results / "tuned.md"
     write_result(output, lines)
     print("\n".join(lines))
+
+
+def _of(families: dict[str, Family | str], name: str) -> Family | None:
+    family = families.get(name)
+    return family if isinstance(family, Family) else None
 
 
 if __name__ == "__main__":

@@ -106,6 +106,9 @@ AREA = re.compile(r"\barea\b|\bAUC\b|\bauc\b")
 AREA_AFTER = re.compile(r"\s*(?:on|in|of) (?:the )?(?:area|AUC)")  # "0.42 [0.35, 0.49] on the area"
 HISTORY = re.compile(r"\bhad (?:been|given|put)\b")
 HOLM = re.compile(r"Holm p (?:≤ )?(\d\.\d+(?:e-\d+)?)(?: to (\d\.\d+))?")
+# A sequential decision's statistic against its boundary, and P's repeated interval, as a report
+# of decisions writes them ("z = −4.46 against ±4.53", "repeated CI [0.31, 0.71]").
+SEQUENTIAL = re.compile(r"z = [−-]?\d+\.\d+ against ±\d+\.\d+|repeated CI \[\d\.\d+, \d\.\d+\]")
 COUNT = re.compile(r"\b(\d+) of (\d+)\b")
 
 
@@ -252,6 +255,24 @@ def _untied_p_values(text: str, rows: list[Row]) -> list[str]:
     return untied
 
 
+def _untied_sequential(text: str, rows: list[Row]) -> list[str]:
+    """Each "z = X against ±Y" and "repeated CI [A, B]" that no cell of a row in scope holds as
+    written: a z, a boundary or an interval that drifts from its report, or is another
+    comparison's, fails."""
+    untied = []
+    for block in _blocks(text):
+        for sentence in _sentences(block):
+            for match in SEQUENTIAL.finditer(sentence):
+                tied = any(
+                    _in_scope(row, sentence, block) and match.group(0) in cell
+                    for row in rows
+                    for cell in row.values()
+                )
+                if not tied:
+                    untied.append(f"{match.group(0)} in “{sentence[:120]}…”")
+    return untied
+
+
 def _same_p(quoted: str, cell: str) -> bool:
     """A quoted p is the cell's, to the precision quoted."""
     try:
@@ -300,6 +321,7 @@ def test_every_quoted_figure_is_its_task_s_and_variant_s_in_a_report(name):
     untied = [
         *_untied_intervals(text, rows),
         *_untied_p_values(text, rows),
+        *_untied_sequential(text, rows),
         *_untied_counts(text, rows, _sources()),
     ]
     assert not untied, f"{name} quotes figures no report ties to what it names: {untied}"
@@ -320,6 +342,14 @@ def test_the_tie_tells_a_figure_quoted_for_the_wrong_task_variant_or_endpoint():
     assert _untied_p_values("DPO on Swimmer, Holm p 0.011.", rows) == []
     assert _untied_p_values("DPO on Swimmer, Holm p 0.012.", rows)
     assert _untied_p_values("DPO on Ant, Holm p 8.3e-05.", rows)  # baseline-shape's Swimmer
+    # FPPO-LP on Hopper in the tuned plan's MuJoCo family, and in Hopper's own study.
+    family = "On Hopper FPPO-LP is undecided in the plan's family (z = −4.46 against ±4.53)."
+    assert not _untied_sequential(family, rows)
+    assert not _untied_sequential(family.replace("4.53", "4.29"), rows)  # its study's, beside
+    assert _untied_sequential(family.replace("4.53", "4.52"), rows)
+    assert _untied_sequential(family.replace("Hopper", "Swimmer"), rows)
+    assert not _untied_sequential("On Hopper FPPO-QP: repeated CI [0.31, 0.71].", rows)
+    assert _untied_sequential("On Hopper FPPO-LP: repeated CI [0.31, 0.71].", rows)
     sources = _sources()
     assert _untied_counts("On HalfCheetah PPO 11 of 20 reach 80%.", rows, sources) == []
     # A count no report can hold, so that recording more results never ties it.
@@ -439,3 +469,66 @@ def test_every_spo_and_dpo_run_on_ant_ends_below_every_ppo_run():
         if r.report == "experiments/results/spo-dpo.md" and r.task == "ant" and "text" not in r
     ]
     assert [_interval(r.cell("P(> ppo), final [95% CI]")) for r in rows] == [(0.0, 0.0, 0.0)] * 2
+
+
+def _tuned_rows(header: str) -> list[Row]:
+    """The rows of tuned.md's tables that have a column `header`."""
+    return [
+        r
+        for r in _rows()
+        if r.report == "experiments/results/tuned.md"
+        and any(k.startswith(f"{header} (") for k in r)
+    ]
+
+
+def test_ten_of_the_13_tuned_mujoco_decisions_stand_in_the_plan_s_family():
+    _quoted(
+        "decided as the plan's family of 15 on the same runs, 10 of their 13 decisions stand and "
+        "3 are not reached, undecided at the seeds their studies ran",
+        "README.md",
+    )
+    rows = _tuned_rows("the plan's family of 15, at the seeds run")
+    assert len(rows) == 15
+    decided = [
+        (
+            r.task,
+            r.cell("candidate"),
+            r.cell("the plan's family of 15, at the seeds run").split(":")[0],
+        )
+        for r in rows
+        if r.cell("its task's study, a family of 5").split(" ")[0]
+        in ("better", "worse", "equivalent")
+    ]
+    assert len(decided) == 13
+    assert [d for d in decided if d[2] != "stands"] == [
+        ("hopper", "fppo-lp", "not reached"),
+        ("hopper", "fppo-qp", "not reached"),
+        ("swimmer", "spo", "not reached"),
+    ]
+
+
+def test_which_tuned_variant_is_better_than_tuned_ppo_where():
+    _quoted(
+        "FPPO-QP is equivalent to tuned PPO or undecided on each of the six tasks tested, and "
+        "FPPO-LP is better only on HalfCheetah",
+        "README.md",
+    )
+    _quoted(
+        "SPO is better on HalfCheetah, against a PPO that tuning left below its default there, "
+        "and DPO on Swimmer; neither is better on Hopper or a classic task",
+        "README.md",
+    )
+    rows = _tuned_rows("decision against tuned PPO")
+    decided = {
+        (r.task, r.cell("candidate")): r.cell("decision against tuned PPO").split(" ")[0]
+        for r in rows
+    }
+    assert len(decided) == 30  # 5 candidates on each of the six tasks
+    fppo_qp = {d for (_, candidate), d in decided.items() if candidate == "fppo-qp"}
+    assert fppo_qp <= {"equivalent", "undecided"}
+    better = sorted(key for key, d in decided.items() if d == "better")
+    assert [k for k in better if k[1] in ("fppo-lp", "spo", "dpo")] == [
+        ("halfcheetah", "fppo-lp"),
+        ("halfcheetah", "spo"),
+        ("swimmer", "dpo"),
+    ]

@@ -1,13 +1,17 @@
-"""Converts studies' plans recorded when the rule's words named its module, once.
+"""Converts studies' plans recorded by earlier versions to this one's form, once.
 
-A study's ``plan.json`` records its test in words (``test`` and, with a margin,
-``equivalence_test``), and a resumed study is held to them. Until the package was laid out in
-folders, those words ended with the module that held the rule, ``(fppo_jax.sequential)``; the
-module moved (``fppo_jax.stats.sequential``) and the words now name none, so that a move
-changes no plan. This removes that ending from every plan under the directories given
-(default: experiments/results), leaving everything else as it was, byte for byte, and says
-which files it changed. Run once over experiments/results (done; the converted plans are
-committed); a study of one's own recorded before the move converts the same way::
+Two conversions, each of the plan's rule, everything else left as it was:
+- Until the package was laid out in folders, the rule's words (``test`` and, with a margin,
+  ``equivalence_test``) ended with the module that held it, ``(fppo_jax.sequential)``; that
+  ending is removed.
+- Until rules were named by id, a plan recorded its rule in those words; now it records
+  ``rule``, the rule's id and version (``fppo_jax.stats.rules``), in their place
+  (``fppo_jax.analysis.study_plan.upgraded``, which a study also applies when it reads an
+  earlier plan, so that it goes on under it unconverted).
+
+A converted plan is the one this version writes for the same study, byte for byte. Run once
+over experiments/results (done; the converted plans are committed); a study of one's own
+recorded before either change converts the same way::
 
     python experiments/convert_plans.py runs/my-study
 """
@@ -15,19 +19,23 @@ committed); a study of one's own recorded before the move converts the same way:
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
+
+from fppo_jax.analysis.study_plan import upgraded
+from fppo_jax.store.files import write_json
 
 ENDING = " (fppo_jax.sequential)"
 
 
 def convert(path: Path) -> bool:
-    """Removes the module's name from the rule's words in the plan at `path`; whether it did."""
+    """Converts the plan at `path` to this version's form; whether it changed it."""
     text = path.read_text()
     # The words sit in JSON strings, where the ending is written as is (no escapes in it).
-    converted = text.replace(ENDING + '"', '"')
-    if converted == text:
+    plan = upgraded(json.loads(text.replace(ENDING + '"', '"')))
+    if json.dumps(plan, indent=2) + "\n" == text:
         return False
-    path.write_text(converted)
+    write_json(path, plan)
     return True
 
 

@@ -56,12 +56,14 @@ _MODULES = {
     "fppo_jax.run.train_result": ("TrainResult",),
     "fppo_jax.store.saved_policy": ("load_policy",),
     "fppo_jax.analysis.studies": ("study",),
+    "fppo_jax.analysis.study_files": ("StudyResult", "load_study"),
     "fppo_jax.core.surrogates": ("Surrogate",),
     "fppo_jax.core.own_surrogates": ("surrogate",),
     "fppo_jax.run.stop_signals": ("StoppedBySignal",),
     "fppo_jax.run.sweeps": ("expand_grid", "sweep"),
     "fppo_jax.core.trainer": ("METRICS", "Metrics", "Trainer", "TrainState", "make_train"),
-    "fppo_jax.analysis.tuning": ("TuneResult", "tune"),
+    "fppo_jax.analysis.tuning": ("tune",),
+    "fppo_jax.analysis.tune_files": ("TuneResult", "load_tune"),
 }
 _MODULE_OF = {name: module for module, names in _MODULES.items() for name in names}
 
@@ -87,6 +89,7 @@ __all__ = [
     "Progress",
     "Snapshot",
     "StoppedBySignal",
+    "StudyResult",
     "Surrogate",
     "SweepResult",
     "TrainConfig",
@@ -99,6 +102,8 @@ __all__ = [
     "expand_grid",
     "hyperparameters",
     "load_policy",
+    "load_study",
+    "load_tune",
     "make_env",
     "make_train",
     "merge",

@@ -8,9 +8,6 @@ import runpy
 import subprocess
 import sys
 import traceback
-import types
-import typing
-from collections.abc import Mapping, Sequence
 from pathlib import Path
 from unittest import mock
 
@@ -170,42 +167,3 @@ BAD_SEEDS = [
     ([0, 1, 2**32], "seeds 0 and 4294967296 give the same key"),
     ([-1, 2**32 - 1], "seeds -1 and 4294967295 give the same key"),
 ]
-
-
-def mismatches(value, kind, where="") -> list[str]:
-    """Where `value` (JSON as read) is not of `kind`, each as ``"where: why"`` (empty if none)."""
-    if kind is typing.Any or kind is object:
-        return []
-    if typing.is_typeddict(kind):
-        if not isinstance(value, dict):
-            return [f"{where}: {value!r} is not an object"]
-        hints = typing.get_type_hints(kind)
-        found = [f"{where}.{key}: not in {kind.__name__}" for key in value if key not in hints]
-        found += [f"{where}.{key}: missing" for key in kind.__required_keys__ if key not in value]
-        for key, item in value.items():
-            if key in hints:
-                found += mismatches(item, hints[key], f"{where}.{key}")
-        return found
-    origin, args = typing.get_origin(kind), typing.get_args(kind)
-    if origin in (typing.Union, types.UnionType):
-        tried = [mismatches(value, arm, where) for arm in args]
-        return [] if any(not found for found in tried) else min(tried, key=len)
-    if origin in (list, Sequence):
-        if not isinstance(value, list):
-            return [f"{where}: {value!r} is not a list"]
-        return [
-            m for i, item in enumerate(value) for m in mismatches(item, args[0], f"{where}[{i}]")
-        ]
-    if origin in (dict, Mapping):
-        if not isinstance(value, dict):
-            return [f"{where}: {value!r} is not an object"]
-        return [m for k, item in value.items() for m in mismatches(item, args[1], f"{where}.{k}")]
-    if kind is type(None):
-        return [] if value is None else [f"{where}: {value!r} is not null"]
-    if kind is float:
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
-    elif kind is int:
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    else:
-        ok = isinstance(value, kind)
-    return [] if ok else [f"{where}: {value!r} is not {kind.__name__}"]

@@ -231,27 +231,33 @@ def test_an_interval_is_at_the_edge_only_within_its_bounds_monte_carlo_error(mon
     assert common.outcome((0.3, 0.1, 0.45)) == "worse"
 
 
-def test_the_plan_converter_removes_the_rules_module_and_nothing_else(tmp_path):
-    """A study recorded when its rule's words named their module goes on once converted."""
-    from fppo_jax.analysis.study_plan import EQUIVALENCE_TEST, TEST
+def test_the_plan_converter_names_the_rule_by_id_and_changes_nothing_else(tmp_path):
+    """A study recorded when its rule's words named their module, or when its plan named the
+    rule in words, goes on once converted; a plan of this version is left as it is."""
+    from fppo_jax.analysis.study_plan import LEGACY_WORDS
 
     plan = tmp_path / "study" / "plan.json"
     plan.parent.mkdir()
-    recorded = {"test": TEST + " (fppo_jax.sequential)", "level": 0.05}
-    recorded |= {"equivalence": {"equivalence_test": EQUIVALENCE_TEST + " (fppo_jax.sequential)"}}
+    recorded = {"tasks": ["cartpole"], "test": LEGACY_WORDS["test"] + " (fppo_jax.sequential)"}
+    recorded |= {"level": 0.05, "margin": 0.2}
+    recorded |= {"equivalence_test": LEGACY_WORDS["equivalence_test"] + " (fppo_jax.sequential)"}
+    recorded |= {"commit": "a" * 40}
     plan.write_text(json.dumps(recorded, indent=2))
     other = tmp_path / "study" / "decisions.json"
     other.write_text('{"note": "x (fppo_jax.sequential)"}')
     done = run_script(EXPERIMENTS / "convert_plans.py", str(tmp_path), cwd=EXPERIMENTS)
     assert done.returncode == 0 and f"converted {plan}" in done.stdout
-    assert json.loads(plan.read_text()) == {
-        "test": TEST,
-        "level": 0.05,
-        "equivalence": {"equivalence_test": EQUIVALENCE_TEST},
-    }
+    converted = plan.read_text()
+    assert list(json.loads(converted).items()) == [
+        ("tasks", ["cartpole"]),
+        ("rule", {"id": "sequential-mann-whitney-holm", "version": 1}),
+        ("level", 0.05),
+        ("margin", 0.2),
+        ("commit", "a" * 40),
+    ]
     assert other.read_text() == '{"note": "x (fppo_jax.sequential)"}'  # only plans
     again = run_script(EXPERIMENTS / "convert_plans.py", str(tmp_path), cwd=EXPERIMENTS)
-    assert again.returncode == 0 and again.stdout == ""
+    assert again.returncode == 0 and again.stdout == "" and plan.read_text() == converted
 
 
 def _tuned_families(monkeypatch):
@@ -331,3 +337,46 @@ def test_a_replay_that_does_not_give_a_study_s_recorded_decisions_is_refused(mon
     (study / "decisions.json").write_text(json.dumps(decisions))
     with pytest.raises(SystemExit, match="does not give its recorded decision of hopper fppo-lp"):
         families.decide_family(tmp_path, "mujoco", ["hopper"])
+
+
+SCRIPTS = sorted(p for p in EXPERIMENTS.rglob("*.py") if "results" not in p.parts)
+
+
+def _imported_names(path: Path) -> list[tuple[str, str | None]]:
+    """Every ``fppo_jax`` import of `path`, anywhere in it: (module, name), name None for
+    ``import fppo_jax.x``."""
+    import ast
+
+    found: list[tuple[str, str | None]] = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "fppo_jax":
+            found += [(str(node.module), alias.name) for alias in node.names]
+        elif isinstance(node, ast.Import):
+            found += [(a.name, None) for a in node.names if a.name.split(".")[0] == "fppo_jax"]
+    return found
+
+
+def test_every_scripts_imports_of_the_library_resolve():
+    """A script in experiments/ that imports a name the library no longer has fails here, on
+    every import, those inside a function too, without running the script."""
+    unresolved = []
+    for path in SCRIPTS:
+        for module, name in _imported_names(path):
+            imported = importlib.import_module(module)
+            if name is not None and not hasattr(imported, name):
+                try:
+                    importlib.import_module(f"{module}.{name}")
+                except ModuleNotFoundError:
+                    unresolved.append(f"{path.relative_to(EXPERIMENTS)}: {module}.{name}")
+    assert len(SCRIPTS) > 30 and not unresolved, unresolved
+
+
+def test_the_tune_benchmark_runs_tiny_into_a_temporary_directory(tmp_path):
+    script = EXPERIMENTS / "benchmarks" / "bench_tune.py"
+    helped = run_script(script, "--help", cwd=EXPERIMENTS)
+    assert helped.returncode == 0 and "--trials" in helped.stdout
+    flags = ["--tiny", "--trials", "2", "--eta", "2", "--steps", "1024", "--repeats", "1"]
+    done = run_script(script, *flags, "--results", str(tmp_path), cwd=EXPERIMENTS)
+    assert done.returncode == 0, done.stdout + done.stderr
+    written = (tmp_path / "bench_tune_cartpole.md").read_text()
+    assert "| fppo-jax tune (one program per rung) |" in written and "Wall time" in written

@@ -12,7 +12,7 @@ from own_surrogates import frozen, my_ppo
 from scipy import stats
 
 import fppo_jax
-from fppo_jax.analysis.study_plan import check_plan
+from fppo_jax.analysis.preregistration import check_plan
 from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.cli import main
 from fppo_jax.run.merge import merge
@@ -293,7 +293,7 @@ def test_a_study_of_identical_settings_is_decided_equivalent_within_its_margin(t
     low, high = row["interval"]
     assert 0.3 <= low < 0.5 < high <= 0.7 and "within 1/2 ± 0.2 at look 1" in row["reason"]
     plan = json.loads((output / "plan.json").read_text())
-    assert plan["margin"] == 0.2 and "two one-sided" in plan["equivalence_test"]
+    assert plan["margin"] == 0.2 and plan["rule"]["id"] == "sequential-mann-whitney-holm"
     recorded = json.loads((output / "decisions.json").read_text())
     assert recorded["margin"] == 0.2 and recorded["comparisons"] == done.decisions
     report = (output / "report.md").read_text()
@@ -372,4 +372,9 @@ def test_a_study_recorded_before_margins_reads_and_decides_as_it_did(tmp_path, m
     assert "Equivalence margin" not in (output / "report.md").read_text()
     plan = json.loads((recorded / "plan.json").read_text())
     with pytest.raises(ValueError, match=r"planned with margin = none, not 0\.2"):
-        check_plan(output, {**plan, "margin": 0.2, "equivalence_test": "two one-sided tests"})
+        check_plan(
+            output,
+            {**plan, "margin": 0.2, "equivalence_test": "two one-sided tests"},
+            "a study",
+            "plan.json",
+        )

@@ -7,7 +7,7 @@ import pytest
 from own_surrogates import frozen
 
 import fppo_jax
-from fppo_jax.analysis.study_plan import commit
+from fppo_jax.analysis.preregistration import commit
 from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.run.merge import merge
 from fppo_jax.run.results import SweepResult

@@ -1,45 +1,47 @@
-"""fppo_jax.analysis.study_plan: a plan written once, then held to field by field (naming the
-field, inside a section too), the fields recorded only left aside, and the rule named in words
-that no move of a module changes; every recorded study's plan and decisions of the shapes the
-module gives them."""
+"""fppo_jax.analysis.study_plan: the rule named by id and version, never by words or a module;
+a plan that named it in words read as the same plan; every recorded study's plan and decisions
+of the shapes the module gives them, its rule one this code decides by."""
 
 import json
 from pathlib import Path
 
 import pytest
-from helpers import mismatches
 
-from fppo_jax.analysis.study_plan import EQUIVALENCE_TEST, TEST, Decisions, StudyPlan, check_plan
+from fppo_jax.analysis.preregistration import check_plan
+from fppo_jax.analysis.study_plan import (
+    LEGACY_WORDS,
+    Decisions,
+    StudyPlan,
+    rule_of_plan,
+    upgraded,
+)
 from fppo_jax.errors import InvalidInput
+from fppo_jax.store.shapes import mismatches
 
-PLAN = {"level": 0.05, "sampler": {"name": "qmc", "seed": 0}, "commit": "a" * 40}
-
-
-def test_a_plan_is_written_once_then_held_to_naming_the_field(tmp_path):
-    assert check_plan(tmp_path, PLAN) == PLAN
-    assert json.loads((tmp_path / "plan.json").read_text()) == PLAN
-    # Another commit goes on, under the plan as recorded.
-    assert check_plan(tmp_path, {**PLAN, "commit": "b" * 40}) == PLAN
-    with pytest.raises(InvalidInput, match=r"planned with level = 0\.05, not 0\.1"):
-        check_plan(tmp_path, {**PLAN, "level": 0.1})
-    with pytest.raises(InvalidInput, match=r"planned with sampler\.seed = 0, not 1"):
-        check_plan(tmp_path, {**PLAN, "sampler": {"name": "qmc", "seed": 1}})
-    with pytest.raises(InvalidInput, match=r"planned with margin = none, not 0\.2"):
-        check_plan(tmp_path, {**PLAN, "margin": 0.2})
+LEGACY = {"tasks": ["cartpole"], "test": LEGACY_WORDS["test"], "level": 0.05, "margin": 0.2}
+LEGACY |= {"equivalence_test": LEGACY_WORDS["equivalence_test"], "group_size": 5}
+LEGACY |= {"max_seeds": 10, "commit": "a" * 40}
+RULE = {"id": "sequential-mann-whitney-holm", "version": 1}
 
 
-def test_fields_recorded_only_are_not_held_to(tmp_path):
-    recorded = {**PLAN, "sampler": {**PLAN["sampler"], "package": "optuna 5.0.0"}}
-    check_plan(tmp_path, recorded, "a tune", "tune.json")
-    now = {**PLAN, "sampler": {**PLAN["sampler"], "package": "optuna 5.1.0"}}
-    only = frozenset({"commit", "sampler.package"})
-    assert check_plan(tmp_path, now, "a tune", "tune.json", only) == recorded
-    with pytest.raises(InvalidInput, match=r"a tune planned with sampler\.package"):
-        check_plan(tmp_path, now, "a tune", "tune.json")
+def test_a_plan_that_named_its_rule_in_words_goes_on_under_its_id(tmp_path):
+    now = upgraded(LEGACY)
+    assert list(now) == ["tasks", "rule", "level", "margin", "group_size", "max_seeds", "commit"]
+    assert now["rule"] == RULE and upgraded(now) == now
+    (tmp_path / "plan.json").write_text(json.dumps(LEGACY))
+    assert check_plan(tmp_path, now, "a study", "plan.json", upgrade=upgraded) == now
+    with pytest.raises(InvalidInput, match=r"planned with test = \"two-sided"):
+        check_plan(tmp_path, now, "a study", "plan.json")  # read without the upgrade
+    with pytest.raises(InvalidInput, match="names its rule \\(test\\) in words this fppo-jax"):
+        upgraded({**LEGACY, "test": "a t-test"})
 
 
-def test_the_rule_is_named_in_words_without_a_module():
-    assert "fppo_jax" not in TEST and "fppo_jax" not in EQUIVALENCE_TEST
+def test_the_plans_rule_is_one_this_code_decides_by():
+    rule = rule_of_plan(upgraded(LEGACY))
+    assert (rule.design.group_size, rule.design.max_seeds, rule.design.margin) == (5, 10, 0.2)
+    assert "fppo_jax" not in rule.words and "fppo_jax" not in (rule.equivalence_words or "")
+    with pytest.raises(InvalidInput, match="the rule 'permutation', which this fppo-jax does"):
+        rule_of_plan({**upgraded(LEGACY), "rule": {"id": "permutation", "version": 1}})
 
 
 RESULTS = Path(__file__).resolve().parent.parent / "experiments" / "results"
@@ -52,7 +54,9 @@ def test_there_are_recorded_studies_to_check():
 
 @pytest.mark.parametrize("study", STUDIES, ids=lambda path: str(path.relative_to(RESULTS)))
 def test_a_recorded_study_holds_the_shapes_of_its_plan_and_decisions(study):
-    assert mismatches(json.loads((study / "plan.json").read_text()), StudyPlan) == []
+    plan = json.loads((study / "plan.json").read_text())
+    assert mismatches(plan, StudyPlan) == []
+    assert rule_of_plan(plan).id == plan["rule"]["id"]
     decisions = study / "decisions.json"
     if decisions.exists():
         assert mismatches(json.loads(decisions.read_text()), Decisions) == []

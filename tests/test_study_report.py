@@ -32,7 +32,7 @@ def test_across_tasks_the_report_normalises_only_where_every_task_can_be(tmp_pat
         "max_seeds": 10,
         "level": 0.05,
         "comparisons": [{"task": t, "candidate": "spo", "baseline": "ppo"} for t in "ab"],
-        "test": "a test",
+        "rule": {"id": "sequential-mann-whitney-holm", "version": 1},
         "commit": "0" * 40,
     }
     rows = [

@@ -46,7 +46,7 @@ def test_the_report_notes_ceilings_ties_and_boundaries_that_holm_moved(tmp_path)
         "level": 0.05,
         "boundaries_if_none_decided": list(boundaries(0.025, fractions)),
         "comparisons": [{"task": t, "candidate": "spo", "baseline": "ppo"} for t in "ab"],
-        "test": "a test",
+        "rule": {"id": "sequential-mann-whitney-holm", "version": 1},
         "commit": "0" * 40,
     }
     moved = boundaries(0.05, fractions)[1]

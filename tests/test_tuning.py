@@ -14,13 +14,13 @@ from helpers import TUNE_SMALL as SMALL
 from helpers import rung_scores
 
 import fppo_jax
-from fppo_jax.analysis import tuning, tuning_rungs
+from fppo_jax.analysis import tuning_rungs
 from fppo_jax.analysis.studies import study
 from fppo_jax.analysis.study_runs import run_scores
-from fppo_jax.analysis.tuning import TUNING_SEED_START, schedule, tune
+from fppo_jax.analysis.tune_files import recorded_rungs, tune_digest
+from fppo_jax.analysis.tuning import TUNING_SEED_START, tune
 from fppo_jax.analysis.tuning_draws import import_optuna
 from fppo_jax.analysis.tuning_report import across_tasks
-from fppo_jax.analysis.tuning_rungs import recorded_rungs
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats import statistics
 
@@ -47,22 +47,6 @@ def tuned(tmp_path_factory):
         patch.setattr(tuning_rungs, "compile_program", counting)
         result = tune("cartpole", ARMS, output=output, **SMALL)
     return output, result, compiled
-
-
-def test_schedule_halves_the_trials_and_ends_at_the_full_budget():
-    rungs = schedule(27, 3, 81)
-    assert rungs.trials == (27, 9, 3, 1)
-    assert rungs.ends == (3, 9, 27, 81)
-    assert schedule(10, 3, 100).trials == (10, 3, 1)
-    assert schedule(10, 3, 100).ends == (11, 33, 100)
-    # Every trial trains the first rung; the survivors each rung's further updates.
-    assert rungs.updates_per_arm(seeds=2) == 2 * (27 * 3 + 9 * 6 + 3 * 18 + 1 * 54)
-    assert schedule(1, 3, 5).ends == (5,)
-    # Progress between calls: the first rung (3 updates here, 54 on MuJoCo) in whole calls.
-    assert rungs.updates_per_call == 1
-    assert schedule(9, 3, 488).updates_per_call == 3
-    with pytest.raises(InvalidInput, match="too short for 4 rungs"):
-        schedule(27, 3, 20)
 
 
 def test_a_tune_halves_each_arm_in_one_program_per_rung(tuned):
@@ -184,7 +168,7 @@ def test_a_study_tests_the_chosen_settings_on_fresh_seeds_with_the_defaults_besi
     assert plan["settings"]["cartpole"] == {
         arm: result.chosen("cartpole", arm) for arm in ["fppo-lp", "ppo"]
     }
-    assert plan["plan_digest"] == tuning.plan_digest(output)
+    assert plan["plan_digest"] == tune_digest(output)
     # Copied elsewhere (another clone, another node), the study goes on: a tune is known by its
     # plan's digest, not where it lay; a tune of another plan is refused.
     moved = tmp_path / "moved"

@@ -6,9 +6,9 @@ import json
 from pathlib import Path
 
 import pytest
-from helpers import mismatches
 
 from fppo_jax.analysis.tuning_records import ArmResults, RungScores, ShareScores, TunePlan
+from fppo_jax.store.shapes import mismatches
 
 TUNED = Path(__file__).resolve().parent.parent / "experiments" / "results" / "tuned"
 TUNES = sorted(path.parent for path in TUNED.rglob("tune.json"))

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from fppo_jax.analysis.tuning import Rungs
-from fppo_jax.analysis.tuning_report import arm_results, expected_best, ranked, write_report
+from fppo_jax.analysis.halving import Rungs
+from fppo_jax.analysis.tuning_report import arm_results, expected_best, write_report
 
 
 def row(trial, score, diverged=False):
@@ -123,11 +123,6 @@ def test_one_trial_gives_a_band_of_zero_width():
     point, low, high = expected_best(np.array([7.0]), 5)
     assert np.array_equal(point, np.full(5, 7.0))
     assert np.array_equal(low, point) and np.array_equal(high, point)
-
-
-def test_a_trial_without_an_episode_ranks_below_scored_ones_and_a_diverged_one_not_at_all():
-    rows = [row(0, None), row(1, 5.0), row(2, 7.0, True), row(3, None), row(4, 5.0)]
-    assert [r["trial"] for r in ranked(rows)] == [1, 4, 0, 3]
 
 
 def test_a_rung_that_scored_every_trial_alike_is_reported_as_tied(tmp_path):

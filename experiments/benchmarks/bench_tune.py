@@ -27,6 +27,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import fppo_jax
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
 from common import (
@@ -96,7 +98,7 @@ def run_tune(args: Any, where: Path, shape: dict[str, Any]) -> dict[str, Any]:
     seconds = time.perf_counter() - start
     if status:
         sys.exit(f"the tune failed ({status})")
-    results = json.loads((where / "results.json").read_text())[args.env]["ppo"]
+    results = fppo_jax.load_tune(where).results[args.env]["ppo"]
     return {
         "seconds": seconds,
         "steps": results["env_steps"],
@@ -109,7 +111,8 @@ def run_usual(args: Any, where: Path, tuned: Path, shape: dict[str, Any]) -> dic
     """Arm (b): one process per trial, pruned by Optuna's SuccessiveHalvingPruner."""
     import optuna
 
-    plan = json.loads((tuned / "tune.json").read_text())
+    recorded = fppo_jax.load_tune(tuned)
+    plan, trials = recorded.plan, recorded.results[args.env]["ppo"]["trials"]
     first = plan["budget"][args.env]["rungs"][0]["ends_at_update"]
     drawn = optuna.load_study(study_name=f"{args.env}/ppo", storage=f"sqlite:///{tuned}/optuna.db")
     storage = f"sqlite:///{where}/usual.db"  # the usual way's own study, its trials the same
@@ -122,8 +125,6 @@ def run_usual(args: Any, where: Path, tuned: Path, shape: dict[str, Any]) -> dic
             min_resource=first, reduction_factor=args.eta, min_early_stopping_rate=0
         ),
     )
-    from fppo_jax.analysis.tuning import setting_of
-
     start, updates, peak, best = time.perf_counter(), 0, 0, None
     last_update = plan["budget"][args.env]["rungs"][-1]["ends_at_update"]
     for frozen in sorted(drawn.trials, key=lambda t: t.number):
@@ -132,7 +133,7 @@ def run_usual(args: Any, where: Path, tuned: Path, shape: dict[str, Any]) -> dic
         for name, d in frozen.distributions.items():
             trial.suggest_float(name, d.low, d.high, log=d.log)
         given = {
-            "setting": setting_of(frozen.params),
+            "setting": trials[frozen.number],
             "seeds": plan["seeds"],
             "config": shape["config"],
         }

@@ -80,7 +80,7 @@ class Pool:
         for seed in sorted(seeds):
             where, recorded, run = chosen[seed]
             by_sweep.setdefault(where, (recorded, []))[1].append(run)
-        parts = [_runs(recorded, runs) for recorded, runs in by_sweep.values()]
+        parts = [runs_alone(recorded, runs) for recorded, runs in by_sweep.values()]
         return Taken(merge(parts), list(by_sweep))
 
 
@@ -95,7 +95,7 @@ def _record(recorded: SweepResult) -> RunRecord:
     return RunRecord.from_json(recorded.config, "a recorded sweep's record")
 
 
-def _runs(recorded: SweepResult, runs: list[int]) -> SweepResult:
+def runs_alone(recorded: SweepResult, runs: list[int]) -> SweepResult:
     """The sweep of `recorded`'s `runs` alone, all of one setting."""
     setting = recorded.settings[recorded.runs[runs[0]]["setting"]]
     seeds = [recorded.runs[run]["seed"] for run in runs]

@@ -33,8 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from fppo_jax.analysis.study_looks import StudyResult, run_looks, shown_progress
-from fppo_jax.analysis.study_plan import ENDPOINTS, check_plan, make_plan
+from fppo_jax.analysis.arms import Variants, names_of_tasks, resolve_arms
+from fppo_jax.analysis.preregistration import Preregistered
+from fppo_jax.analysis.study_files import StudyResult
+from fppo_jax.analysis.study_looks import run_looks, shown_progress
+from fppo_jax.analysis.study_plan import ENDPOINTS, PLAN_FILE, make_plan, upgraded
 from fppo_jax.analysis.study_runs import OWN_SETTINGS, Shape, Source
 from fppo_jax.analysis.study_tuned import check_tuned_protocol, tuned_settings
 from fppo_jax.core.checks import check_part, positive_int
@@ -44,21 +47,11 @@ from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.options import Options
 from fppo_jax.stats.decidable import plan_lines
+from fppo_jax.stats.rules import SequentialMannWhitney
 from fppo_jax.stats.sequential import Design
-from fppo_jax.store.files import DirectoryLock, writable_directory
 
 # The options a plan records: evaluations make the eval endpoint, and change what runs record.
 EVALUATION = ("eval_every", "eval_episodes")
-
-
-# A study's candidates: one variant (a built-in's name, "module:attribute" or a surrogate) or
-# several.
-Variants = str | Surrogate | Sequence[str | Surrogate]
-
-
-# Seconds an array task waits for the others that started with it to check the plan: each
-# holds the study's lock for that alone, well under a second, before it trains its share.
-PART_LOCK_WAIT = 60.0
 
 
 def study(
@@ -108,7 +101,7 @@ def study(
     (:func:`~fppo_jax.analysis.tuning_report.across_tasks`) instead of each task's best.
     `total_steps`, `preset`, `backend`, `chunk` and `settings` are the sweeps'.
     """
-    tasks = names_of_tasks(tasks)
+    tasks = names_of_tasks(tasks, "a study")
     candidates, baseline = _variants(candidates, baseline)
     design = Design(group_size, max_seeds, level, margin)
     _check_arguments(endpoint, groups, chunk, part, settings)
@@ -132,21 +125,24 @@ def study(
         source = dataclasses.replace(source, defaults=source.at_defaults(everyone))
     planned: dict[str, object] = {**shape, **_planned_settings(settings)}
     plan = make_plan(
-        tasks, candidates, baseline, design, endpoint, planned, sources, chosen, bool(with_defaults)
+        tasks,
+        candidates,
+        baseline,
+        SequentialMannWhitney(design),
+        endpoint,
+        planned,
+        sources,
+        chosen,
+        bool(with_defaults),
     )
-    output = writable_directory(output)
     # Array tasks that start together take turns to check the plan (each holds the lock briefly).
-    lock = DirectoryLock(output, "a study", wait=PART_LOCK_WAIT if part is not None else 0.0)
-    try:
-        plan = check_plan(output, plan, recorded_only=_RECORDED_ONLY)
-        if part is not None:  # the array's tasks train their shares side by side
-            lock.release()
+    with Preregistered(output, "a study", shared=part is not None) as folder:
+        plan = folder.check(plan, PLAN_FILE, _RECORDED_ONLY, upgraded)
+        folder.share_out()  # the array's tasks train their shares side by side
         if shown_progress(settings):
             lines = plan_lines(design, len(tasks) * len(candidates))
             print("\n".join(f"study: {line}" for line in lines), file=sys.stderr)
-        return run_looks(output, plan, tasks, candidates, baseline, design, groups, source)
-    finally:
-        lock.release()
+        return run_looks(folder.output, plan, tasks, candidates, baseline, groups, source)
 
 
 def _check_arguments(
@@ -191,27 +187,11 @@ def _planned_settings(settings: Mapping[str, object]) -> dict[str, object]:
 _RECORDED_ONLY = frozenset({"commit", "tuned.directory"})
 
 
-def names_of_tasks(tasks: str | Sequence[str], what: str = "a study") -> list[str]:
-    """`tasks`, one name or several, checked: named, and each once (`what` is whose they are)."""
-    tasks = [tasks] if isinstance(tasks, str) else list(tasks)
-    if not tasks or not all(isinstance(task, str) and task for task in tasks):
-        raise InvalidInput(f"{what}'s tasks are named tasks (fppo-jax list), got {tasks!r}")
-    if len(set(tasks)) < len(tasks):
-        raise InvalidInput(f"a task is named twice among {', '.join(tasks)}")
-    return tasks
-
-
 def _variants(candidates: Variants, baseline: str | Surrogate) -> tuple[list[Surrogate], Surrogate]:
     """The candidates and the baseline resolved (a name or a surrogate each), checked."""
-    listed = [candidates] if isinstance(candidates, str | Surrogate) else candidates
-    arms = [resolve(c) for c in listed]
+    arms = resolve_arms(candidates, "a study", "candidate")
     against = resolve(baseline)
-    if not arms:
-        raise InvalidInput("a study needs at least one candidate")
     union([*arms, against])  # two different surrogates under one name are refused
-    names = [c.name for c in arms]
-    if against.name in names:
+    if against.name in [c.name for c in arms]:
         raise InvalidInput(f"the baseline {against.name} is also a candidate")
-    if len(set(names)) < len(names):
-        raise InvalidInput(f"a candidate is named twice among {', '.join(names)}")
     return arms, against

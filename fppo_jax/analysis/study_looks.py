@@ -13,8 +13,10 @@ from typing import TypedDict, cast
 
 import numpy as np
 
+from fppo_jax.analysis.preregistration import commit
 from fppo_jax.analysis.reuse import Taken, protocol_differences
 from fppo_jax.analysis.study_figures import write_figures
+from fppo_jax.analysis.study_files import DEFAULTS, StudyResult, task_folder
 from fppo_jax.analysis.study_plan import (
     DECISIONS_FILE,
     REPORT_FILE,
@@ -23,7 +25,7 @@ from fppo_jax.analysis.study_plan import (
     Decisions,
     GroupEntry,
     StudyPlan,
-    commit,
+    rule_of_plan,
 )
 from fppo_jax.analysis.study_report import beside_defaults, write_report
 from fppo_jax.analysis.study_runs import (
@@ -40,30 +42,13 @@ from fppo_jax.errors import InvalidInput
 from fppo_jax.run.merge import merge
 from fppo_jax.run.results import SweepResult
 from fppo_jax.stats import statistics
-from fppo_jax.stats.sequential import Decision, Design, decide
+from fppo_jax.stats.rules import DecisionRule
+from fppo_jax.stats.sequential import Decision
 from fppo_jax.store.files import write_json
 
 # Reported beside the plan's endpoints, never decided on: each run's best return over training
 # (the paper's statistic is its like over the seed-mean curve), biased upward.
 REPORTED = "max"
-
-
-# Where each arm's default setting trains beside its tuned one (with_defaults), by task and group.
-DEFAULTS = "defaults"
-
-
-@dataclasses.dataclass
-class StudyResult:
-    """What a study holds so far: its `plan` (as ``plan.json`` has it), one row per comparison
-    in `decisions` (as ``decisions.json`` has them), each task's recorded runs merged into one
-    sweep (`results`, by task), whether every comparison is `finished`, and with
-    ``with_defaults`` each task's runs of each arm's default setting (`defaults`, by task)."""
-
-    plan: StudyPlan
-    decisions: list[DecisionRow]
-    results: dict[str, SweepResult]
-    finished: bool
-    defaults: dict[str, SweepResult] = dataclasses.field(default_factory=dict)
 
 
 def shown_progress(settings: Mapping[str, object]) -> bool:
@@ -102,19 +87,20 @@ def run_looks(
     tasks: list[str],
     candidates: list[Surrogate],
     baseline: Surrogate,
-    design: Design,
     groups: int | None,
     source: Source,
 ) -> StudyResult:
-    """The looks: each task's next group while some comparison awaits seeds, then the rule.
+    """The looks: each task's next group while some comparison awaits seeds, then the plan's
+    rule (:func:`~fppo_jax.analysis.study_plan.rule_of_plan`).
     With ``source.part``, the first look whose groups are not all recorded has this share of
     them trained, and the call returns there, writing no decision."""
     recorded: dict[str, list[SweepResult]] = {task: [] for task in tasks}
     defaults: dict[str, list[SweepResult]] = {task: [] for task in tasks}  # with_defaults
     trained: list[GroupEntry] = []
     shown = shown_progress(source.settings)
-    endpoint = plan["primary_endpoint"]
-    decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
+    endpoint, rule = plan["primary_endpoint"], rule_of_plan(plan)
+    design = rule.design
+    decisions = _decide(recorded, tasks, candidates, baseline, rule, endpoint)
     for look, seeds in enumerate(design.looks):
         waiting = {key for key, d in decisions.items() if d.decision is None}
         if not waiting:
@@ -147,7 +133,7 @@ def run_looks(
             if entry := _gather(group, defaults if group.defaults else recorded):
                 trained.append(entry)
         before = decisions
-        decisions = _decide(recorded, tasks, candidates, baseline, design, endpoint)
+        decisions = _decide(recorded, tasks, candidates, baseline, rule, endpoint)
         if shown:
             for (task, name), decision in decisions.items():
                 if decision.decision is not None and before[task, name].decision is None:
@@ -192,7 +178,7 @@ def _write_merged(output: Path, recorded: dict[str, list[SweepResult]], tasks: l
     restarts), beside the groups; not for a task whose runs were all taken from recorded
     sweeps (it has no directory in the study's)."""
     for task in dict.fromkeys(tasks):
-        where = output / _directory_name(task)
+        where = output / task_folder(task)
         if recorded[task] and where.is_dir():
             merge(recorded[task]).write(where)
 
@@ -213,7 +199,7 @@ def _group(
         source, output = cast(Source, source.defaults), output / DEFAULTS
     taken = {v.name: t for v in variants if (t := source.take(task, v, seeds))}
     variants = [v for v in variants if v.name not in taken]
-    where = output / _directory_name(task) / f"group-{look + 1}"
+    where = output / task_folder(task) / f"group-{look + 1}"
     result = recorded_group(where, variants, seeds) if variants else None
     differences = protocol_differences(result.config, source.expected[task][0]) if result else []
     if differences:
@@ -318,17 +304,12 @@ def _first_finite(curve: np.ndarray) -> float:
     return float(finite[0]) if finite.size else np.nan
 
 
-def _directory_name(task: str) -> str:
-    """A task's directory in the study: its name, a namespace's slash made a double underscore."""
-    return task.replace("/", "__")
-
-
 def _decide(
     recorded: dict[str, list[SweepResult]],
     tasks: list[str],
     candidates: list[Surrogate],
     baseline: Surrogate,
-    design: Design,
+    rule: DecisionRule,
     endpoint: str,
 ) -> dict[tuple[str, str], Decision]:
     """The rule on every comparison's scores so far (seeds in order, group after group)."""
@@ -346,7 +327,7 @@ def _decide(
         scores.append(tuple(pair))
     # each of `scores` is a (candidate, baseline) pair
     return dict(
-        zip(keys, decide(cast("list[tuple[np.ndarray, np.ndarray]]", scores), design), strict=True)
+        zip(keys, rule.decide(cast("list[tuple[np.ndarray, np.ndarray]]", scores)), strict=True)
     )
 
 

@@ -1,45 +1,38 @@
 """A study's plan: what ``plan.json`` preregisters before any run (the comparisons, the
-endpoints, the test in words, the seed schedule, the settings and the commit), and the check
-that a study, or a tune, goes on only under the plan it started with. With the shapes of the
-JSON a study records: ``plan.json``'s (:class:`StudyPlan`) and ``decisions.json``'s
+endpoints, the test in words, the seed schedule, the settings and the commit), which
+:mod:`fppo_jax.analysis.preregistration` holds a study to. With the shapes of the JSON a
+study records: ``plan.json``'s (:class:`StudyPlan`) and ``decisions.json``'s
 (:class:`Decisions`, a row per comparison a :class:`DecisionRow`). The annotations are
 evaluated (no ``from __future__ import annotations``), so that ``NotRequired`` keys are known at
 run time too."""
 
-import json
-import subprocess
 from collections.abc import Mapping
-from pathlib import Path
-from typing import NotRequired, TypedDict, TypeVar, cast
+from typing import NotRequired, TypedDict, cast
 
+from fppo_jax.analysis.preregistration import commit
 from fppo_jax.core.config import Setting
 from fppo_jax.core.objectives import identities
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats import statistics
+from fppo_jax.stats.rules import (
+    DecisionRule,
+    RuleRecord,
+    SequentialMannWhitney,
+    record_of,
+    rule_of,
+)
 from fppo_jax.stats.sequential import Design
 from fppo_jax.stats.spending import boundaries
-from fppo_jax.store.files import json_value, write_json
+from fppo_jax.store.files import json_value
 
 ENDPOINTS = statistics.STUDY_ENDPOINTS  # decided on; those not chosen are reported beside it
 
 
-# The rule in words, which a plan records and a resumed study is held to; they name no module,
-# whose place may change while the rule does not (experiments/convert_plans.py converted the
-# plans recorded when they named one).
-TEST = (
-    "two-sided group-sequential Mann–Whitney test of P(candidate > baseline) = 1/2, "
-    "Lan–DeMets O'Brien–Fleming-type alpha-spending over the looks, Holm's procedure across "
-    "the comparisons"
-)
-
-
-EQUIVALENCE_TEST = (
-    "equivalent when P(candidate > baseline) is within 1/2 ± margin: two one-sided "
-    "group-sequential tests (the repeated confidence interval of P, placement standard error, "
-    "inside the margin), Lan–DeMets O'Brien–Fleming-type one-sided alpha-spending, Holm's "
-    "procedure across the comparisons"
-)
+# What plans recorded of their rule before they named it by id: its words (and, with a margin,
+# the equivalence test's), which upgraded() reads as the rule's record.
+WORDS = SequentialMannWhitney(Design(margin=0.2))
+LEGACY_WORDS = {"test": WORDS.words, "equivalence_test": WORDS.equivalence_words}
 
 
 PLAN_FILE, DECISIONS_FILE, REPORT_FILE = "plan.json", "decisions.json", "report.md"
@@ -71,10 +64,11 @@ class TunedChoice(TypedDict):
 
 
 class StudyPlan(TypedDict):
-    """``plan.json``: the preregistration (:func:`make_plan`), as :func:`check_plan` holds a
-    study to it. The keys a plan lacks where it was recorded before they existed, or where the
-    study has none: the equivalence margin and its test, the directories of recorded sweeps to
-    `reuse`, the `surrogates` of one's own (each one's identity,
+    """``plan.json``: the preregistration (:func:`make_plan`), as
+    :func:`~fppo_jax.analysis.preregistration.check_plan` holds a study to it. The keys a plan
+    lacks where it was recorded before they existed, or where the study has none: the
+    equivalence margin and its test, the directories of recorded sweeps to `reuse`, the
+    `surrogates` of one's own (each one's identity,
     :meth:`~fppo_jax.core.surrogates.Surrogate.identity`), the `tuned` settings and whether
     each arm's default trains beside them (`with_defaults`). Its `settings`: the run shape
     (``total_steps``, ``preset``, ``backend``) and the sweeps' other keyword arguments that
@@ -86,10 +80,9 @@ class StudyPlan(TypedDict):
     comparisons: list[Comparison]
     primary_endpoint: str
     secondary_endpoints: list[str]
-    test: str
+    rule: RuleRecord
     level: float
     margin: NotRequired[float]
-    equivalence_test: NotRequired[str]
     group_size: int
     max_seeds: int
     looks: list[int]
@@ -104,7 +97,7 @@ class StudyPlan(TypedDict):
 
 class DecisionRow(TypedDict):
     """One comparison's row of ``decisions.json`` (and of
-    :attr:`~fppo_jax.analysis.study_looks.StudyResult.decisions`): its `decision` (``better``,
+    :attr:`~fppo_jax.analysis.study_files.StudyResult.decisions`): its `decision` (``better``,
     ``worse``, ``equivalent``, or ``undecided`` while it awaits seeds or where the seeds ran
     out), whether it is `final`, the `seeds` per setting it used, its latest statistic `z` and
     the `boundary` held against it (None before any look), why it stopped in words, and with a
@@ -188,33 +181,11 @@ class Decisions(TypedDict):
     groups: list[GroupEntry]
 
 
-# Any plan check_plan holds to: a study's, a tune's, as JSON.
-Plan = TypeVar("Plan", bound=Mapping[str, object])
-
-
-def commit() -> str:
-    """The commit of the code that runs (``git rev-parse HEAD`` in the package's directory), or
-    ``unknown`` outside a git checkout."""
-    try:
-        done = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            cwd=Path(__file__).resolve().parent,
-            capture_output=True,
-            text=True,
-            check=True,
-            timeout=30,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return done.stdout.strip() or "unknown"
-
-
 class _Optional(TypedDict, total=False):
     """The keys of :class:`StudyPlan` that only some plans have, as :func:`make_plan` spreads
     each in its place."""
 
     margin: float
-    equivalence_test: str
     reuse: list[str]
     surrogates: Mapping[str, Mapping[str, object]]
     tuned: TunedChoice
@@ -225,7 +196,7 @@ def make_plan(
     tasks: list[str],
     candidates: list[Surrogate],
     baseline: Surrogate,
-    design: Design,
+    rule: DecisionRule,
     endpoint: str,
     settings: dict[str, object],
     reuse: list[str],
@@ -233,8 +204,10 @@ def make_plan(
     with_defaults: bool = False,
 ) -> StudyPlan:
     """What ``plan.json`` records: the preregistration, decided before any run (as JSON: what
-    :func:`check_plan` compares with the file's). What only some plans record is left out where
-    the study has none: a plan from before it existed is one without."""
+    :func:`~fppo_jax.analysis.preregistration.check_plan` compares with the file's). What only
+    some plans record is left out where the study has none: a plan from before it existed is
+    one without."""
+    design = rule.design
     own = identities([*candidates, baseline]).get("surrogates")
     reused: _Optional = {"reuse": reuse} if reuse else {}
     surrogates: _Optional = {"surrogates": own} if own else {}
@@ -254,7 +227,7 @@ def make_plan(
         "secondary_endpoints": [
             e for e in ENDPOINTS if e != endpoint and (e != "eval" or "eval_every" in settings)
         ],
-        "test": TEST,
+        "rule": record_of(rule),
         "level": design.level,
         **_equivalence_plan(design),
         "group_size": design.group_size,
@@ -274,54 +247,35 @@ def make_plan(
 
 def _equivalence_plan(design: Design) -> _Optional:
     """What the plan records of the equivalence test: nothing without a margin (a plan
-    recorded before margins existed is one without), else the margin and the test."""
-    if design.margin is None:
-        return {}
-    return {"margin": design.margin, "equivalence_test": EQUIVALENCE_TEST}
+    recorded before margins existed is one without), else the margin."""
+    return {} if design.margin is None else {"margin": design.margin}
+
+
+def upgraded(plan: dict[str, object]) -> dict[str, object]:
+    """`plan` as this code records it, where it was recorded naming its rule in words (the
+    rule's record in place of the words, the keys in their order); refused, naming it, if the
+    words are not the rule's."""
+    if "test" not in plan:
+        return plan
+    for key, words in LEGACY_WORDS.items():
+        if key in plan and plan[key] != words:
+            raise InvalidInput(
+                f"the plan names its rule ({key}) in words this fppo-jax does not know: "
+                f"{plan[key]!r}; decide it with the fppo-jax that planned it"
+            )
+    rule = record_of(WORDS)
+    return {
+        ("rule" if key == "test" else key): (rule if key == "test" else value)
+        for key, value in plan.items()
+        if key != "equivalence_test"
+    }
+
+
+def rule_of_plan(plan: StudyPlan) -> DecisionRule:
+    """The rule `plan` decides by, under its design."""
+    design = Design(plan["group_size"], plan["max_seeds"], plan["level"], plan.get("margin"))
+    return rule_of(plan["rule"], design)
 
 
 def _fractions(design: Design) -> tuple[float, ...]:
     return tuple(n / design.max_seeds for n in design.looks)
-
-
-def check_plan(
-    output: Path,
-    plan: Plan,
-    what: str = "a study",
-    name: str = PLAN_FILE,
-    recorded_only: frozenset[str] = frozenset({"commit"}),
-) -> Plan:
-    """Write `plan` as `name` in `output`, or check it against the one there: `what` (a study,
-    a tune) goes on only under the plan it started with, the fields in `recorded_only` aside
-    (the commit: a group records its own). Returns the plan as recorded, with the commit it was
-    made at (of `plan`'s shape: the file's fields are compared with it, one by one)."""
-    path = output / name
-    if not path.exists():
-        write_json(path, plan)
-        return plan
-    try:
-        recorded = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as error:
-        raise InvalidInput(f"cannot read the plan {path}: {error}") from None
-    for field in dict.fromkeys([*recorded, *plan]):
-        was, now = recorded.get(field), plan.get(field)
-        if field in recorded_only or was == now:
-            continue
-        if isinstance(was, dict) and isinstance(now, dict):
-            keys = [
-                k
-                for k in dict.fromkeys([*was, *now])
-                if was.get(k) != now.get(k) and f"{field}.{k}" not in recorded_only
-            ]
-            if not keys:
-                continue
-            field, was, now = f"{field}.{keys[0]}", was.get(keys[0]), now.get(keys[0])
-        raise InvalidInput(
-            f"{output} holds {what} planned with {field} = {_shown(was)}, not {_shown(now)}: "
-            f"{what} goes on only under its plan (start another in a new directory)"
-        )
-    return cast(Plan, recorded)
-
-
-def _shown(value: object) -> str:
-    return "none" if value is None else json.dumps(value)

@@ -23,6 +23,7 @@ from fppo_jax.analysis.study_plan import (
     Interval,
     StudyPlan,
     TuningGain,
+    rule_of_plan,
 )
 from fppo_jax.analysis.study_sections import START, Scores, interval_cell, task_section
 from fppo_jax.stats import statistics
@@ -229,7 +230,7 @@ def _across_tasks(
 
 def _preamble(plan: StudyPlan, comparisons: int, finished: bool) -> list[str]:
     """The report's title and its plan, status and intervals in words."""
-    looks = ", ".join(map(str, plan["looks"]))
+    looks, rule = ", ".join(map(str, plan["looks"])), rule_of_plan(plan)
     status = (
         "Every comparison is decided or reached the maximum of seeds."
         if finished
@@ -275,7 +276,7 @@ def _preamble(plan: StudyPlan, comparisons: int, finished: bool) -> list[str]:
         f"{plan['baseline']}) shown within 1/2 ± {plan['margin']:g}: its repeated confidence "
         "interval at the test's level, 1 − 2α/m while none is decided (in the reason: a normal "
         "interval, narrower than the table's bootstrap one at 1 − α/m), inside that range "
-        f"(test: {plan['equivalence_test']}); the "
+        f"(test: {rule.equivalence_words}); the "
         "chance of any false `equivalent` (a comparison whose P is at or beyond the margin) in "
         f"the family is at most {plan['level']:g}, as is that of any false `better` or `worse` "
         "where the settings score alike."
@@ -288,7 +289,7 @@ def _preamble(plan: StudyPlan, comparisons: int, finished: bool) -> list[str]:
         f"Planned in plan.json {planned} (commit {plan['commit']}). Primary endpoint: "
         f"{plan['primary_endpoint']} ({statistics.ENDPOINTS[plan['primary_endpoint']]}); "
         f"reported beside it: {', '.join([*plan['secondary_endpoints'], 'max'])}. Test: "
-        f"{plan['test']}; family-wise error at most {plan['level']:g} over the {comparisons} "
+        f"{rule.words}; family-wise error at most {plan['level']:g} over the {comparisons} "
         f"comparison{'s' if comparisons > 1 else ''}. Seeds per setting at the looks: "
         f"{looks}.{equivalence}{reused}",
         "",

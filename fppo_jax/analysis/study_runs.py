@@ -13,8 +13,9 @@ from typing import Any, TypedDict
 
 import numpy as np
 
+from fppo_jax.analysis.preregistration import commit
 from fppo_jax.analysis.reuse import Pool, Taken
-from fppo_jax.analysis.study_plan import TunedChoice, commit
+from fppo_jax.analysis.study_plan import TunedChoice
 from fppo_jax.core.config import Setting
 from fppo_jax.core.objectives import hyperparameter_names, identities, takers
 from fppo_jax.core.resolution import resolve_hyperparameters, sweepable

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fppo_jax.analysis.study_plan import DecisionRow, StudyPlan
+from fppo_jax.analysis.study_plan import DecisionRow, StudyPlan, rule_of_plan
 from fppo_jax.stats import statistics
 from fppo_jax.stats.sequential import Design, repeated_confidence
 from fppo_jax.stats.spending import boundaries
@@ -65,7 +65,7 @@ def _table(
         head = f"Primary endpoint, {endpoint}: tested; the decision column is the test's."
         columns = ["candidate", "decision", "seeds", "why it stopped"]
         columns.append(f"P(candidate > {baseline}), repeated CI")
-        design = Design(plan["group_size"], plan["max_seeds"], plan["level"], plan.get("margin"))
+        design = rule_of_plan(plan).design
     elif endpoint == "max":
         head = (
             "Each run's best, max: reported, not tested, and biased upward (the best of a "

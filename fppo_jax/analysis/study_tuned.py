@@ -4,14 +4,14 @@ seeds."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Collection
 from pathlib import Path
-from typing import cast
 
 from fppo_jax.analysis.study_plan import TunedChoice
 from fppo_jax.analysis.study_runs import Source
-from fppo_jax.analysis.tuning_records import ArmResults, TrialAcrossTasks, TunePlan
+from fppo_jax.analysis.tune_files import RESULTS_FILE, TuneResult, load_tune, tune_digest
+from fppo_jax.analysis.tuning_records import TrialAcrossTasks
+from fppo_jax.analysis.tuning_report import across_tasks as trial_across_tasks
 from fppo_jax.core.config import Setting
 from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
 from fppo_jax.core.surrogates import Surrogate
@@ -44,19 +44,15 @@ def tuned_settings(
     `across_tasks`, the trial chosen for all the tune's tasks, and the rule); refused if the
     tune is not finished, lacks a task or a variant, or used a seed the study would, or, with
     `with_defaults`, if a trial 0 is not the default this code trains."""
-    from fppo_jax.analysis.tuning import PLAN_FILE as TUNE_PLAN
-    from fppo_jax.analysis.tuning import RESULTS_FILE, plan_digest
-
     directory = Path(directory)
-    digest = plan_digest(directory)
-    results_path = directory / RESULTS_FILE
-    if not results_path.exists():
+    digest = tune_digest(directory)
+    recorded = load_tune(directory)
+    if not recorded.finished:
         raise InvalidInput(
             f"the tune in {directory} is not finished ({RESULTS_FILE} is missing): run it to "
             "the end first"
         )
-    tune_plan = cast("TunePlan", json.loads((directory / TUNE_PLAN).read_text()))
-    results = cast("dict[str, dict[str, ArmResults]]", json.loads(results_path.read_text()))
+    tune_plan, results = recorded.plan, recorded.results
     given = sorted(set(settings) & set(sweepable(everyone)))
     if given:
         raise InvalidInput(
@@ -69,7 +65,7 @@ def tuned_settings(
     for variant in everyone:
         if variant.name not in tune_plan["variants"]:
             raise InvalidInput(f"the tune in {directory} did not tune {variant.name}")
-    trials = _across_tasks(directory, tune_plan, results, everyone) if across_tasks else None
+    trials = _across_tasks(recorded, everyone) if across_tasks else None
     chosen: dict[str, dict[str, Setting]] = {}
     for task in tasks:
         for variant in everyone:
@@ -114,36 +110,27 @@ def tuned_settings(
     }
 
 
-def _across_tasks(
-    directory: Path,
-    tune_plan: TunePlan,
-    results: dict[str, dict[str, ArmResults]],
-    everyone: list[Surrogate],
-) -> dict[str, TrialAcrossTasks]:
+def _across_tasks(recorded: TuneResult, everyone: list[Surrogate]) -> dict[str, TrialAcrossTasks]:
     """Each variant's trial chosen for all the tune's tasks by the rule of
     :func:`~fppo_jax.analysis.tuning_report.across_tasks` (its trial, rung and mean normalised
     score), from the rungs' scores the tune recorded; refused for a tune of one task, one whose
     ``results.json`` lacks the trials' settings, and a variant no trial of which scored on
     every task."""
-    from fppo_jax.analysis.tuning_report import across_tasks
-    from fppo_jax.analysis.tuning_rungs import recorded_rungs
-
-    tuned = tune_plan["tasks"]
+    directory, tuned = recorded.directory, recorded.plan["tasks"]
     if len(tuned) < 2:
         raise InvalidInput(
             f"the tune in {directory} tuned one task ({tuned[0]}): a setting chosen across "
             "tasks needs several (without across_tasks the setting is its best on that task)"
         )
-    if any("trials" not in arms[v.name] for arms in results.values() for v in everyone):
+    if any("trials" not in arms[v.name] for arms in recorded.results.values() for v in everyone):
         raise InvalidInput(
             f"the tune in {directory} did not record each trial's setting (its results.json "
             "is from an earlier version): run the same tune command again, which trains nothing "
             "and records them"
         )
-    rungs = {task: recorded_rungs(directory / task) for task in tuned}
     trials = {}
     for variant in everyone:
-        found = across_tasks(rungs, variant.name)
+        found = trial_across_tasks(recorded.rungs, variant.name)
         if found is None:
             raise InvalidInput(
                 f"no trial of {variant.name} scored on every task of the tune in {directory} "

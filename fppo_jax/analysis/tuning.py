@@ -32,8 +32,6 @@ tuning seeds that the test never uses; successive halving is Jamieson and Talwal
 
 from __future__ import annotations
 
-import dataclasses
-import hashlib
 import math
 import warnings
 from collections.abc import Mapping, Sequence
@@ -42,36 +40,36 @@ from typing import Any, cast
 
 import numpy as np
 
-from fppo_jax.analysis.studies import PART_LOCK_WAIT, names_of_tasks
-from fppo_jax.analysis.study_plan import check_plan, commit
+from fppo_jax.analysis.arms import Variants, names_of_tasks, resolve_arms
+from fppo_jax.analysis.halving import Rungs, schedule
+from fppo_jax.analysis.preregistration import Preregistered, commit
+from fppo_jax.analysis.tune_files import (
+    PLAN_FILE,
+    RESULTS_FILE,
+    STORAGE_FILE,
+    TuneResult,
+    task_directory,
+)
 from fppo_jax.analysis.tuning_draws import draw_population, import_optuna, open_storage
 from fppo_jax.analysis.tuning_records import (
-    ArmResults,
-    RungPlan,
     RunShapeValue,
     TaskBudget,
     TunePlan,
 )
 from fppo_jax.analysis.tuning_report import write_report
-from fppo_jax.analysis.tuning_rungs import CALLS_A_RUNG, TaskTune
+from fppo_jax.analysis.tuning_rungs import TaskTune
 from fppo_jax.core.checks import check_part, check_seeds, positive_int
 from fppo_jax.core.config import CONFIG_FIELDS
-from fppo_jax.core.objectives import identities, union
-from fppo_jax.core.resolution import resolve
+from fppo_jax.core.objectives import identities
 from fppo_jax.core.search_space import (
     SearchSpace,
     read_space_file,
     search_spaces,
 )
 from fppo_jax.core.surrogates import Surrogate
-from fppo_jax.errors import InvalidInput, MissingFile
+from fppo_jax.errors import InvalidInput
 from fppo_jax.run.prepare import Prepared, prepare
-from fppo_jax.store.files import (
-    DirectoryLock,
-    json_value,
-    writable_directory,
-    write_json,
-)
+from fppo_jax.store.files import json_value, write_json
 
 # Tuning seeds come from their own stream, far from the 0, 1, 2, … that studies and sweeps
 # count from, so that a test on fresh seeds never meets them.
@@ -79,14 +77,6 @@ TUNING_SEED_START = 1_000_000
 
 
 SAMPLERS = ("qmc", "random")
-
-
-PLAN_FILE, RESULTS_FILE, REPORT_FILE, STORAGE_FILE = (
-    "tune.json",
-    "results.json",
-    "report.md",
-    "optuna.db",
-)
 
 
 SCORE = (
@@ -105,83 +95,9 @@ SELECTION = "per task and arm: the trial with the best score at the last rung (t
 _RECORDED_ONLY = frozenset({"commit", "sampler.package"})
 
 
-@dataclasses.dataclass(frozen=True)
-class Rungs:
-    """A successive-halving schedule: the live `trials` of each arm at each rung, the update
-    each rung ends at (the last one the run's end), and the updates per compiled call."""
-
-    trials: tuple[int, ...]
-    ends: tuple[int, ...]
-
-    @property
-    def updates_per_call(self) -> int:
-        """The largest divisor of the first rung's length that is at most a
-        :data:`CALLS_A_RUNG`-th of it (1 for a shorter rung): every rung but the last, whose end
-        the run's length stops, is then whole calls, and progress is told between them."""
-        first = self.ends[0]
-        return (
-            max(d for d in range(1, first // CALLS_A_RUNG + 1) if first % d == 0)
-            if (first >= CALLS_A_RUNG)
-            else 1
-        )
-
-    def to_json(self, samples_per_update: int) -> list[RungPlan]:
-        return [
-            {"trials": n, "ends_at_update": end, "env_steps_per_run": end * samples_per_update}
-            for n, end in zip(self.trials, self.ends, strict=True)
-        ]
-
-    def updates_per_arm(self, seeds: int) -> int:
-        """Updates every arm trains over the rungs: its live trials × seeds × each rung's."""
-        starts = (0, *self.ends[:-1])
-        return seeds * sum(
-            n * (end - start) for n, start, end in zip(self.trials, starts, self.ends, strict=True)
-        )
-
-
-def schedule(trials: int, eta: int, num_updates: int) -> Rungs:
-    """The rungs of `trials` trials halved by `eta` over a run of `num_updates` updates: as
-    many rungs as `eta` divides the trials down to one, rung r (from 0) keeping
-    ``trials // eta**r`` of them and ending at update ``first · eta**r`` (the last at the run's
-    end), ``first = num_updates // eta**(rungs − 1)``."""
-    count = 1
-    while eta**count <= trials:
-        count += 1
-    first = num_updates // eta ** (count - 1)
-    if first < 1:
-        raise InvalidInput(
-            f"a run of {num_updates} updates is too short for {count} rungs of η = {eta} (the "
-            f"first rung would be {num_updates}/{eta ** (count - 1)} of an update): give more "
-            "total_steps, fewer trials or a smaller eta"
-        )
-    ends = (*(first * eta**r for r in range(count - 1)), num_updates)
-    return Rungs(tuple(max(1, trials // eta**r) for r in range(count)), ends)
-
-
-@dataclasses.dataclass
-class TuneResult:
-    """A tune's `plan` (as ``tune.json`` has it), `results` (as ``results.json``: per task and
-    arm, the chosen setting and what the rungs measured) and whether it is `finished`."""
-
-    plan: TunePlan
-    results: dict[str, dict[str, ArmResults]]
-    finished: bool
-    directory: Path
-
-    def chosen(self, task: str, arm: str) -> dict[str, float]:
-        """The setting chosen for `arm` on `task` (refused where every trial diverged)."""
-        chosen = self.results[task][arm]["chosen"]
-        if chosen is None:
-            raise InvalidInput(
-                f"the tune in {self.directory} chose no setting for {arm} on {task}: every "
-                "trial diverged"
-            )
-        return chosen["setting"]
-
-
 def tune(
     tasks: str | Sequence[str],
-    variants: Any,
+    variants: Variants,
     *,
     output: str | Path,
     trials: int = 27,
@@ -220,7 +136,7 @@ def tune(
     :class:`~fppo_jax.core.config.TrainConfig`) are every run's.
     """
     tasks = names_of_tasks(tasks, "a tune")
-    arms = _arms(variants)
+    arms = resolve_arms(variants, "a tune")
     trials = positive_int("trials", trials)
     if isinstance(eta, bool) or not isinstance(eta, int | np.integer) or eta < 2:
         raise InvalidInput(f"eta (the halving rate) must be an integer of at least 2, got {eta!r}")
@@ -276,55 +192,53 @@ def tune(
             **settings,
         },
     )
-    output = writable_directory(output)
-    # Array tasks that start together take turns with the lock: each holds it while it reads
-    # and writes the plan and Optuna's storage, then lets go to train its share.
-    lock = DirectoryLock(output, "a tune", wait=PART_LOCK_WAIT if part is not None else 0.0)
     verbosity = optuna.logging.get_verbosity()
-    try:
-        # Optuna's line per study made and per trial told, and its note that the Sobol sampler
-        # is experimental, are not this tune's progress: quiet for the call, then as found.
-        optuna.logging.set_verbosity(optuna.logging.WARNING)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-            plan = check_plan(output, plan, "a tune", PLAN_FILE, _RECORDED_ONLY)
-            store = open_storage(
-                optuna, storage or f"sqlite:///{(output / STORAGE_FILE).absolute()}"
-            )
-            tuned = [
-                TaskTune(
-                    task,
-                    runs[task],
-                    arms,
-                    draw_population(
-                        optuna, store, task, arms, spaces, trials, sampler, sampler_seed
-                    ),
-                    schedules[task],
-                    tuning_seeds,
-                    chunk,
-                    output / task,
-                    optuna,
-                    store,
-                    progress,
+    # Array tasks that start together take turns with the folder: each holds it while it reads
+    # and writes the plan and Optuna's storage, then lets go to train its share.
+    with Preregistered(output, "a tune", shared=part is not None) as folder:
+        try:
+            # Optuna's line per study made and per trial told, and its note that the Sobol
+            # sampler is experimental, are not this tune's progress: quiet for the call.
+            optuna.logging.set_verbosity(optuna.logging.WARNING)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                plan = folder.check(plan, PLAN_FILE, _RECORDED_ONLY)
+                store = open_storage(
+                    optuna, storage or f"sqlite:///{(folder.output / STORAGE_FILE).absolute()}"
                 )
-                for task in tasks
-            ]
-            for each in tuned:  # what is recorded, told to Optuna; shares joined without a part
-                each.read(join=part is None)
-            if part is not None:  # a share writes only its own files: the others go on
-                lock.release()
-            left = math.inf if rungs is None else rungs
-            for each in tuned:
-                left -= each.train(left, part)
-    finally:
-        optuna.logging.set_verbosity(verbosity)
-        lock.release()
+                tuned = [
+                    TaskTune(
+                        task,
+                        runs[task],
+                        arms,
+                        draw_population(
+                            optuna, store, task, arms, spaces, trials, sampler, sampler_seed
+                        ),
+                        schedules[task],
+                        tuning_seeds,
+                        chunk,
+                        task_directory(folder.output, task),
+                        optuna,
+                        store,
+                        progress,
+                    )
+                    for task in tasks
+                ]
+                for each in tuned:  # what is recorded, told to Optuna; shares joined
+                    each.read(join=part is None)
+                folder.share_out()  # a share writes only its own files: the others go on
+                left = math.inf if rungs is None else rungs
+                for each in tuned:
+                    left -= each.train(left, part)
+        finally:
+            optuna.logging.set_verbosity(verbosity)
     results = {each.task: each.results(baseline) for each in tuned if each.finished}
     finished = len(results) == len(tasks)
     if finished and part is None:
-        write_json(output / RESULTS_FILE, results)
-        write_report(output, plan, results)
-    return TuneResult(plan, results, finished, output)
+        write_json(folder.output / RESULTS_FILE, results)
+        write_report(folder.output, plan, results)
+    rungs_recorded = {each.task: each.scores for each in tuned}
+    return TuneResult(folder.output, plan, rungs_recorded, results, finished)
 
 
 def _checked_split(chunk: int | None, part: object, seeds: int) -> tuple[int, int] | None:
@@ -348,18 +262,6 @@ def _checked_split(chunk: int | None, part: object, seeds: int) -> tuple[int, in
             "bit"
         )
     return k, n
-
-
-def _arms(variants: Any) -> list[Surrogate]:
-    one = isinstance(variants, str | Surrogate)
-    arms = [resolve(v) for v in ([variants] if one else list(variants))]
-    if not arms:
-        raise InvalidInput("a tune needs at least one variant")
-    union(arms)  # two different surrogates under one name are refused
-    names = [arm.name for arm in arms]
-    if len(set(names)) < len(names):
-        raise InvalidInput(f"a variant is named twice among {', '.join(names)}")
-    return arms
 
 
 def _baseline(baseline: str | None, arms: list[Surrogate]) -> str:
@@ -423,11 +325,3 @@ def make_plan(
             }
         ),
     )
-
-
-def plan_digest(directory: Path) -> str:
-    """The SHA-256 of a tune's ``tune.json``, which a study on its settings records."""
-    path = Path(directory) / PLAN_FILE
-    if not path.exists():
-        raise MissingFile(f"{directory} holds no tune ({PLAN_FILE} is missing)")
-    return hashlib.sha256(path.read_bytes()).hexdigest()

@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from fppo_jax.analysis.halving import Rungs, ranked
 from fppo_jax.analysis.tuning_records import (
     ArmResults,
     ArmRung,
@@ -42,16 +42,6 @@ from fppo_jax.core.checks import positive_int
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats.statistics import CONFIDENCE, RESAMPLES, check_confidence
 from fppo_jax.store.files import write_atomically
-
-if TYPE_CHECKING:
-    from fppo_jax.analysis.tuning import Rungs
-
-
-def ranked(rows: list[TrialScore]) -> list[TrialScore]:
-    """A rung's trials best first, those that diverged left out: by score, then those without
-    one (no episode finished), ties by trial number."""
-    alive = [row for row in rows if not row["diverged"]]
-    return sorted(alive, key=lambda r: (r["score"] is None, -(r["score"] or 0.0), r["trial"]))
 
 
 def expected_best(

@@ -7,16 +7,23 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import json
 import math
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any, cast
 
 import jax
 import numpy as np
 
+from fppo_jax.analysis.halving import CALLS_A_RUNG, Rungs, ranked
+from fppo_jax.analysis.tune_files import (
+    SCORES_FILE,
+    STATE_FILE,
+    read_rung,
+    read_share,
+    rung_directory,
+)
 from fppo_jax.analysis.tuning_draws import setting_of
 from fppo_jax.analysis.tuning_records import (
     ArmResults,
@@ -25,7 +32,7 @@ from fppo_jax.analysis.tuning_records import (
     ShareScores,
     TrialScore,
 )
-from fppo_jax.analysis.tuning_report import ranked
+from fppo_jax.analysis.tuning_report import arm_results
 from fppo_jax.core.config import stack_hyperparameters, with_budget
 from fppo_jax.core.resolution import resolve_hyperparameters
 from fppo_jax.core.surrogates import Surrogate
@@ -37,14 +44,6 @@ from fppo_jax.run.memory import check_host_memory
 from fppo_jax.run.plan import share_bounds
 from fppo_jax.run.prepare import Prepared
 from fppo_jax.store.files import write_atomically, write_json
-
-if TYPE_CHECKING:
-    from fppo_jax.analysis.tuning import Rungs
-
-_STATE, _SCORES = "state.npz", "scores.json"
-
-
-CALLS_A_RUNG = 10  # compiled calls the first rung is split into, at least, for progress
 
 
 @dataclasses.dataclass
@@ -101,9 +100,9 @@ class TaskTune:
         self.directory.mkdir(exist_ok=True)
         while not self.finished:
             where = self._where(len(self.scores))
-            if (where / _SCORES).exists():
-                self._recorded(cast(RungScores, json.loads((where / _SCORES).read_text())))
-            elif join and any(where.glob(f"part-*/{_SCORES}")):
+            if (where / SCORES_FILE).exists():
+                self._recorded(read_rung(where / SCORES_FILE))
+            elif join and any(where.glob(f"part-*/{SCORES_FILE}")):
                 self._record(self._read_shares())
             else:
                 return
@@ -124,7 +123,7 @@ class TaskTune:
         return trained
 
     def _where(self, rung: int) -> Path:
-        return self.directory / f"rung-{rung}"
+        return rung_directory(self.directory, rung)
 
     def _order(self) -> list[tuple[str, int, int]]:
         """The next rung's runs: each arm's live trials × the seeds, in that order."""
@@ -183,11 +182,11 @@ class TaskTune:
         if rung + 1 < len(self.rungs.trials):
             keep = [i for i, (arm, t, _) in enumerate(order) if t in arms[arm]["survivors"]]
             leaves = zip(*(share.leaves for share in shares), strict=True)
-            _save_leaves(where / _STATE, [np.concatenate(leaf)[keep] for leaf in leaves])
+            _save_leaves(where / STATE_FILE, [np.concatenate(leaf)[keep] for leaf in leaves])
         seconds = sum(share.seconds for share in shares)
         compile_seconds = sum(share.compile_seconds for share in shares)
         scores: RungScores = {"arms": arms, "seconds": seconds, "compile_seconds": compile_seconds}
-        write_json(where / _SCORES, scores)
+        write_json(where / SCORES_FILE, scores)
         self._recorded(scores)
         best = ", ".join(
             f"{arm} {found[0]['score']:.1f}"
@@ -203,7 +202,7 @@ class TaskTune:
         rung, (k, n) = len(self.scores), part
         where = self._where(rung) / f"part-{k}"
         said = f"{self.task}: rung {rung + 1} of {len(self.rungs.trials)}, part {k} of {n}"
-        if (where / _SCORES).exists():
+        if (where / SCORES_FILE).exists():
             self._say(f"{said}: recorded already (a call without a part joins the rung's parts)")
             return
         share = self._share(part)
@@ -217,7 +216,7 @@ class TaskTune:
             return
         where.mkdir(parents=True, exist_ok=True)
         if share.leaves:
-            _save_leaves(where / _STATE, share.leaves)
+            _save_leaves(where / STATE_FILE, share.leaves)
         recorded: ShareScores = {
             "part": [k, n],
             "runs": share.runs,
@@ -226,7 +225,7 @@ class TaskTune:
             "seconds": share.seconds,
             "compile_seconds": share.compile_seconds,
         }
-        write_json(where / _SCORES, recorded)  # last: a share with its scores is whole
+        write_json(where / SCORES_FILE, recorded)  # last: a share with its scores is whole
         self._say(f"{said}: {len(share.runs)} runs recorded in {share.seconds:.1f} s")
 
     def _read_shares(self) -> list[_Share]:
@@ -235,8 +234,8 @@ class TaskTune:
         rung, order = len(self.scores), self._order()
         where = self._where(rung)
         found: dict[tuple[int, ...], ShareScores] = {}
-        for path in where.glob(f"part-*/{_SCORES}"):
-            recorded = cast(ShareScores, json.loads(path.read_text()))
+        for path in where.glob(f"part-*/{SCORES_FILE}"):
+            recorded = read_share(path)
             found[tuple(recorded["part"])] = recorded
         splits = sorted({n for _, n in found})
         if len(splits) > 1:
@@ -260,7 +259,7 @@ class TaskTune:
                 )
             recorded = found[k, n]
             later = rung + 1 < len(self.rungs.trials)
-            leaves = _read_leaves(where / f"part-{k}" / _STATE) if later else []
+            leaves = _read_leaves(where / f"part-{k}" / STATE_FILE) if later else []
             if [tuple(run) for run in recorded["runs"]] != runs or any(
                 len(leaf) != len(runs) for leaf in leaves
             ):
@@ -365,7 +364,7 @@ class TaskTune:
             state = program.init(keys, hps)
         else:
             like = jax.eval_shape(jax.vmap(trainer.init), keys, hps)
-            state = _load_state(self._where(rung - 1) / _STATE, like, index, runs)
+            state = _load_state(self._where(rung - 1) / STATE_FILE, like, index, runs)
             if resets_itself(trainer.env):  # their state lived outside JAX, in another batch
                 state = jax.jit(jax.vmap(trainer.restart_envs))(state)
         budgeted = with_budget(hps, trainer.config.num_updates)
@@ -420,8 +419,6 @@ class TaskTune:
 
     def results(self, baseline: str) -> dict[str, ArmResults]:
         """Per arm: the chosen setting, trial 0's and the rungs' scores, the steps used."""
-        from fppo_jax.analysis.tuning_report import arm_results
-
         return {
             arm.name: arm_results(
                 arm.name,
@@ -438,15 +435,6 @@ class TaskTune:
     def _say(self, line: str) -> None:
         if self.progress:
             print(line, file=sys.stderr, flush=True)
-
-
-def recorded_rungs(directory: Path) -> list[RungScores]:
-    """The scores of a task's rungs recorded in `directory` (``rung-<r>/scores.json``), in
-    order, up to the first rung not recorded."""
-    found: list[RungScores] = []
-    while (path := directory / f"rung-{len(found)}" / _SCORES).exists():
-        found.append(cast(RungScores, json.loads(path.read_text())))
-    return found
 
 
 def fetch_diverged(state: TrainState) -> np.ndarray:

@@ -28,8 +28,9 @@ from typing import Any, cast
 
 import numpy as np
 
-from fppo_jax.errors import InvalidInput
+from fppo_jax.errors import InvalidInput, MissingFile
 from fppo_jax.store.files import check_format, json_value, tree_digest, write_atomically
+from fppo_jax.store.shapes import mismatches
 
 
 class DamagedArtifact(InvalidInput):
@@ -71,6 +72,31 @@ def read_record(
         raise DamagedArtifact(f"{path} holds a {type(record).__name__}, not {kind}")
     check_format(record, what, reads)
     return record
+
+
+def read_typed(path: Path, kind: Any, what: str, reads: int | tuple[int, ...] = 1) -> Any:
+    """The JSON object at `path` (`what` it is, in words: "the tune's plan"), held to `kind` (a
+    ``TypedDict`` or a mapping of them, :func:`~fppo_jax.store.shapes.mismatches`) apart from
+    its ``format``: :class:`~fppo_jax.errors.MissingFile` if it is not there,
+    :class:`DamagedArtifact` naming the file and the first place it differs,
+    :class:`~fppo_jax.store.files.IncompatibleFormat` if it is in another layout."""
+    if not path.is_file():
+        raise MissingFile(f"{what} is missing ({path})")
+    record = read_record(path, what, reads)
+    check_shape({k: v for k, v in record.items() if k != "format"}, kind, path, what)
+    return record
+
+
+def check_shape(record: object, kind: Any, path: Path, what: str) -> None:
+    """:class:`DamagedArtifact` naming `path` and the first place where `record`, read from it,
+    is not of `kind` (:func:`read_typed`)."""
+    differs = mismatches(record, kind)
+    if differs:
+        more = f" (and {len(differs) - 1} more)" if len(differs) > 1 else ""
+        raise DamagedArtifact(
+            f"{path} is not {what} as fppo-jax writes it: {differs[0]}{more}; restore it or "
+            "remove it to record it again"
+        )
 
 
 def arrays_file(arrays: Mapping[str, np.ndarray]) -> bytes:

@@ -1,0 +1,73 @@
+"""Successive halving (Jamieson and Talwalkar, AISTATS 2016), as a tune spends its budget:
+the rungs of a population of trials (:func:`schedule`: how many trials each rung keeps, and the
+update it ends at), and the rule that ranks a rung's trials (:func:`ranked`), whose best
+``1/eta`` go on from where they stopped."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from fppo_jax.analysis.tuning_records import RungPlan, TrialScore
+from fppo_jax.errors import InvalidInput
+
+CALLS_A_RUNG = 10  # compiled calls the first rung is split into, at least, for progress
+
+
+@dataclasses.dataclass(frozen=True)
+class Rungs:
+    """A successive-halving schedule: the live `trials` of each arm at each rung, the update
+    each rung ends at (the last one the run's end), and the updates per compiled call."""
+
+    trials: tuple[int, ...]
+    ends: tuple[int, ...]
+
+    @property
+    def updates_per_call(self) -> int:
+        """The largest divisor of the first rung's length that is at most a
+        :data:`CALLS_A_RUNG`-th of it (1 for a shorter rung): every rung but the last, whose end
+        the run's length stops, is then whole calls, and progress is told between them."""
+        first = self.ends[0]
+        return (
+            max(d for d in range(1, first // CALLS_A_RUNG + 1) if first % d == 0)
+            if (first >= CALLS_A_RUNG)
+            else 1
+        )
+
+    def to_json(self, samples_per_update: int) -> list[RungPlan]:
+        return [
+            {"trials": n, "ends_at_update": end, "env_steps_per_run": end * samples_per_update}
+            for n, end in zip(self.trials, self.ends, strict=True)
+        ]
+
+    def updates_per_arm(self, seeds: int) -> int:
+        """Updates every arm trains over the rungs: its live trials × seeds × each rung's."""
+        starts = (0, *self.ends[:-1])
+        return seeds * sum(
+            n * (end - start) for n, start, end in zip(self.trials, starts, self.ends, strict=True)
+        )
+
+
+def schedule(trials: int, eta: int, num_updates: int) -> Rungs:
+    """The rungs of `trials` trials halved by `eta` over a run of `num_updates` updates: as
+    many rungs as `eta` divides the trials down to one, rung r (from 0) keeping
+    ``trials // eta**r`` of them and ending at update ``first · eta**r`` (the last at the run's
+    end), ``first = num_updates // eta**(rungs − 1)``."""
+    count = 1
+    while eta**count <= trials:
+        count += 1
+    first = num_updates // eta ** (count - 1)
+    if first < 1:
+        raise InvalidInput(
+            f"a run of {num_updates} updates is too short for {count} rungs of η = {eta} (the "
+            f"first rung would be {num_updates}/{eta ** (count - 1)} of an update): give more "
+            "total_steps, fewer trials or a smaller eta"
+        )
+    ends = (*(first * eta**r for r in range(count - 1)), num_updates)
+    return Rungs(tuple(max(1, trials // eta**r) for r in range(count)), ends)
+
+
+def ranked(rows: list[TrialScore]) -> list[TrialScore]:
+    """A rung's trials best first, those that diverged left out: by score, then those without
+    one (no episode finished), ties by trial number."""
+    alive = [row for row in rows if not row["diverged"]]
+    return sorted(alive, key=lambda r: (r["score"] is None, -(r["score"] or 0.0), r["trial"]))

@@ -1,0 +1,67 @@
+"""fppo_jax.analysis.tune_files: every recorded tune reads back through the public reader, each
+file held to its shape; a file cut short, edited or missing is one error naming it."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+import fppo_jax
+from fppo_jax.analysis.tune_files import load_tune, recorded_rungs, tune_digest
+from fppo_jax.errors import InvalidInput, MissingFile
+from fppo_jax.store.artifact import DamagedArtifact
+
+TUNED = Path(__file__).resolve().parent.parent / "experiments" / "results" / "tuned"
+TUNES = sorted(path.parent for path in TUNED.rglob("tune.json"))
+
+
+@pytest.mark.parametrize("directory", TUNES, ids=lambda path: str(path.relative_to(TUNED)))
+def test_every_recorded_tune_reads_through_the_public_reader(directory):
+    tune = fppo_jax.load_tune(directory)
+    assert tune.finished and tune.plan["tasks"] == list(tune.results) == list(tune.rungs)
+    for task, rungs in tune.rungs.items():
+        assert len(rungs) == len(tune.plan["budget"][task]["rungs"])
+        for arm in tune.plan["variants"]:
+            chosen = tune.results[task][arm]["chosen"]
+            assert chosen is not None
+            assert tune.chosen(task, arm) == chosen["setting"]
+            assert chosen["trial"] in rungs[-1]["arms"][arm]["survivors"]
+
+
+def _copy(tmp_path):
+    copy = tmp_path / "tune"
+    shutil.copytree(TUNES[0], copy, ignore=shutil.ignore_patterns("*.npz", "*.db", "*.png"))
+    return copy
+
+
+def test_a_file_cut_short_or_edited_is_named(tmp_path):
+    copy = _copy(tmp_path)
+    task = load_tune(copy).plan["tasks"][0]
+    scores = copy / task / "rung-0" / "scores.json"
+    scores.write_text(scores.read_text()[:100])
+    with pytest.raises(DamagedArtifact, match=r"rung-0/scores\.json is not valid JSON"):
+        load_tune(copy)
+    with pytest.raises(DamagedArtifact, match=r"rung-0/scores\.json is not valid JSON"):
+        recorded_rungs(copy / task)
+    plan = json.loads((copy / "tune.json").read_text())
+    del plan["eta"]
+    (copy / "tune.json").write_text(json.dumps(plan))
+    with pytest.raises(
+        DamagedArtifact, match=r"tune\.json is not the tune's plan .*: \.eta: missing"
+    ):
+        load_tune(copy)
+
+
+def test_a_folder_without_a_tune_or_unfinished(tmp_path):
+    with pytest.raises(MissingFile, match=r"the tune's plan in .* is missing"):
+        load_tune(tmp_path)
+    with pytest.raises(MissingFile, match=r"holds no tune \(tune\.json is missing\)"):
+        tune_digest(tmp_path)
+    copy = _copy(tmp_path)
+    (copy / "results.json").unlink()
+    unfinished = load_tune(copy)
+    assert not unfinished.finished and unfinished.results == {}
+    task, arm = unfinished.plan["tasks"][0], unfinished.plan["variants"][0]
+    with pytest.raises(InvalidInput, match=f"did not tune {arm} on {task}"):
+        unfinished.chosen(task, arm)

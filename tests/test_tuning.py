@@ -14,7 +14,7 @@ from helpers import TUNE_SMALL as SMALL
 from helpers import rung_scores
 
 import fppo_jax
-from fppo_jax.analysis import tuning_rungs
+from fppo_jax.analysis import population, tuning_rungs
 from fppo_jax.analysis.studies import study
 from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.analysis.tune_files import recorded_rungs, tune_digest
@@ -43,8 +43,8 @@ def tuned(tmp_path_factory):
             compiled.append(args[1].shape[0])  # the runs of the program
             return original(*args, **kwargs)
 
-        original = tuning_rungs.compile_program
-        patch.setattr(tuning_rungs, "compile_program", counting)
+        original = population.compile_program
+        patch.setattr(population, "compile_program", counting)
         result = tune("cartpole", ARMS, output=output, **SMALL)
     return output, result, compiled
 

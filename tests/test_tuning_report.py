@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from fppo_jax.analysis.halving import Rungs
+from fppo_jax.analysis.halving import Rungs, SuccessiveHalving
 from fppo_jax.analysis.tuning_report import arm_results, expected_best, write_report
 
 
@@ -35,6 +35,15 @@ ARMS = [
     },
 ]
 SCORES = [{"arms": arms} for arms in ARMS]
+
+
+def windows(scores):
+    """What each rung of `scores` trained: its arms' trials × 2 seeds over the rung's updates."""
+    arms = list(scores[0]["arms"])
+    halving = SuccessiveHalving(arms, 4, [1000000, 1000001], RUNGS)
+    return [halving.next_window(scores[:rung]) for rung in range(len(scores))]
+
+
 SETTINGS = {
     arm: [{"learning_rate": lr} for lr in (1e-4, 2e-4, 3e-4, 4e-4)] for arm in ("ppo", "spo")
 }
@@ -69,7 +78,7 @@ PLAN = {
 
 
 def test_an_arms_results_say_what_the_rungs_measured():
-    found = arm_results("spo", "ppo", SCORES, SETTINGS, RUNGS, seeds=2, samples_per_update=100)
+    found = arm_results("spo", "ppo", SCORES, SETTINGS, windows(SCORES), 100)
     assert found["chosen"] == {"trial": 2, "score": 35.0, "setting": {"learning_rate": 3e-4}}
     assert found["default"]["first_rung_score"] == 9.0
     assert found["default"]["last_rung_reached"] == 0
@@ -131,15 +140,16 @@ def test_a_rung_that_scored_every_trial_alike_is_reported_as_tied(tmp_path):
         {"arms": {"ppo": {"trials": [row(0, -150.0), row(1, -120.0)], "survivors": [1]}}},
         {"arms": {"ppo": {"trials": [row(1, -110.0)], "survivors": [1]}}},
     ]
-    found = arm_results("ppo", "ppo", flat, SETTINGS, RUNGS, 2, 100)
+    found = arm_results("ppo", "ppo", flat, SETTINGS, windows(flat), 100)
     assert found["tied_rungs"] == [0]
-    assert arm_results("spo", "ppo", SCORES, SETTINGS, RUNGS, 2, 100)["tied_rungs"] == []
+    assert arm_results("spo", "ppo", SCORES, SETTINGS, windows(SCORES), 100)["tied_rungs"] == []
 
 
 def test_the_report_gives_each_arm_its_row_its_sensitivity_its_band_and_the_checklist(tmp_path):
     results = {
         "cartpole": {
-            arm: arm_results(arm, "ppo", SCORES, SETTINGS, RUNGS, 2, 100) for arm in ("ppo", "spo")
+            arm: arm_results(arm, "ppo", SCORES, SETTINGS, windows(SCORES), 100)
+            for arm in ("ppo", "spo")
         }
     }
     write_report(tmp_path, PLAN, results)
@@ -166,7 +176,7 @@ def test_a_band_of_zero_width_is_not_called_wide(tmp_path):
         {"arms": {"ppo": {"trials": [row(0, -150.0), row(1, -120.0)], "survivors": [1]}}},
         {"arms": {"ppo": {"trials": [row(1, -110.0)], "survivors": [1]}}},
     ]
-    results = {"cartpole": {"ppo": arm_results("ppo", "ppo", flat, SETTINGS, RUNGS, 2, 100)}}
+    results = {"cartpole": {"ppo": arm_results("ppo", "ppo", flat, SETTINGS, windows(flat), 100)}}
     write_report(tmp_path, {**PLAN, "variants": ["ppo"]}, results)
     report = (tmp_path / "report.md").read_text()
     assert "| ppo | 4 | -200.0 / -200.0 / -200.0 | 0.0 | 0.0 | -200.0 [-200.0, -200.0] |" in report

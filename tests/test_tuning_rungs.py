@@ -8,7 +8,7 @@ from helpers import TUNE_ARMS as ARMS
 from helpers import TUNE_SMALL as SMALL
 from helpers import rung_scores
 
-from fppo_jax.analysis import tuning_rungs
+from fppo_jax.analysis import population
 from fppo_jax.analysis.tuning import tune
 from fppo_jax.analysis.tuning_draws import import_optuna
 from fppo_jax.errors import InvalidInput
@@ -87,7 +87,7 @@ def test_a_missing_part_is_refused_by_name_and_a_recorded_one_not_trained_again(
         raise AssertionError("a recorded part was trained again")
 
     with monkeypatch.context() as patch:
-        patch.setattr(tuning_rungs, "compile_program", compiled)
+        patch.setattr(population, "compile_program", compiled)
         assert not tune("cartpole", ARMS, output=tmp_path, part=(1, 2), **arguments).finished
     assert share.read_text() == recorded
     with pytest.raises(

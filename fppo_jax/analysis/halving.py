@@ -1,13 +1,18 @@
 """Successive halving (Jamieson and Talwalkar, AISTATS 2016), as a tune spends its budget:
 the rungs of a population of trials (:func:`schedule`: how many trials each rung keeps, and the
-update it ends at), and the rule that ranks a rung's trials (:func:`ranked`), whose best
-``1/eta`` go on from where they stopped."""
+update it ends at), the rule that ranks a rung's trials (:func:`ranked`), whose best ``1/eta``
+go on from where they stopped, and the two as a tune's scheduler (:class:`SuccessiveHalving`)."""
 
 from __future__ import annotations
 
 import dataclasses
+import math
+from collections.abc import Sequence
 
-from fppo_jax.analysis.tuning_records import RungPlan, TrialScore
+import numpy as np
+
+from fppo_jax.analysis.population import Window
+from fppo_jax.analysis.tuning_records import ArmRung, RungPlan, RungScores, TrialScore
 from fppo_jax.errors import InvalidInput
 
 CALLS_A_RUNG = 10  # compiled calls the first rung is split into, at least, for progress
@@ -71,3 +76,66 @@ def ranked(rows: list[TrialScore]) -> list[TrialScore]:
     one (no episode finished), ties by trial number."""
     alive = [row for row in rows if not row["diverged"]]
     return sorted(alive, key=lambda r: (r["score"] is None, -(r["score"] or 0.0), r["trial"]))
+
+
+class SuccessiveHalving:
+    """Successive halving as a :class:`~fppo_jax.analysis.scheduling.Scheduler`: round r trains
+    each arm's live trials × `seeds` from the end of round r − 1 (its own runs' states) to
+    ``rungs.ends[r]``; after it, each arm keeps its best ``rungs.trials[r + 1]`` trials by
+    :func:`ranked`, and after the last round the best one."""
+
+    def __init__(self, arms: Sequence[str], trials: int, seeds: Sequence[int], rungs: Rungs):
+        self.arms, self.trials, self.seeds, self.rungs = list(arms), trials, list(seeds), rungs
+
+    @property
+    def rounds(self) -> int:
+        return len(self.rungs.trials)
+
+    @property
+    def updates_per_call(self) -> int:
+        return self.rungs.updates_per_call
+
+    def live(self, recorded: Sequence[RungScores]) -> dict[str, list[int]]:
+        """Each arm's trials in the round after `recorded`."""
+        if not recorded:
+            return {arm: list(range(self.trials)) for arm in self.arms}
+        return {arm: list(recorded[-1]["arms"][arm]["survivors"]) for arm in self.arms}
+
+    def next_window(self, recorded: Sequence[RungScores]) -> Window | None:
+        rung = len(recorded)
+        if rung >= self.rounds:
+            return None
+        live = self.live(recorded)
+        runs = tuple((arm, t, seed) for arm in self.arms for t in live[arm] for seed in self.seeds)
+        if rung == 0:
+            return Window(runs, 0, self.rungs.ends[0])
+        before = self.next_window(recorded[:-1])
+        assert before is not None
+        where = {run: i for i, run in enumerate(before.runs)}
+        continues = tuple(where[run] for run in runs)
+        return Window(runs, self.rungs.ends[rung - 1], self.rungs.ends[rung], continues)
+
+    def measured(
+        self, recorded: Sequence[RungScores], last: np.ndarray, diverged: np.ndarray
+    ) -> dict[str, ArmRung]:
+        window = self.next_window(recorded)
+        assert window is not None
+        going_on = self.rungs.trials[min(len(recorded) + 1, self.rounds - 1)]
+        scores: dict[str, ArmRung] = {}
+        for arm, trials in self.live(recorded).items():
+            rows: list[TrialScore] = []
+            for trial in trials:
+                runs = [i for i, (a, t, _) in enumerate(window.runs) if a == arm and t == trial]
+                values = np.asarray(last)[runs].astype(float)
+                mean = float(np.mean(values))
+                rows.append(
+                    {
+                        "trial": trial,
+                        "score": mean if math.isfinite(mean) else None,
+                        "seed_scores": [float(v) if math.isfinite(v) else None for v in values],
+                        "diverged": bool(np.asarray(diverged)[runs].any()),
+                    }
+                )
+            survivors = sorted(r["trial"] for r in ranked(rows)[:going_on])
+            scores[arm] = {"trials": rows, "survivors": survivors}
+        return scores

@@ -33,6 +33,7 @@ tuning seeds that the test never uses; successive halving is Jamieson and Talwal
 from __future__ import annotations
 
 import math
+import sys
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -41,7 +42,8 @@ from typing import Any, cast
 import numpy as np
 
 from fppo_jax.analysis.arms import Variants, names_of_tasks, resolve_arms
-from fppo_jax.analysis.halving import Rungs, schedule
+from fppo_jax.analysis.halving import Rungs, SuccessiveHalving, schedule
+from fppo_jax.analysis.population import Population
 from fppo_jax.analysis.preregistration import Preregistered, commit
 from fppo_jax.analysis.tune_files import (
     PLAN_FILE,
@@ -50,7 +52,12 @@ from fppo_jax.analysis.tune_files import (
     TuneResult,
     task_directory,
 )
-from fppo_jax.analysis.tuning_draws import draw_population, import_optuna, open_storage
+from fppo_jax.analysis.tuning_draws import (
+    draw_population,
+    import_optuna,
+    open_storage,
+    setting_of,
+)
 from fppo_jax.analysis.tuning_records import (
     RunShapeValue,
     TaskBudget,
@@ -207,19 +214,19 @@ def tune(
                     optuna, storage or f"sqlite:///{(folder.output / STORAGE_FILE).absolute()}"
                 )
                 tuned = [
-                    TaskTune(
+                    _task_tune(
                         task,
                         runs[task],
                         arms,
                         draw_population(
                             optuna, store, task, arms, spaces, trials, sampler, sampler_seed
                         ),
-                        schedules[task],
-                        tuning_seeds,
+                        SuccessiveHalving(
+                            [arm.name for arm in arms], trials, tuning_seeds, schedules[task]
+                        ),
                         chunk,
                         task_directory(folder.output, task),
-                        optuna,
-                        store,
+                        (optuna, store),
                         progress,
                     )
                     for task in tasks
@@ -239,6 +246,28 @@ def tune(
         write_report(folder.output, plan, results)
     rungs_recorded = {each.task: each.scores for each in tuned}
     return TuneResult(folder.output, plan, rungs_recorded, results, finished)
+
+
+def _task_tune(
+    task: str,
+    prepared: Prepared,
+    arms: list[Surrogate],
+    drawn: dict[str, list[dict[str, float]]],
+    scheduler: SuccessiveHalving,
+    chunk: int | None,
+    directory: Path,
+    optuna_storage: tuple[Any, Any],
+    progress: bool,
+) -> TaskTune:
+    """`task`'s tune: the population of the `drawn` trials, trained as `scheduler` says."""
+    settings = {arm: [setting_of(params) for params in trials] for arm, trials in drawn.items()}
+
+    def say(line: str) -> None:
+        if progress:
+            print(line, file=sys.stderr, flush=True)
+
+    population = Population(prepared, arms, settings, scheduler.updates_per_call, chunk, say)
+    return TaskTune(task, population, scheduler, directory, *optuna_storage)
 
 
 def _checked_split(chunk: int | None, part: object, seeds: int) -> tuple[int, int] | None:

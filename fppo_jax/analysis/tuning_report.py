@@ -21,11 +21,13 @@ best score seen: read it as too narrow rather than too wide."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from fppo_jax.analysis.halving import Rungs, ranked
+from fppo_jax.analysis.halving import ranked
+from fppo_jax.analysis.population import Window
 from fppo_jax.analysis.tuning_records import (
     ArmResults,
     ArmRung,
@@ -90,11 +92,11 @@ def arm_results(
     baseline: str,
     rungs_scores: list[RungScores],
     settings: dict[str, list[dict[str, float]]],
-    rungs: Rungs,
-    seeds: int,
+    windows: Sequence[Window],
     samples_per_update: int,
 ) -> ArmResults:
-    """What ``results.json`` holds of `arm` on one task (see the module)."""
+    """What ``results.json`` holds of `arm` on one task (see the module), from its rungs'
+    scores and what each rung trained (`windows`)."""
     first = rungs_scores[0]["arms"][arm]["trials"]
     finite = np.array([row["score"] for row in first if row["score"] is not None], float)
     base = _score(rungs_scores[0]["arms"][baseline]["trials"], 0)
@@ -106,14 +108,15 @@ def arm_results(
     ]
     curve: list[CurvePoint] = []
     reached, score_there, spent = 0, _score(first, 0), 0
-    starts = (0, *rungs.ends[:-1])
-    for r, scores in enumerate(rungs_scores):
+    for scores, window in zip(rungs_scores, windows, strict=True):
         rows = scores["arms"][arm]["trials"]
-        spent += len(rows) * seeds * (rungs.ends[r] - starts[r]) * samples_per_update
+        runs = sum(run[0] == arm for run in window.runs)
+        spent += runs * (window.end - window.start) * samples_per_update
         best = max((row["score"] for row in rows if row["score"] is not None), default=None)
-        curve.append({"rung": r, "env_steps": spent, "best": best, "trials": len(rows)})
+        rung = len(curve)
+        curve.append({"rung": rung, "env_steps": spent, "best": best, "trials": len(rows)})
         if _score(rows, 0) is not None:
-            reached, score_there = r, _score(rows, 0)
+            reached, score_there = rung, _score(rows, 0)
     last_rung = ranked(rungs_scores[-1]["arms"][arm]["trials"])
     chosen: Chosen | None = None
     if last_rung:

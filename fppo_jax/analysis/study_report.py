@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fppo_jax.analysis.report_kit import interval_cell
 from fppo_jax.analysis.study_plan import (
     BesideDefaults,
     Compared,
@@ -25,7 +26,7 @@ from fppo_jax.analysis.study_plan import (
     TuningGain,
     rule_of_plan,
 )
-from fppo_jax.analysis.study_sections import START, Scores, interval_cell, task_section
+from fppo_jax.analysis.study_sections import START, Scores, task_section
 from fppo_jax.stats import statistics
 from fppo_jax.store.files import write_atomically
 

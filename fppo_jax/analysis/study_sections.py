@@ -12,6 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from fppo_jax.analysis.report_kit import interval_cell, ruled_out
 from fppo_jax.analysis.study_plan import DecisionRow, StudyPlan, rule_of_plan
 from fppo_jax.stats import statistics
 from fppo_jax.stats.sequential import Design, repeated_confidence
@@ -275,22 +276,3 @@ def _speed_table(scores: Scores, plan: StudyPlan) -> list[str]:
 def _listed(items: Sequence[str]) -> str:
     """`items` in words: "a", "a and b", "a, b and c"."""
     return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
-
-
-def interval_cell(values: tuple[float, float, float], form: str) -> str:
-    point, low, high = values
-    return "–" if np.isnan(point) else f"{point:{form}} [{low:{form}}, {high:{form}}]"
-
-
-def ruled_out(difference: tuple[float, float, float], baseline_iqm: float) -> str:
-    """The relative effects an IQM difference's interval excludes, as a share of the
-    baseline's IQM: "a gain above 12% and a loss above 30% of the baseline's IQM"."""
-    _, low, high = difference
-    if not (np.isfinite(low) and np.isfinite(high)):
-        return "–"
-    if not np.isfinite(baseline_iqm) or baseline_iqm == 0:
-        return f"a gain above {max(high, 0):.1f} and a loss above {max(-low, 0):.1f}"
-    scale = abs(baseline_iqm)
-    gain = "any gain" if high <= 0 else f"a gain above {high / scale:.0%}"
-    loss = "any loss" if low >= 0 else f"a loss above {-low / scale:.0%}"
-    return f"{gain} and {loss} of the baseline's IQM"

@@ -37,8 +37,8 @@ if TYPE_CHECKING:
     import jax
     from matplotlib.axes import Axes
 
+    from fppo_jax import SweepResult
     from fppo_jax.envs import Environment
-    from fppo_jax.run.results import SweepResult
 
 RESULTS = Path(__file__).resolve().parent / "results"
 RUN_RECORD = "run.json"  # beside a sweep's curves: the machine, date, wall time, commit, command
@@ -390,13 +390,18 @@ def record_sweep(
     return result
 
 
+def recorded_parts(folder: Path) -> dict[Path, SweepResult]:
+    """The parts recorded in `folder` (one task's protocol: ``<results>/study/<task>/paper/``),
+    by directory in order of name: each sweep with the run record (:data:`RUN_RECORD`) that
+    a script of this folder writes beside it."""
+    from fppo_jax import SweepResult
+
+    records = sorted(folder.glob(f"*/{RUN_RECORD}"))
+    return {record.parent: SweepResult.read(record.parent) for record in records}
+
+
 def by_variant(result: SweepResult) -> dict[str, int]:
     return {setting["variant"]: index for index, setting in enumerate(result.settings)}
-
-
-def interval_text(values: tuple[float, float, float], form: str = ".1f") -> str:
-    point, low, high = values
-    return "–" if np.isnan(point) else f"{point:{form}} [{low:{form}}, {high:{form}}]"
 
 
 def outcome(probability: tuple[float, float, float], edge: Edge | None = None) -> str:

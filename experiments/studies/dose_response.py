@@ -37,7 +37,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from fppo_jax import SweepResult, merge
-from fppo_jax.analysis.study_sections import ruled_out
+from fppo_jax.analysis.report_kit import NO_DIFFERENCE, holm_verdicts, interval_cell, ruled_out
 from fppo_jax.core.resolution import SYMBOLS
 from fppo_jax.run.results import labels
 from fppo_jax.stats import statistics
@@ -46,13 +46,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: sh
 
 from common import (
     RESULTS,
-    RUN_RECORD,
     add_force_flag,
     argument_parser,
     edge,
     edge_note,
     header,
-    interval_text,
+    recorded_parts,
     refuse_to_replace,
     write_result,
 )
@@ -61,7 +60,6 @@ EXPERIMENTS = Path(__file__).resolve().parents[1]
 PLAN = EXPERIMENTS / "plans" / "dose-response.json"
 FOLDER = "dose_response"  # study.py's folder of the plan's parts
 SEEDS = 10
-FAMILY_ERROR = 0.05
 THRESHOLDS = (0.5, 0.8)  # of the sweep's PPO IQM final return
 TREND_NAMES = {
     "final": "final return",
@@ -92,16 +90,9 @@ def doses(plan: dict) -> dict[str, tuple[str, list[float]]]:
     }
 
 
-def recorded(results: Path, task: str) -> SweepResult | None:
-    """Every part of `task` recorded for the plan, merged."""
-    parts = recorded_parts(results, task)
-    return merge(parts) if parts else None
-
-
-def recorded_parts(results: Path, task: str) -> list[SweepResult]:
+def plan_parts(results: Path, task: str) -> list[SweepResult]:
     """Each part of `task` recorded for the plan: a sweep compiled and run on its own."""
-    records = sorted((results / FOLDER / task / "paper").glob(f"*/{RUN_RECORD}"))
-    return [SweepResult.read(r.parent) for r in records]
+    return list(recorded_parts(results / FOLDER / task / "paper").values())
 
 
 def seed_ranges(parts: list[SweepResult]) -> list[str]:
@@ -287,10 +278,12 @@ def reached(steps: np.ndarray, total: float) -> str:
     return f"{hit.size}/{steps.size}" + (f", median {np.median(hit):,.0f}" if hit.size else "")
 
 
-def trend_reading(row: dict) -> str:
-    if row["holm"] >= FAMILY_ERROR:
-        return "no trend measurable"
-    return "more pull, more return" if row["trend"]["final"][0] > 0 else "more pull, less return"
+# The verdict on a trend of final return with the dose, by Holm's p and the sign of ρ.
+READINGS = {
+    "better": "more pull, more return",
+    "worse": "more pull, less return",
+    NO_DIFFERENCE: "no trend measurable",
+}
 
 
 def report(
@@ -322,8 +315,11 @@ def report(
         for task, outcome in tasks.items()
         for variant, analysis in outcome["variants"].items()
     ]
-    for row, adjusted in zip(rows, statistics.holm([r["p"] for r in rows]), strict=True):
-        row["holm"] = float(adjusted)
+    trends = holm_verdicts(
+        [row["p"] for row in rows], [row["trend"]["final"][0] for row in rows], no_effect=0.0
+    )
+    for row, trend in zip(rows, trends, strict=True):
+        row["holm"], row["reading"] = trend.holm, READINGS[trend.verdict]
     errors = [permutation_error(row["p"]) for row in rows]
     lines += [
         "## The planned test: the trend of final return with the dose",
@@ -340,8 +336,8 @@ def report(
         lines.append(
             f"| {row['task']} | {row['variant']} | {SYMBOLS.get(row['name'], row['name'])} ∈ "
             f"{{{', '.join(f'{d:g}' for d in row['doses'])}}} "
-            f"| {interval_text(row['trend']['final'], '.2f')} | {row['p']:.{P_DECIMALS}f} "
-            f"| {row['holm']:.{P_DECIMALS}f} | {trend_reading(row)} |"
+            f"| {interval_cell(row['trend']['final'], '.2f')} | {row['p']:.{P_DECIMALS}f} "
+            f"| {row['holm']:.{P_DECIMALS}f} | {row['reading']} |"
         )
     lines += edge_note(
         [
@@ -365,7 +361,7 @@ def report(
     ]
     for row in rows:
         trend = row["trend"]
-        cells = [interval_text(trend[s], ".2f") for s in ("escape", "auc", *THRESHOLDS)]
+        cells = [interval_cell(trend[s], ".2f") for s in ("escape", "auc", *THRESHOLDS)]
         lines.append(f"| {row['task']} | {row['variant']} | {' | '.join(cells)} |")
     lines += edge_note(
         [
@@ -380,11 +376,12 @@ def report(
         result, ppo = results[task], outcome["ppo"]
         total = float(result.metrics["env_steps"][0, -1])
         level = ", ".join(f"{s:.0%}: {v:,.1f}" for s, v in outcome["levels"].items())
+        ppo_final = interval_cell(statistics.interval(ppo["final"]), ".1f")
         lines += [
             "",
             f"## {task}: each dose against PPO",
             "",
-            f"PPO's IQM final return {interval_text(statistics.interval(ppo['final']))} over "
+            f"PPO's IQM final return {ppo_final} over "
             f"{ppo['final'].size} runs; thresholds {level}. Reaching a threshold: runs that do, "
             "and their median env steps.",
             "",
@@ -392,8 +389,8 @@ def report(
             "| Δ IQM final [95% CI] | the interval rules out | P(> PPO), AUC [95% CI] "
             "| IQM escape share [95% CI] | reach 50% | reach 80% |",
             "|---|---|---|---|---|---|---|---|---|---|",
-            f"| ppo | {ppo['final'].size} | {interval_text(statistics.interval(ppo['final']))} "
-            f"| – | – | – | – | {interval_text(statistics.interval(ppo['escape']), '.3f')} "
+            f"| ppo | {ppo['final'].size} | {ppo_final} "
+            f"| – | – | – | – | {interval_cell(statistics.interval(ppo['escape']), '.3f')} "
             f"| {reached(ppo[0.5], total)} | {reached(ppo[0.8], total)} |",
         ]
         names = dict(zip(map(_key, result.settings), labels(result.settings), strict=True))
@@ -415,12 +412,12 @@ def report(
                         edges.append(f"{label}'s P(> PPO), {score}: {at_edge.text()}")
                 lines.append(
                     f"| {label} | {runs['final'].size} "
-                    f"| {interval_text(statistics.interval(runs['final']))} "
-                    f"| {interval_text(on_final['probability_of_improvement'], '.2f')} "
-                    f"| {interval_text(on_final['iqm_difference'])} "
+                    f"| {interval_cell(statistics.interval(runs['final']), '.1f')} "
+                    f"| {interval_cell(on_final['probability_of_improvement'], '.2f')} "
+                    f"| {interval_cell(on_final['iqm_difference'], '.1f')} "
                     f"| {ruled_out(on_final['iqm_difference'], outcome['ppo_iqm'])} "
-                    f"| {interval_text(on_area['probability_of_improvement'], '.2f')} "
-                    f"| {interval_text(statistics.interval(runs['escape']), '.3f')} "
+                    f"| {interval_cell(on_area['probability_of_improvement'], '.2f')} "
+                    f"| {interval_cell(statistics.interval(runs['escape']), '.3f')} "
                     f"| {reached(runs[0.5], total)} | {reached(runs[0.8], total)} |"
                 )
         lines += edge_note(edges, "0.5")
@@ -477,7 +474,7 @@ def main() -> int:
     out = args.output or args.results / f"{FOLDER}.md"
     figure = out.parent / FOLDER / f"{FOLDER}.png"
     refuse_to_replace([out, figure], args.force, elsewhere="--results DIR or --output FILE")
-    by_task = {task: recorded_parts(args.results, task) for task in args.tasks or plan["tasks"]}
+    by_task = {task: plan_parts(args.results, task) for task in args.tasks or plan["tasks"]}
     merged = {task: merge(of_task) if of_task else None for task, of_task in by_task.items()}
     short = missing(plan, merged)
     if short:
@@ -491,10 +488,7 @@ def main() -> int:
     tasks = {task: analyse(plan, result) for task, result in results.items()}
     checks = {}
     for task, result in results.items():
-        study = [
-            p.parent for p in (args.results / "study" / task / "paper").glob(f"*/{RUN_RECORD}")
-        ]
-        parts = [SweepResult.read(d) for d in sorted(study)]
+        parts = list(recorded_parts(args.results / "study" / task / "paper").values())
         parts = [p for p in parts if any(s["variant"] == "ppo" for s in p.settings)]
         checks[task] = controls(result, merge(parts) if parts else None, plan)
     compiled = {task: of_task for task, of_task in by_task.items() if task in results}

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from fppo_jax import SweepResult, merge
-from fppo_jax.analysis.study_sections import ruled_out
+from fppo_jax.analysis.report_kit import interval_cell, mann_whitney_verdicts, ruled_out
 from fppo_jax.envs import MUJOCO_TASKS
 from fppo_jax.stats import statistics
 
@@ -42,21 +42,19 @@ from common import (
     CLASSIC_TASKS,
     EDGE_SEEDS,
     RESULTS,
-    RUN_RECORD,
     add_force_flag,
     argument_parser,
     by_variant,
     edge,
     header,
-    interval_text,
     outcome,
+    recorded_parts,
     refuse_to_replace,
     write_result,
 )
 
 EXPERIMENTS = Path(__file__).resolve().parents[1]
 SEEDS = {**dict.fromkeys(CLASSIC_TASKS, 50), **dict.fromkeys(MUJOCO_TASKS, 20)}
-FAMILY_ERROR = 0.05
 SHAPE_FOLDER = "baseline_shape"  # plans/baseline-shape.json's parts, under the results
 HIGH_CLUSTER = {"halfcheetah": 3000.0}  # its final returns split there (plans/baseline-shape.json)
 
@@ -74,10 +72,7 @@ class Arm:
 def recorded(folder: Path, task: str, variants: set[str]) -> SweepResult | None:
     """Every part of `task` under the paper protocol in `folder` that ran one of `variants`,
     merged."""
-    parts = [
-        SweepResult.read(record.parent)
-        for record in sorted((folder / task / "paper").glob(f"*/{RUN_RECORD}"))
-    ]
+    parts = list(recorded_parts(folder / task / "paper").values())
     parts = [p for p in parts if variants & {s["variant"] for s in p.settings}]
     return merge(parts) if parts else None
 
@@ -144,19 +139,20 @@ def missing(every: dict[str, dict[str, Arm | None]]) -> list[str]:
 
 
 def comparisons(plan: dict, every: dict[str, dict[str, Arm]]) -> list[dict]:
-    """A row per (task, candidate): the test's raw and Holm-adjusted p and the effects."""
+    """A row per (task, candidate): the test's raw and Holm-adjusted p, its verdict and the
+    effects."""
     baseline, candidates = arm_names(plan)
-    rows = []
+    rows, tested = [], []
     for task, by_name in every.items():
         base = by_name[baseline]
         for candidate in candidates:
             runs = by_name[candidate]
+            tested.append((runs.final, base.final))
             on_final = statistics.compare(runs.final, base.final)
             rows.append(
                 {
                     "task": task,
                     "candidate": candidate,
-                    "p": statistics.improvement_test(runs.final, base.final),
                     "probability": on_final["probability_of_improvement"],
                     "difference": on_final["iqm_difference"],
                     "baseline_iqm": float(statistics.iqm(base.final)),
@@ -164,8 +160,8 @@ def comparisons(plan: dict, every: dict[str, dict[str, Arm]]) -> list[dict]:
                     "area": statistics.compare(runs.auc, base.auc)["probability_of_improvement"],
                 }
             )
-    for row, adjusted in zip(rows, statistics.holm([r["p"] for r in rows]), strict=True):
-        row["holm"] = float(adjusted)
+    for row, verdict in zip(rows, mann_whitney_verdicts(tested), strict=True):
+        row |= {"p": verdict.p, "holm": verdict.holm, "verdict": verdict.verdict}
     return rows
 
 
@@ -197,7 +193,7 @@ def ceiling(plan: dict, rows: list[dict], every: dict[str, dict[str, Arm]]) -> l
             r
             for r in rows
             if r["task"] == task
-            and decision(r) == "better"
+            and r["verdict"] == "better"
             and r["candidate_iqm"][1] == r["candidate_iqm"][2] == top
         ]
         if not capped:
@@ -230,7 +226,7 @@ def other_baseline(
         return []
     lines = []
     for row in rows:
-        if decision(row) != "better":
+        if row["verdict"] != "better":
             continue
         shaped = arm(
             recorded(results / SHAPE_FOLDER, row["task"], {"ppo"}), "ppo", SEEDS[row["task"]]
@@ -253,24 +249,18 @@ def other_baseline(
             "worse": "below it",
             "at the edge": f"at the edge of below it ({at_edge.text() if at_edge else ''})",
         }.get(outcome(probability, at_edge), "not told from it")
+        shaped_iqm = interval_cell(statistics.interval(shaped.final), ".1f")
+        candidate_iqm = interval_cell(row["candidate_iqm"], ".1f")
         lines += [
             "",
             f"{row['task']}: {row['candidate']}'s *better* is against the recorded baseline, "
             f"PPO at this project's 8 × 256. PPO at OpenAI baselines' 1 × 2,048 (the same "
             f"seeds, recorded for [`plans/baseline-shape.json`](../plans/baseline-shape.json)) "
-            f"ends at IQM {interval_text(statistics.interval(shaped.final))}, against "
-            f"{row['candidate']}'s {interval_text(row['candidate_iqm'])}: P({row['candidate']} "
-            f"> ppo 1×2048) = {interval_text(probability, '.2f')}, {side}. Descriptive, not in "
-            "the family.",
+            f"ends at IQM {shaped_iqm}, against {row['candidate']}'s {candidate_iqm}: "
+            f"P({row['candidate']} > ppo 1×2048) = {interval_cell(probability, '.2f')}, {side}. "
+            "Descriptive, not in the family.",
         ]
     return lines
-
-
-def decision(row: dict) -> str:
-    """The planned test's answer: better or worse where Holm's p is below the family's error."""
-    if row["holm"] >= FAMILY_ERROR:
-        return "no measurable difference"
-    return "better" if row["probability"][0] > 0.5 else "worse"
 
 
 def high_cluster(plan: dict, every: dict[str, dict[str, Arm]]) -> list[str]:
@@ -297,7 +287,7 @@ def high_cluster(plan: dict, every: dict[str, dict[str, Arm]]) -> list[str]:
             )
             lines.append(
                 f"| {name} | {int(high[name].sum())} of {high[name].size} "
-                f"| {interval_text(difference, '.2f')} |"
+                f"| {interval_cell(difference, '.2f')} |"
             )
     return lines
 
@@ -322,12 +312,12 @@ def report(
     ]
     for row in rows:
         lines.append(
-            f"| {row['task']} | {row['candidate']} | {interval_text(row['candidate_iqm'])} "
-            f"| {row['baseline_iqm']:.1f} | {interval_text(row['probability'], '.2f')} "
-            f"| {_p(row['p'])} | {_p(row['holm'])} | {decision(row)} "
-            f"| {interval_text(row['difference'])} "
+            f"| {row['task']} | {row['candidate']} | {interval_cell(row['candidate_iqm'], '.1f')} "
+            f"| {row['baseline_iqm']:.1f} | {interval_cell(row['probability'], '.2f')} "
+            f"| {_p(row['p'])} | {_p(row['holm'])} | {row['verdict']} "
+            f"| {interval_cell(row['difference'], '.1f')} "
             f"| {ruled_out(row['difference'], row['baseline_iqm'])} "
-            f"| {interval_text(row['area'], '.2f')} |"
+            f"| {interval_cell(row['area'], '.2f')} |"
         )
     lines += ceiling(plan, rows, every) + other_baseline(plan, rows, every, results)
     mujoco = [t for t in every if t in MUJOCO_TASKS]
@@ -353,7 +343,7 @@ def report(
             if at_edge is not None:
                 edges.append(f"{candidate}: {at_edge.text()}")
             lines.append(
-                f"| {candidate} | {interval_text(value, '.2f')} | {outcome(value, at_edge)} |"
+                f"| {candidate} | {interval_cell(value, '.2f')} | {outcome(value, at_edge)} |"
             )
         if edges:
             lines += [

@@ -37,8 +37,8 @@ import numpy as np
 from study import PROTOCOLS
 
 import fppo_jax
+from fppo_jax.analysis.report_kit import LEVEL, mann_whitney_verdicts
 from fppo_jax.analysis.study_runs import run_scores
-from fppo_jax.stats import statistics
 from fppo_jax.stats.decidable import narrowest_half_width
 from fppo_jax.stats.sequential import improvement_estimate
 from fppo_jax.stats.spending import boundaries
@@ -57,7 +57,6 @@ from common import (
 REPOSITORY = Path(__file__).resolve().parents[2]
 PLAN = REPOSITORY / "experiments" / "plans" / "redecided.json"
 BASELINE = "ppo"
-LEVEL = 0.05  # each family's, as its original plan had it
 ENDPOINT = "final"
 # Each family's protocol (the seed study's two, by their names in study.py).
 PROTOCOL = {"fppo-paper": "paper", "fppo-unnormalised": "unnormalised", "spo-dpo": "paper"}
@@ -158,7 +157,7 @@ def run_study(spec: dict[str, Any], plan: dict[str, Any], records: Path, out: Pa
                 "family": spec["family"],
                 "study": spec["name"],
                 "theta": theta,
-                "p": statistics.improvement_test(candidate, baseline),
+                "scores": (candidate, baseline),
                 "failed": int(np.sum(~np.isfinite(candidate)) + np.sum(~np.isfinite(baseline))),
             }
         )
@@ -167,16 +166,12 @@ def run_study(spec: dict[str, Any], plan: dict[str, Any], records: Path, out: Pa
 
 def earlier_verdicts(rows: list[dict]) -> None:
     """Each row's earlier verdict: the original plan's Mann–Whitney p, Holm-adjusted over the
-    family, better or worse where it is below 0.05."""
+    family, better or worse where it is below the family's level."""
     for family in dict.fromkeys(r["family"] for r in rows):
         members = [r for r in rows if r["family"] == family]
-        for row, adjusted in zip(members, statistics.holm([r["p"] for r in members]), strict=True):
-            row["holm"] = float(adjusted)
-            row["earlier"] = (
-                "no measurable difference"
-                if adjusted >= LEVEL
-                else ("better" if row["theta"] > 0.5 else "worse")
-            )
+        verdicts = mann_whitney_verdicts([r["scores"] for r in members], level=LEVEL)
+        for row, verdict in zip(members, verdicts, strict=True):
+            row["holm"], row["earlier"] = verdict.holm, verdict.verdict
 
 
 def _p(p: float) -> str:

@@ -34,6 +34,7 @@ from study import PROTOCOLS as PROTOCOL_SETTINGS
 import fppo_jax
 from fppo_jax import SweepResult, merge
 from fppo_jax.analysis.plots import plot_curves
+from fppo_jax.analysis.report_kit import LEVEL, interval_cell, mann_whitney_verdicts
 from fppo_jax.envs import MUJOCO_TASKS
 from fppo_jax.run.results import labels, max_average_return
 from fppo_jax.stats import statistics
@@ -47,16 +48,15 @@ from common import (
     ESCAPE_VARIANTS,
     PAPER_VARIANTS,
     RESULTS,
-    RUN_RECORD,
     TABLE1,
     argument_parser,
     by_variant,
     edge,
     edge_note,
-    interval_text,
     outcome,
     read_fractions,
     read_run_record,
+    recorded_parts,
     write_result,
 )
 
@@ -87,9 +87,8 @@ DPI = 80
 def recorded(results: Path, task: str, protocol: str) -> tuple[SweepResult | None, list[dict]]:
     """The merged parts of `task` under `protocol` that ran this study's variants (parts of
     other studies, such as SPO's and DPO's, share the folders), and each one's run record."""
-    run_records = (results / "study" / task / protocol).glob(f"*/{RUN_RECORD}")
     studied = {*PLAN[task][0], *EXPLORATORY}
-    parts = {p.parent: SweepResult.read(p.parent) for p in sorted(run_records)}
+    parts = recorded_parts(results / "study" / task / protocol)
     parts = {d: r for d, r in parts.items() if studied & {s["variant"] for s in r.settings}}
     if not parts:
         return None, []
@@ -120,16 +119,18 @@ def holm_adjusted(results: dict[str, SweepResult], protocol: str) -> dict[tuple[
     returns, over the protocol's whole planned family; a comparison not recorded yet enters
     as p = 1, so the adjustment can only fall as the study fills in."""
     family = planned_comparisons(protocol)
-    p_values = []
+    none = (np.array([]), np.array([]))  # not recorded yet: untested
+    compared = []
     for task, variant in family:
         result = results.get(task)
         index = by_variant(result) if result is not None else {}
-        p = float("nan")
         if {variant, BASELINE} <= set(index):
             final = result.scores("final")
-            p = statistics.improvement_test(final[index[variant]], final[index[BASELINE]])
-        p_values.append(1.0 if np.isnan(p) else p)
-    return dict(zip(family, statistics.holm(p_values), strict=True))
+            compared.append((final[index[variant]], final[index[BASELINE]]))
+        else:
+            compared.append(none)
+    verdicts = mann_whitney_verdicts(compared)
+    return {key: verdict.holm for key, verdict in zip(family, verdicts, strict=True)}
 
 
 def task_section(
@@ -164,8 +165,8 @@ def task_section(
         paper = TABLE1[task][PAPER_VARIANTS.index(variant)]
         lines.append(
             f"| {names[i]} | {result.setting_seeds(i)} "
-            f"| {interval_text(statistics.interval(final[i]))} "
-            f"| {interval_text(statistics.interval(area[i]))} "
+            f"| {interval_cell(statistics.interval(final[i]), '.1f')} "
+            f"| {interval_cell(statistics.interval(area[i]), '.1f')} "
             f"| {statistics.sample_std(final[i]):.1f} | {best:.1f} ± {std:.1f} | {paper} |"
         )
     if BASELINE not in index:
@@ -212,10 +213,10 @@ def task_section(
             edges.append(f"{names[i]}'s P(> {BASELINE}), final: {at_edge.text()}")
         holm = adjusted.get((task, variant))
         lines.append(
-            f"| {names[i]} | {interval_text(probability, '.2f')} | {outcome(probability, at_edge)} "
+            f"| {names[i]} | {interval_cell(probability, '.2f')} | {outcome(probability, at_edge)} "
             f"| {'–' if holm is None else f'{holm:.2f}'} "
-            f"| {interval_text(on_area['probability_of_improvement'], '.2f')} "
-            f"| {interval_text(on_final['iqm_difference'])} | {interval_text(gap)} "
+            f"| {interval_cell(on_area['probability_of_improvement'], '.2f')} "
+            f"| {interval_cell(on_final['iqm_difference'], '.1f')} | {interval_cell(gap, '.1f')} "
             f"| {paper_gap:+.1f} | {inside} | {percent(share)} | {paper_share:+.0%} "
             f"| {inside_share} |"
         )
@@ -284,7 +285,7 @@ def escape_section(path: Path, label: str) -> list[str]:
         for variant in ("fppo-lp", "fppo-qp"):
             paired = last[:, ESCAPE_VARIANTS.index(variant)] - last[:, 0]
             difference = statistics.interval(paired, "mean")
-            cells.append(interval_text(difference, ".2f"))
+            cells.append(interval_cell(difference, ".2f"))
             at_edge = edge(
                 difference,
                 lambda seed, paired=paired: statistics.interval(paired, "mean", seed=seed),
@@ -354,7 +355,7 @@ def main() -> None:
         "- The planned comparisons, FPPO-LP and FPPO-QP against PPO on each task's final "
         "returns, are tested as planned, as a family: Mann–Whitney's U test of P = ½, each p-value "
         "adjusted by Holm's step-down method over every planned comparison of its protocol "
-        "(one not recorded yet counts as p = 1). A *Holm p* below 0.05 is a difference that "
+        f"(one not recorded yet counts as p = 1). A *Holm p* below {LEVEL:g} is a difference that "
         "survives the number of comparisons made; TR-PPO's and PPO-RB's rows are exploratory "
         "and carry none.",
         "- Runs: seed s starts from `jax.random.key(s)`; Table 2's α and k; the `paper` preset "

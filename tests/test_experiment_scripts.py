@@ -339,6 +339,24 @@ def test_a_replay_that_does_not_give_a_study_s_recorded_decisions_is_refused(mon
         families.decide_family(tmp_path, "mujoco", ["hopper"])
 
 
+def test_a_family_s_study_of_a_namespaced_task_is_read_from_the_library_s_folder(
+    monkeypatch, tmp_path
+):
+    # Hopper's study as if its task were native/hopper, whose runs a study records under
+    # native__hopper/: the replay reads them there, and gives the study's decisions.
+    families = _tuned_families(monkeypatch)
+    recorded = EXPERIMENTS / "results" / "tuned" / "mujoco" / "study-hopper"
+    study = tmp_path / "tuned" / "mujoco" / "study-hopper"
+    study.mkdir(parents=True)
+    (study / "native__hopper").symlink_to(recorded / "hopper")
+    for name in ("plan.json", "decisions.json"):
+        text = (recorded / name).read_text()
+        (study / name).write_text(text.replace('"hopper"', '"native/hopper"'))
+    family = families.decide_family(tmp_path, "mujoco", ["native/hopper"])
+    assert {one.task for one in family.replayed} == {"native/hopper"}
+    assert all(families.same_as_recorded(one.alone, one.row) for one in family.replayed)
+
+
 SCRIPTS = sorted(p for p in EXPERIMENTS.rglob("*.py") if "results" not in p.parts)
 
 

@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import math
 import sys
 from pathlib import Path
 
-from fppo_jax import SweepResult, merge
+import fppo_jax
+from fppo_jax import StudyResult
 from fppo_jax.analysis.study_runs import run_scores
+from fppo_jax.errors import MissingFile
 from fppo_jax.stats.sequential import Decision, Design, decide
 
 # A decision reached, in the plan's words; "undecided" is the last look's, None awaits seeds.
@@ -37,26 +38,11 @@ def listed(names: list[str]) -> str:
     return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
-def study_runs(study: Path, task: str, decided: dict) -> SweepResult:
-    """A task's runs in `study` that its decisions used (``decisions.json``'s groups: a look
-    still training in shares is left out), each group read whole or, where it trained in
-    shares (``--part``), from its shares joined."""
-    groups = []
-    used = (g["group"] for g in decided["groups"] if g["task"] == task)
-    for group in (study / task / f"group-{number}" for number in sorted(used)):
-        if (group / "sweep.json").exists():
-            groups.append(SweepResult.read(group))
-        else:
-            groups.append(
-                merge([SweepResult.read(p.parent) for p in group.glob("part-*/sweep.json")])
-            )
-    return merge(groups)
-
-
 @functools.cache
-def recorded_runs(study: Path, task: str) -> SweepResult:
-    """A task's runs in `study` that its recorded decisions used, read once per write-up."""
-    return study_runs(study, task, json.loads((study / "decisions.json").read_text()))
+def recorded_study(study: Path) -> StudyResult:
+    """The study recorded in `study` (:func:`fppo_jax.load_study`: its plan, its decisions
+    and each task's runs they used), read once per write-up."""
+    return fppo_jax.load_study(study)
 
 
 class FamilyNotAssembled(ValueError):
@@ -106,16 +92,20 @@ def family_studies(results: Path, name: str, tasks: list[str]) -> dict[str, Path
     decisions); refused unless each task is in exactly one."""
     where = results / "tuned" / name
     studies: dict[str, list[Path]] = {task: [] for task in tasks}
-    for plan in sorted(where.glob("study*/plan.json")):
-        ran = json.loads(plan.read_text())["tasks"]
+    for folder in sorted(where.glob("study*")):
+        try:
+            study = recorded_study(folder)
+        except MissingFile:  # no plan.json: not a study
+            continue
+        ran = study.plan["tasks"]
         if not set(ran) <= set(tasks):  # its levels would be shared with another family's
             raise FamilyNotAssembled(
-                f"{plan.parent} ran {listed(sorted(set(ran) - set(tasks)))}, outside "
+                f"{folder} ran {listed(sorted(set(ran) - set(tasks)))}, outside "
                 f"{called(name)} ({listed(tasks)})"
             )
-        if (plan.parent / "decisions.json").exists():
+        if study.decisions:  # it decided a look
             for task in ran:
-                studies[task].append(plan.parent)
+                studies[task].append(folder)
     missing = [task for task in tasks if not studies[task]]
     if missing:
         raise FamilyNotAssembled(
@@ -135,7 +125,7 @@ def family_studies(results: Path, name: str, tasks: list[str]) -> dict[str, Path
 def shared_design(name: str, studies: list[Path]) -> tuple[Design, dict]:
     """The design and the comparisons' terms (endpoint, baseline, candidates) that every study
     of a family shares; refused where two differ, since the family has one rule."""
-    plans = [json.loads((study / "plan.json").read_text()) for study in studies]
+    plans = [recorded_study(study).plan for study in studies]
     keys = ("group_size", "max_seeds", "level", "margin", "primary_endpoint", "baseline")
     terms = [{key: plan.get(key) for key in (*keys, "candidates")} for plan in plans]
     differing = [key for key in terms[0] if any(t[key] != terms[0][key] for t in terms)]
@@ -156,10 +146,11 @@ def decide_family(results: Path, name: str, tasks: list[str]) -> Family:
     design, terms = shared_design(name, sorted(set(studies.values())))
     endpoint, baseline = terms["primary_endpoint"], terms["baseline"]
     keys = [(task, candidate) for task in tasks for candidate in terms["candidates"]]
+    runs = {task: recorded_study(study).results[task] for task, study in studies.items()}
     scores = {
         (task, candidate): (
-            run_scores(recorded_runs(studies[task], task), candidate, endpoint),
-            run_scores(recorded_runs(studies[task], task), baseline, endpoint),
+            run_scores(runs[task], candidate, endpoint),
+            run_scores(runs[task], baseline, endpoint),
         )
         for task, candidate in keys
     }
@@ -188,7 +179,7 @@ def decide_family(results: Path, name: str, tasks: list[str]) -> Family:
 
 def recorded_row(study: Path, task: str, candidate: str) -> dict:
     """`candidate`'s comparison on `task` as `study`'s ``decisions.json`` records it."""
-    rows = json.loads((study / "decisions.json").read_text())["comparisons"]
+    rows = recorded_study(study).decisions
     return next(r for r in rows if r["task"] == task and r["candidate"] == candidate)
 
 

@@ -33,8 +33,12 @@ from pathlib import Path
 
 import numpy as np
 
-from fppo_jax import SweepResult, merge
+import fppo_jax
+from fppo_jax import StudyResult, SweepResult, TuneResult, merge
+from fppo_jax.analysis.report_kit import interval_cell
+from fppo_jax.analysis.study_files import task_folder
 from fppo_jax.analysis.study_runs import run_scores
+from fppo_jax.errors import MissingFile
 from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
@@ -46,9 +50,9 @@ from _tuned_families import (
     families_lines,
     listed,
     planned_families,
-    recorded_runs,
+    recorded_study,
 )
-from common import RESULTS, argument_parser, header, write_result
+from common import RESULTS, argument_parser, header, recorded_parts, write_result
 
 PLAN = RESULTS.parent / "plans" / "tuned.json"
 
@@ -78,12 +82,32 @@ CAPS = {"cartpole": 200.0}
 
 
 def interval(point: tuple[float, float, float], digits: int = 2) -> str:
-    return f"{point[0]:.{digits}f} [{point[1]:.{digits}f}, {point[2]:.{digits}f}]"
+    return interval_cell(point, f".{digits}f")
 
 
 def recorded_defaults(results: Path, task: str) -> SweepResult | None:
-    parts = sorted((results / "study" / task / "paper").glob("*/sweep.json"))
-    return merge([SweepResult.read(p.parent) for p in parts]) if parts else None
+    """Each arm's default runs on `task`: the seed study's parts, merged."""
+    parts = list(recorded_parts(results / "study" / task / "paper").values())
+    return merge(parts) if parts else None
+
+
+def finished_tune(directory: Path) -> TuneResult | None:
+    """The tune recorded in `directory` (:func:`fppo_jax.load_tune`) once it has finished;
+    None before."""
+    try:
+        tune = fppo_jax.load_tune(directory)
+    except MissingFile:
+        return None
+    return tune if tune.finished else None
+
+
+def decided_study(directory: Path) -> StudyResult | None:
+    """The study recorded in `directory` once it has decided a look; None before."""
+    try:
+        study = recorded_study(directory)
+    except MissingFile:
+        return None
+    return study if study.decisions else None
 
 
 def finite_final(runs: SweepResult, arm: str) -> np.ndarray:
@@ -92,41 +116,37 @@ def finite_final(runs: SweepResult, arm: str) -> np.ndarray:
     return final[np.isfinite(final)]
 
 
-def part_lines(results: Path, tune: Path, study: Path, family: Family | None) -> list[str]:
-    """One part of the plan: the tune recorded in `tune` and its study in `study`, whose
-    comparisons are decided in the plan's `family` (None where it could not be assembled:
-    then the study's own decisions, and the lines say so)."""
+def part_lines(results: Path, tune: TuneResult, where: Path, family: Family | None) -> list[str]:
+    """One part of the plan: the finished `tune` and its study in `where`, whose comparisons
+    are decided in the plan's `family` (None where it could not be assembled: then the
+    study's own decisions, and the lines say so)."""
     lines = tune_lines(results, tune)
-    if not (study / "decisions.json").exists():
-        return [*lines, not_started(results, study), ""]
-    plan = json.loads((study / "plan.json").read_text())
-    decided = json.loads((study / "decisions.json").read_text())
-    tuned = json.loads((tune / "results.json").read_text())
-    runs = {task: recorded_runs(study, task) for task in plan["tasks"]}
-    rows = planned_rows(decided, family)
-    lines += study_lines(results, study, plan, decided, family)
+    study = decided_study(where)
+    if study is None:
+        return [*lines, not_started(results, where), ""]
+    plan, runs = study.plan, study.results
+    rows = planned_rows(study.decisions, family)
+    lines += study_lines(results, where, study, family)
     lines += decisions_table(plan, rows, runs)
     lines += capped_lines(plan, runs)
-    lines += gains_lines(results, plan, tuned, runs, rows)
+    lines += gains_lines(results, plan, tune.results, runs, rows)
     lines += published_lines(plan, runs)
     return [*lines, ""]
 
 
-def tune_lines(results: Path, tune: Path) -> list[str]:
-    """The tune recorded in `tune`: its budget, its curves and each arm's chosen trial."""
-    tune_plan = json.loads((tune / "tune.json").read_text())
-    tuned = json.loads((tune / "results.json").read_text())
+def tune_lines(results: Path, tune: TuneResult) -> list[str]:
+    """The finished `tune`: its budget, its curves and each arm's chosen trial."""
+    tune_plan, tuned, folder = tune.plan, tune.results, tune.directory.relative_to(results)
     budget = ", ".join(
         f"{task} {b['env_steps_per_arm']:,}" for task, b in tune_plan["budget"].items()
     )
     lines = [
-        f"Tune ([report]({tune.relative_to(results)}/report.md), at {tune_plan['commit'][:7]}): "
+        f"Tune ([report]({folder}/report.md), at {tune_plan['commit'][:7]}): "
         f"{tune_plan['trials']} trials per arm and task, {len(tune_plan['seeds'])} tuning seeds "
         f"per trial, η = {tune_plan['eta']}; every arm trained the same env steps per task "
         f"({budget}).",
         "",
-        f"![Best score against env steps per arm, {', '.join(tuned)}]"
-        f"({tune.relative_to(results)}/tuning_curves.png)",
+        f"![Best score against env steps per arm, {', '.join(tuned)}]({folder}/tuning_curves.png)",
         "",
     ]
     for task, arms in tuned.items():
@@ -160,15 +180,15 @@ def not_started(results: Path, study: Path) -> str:
     return f"The study on fresh seeds {started}."
 
 
-def planned_rows(decided: dict, family: Family | None) -> list[dict]:
-    """The study's comparisons with the plan's family's decision and the seeds it holds, and
-    (`own`) the study's own decision where the family's differs; the study's as recorded
-    where the family could not be assembled."""
+def planned_rows(decided: list, family: Family | None) -> list[dict]:
+    """The study's comparisons (`decided`, as recorded) with the plan's family's decision and
+    the seeds it holds, and (`own`) the study's own decision where the family's differs; the
+    study's as recorded where the family could not be assembled."""
     if family is None:
-        return [{**row, "own": None} for row in decided["comparisons"]]
+        return [{**row, "own": None} for row in decided]
     by_key = {(one.task, one.candidate): one for one in family.replayed}
     rows = []
-    for row in decided["comparisons"]:
+    for row in decided:
         planned = by_key[row["task"], row["candidate"]].planned
         decision = planned.decision or "undecided"
         own = row["decision"] if row["decision"] != decision else None
@@ -176,14 +196,14 @@ def planned_rows(decided: dict, family: Family | None) -> list[dict]:
     return rows
 
 
-def study_lines(
-    results: Path, study: Path, plan: dict, decided: dict, family: Family | None
-) -> list[str]:
-    """The study's record, design and levels, and which family its table's decisions are."""
-    state = "finished" if decided["finished"] else "**not finished** (some comparisons await seeds)"
+def study_lines(results: Path, where: Path, study: StudyResult, family: Family | None) -> list[str]:
+    """The study recorded in `where`: its design and levels, and which family its table's
+    decisions are."""
+    plan = study.plan
+    state = "finished" if study.finished else "**not finished** (some comparisons await seeds)"
     count, level = len(plan["comparisons"]), plan["level"]
     said = (
-        f"Study on test seeds ([report]({study.relative_to(results)}/report.md), at "
+        f"Study on test seeds ([report]({where.relative_to(results)}/report.md), at "
         f"{plan['commit'][:7]}): {state}; primary endpoint {plan['primary_endpoint']}, margin "
         f"{plan.get('margin')}, level {level} for each of two kinds of error over its {count} "
         f"comparisons (a wrong better or worse, a wrong equivalent), so a chance up to "
@@ -352,16 +372,17 @@ def mujoco_lines(results: Path, tasks: list[str], family: Family | None) -> list
     """The MuJoCo family, a part per task (its tune, then its study), and what is left."""
     where = results / "tuned" / "mujoco"
     lines = ["## MuJoCo tasks", ""]
-    done = [task for task in tasks if (where / f"tune-{task}" / "results.json").exists()]
-    for task in done:
-        lines += [f"### {task}", ""]
-        lines += part_lines(results, where / f"tune-{task}", where / f"study-{task}", family)
-    left = [f"the tune of {task}" for task in tasks if task not in done]
+    tunes = {task: finished_tune(where / f"tune-{task_folder(task)}") for task in tasks}
+    for task, tune in tunes.items():
+        if tune is not None:
+            lines += [f"### {task}", ""]
+            lines += part_lines(results, tune, where / f"study-{task_folder(task)}", family)
+    left = [f"the tune of {task}" for task, tune in tunes.items() if tune is None]
     for task in tasks:
-        decisions = where / f"study-{task}" / "decisions.json"
-        if not decisions.exists():
+        study = decided_study(where / f"study-{task_folder(task)}")
+        if study is None:
             left.append(f"the study of {task}")
-        elif not json.loads(decisions.read_text())["finished"]:
+        elif not study.finished:
             left.append(f"the rest of {task}'s study")
     return [*lines, *left_lines(left)]
 
@@ -422,11 +443,10 @@ def main() -> None:
         *families_lines(args.results, plan, families),
     ]
     classic = args.results / "tuned" / "classic"
-    if (classic / "tune" / "results.json").exists():
+    tune = finished_tune(classic / "tune")
+    if tune is not None:
         lines += ["## Classic tasks", ""]
-        lines += part_lines(
-            args.results, classic / "tune", classic / "study", _of(families, "classic")
-        )
+        lines += part_lines(args.results, tune, classic / "study", _of(families, "classic"))
     mujoco = planned_families(plan)["mujoco"]
     lines += mujoco_lines(args.results, mujoco, _of(families, "mujoco"))
     output = args.output or args.results / "tuned.md"

@@ -376,8 +376,15 @@ def _quoted(phrase: str, *names: str) -> None:
 
 
 def test_sixteen_of_the_18_fppo_intervals_hold_one_is_at_the_edge_and_one_excludes_half():
-    _quoted("16 intervals hold 0.5, with P between 0.35 and 0.60; one is at the edge", "README.md")
-    _quoted("FPPO-QP on HalfCheetah (P = 0.34 [0.17, 0.52]", "README.md")
+    _quoted(
+        "16 intervals hold 0.5, with P between 0.35 and 0.60; one is at the edge", "docs/results.md"
+    )
+    _quoted("FPPO-QP on HalfCheetah (P = 0.34 [0.17, 0.52]", "docs/results.md")
+    _quoted(
+        "the one FPPO-against-PPO interval of the 18 that excludes 0.5 does not survive a "
+        "correction for the number of comparisons",
+        "README.md",
+    )
     rows = [
         r
         for r in _rows()
@@ -401,7 +408,7 @@ def test_every_escape_interval_is_below_zero_but_walker2d_fppo_qp_s_at_the_edge(
     _quoted(
         "every interval below zero but FPPO-QP's on Walker2d, [−0.14, −0.00], which is at the "
         "edge of zero",
-        "README.md",
+        "docs/results.md",
         "experiments/README.md",
     )
     rows = [r for r in _rows() if r.heading.startswith("## The escape speed") and "text" not in r]
@@ -418,7 +425,7 @@ def test_every_escape_interval_is_below_zero_but_walker2d_fppo_qp_s_at_the_edge(
 
 
 def test_every_p_dose_interval_on_final_returns_holds_half():
-    _quoted("every P(dose > PPO) interval holds 0.5", "README.md")
+    _quoted("every P(dose > PPO) interval holds 0.5", "docs/results.md")
     _quoted("each P(dose > PPO) interval holds 0.5", "experiments/README.md")
     rows = [
         r
@@ -452,7 +459,7 @@ def test_no_steps_trend_excludes_zero_and_one_is_at_the_edge():
 
 
 def test_none_of_the_library_s_24_comparisons_is_decided():
-    _quoted("none of its 24 comparisons is decided", "README.md")
+    _quoted("none of its 24 comparisons is decided", "docs/results.md")
     decisions = [
         r.cell("decision")
         for r in _rows()
@@ -462,7 +469,7 @@ def test_none_of_the_library_s_24_comparisons_is_decided():
 
 
 def test_every_spo_and_dpo_run_on_ant_ends_below_every_ppo_run():
-    _quoted("on Ant, where every SPO and DPO run ends below every PPO run", "README.md")
+    _quoted("on Ant, where every SPO and DPO run ends below every PPO run", "docs/results.md")
     rows = [
         r
         for r in _rows()
@@ -485,7 +492,7 @@ def test_ten_of_the_13_tuned_mujoco_decisions_stand_in_the_plan_s_family():
     _quoted(
         "decided as the plan's family of 15 on the same runs, 10 of their 13 decisions stand and "
         "3 are not reached, undecided at the seeds their studies ran",
-        "README.md",
+        "docs/results.md",
     )
     rows = _tuned_rows("the plan's family of 15, at the seeds run")
     assert len(rows) == 15
@@ -511,12 +518,12 @@ def test_which_tuned_variant_is_better_than_tuned_ppo_where():
     _quoted(
         "FPPO-QP is equivalent to tuned PPO or undecided on each of the six tasks tested, and "
         "FPPO-LP is better only on HalfCheetah",
-        "README.md",
+        "docs/results.md",
     )
     _quoted(
         "SPO is better on HalfCheetah, against a PPO that tuning left below its default there, "
         "and DPO on Swimmer; neither is better on Hopper or a classic task",
-        "README.md",
+        "docs/results.md",
     )
     rows = _tuned_rows("decision against tuned PPO")
     decided = {
@@ -532,3 +539,43 @@ def test_which_tuned_variant_is_better_than_tuned_ppo_where():
         ("halfcheetah", "spo"),
         ("swimmer", "dpo"),
     ]
+
+
+def test_the_readme_s_headline_table_is_the_tuned_verdict_s():
+    """Each cell of the README's table of FPPO against tuned PPO is tuned.md's row for its task
+    and candidate (the plan's family's decision, P(candidate > PPO) as printed and the seeds it
+    holds), and the counts the paragraph above it gives are those of the table."""
+    recorded = {
+        (r.task, r.cell("candidate")): (
+            r.cell("decision against tuned PPO").split(" ")[0],
+            r.cell("P(candidate > PPO), eval"),
+            r.cell("seeds"),
+        )
+        for r in _tuned_rows("decision against tuned PPO")
+        if r.cell("candidate") in ("fppo-lp", "fppo-qp")
+    }
+    assert len(recorded) == 12
+    text = _path("README.md").read_text()
+    header = "| task | FPPO-LP against tuned PPO | FPPO-QP against tuned PPO |"
+    assert header in text
+    rows = text.split(header)[1].split("\n\n")[0].splitlines()[2:]
+    cell = re.compile(r"(\w+): (\d\.\d\d \[\d\.\d\d, \d\.\d\d\]), (\d+) seeds")
+    quoted = {}
+    for row in rows:
+        task, *cells = (c.strip() for c in row.strip("|").split("|"))
+        for candidate, written in zip(("fppo-lp", "fppo-qp"), cells, strict=True):
+            found = cell.fullmatch(written)
+            assert found, written
+            quoted[task.lower(), candidate] = found.groups()
+    assert quoted == recorded
+    decisions = [decision for decision, _, _ in recorded.values()]
+    counts = {d: decisions.count(d) for d in ("better", "equivalent", "undecided", "worse")}
+    assert counts == {"better": 1, "equivalent": 5, "undecided": 6, "worse": 0}
+    _quoted(
+        "Of FPPO's 12 comparisons with tuned PPO (FPPO-LP and FPPO-QP on six tasks), one is "
+        "better: FPPO-LP on HalfCheetah",
+        "README.md",
+    )
+    _quoted("Five are equivalent to tuned PPO", "README.md")
+    _quoted("six are undecided at the seeds their studies ran, and none is worse", "README.md")
+    assert [k for k, (d, _, _) in recorded.items() if d == "better"] == [("halfcheetah", "fppo-lp")]

@@ -9,7 +9,7 @@ probability of improvement over tuned PPO, P(candidate > PPO), on the primary en
 study on test seeds (the deterministic policy's return), over the seeds the decision used, with
 its 95% percentile bootstrap interval; each dot coloured by the decision of the plan's family
 (better, worse, equivalent within the plan's margin, or undecided), and the margin shaded.
-The studies are read with ``fppo_jax.load_study`` (results/tuned/*/study*/), P is
+The studies are read once with ``fppo_jax.load_study`` (results/tuned/*/study*/), P is
 ``fppo_jax.stats.statistics.compare``'s, and the families are decided as one by the library's
 sequential rule replayed on the recorded runs (studies/_tuned_families.py), as
 results/tuned.md reports them. Nothing is trained; the figure is written again freely.
@@ -28,14 +28,13 @@ import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from fppo_jax import load_study
 from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # experiments/: shared modules
 sys.path.insert(0, str(Path(__file__).resolve().parent / "studies"))
 
-from _tuned_families import decide_family, planned_families
+from _tuned_families import decide_family, planned_families, recorded_study
 from common import RESULTS, argument_parser
 
 PLAN = RESULTS.parent / "plans" / "tuned.json"
@@ -79,11 +78,10 @@ def comparisons(results: Path = RESULTS, plan: Path = PLAN) -> tuple[list[Compar
     found, margins = [], set()
     for name, tasks in planned_families(planned).items():
         family = decide_family(results, name, tasks)
-        studies = {study: load_study(study) for study in dict.fromkeys(family.studies.values())}
         for one in family.replayed:
             if one.candidate not in CANDIDATES:
                 continue
-            study = studies[family.studies[one.task]]
+            study = recorded_study(family.studies[one.task])  # fppo_jax.load_study's, read once
             margins.add(study.plan["margin"])
             runs, seeds = study.results[one.task], one.planned.seeds
             candidate = run_scores(runs, one.candidate, family.endpoint)[:seeds]

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import pytest
 from helpers import run_script
-from matplotlib.testing.compare import compare_images
 
 ROOT = Path(__file__).resolve().parent.parent
 EXPERIMENTS = ROOT / "experiments"
@@ -55,6 +54,8 @@ def test_the_figure_s_values_are_the_recorded_verdict_s(drawn):
 
 
 def test_the_committed_figure_is_what_the_script_draws(drawn):
+    from matplotlib.testing.compare import compare_images
+
     out, _ = drawn
     assert compare_images(str(COMMITTED), str(out / "headline.png"), tol=0) is None
 

@@ -2,9 +2,10 @@
 calls of the first rung's length; a rung's trials ranked best first, a trial without a score
 below every scored one, a diverged one out."""
 
+import numpy as np
 import pytest
 
-from fppo_jax.analysis.halving import ranked, schedule
+from fppo_jax.analysis.halving import SuccessiveHalving, ranked, schedule
 from fppo_jax.errors import InvalidInput
 
 
@@ -31,3 +32,15 @@ def test_schedule_halves_the_trials_and_ends_at_the_full_budget():
 def test_a_trial_without_an_episode_ranks_below_scored_ones_and_a_diverged_one_not_at_all():
     rows = [row(0, None), row(1, 5.0), row(2, 7.0, True), row(3, None), row(4, 5.0)]
     assert [r["trial"] for r in ranked(rows)] == [1, 4, 0, 3]
+
+
+def test_a_tied_rung_cuts_none_and_every_rung_records_its_evidence():
+    halving = SuccessiveHalving(["ppo"], 4, [7, 8], schedule(4, 2, 8))
+    window = halving.next_window([])
+    flat = halving.measured([], np.full(len(window.runs), -200.0), np.zeros(8, bool))["ppo"]
+    assert flat["survivors"] == [0, 1, 2, 3] and flat["evidence"]["tied"]
+    recorded = [{"arms": {"ppo": flat}}]
+    assert len(halving.next_window(recorded).runs) == 8  # all four go on, not the first two
+    apart = np.array([float(t) for _, t, _ in window.runs])
+    cut = halving.measured([], apart, np.zeros(8, bool))["ppo"]
+    assert cut["survivors"] == [2, 3] and not cut["evidence"]["tied"]

@@ -45,10 +45,10 @@ def test_a_file_cut_short_or_edited_is_named(tmp_path):
     with pytest.raises(DamagedArtifact, match=r"rung-0/scores\.json is not valid JSON"):
         recorded_rungs(copy / task)
     plan = json.loads((copy / "tune.json").read_text())
-    del plan["eta"]
+    del plan["trials"]
     (copy / "tune.json").write_text(json.dumps(plan))
     with pytest.raises(
-        DamagedArtifact, match=r"tune\.json is not the tune's plan .*: \.eta: missing"
+        DamagedArtifact, match=r"tune\.json is not the tune's plan .*: \.trials: missing"
     ):
         load_tune(copy)
 

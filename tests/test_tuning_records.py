@@ -35,11 +35,11 @@ def test_a_recorded_tune_holds_its_files_shapes(tune):
 def test_a_key_missing_added_or_of_another_type_is_named():
     plan = json.loads((TUNES[0] / "tune.json").read_text())
     assert mismatches(plan, TunePlan) == []
-    del plan["eta"]
+    del plan["trials"]
     plan["extra"] = 1
     plan["budget"][plan["tasks"][0]]["rungs"][0]["trials"] = "nine"
     assert sorted(mismatches(plan, TunePlan)) == [
         f".budget.{plan['tasks'][0]}.rungs[0].trials: 'nine' is not int",
-        ".eta: missing",
         ".extra: not in TunePlan",
+        ".trials: missing",
     ]

@@ -14,7 +14,8 @@ from fppo_jax.analysis.tuning_draws import import_optuna
 from fppo_jax.errors import InvalidInput
 
 # Runs per compiled call of the split tunes: 3 trials × 2 seeds. Rung 0's 16 runs train in
-# groups of 6, 6 and 4 (filled up to 6), rung 1's 8 in groups of 6 and 2, rung 2's 4 in one.
+# groups of 6, 6 and 4 (filled up to 6), rung 1's 8 in groups of 6 and 2, rung 2's 4 in one,
+# the validation race's 80 in 14.
 CHUNK = 6
 
 
@@ -63,10 +64,12 @@ def test_a_tune_split_into_parts_joins_into_the_unsplit_tune_bit_for_bit(tmp_pat
     }
     assert optuna_trials(tmp_path / "split") == optuna_trials(tmp_path / "whole")
     # Rung 1's 8 runs make 2 groups and rung 2's 4 one: the parts past them train nothing.
+    # The validation race's 2 arms × 4 entrants × 10 seeds make 14 groups, in every part.
     shares = [sorted(p.name for p in rung.glob("part-*")) for rung in _rungs(tmp_path / "split")]
-    assert shares == [["part-1", "part-2", "part-3"], ["part-1", "part-2"], ["part-1"]]
+    three = ["part-1", "part-2", "part-3"]
+    assert shares == [three, ["part-1", "part-2"], ["part-1"], three]
     said = capsys.readouterr().err
-    assert "cartpole: rung 2 of 3, part 3 of 3: nothing to train, the rung's 8 runs make 2" in said
+    assert "cartpole: rung 2 of 4, part 3 of 3: nothing to train, the rung's 8 runs make 2" in said
 
 
 def _rungs(directory):

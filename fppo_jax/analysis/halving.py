@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fppo_jax.analysis.population import Window
+from fppo_jax.analysis.rung_evidence import evidence
 from fppo_jax.analysis.tuning_records import ArmRung, RungPlan, RungScores, TrialScore
 from fppo_jax.errors import InvalidInput
 
@@ -82,7 +83,8 @@ class SuccessiveHalving:
     """Successive halving as a :class:`~fppo_jax.analysis.scheduling.Scheduler`: round r trains
     each arm's live trials × `seeds` from the end of round r − 1 (its own runs' states) to
     ``rungs.ends[r]``; after it, each arm keeps its best ``rungs.trials[r + 1]`` trials by
-    :func:`ranked`, and after the last round the best one."""
+    :func:`ranked`, and after the last round the best one; a rung whose trials tie keeps them
+    all (:func:`~fppo_jax.analysis.rung_evidence.tied`), and each records its evidence."""
 
     def __init__(self, arms: Sequence[str], trials: int, seeds: Sequence[int], rungs: Rungs):
         self.arms, self.trials, self.seeds, self.rungs = list(arms), trials, list(seeds), rungs
@@ -116,17 +118,17 @@ class SuccessiveHalving:
         return Window(runs, self.rungs.ends[rung - 1], self.rungs.ends[rung], continues)
 
     def measured(
-        self, recorded: Sequence[RungScores], last: np.ndarray, diverged: np.ndarray
+        self, recorded: Sequence[RungScores], scores: np.ndarray, diverged: np.ndarray
     ) -> dict[str, ArmRung]:
         window = self.next_window(recorded)
         assert window is not None
         going_on = self.rungs.trials[min(len(recorded) + 1, self.rounds - 1)]
-        scores: dict[str, ArmRung] = {}
+        measured: dict[str, ArmRung] = {}
         for arm, trials in self.live(recorded).items():
             rows: list[TrialScore] = []
             for trial in trials:
                 runs = [i for i, (a, t, _) in enumerate(window.runs) if a == arm and t == trial]
-                values = np.asarray(last)[runs].astype(float)
+                values = np.asarray(scores)[runs].astype(float)
                 mean = float(np.mean(values))
                 rows.append(
                     {
@@ -136,6 +138,10 @@ class SuccessiveHalving:
                         "diverged": bool(np.asarray(diverged)[runs].any()),
                     }
                 )
-            survivors = sorted(r["trial"] for r in ranked(rows)[:going_on])
-            scores[arm] = {"trials": rows, "survivors": survivors}
-        return scores
+            before = recorded[-1]["arms"][arm]["trials"] if recorded else None
+            found = evidence(rows, before)
+            # A tie cuts none: the trials' numbers, not their scores, would choose.
+            kept = ranked(rows) if found["tied"] else ranked(rows)[:going_on]
+            survivors = sorted(r["trial"] for r in kept)
+            measured[arm] = {"trials": rows, "survivors": survivors, "evidence": found}
+        return measured

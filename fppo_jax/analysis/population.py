@@ -22,11 +22,13 @@ import jax
 import numpy as np
 
 from fppo_jax.core.config import Hyperparameters, stack_hyperparameters, with_budget
+from fppo_jax.core.policy import make_policy
 from fppo_jax.core.resolution import resolve_hyperparameters
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.trainer import TrainState
 from fppo_jax.envs import resets_itself
 from fppo_jax.errors import InvalidInput, MissingFile
+from fppo_jax.run.evaluation import evaluation_key, make_evaluator
 from fppo_jax.run.execution import Program, compile_program, run_keys
 from fppo_jax.run.memory import check_host_memory
 from fppo_jax.run.plan import share_bounds
@@ -63,7 +65,9 @@ class Trained:
     """What a share of a window trained: its `runs` (in the window's order), each run's score at
     the window's end (the training return, mean of its last episodes; NaN where no episode
     finished) and whether it diverged, the leaves of its state (:func:`save_leaves`; none
-    where no window goes on from it) and the seconds it trained and compiled."""
+    where no window goes on from it), the seconds it trained and compiled, and where the
+    population evaluates, each run's deterministic policy's mean return at the window's end
+    (`evaluated`)."""
 
     runs: list[Run]
     last: np.ndarray
@@ -71,12 +75,16 @@ class Trained:
     leaves: list[np.ndarray]
     seconds: float
     compile_seconds: float
+    evaluated: np.ndarray | None = None
 
 
 class Population:
     """The arms' settings (`settings`: per arm, each trial's) on `prepared`'s task, trained a
     window at a time in groups of `chunk` runs (all of a window's runs if None), each compiled
-    call `updates_per_call` updates; `say` takes progress lines."""
+    call `updates_per_call` updates; with `eval_episodes`, each run's deterministic policy is
+    evaluated over that many episodes at the window's end (the episodes of
+    :func:`~fppo_jax.run.evaluation.evaluation_key`, as a study's evaluations); `say` takes
+    progress lines."""
 
     def __init__(
         self,
@@ -86,9 +94,12 @@ class Population:
         updates_per_call: int,
         chunk: int | None,
         say: Callable[[str], None],
+        eval_episodes: int | None = None,
     ):
         self.prepared, self.arms, self.settings = prepared, {a.name: a for a in arms}, settings
         self.updates_per_call, self.chunk, self.say = updates_per_call, chunk, say
+        self.eval_episodes = eval_episodes
+        self._evaluator: Callable[..., Any] | None = None
 
     def groups(self, runs: int) -> tuple[int, int]:
         """The size and the count of the groups that a window of `runs` runs trains in: `chunk`
@@ -112,7 +123,7 @@ class Population:
         check_host_memory(self.prepared.trainer, size)
         hps = self._hyperparameters(window.runs)
         began, program = time.perf_counter(), None
-        lasts, diverged, leaves = [], [], []
+        lasts, diverged, leaves, evaluated = [], [], [], []
         for group in range(first, stop):
             # Every group has one shape, so one program: the window's last run fills up its last.
             index = np.minimum(np.arange(group * size, (group + 1) * size), len(window.runs) - 1)
@@ -129,6 +140,8 @@ class Population:
             kept = slice(0, len(window.runs) - group * size)  # the group's own runs, not the fill
             lasts.append(last[kept])
             diverged.append(fetch_diverged(state)[kept])
+            if self.eval_episodes:
+                evaluated.append(self._evaluate(state)[kept])
             if keep:
                 leaves.append([_plain(leaf)[kept] for leaf in jax.tree.leaves(state)])
         assert program is not None
@@ -139,7 +152,22 @@ class Population:
             [np.concatenate(leaf) for leaf in zip(*leaves, strict=True)],
             time.perf_counter() - began - program.compile_seconds,
             program.compile_seconds,
+            np.concatenate(evaluated) if evaluated else None,
         )
+
+    def _evaluate(self, state: TrainState) -> np.ndarray:
+        """Each run's deterministic policy's mean return over the population's evaluation
+        episodes, every run on the same episodes' keys (its own environments)."""
+        assert self.eval_episodes is not None
+        if self._evaluator is None:
+            evaluator = make_evaluator(self.prepared.trainer.env, self.eval_episodes)
+            self._evaluator = jax.jit(jax.vmap(evaluator))
+        policy = make_policy(self.prepared.trainer, state)
+        runs = len(fetch_diverged(state))
+        key = evaluation_key()
+        keys = jax.numpy.broadcast_to(key, (runs, *key.shape))
+        returns = np.asarray(self._evaluator(policy, keys), dtype=float)
+        return cast(np.ndarray, returns.mean(axis=-1))
 
     def _hyperparameters(self, runs: Sequence[Run]) -> Hyperparameters:
         """The stacked hyperparameters of `runs` (arm, trial, seed), over every arm's

@@ -41,9 +41,9 @@ class Scheduler(Protocol):
         ...
 
     def measured(
-        self, recorded: Sequence[RungScores], last: np.ndarray, diverged: np.ndarray
+        self, recorded: Sequence[RungScores], scores: np.ndarray, diverged: np.ndarray
     ) -> dict[str, ArmRung]:
-        """The record of the round after `recorded`, from its runs' scores (`last`, NaN where no
-        episode finished) and whether each `diverged`: per arm, its trials' rows and the trials
-        still in."""
+        """The record of the round after `recorded`, from its runs' `scores` (the tune's score
+        at the window's end, NaN where there is none) and whether each `diverged`: per arm, its
+        trials' rows and the trials still in."""
         ...

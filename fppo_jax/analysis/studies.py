@@ -40,7 +40,9 @@ from fppo_jax.analysis.study_looks import run_looks, shown_progress
 from fppo_jax.analysis.study_plan import ENDPOINTS, PLAN_FILE, make_plan, upgraded
 from fppo_jax.analysis.study_runs import OWN_SETTINGS, Shape, Source
 from fppo_jax.analysis.study_tuned import check_tuned_protocol, tuned_settings
+from fppo_jax.analysis.tuning import tune as tune_every_arm
 from fppo_jax.core.checks import check_part, positive_int
+from fppo_jax.core.config import CONFIG_FIELDS
 from fppo_jax.core.objectives import union
 from fppo_jax.core.resolution import resolve
 from fppo_jax.core.surrogates import Surrogate
@@ -73,6 +75,7 @@ def study(
     reuse: str | Path | Sequence[str | Path] | None = None,
     part: tuple[int, int] | None = None,
     tuned: str | Path | None = None,
+    tune: Mapping[str, Any] | None = None,
     with_defaults: bool = False,
     across_tasks: bool = False,
     **settings: Any,
@@ -99,10 +102,20 @@ def study(
     tuning and the default-against-default comparisons beside the decisions, untested.
     `across_tasks` chooses one trial per arm for all the tune's tasks
     (:func:`~fppo_jax.analysis.tuning_report.across_tasks`) instead of each task's best.
+    `tune`, the arguments of :func:`~fppo_jax.tune` (``{}`` for its defaults), tunes every arm
+    first, in ``output/tune`` under the study's protocol and scoring on its endpoint (``eval``:
+    the evaluation return; ``final``: the training return), then studies the settings the
+    tune's validation race chose, as with `tuned`: one command, one output folder.
     `total_steps`, `preset`, `backend`, `chunk` and `settings` are the sweeps'.
     """
     tasks = names_of_tasks(tasks, "a study")
     candidates, baseline = _variants(candidates, baseline)
+    if tune is not None:
+        shape_of_runs: Shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
+        everyone = [*candidates, baseline]
+        tuned = _tuned_first(
+            tasks, everyone, output, tune, tuned, part, endpoint, shape_of_runs, settings
+        )
     design = Design(group_size, max_seeds, level, margin)
     _check_arguments(endpoint, groups, chunk, part, settings)
     sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
@@ -145,6 +158,49 @@ def study(
         return run_looks(folder.output, plan, tasks, candidates, baseline, groups, source)
 
 
+def _tuned_first(
+    tasks: list[str],
+    everyone: list[Surrogate],
+    output: str | Path,
+    arguments: Mapping[str, Any],
+    tuned: str | Path | None,
+    part: tuple[int, int] | None,
+    endpoint: str,
+    shape: Shape,
+    settings: Mapping[str, Any],
+) -> Path:
+    """The tune of ``study(..., tune=...)``, run to its end in ``output/tune``: its directory."""
+    if tuned is not None or part is not None:
+        raise InvalidInput(
+            "tune (--tune) tunes and studies in one call: not beside tuned (--tuned DIR), nor in "
+            "parts (tune with fppo-jax tune --part, then study --tuned DIR --part)"
+        )
+    if endpoint not in TUNE_SCORES:
+        raise InvalidInput(
+            f"a study on its own tune decides on {' or '.join(TUNE_SCORES)}, where the tune "
+            f"scores its trials, not {endpoint}"
+        )
+    taken = sorted(set(arguments) & {"score", "output", "part", *shape, *settings})
+    if taken:
+        raise InvalidInput(f"the study sets the tune's {', '.join(taken)} itself")
+    where = Path(output) / TUNE_DIRECTORY
+    shape_settings = {k: v for k, v in settings.items() if k in CONFIG_FIELDS}
+    episodes = {"eval_episodes": settings["eval_episodes"]} if "eval_episodes" in settings else {}
+    done = tune_every_arm(
+        tasks,
+        everyone,
+        output=where,
+        score=TUNE_SCORES[endpoint],
+        progress=shown_progress(settings),
+        **{**episodes, **arguments},
+        **shape,
+        **shape_settings,
+    )
+    if not done.finished:
+        raise InvalidInput(f"the tune in {where} did not finish (rungs?): run this again")
+    return where
+
+
 def _check_arguments(
     endpoint: str,
     groups: int | None,
@@ -180,6 +236,12 @@ def _planned_settings(settings: Mapping[str, object]) -> dict[str, object]:
     evaluated = settings.get("eval_every") is not None
     recorded = {k: v for k, v in settings.items() if k not in Options.names()}
     return {**recorded, **{k: settings[k] for k in EVALUATION if evaluated and k in settings}}
+
+
+# Where study(..., tune=...) tunes, in its output folder, and what the tune scores on for each
+# endpoint the study may decide on.
+TUNE_DIRECTORY = "tune"
+TUNE_SCORES = {"eval": "eval", "final": "train"}
 
 
 # A tune is known by its plan's digest: the study goes on where the tune and the study were

@@ -82,11 +82,12 @@ def tuned_settings(
             else:
                 setting = found["chosen"]["setting"]
             chosen.setdefault(task, {})[variant.name] = {**setting}
-    overlap = sorted(set(tune_plan["seeds"]) & set(range(design.max_seeds)))
+    validation = tune_plan["validation"]["seeds"] if "validation" in tune_plan else []
+    overlap = (set(tune_plan["seeds"]) | set(validation)) & set(range(design.max_seeds))
     if overlap:
         raise InvalidInput(
-            f"the tune in {directory} used seeds {overlap} that this study would test on: a "
-            "test needs seeds the tune never saw (tune on others)"
+            f"the tune in {directory} used seeds {sorted(overlap)} that this study would test "
+            "on: a test needs seeds the tune never saw (tune and validate on others)"
         )
     where, protocol = str(directory.absolute()), {t: tune_plan["protocol"][t] for t in tasks}
     if trials is None:

@@ -39,12 +39,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, cast
 
-import numpy as np
-
 from fppo_jax.analysis.arms import Variants, names_of_tasks, resolve_arms
-from fppo_jax.analysis.halving import Rungs, SuccessiveHalving, schedule
 from fppo_jax.analysis.population import Population
 from fppo_jax.analysis.preregistration import Preregistered, commit
+from fppo_jax.analysis.tune_design import TuneDesign, design
 from fppo_jax.analysis.tune_files import (
     PLAN_FILE,
     RESULTS_FILE,
@@ -65,7 +63,7 @@ from fppo_jax.analysis.tuning_records import (
 )
 from fppo_jax.analysis.tuning_report import write_report
 from fppo_jax.analysis.tuning_rungs import TaskTune
-from fppo_jax.core.checks import check_part, check_seeds, positive_int
+from fppo_jax.core.checks import check_part, positive_int
 from fppo_jax.core.config import CONFIG_FIELDS
 from fppo_jax.core.objectives import identities
 from fppo_jax.core.search_space import (
@@ -78,23 +76,7 @@ from fppo_jax.errors import InvalidInput
 from fppo_jax.run.prepare import Prepared, prepare
 from fppo_jax.store.files import json_value, write_json
 
-# Tuning seeds come from their own stream, far from the 0, 1, 2, … that studies and sweeps
-# count from, so that a test on fresh seeds never meets them.
-TUNING_SEED_START = 1_000_000
-
-
 SAMPLERS = ("qmc", "random")
-
-
-SCORE = (
-    "a run's training return at the end of the rung (the mean of its last 100 episodes); a "
-    "trial's score is the mean over its tuning seeds; a trial with a run that finished no "
-    "episode ranks below every trial with a score (ties by trial number), and one with a run "
-    "that diverged stops"
-)
-
-
-SELECTION = "per task and arm: the trial with the best score at the last rung (the full budget)"
 
 
 # Every trial is drawn before the first rung trains, so a tune goes on under another Optuna
@@ -110,6 +92,13 @@ def tune(
     trials: int = 27,
     seeds: int | Sequence[int] = 2,
     eta: int = 3,
+    scheduler: str = "halving",
+    budget: int | None = None,
+    score: str = "eval",
+    eval_episodes: int = 10,
+    finalists: int = 3,
+    validation_seeds: int | Sequence[int] = 10,
+    race_level: float = 0.05,
     baseline: str | None = None,
     space: str | Path | Mapping[str, Any] | None = None,
     sampler: str = "qmc",
@@ -126,45 +115,48 @@ def tune(
 ) -> TuneResult:
     """Tune every one of `variants` on each of `tasks` with the same budget (see the module).
 
-    `trials` settings per arm and task, each trained with every one of `seeds` (a count, drawn
-    from :data:`TUNING_SEED_START` on, or the seeds), halved by `eta` at each rung. `space` is a
-    space file or its content (:func:`~fppo_jax.core.search_space.search_spaces`); `sampler`
-    (``qmc``: Optuna's scrambled Sobol sampler, or ``random``) draws the trials from
-    `sampler_seed`; `storage` is Optuna's storage URL (default: a SQLite file in `output`).
-    `baseline` (default: ``ppo`` if tuned, else the first variant) is the arm whose default the
-    report measures the others' sampled settings against. `rungs` limits the rungs this call
-    trains (the same call later goes on; 0 trains none, but joins the shares recorded).
-    `chunk`, a multiple of the seeds' count, is the runs each compiled call trains (default:
-    each rung's runs in one call): a rung's runs, in order, train in groups of that many.
-    ``part=(K, N)`` (with `chunk`) trains the K-th of N shares of those groups of each task's
-    next rung, records it in ``<task>/rung-<r>/part-<K>/`` and returns; a call without `part`
-    joins the shares into the rung trained unsplit with the same `chunk`, bit for bit.
-    `total_steps`, `preset`, `backend` and `settings` (run-shape fields of
+    `trials` settings per arm and task. The search's `scheduler`: ``halving`` trains each trial
+    with every one of `seeds` (a count, drawn from
+    :data:`~fppo_jax.analysis.tune_design.TUNING_SEED_START` on, or the seeds),
+    halved by `eta` at each rung; ``racing`` trains full runs, `seeds` (a count) fresh seeds a
+    round for the trials still in, as many rounds as `budget` (full runs per arm and task, the
+    validation race's included) holds, dropping a trial shown worse than the incumbent at
+    `race_level`. Trials are ranked on `score`: ``eval``, the deterministic policy's mean return
+    over `eval_episodes` episodes (the study's eval endpoint), or ``train``, the training
+    return. Then the validation race: each arm's `finalists` and its default train the full
+    budget on `validation_seeds` (a count from
+    :data:`~fppo_jax.analysis.tune_design.VALIDATION_SEED_START`, or the seeds), and a finalist
+    replaces the default only where a paired one-sided test, Holm over the finalists at
+    `race_level`, shows it better. `space` is a space file or its content
+    (:func:`~fppo_jax.core.search_space.search_spaces`); `sampler` (``qmc``: Optuna's scrambled
+    Sobol sampler, or ``random``) draws the trials from `sampler_seed`; `storage` is Optuna's
+    storage URL (default: a SQLite file in `output`). `baseline` (default: ``ppo`` if tuned,
+    else the first variant) is the arm whose default the report measures the others' sampled
+    settings against. `rungs` limits the rungs this call trains (the same call later goes on;
+    0 trains none, but joins the shares recorded). `chunk` is the runs each compiled call
+    trains (default: each rung's runs in one call): a rung's runs, in order, train in groups
+    of that many. ``part=(K, N)`` (with `chunk`) trains the K-th of N shares of those groups of
+    each task's next rung, records it in ``<task>/rung-<r>/part-<K>/`` and returns; a call
+    without `part` joins the shares into the rung trained unsplit with the same `chunk`, bit
+    for bit. `total_steps`, `preset`, `backend` and `settings` (run-shape fields of
     :class:`~fppo_jax.core.config.TrainConfig`) are every run's.
     """
     tasks = names_of_tasks(tasks, "a tune")
     arms = resolve_arms(variants, "a tune")
-    trials = positive_int("trials", trials)
-    if isinstance(eta, bool) or not isinstance(eta, int | np.integer) or eta < 2:
-        raise InvalidInput(f"eta (the halving rate) must be an integer of at least 2, got {eta!r}")
-    if sampler not in SAMPLERS:
-        raise InvalidInput(f"sampler must be one of {', '.join(SAMPLERS)}, got {sampler!r}")
-    if (
-        not isinstance(sampler_seed, int)
-        or isinstance(sampler_seed, bool)
-        or not (0 <= sampler_seed < 2**32)
-    ):
-        raise InvalidInput(f"sampler_seed must be an integer in [0, 2**32), got {sampler_seed!r}")
-    if rungs is not None and (isinstance(rungs, bool) or not isinstance(rungs, int) or rungs < 0):
-        raise InvalidInput(f"rungs must be a count of rungs (0 or more), got {rungs!r}")
-    stray = sorted(set(settings) - set(CONFIG_FIELDS))
-    if stray:
-        raise InvalidInput(
-            f"a tune takes run-shape settings ({', '.join(CONFIG_FIELDS)}), not "
-            f"{', '.join(stray)}: the hyperparameters are its search space"
-        )
-    tuning_seeds = check_seeds(seeds, first=TUNING_SEED_START)
-    part = _checked_split(chunk, part, len(tuning_seeds))
+    chosen = design(
+        scheduler,
+        trials,
+        seeds,
+        eta,
+        budget,
+        score,
+        eval_episodes,
+        finalists,
+        validation_seeds,
+        race_level,
+    )
+    _check_arguments(sampler, sampler_seed, rungs, settings)
+    part = _checked_split(chunk, part, chosen.per_round)
     baseline = _baseline(baseline, arms)
     given = read_space_file(space) if isinstance(space, str | Path) else space
     spaces = search_spaces(arms, given)
@@ -175,30 +167,18 @@ def tune(
         )
         for task in tasks
     }
-    schedules = {
-        task: schedule(trials, int(eta), run.config.num_updates) for task, run in runs.items()
+    budgets = {task: chosen.budget_of(run) for task, run in runs.items()}
+    _check_budget(budget, budgets)
+    shape: dict[str, RunShapeValue] = {
+        "total_steps": total_steps,
+        "preset": preset,
+        "backend": backend,
+        # The groups a rung trains in make its numbers: recorded where given, so that the
+        # shares and their join are one tune (and a tune planned before it goes on).
+        **({} if chunk is None else {"chunk": chunk}),
+        **settings,
     }
-    plan = make_plan(
-        runs,
-        arms,
-        spaces,
-        schedules,
-        trials,
-        tuning_seeds,
-        int(eta),
-        baseline,
-        sampler,
-        sampler_seed,
-        {
-            "total_steps": total_steps,
-            "preset": preset,
-            "backend": backend,
-            # The groups a rung trains in make its numbers: recorded where given, so that the
-            # shares and their join are one tune (and a tune planned before it goes on).
-            **({} if chunk is None else {"chunk": chunk}),
-            **settings,
-        },
-    )
+    plan = make_plan(runs, arms, spaces, chosen, budgets, baseline, sampler, sampler_seed, shape)
     verbosity = optuna.logging.get_verbosity()
     # Array tasks that start together take turns with the folder: each holds it while it reads
     # and writes the plan and Optuna's storage, then lets go to train its share.
@@ -219,11 +199,9 @@ def tune(
                         runs[task],
                         arms,
                         draw_population(
-                            optuna, store, task, arms, spaces, trials, sampler, sampler_seed
+                            optuna, store, task, arms, spaces, chosen.trials, sampler, sampler_seed
                         ),
-                        SuccessiveHalving(
-                            [arm.name for arm in arms], trials, tuning_seeds, schedules[task]
-                        ),
+                        chosen,
                         chunk,
                         task_directory(folder.output, task),
                         (optuna, store),
@@ -248,25 +226,63 @@ def tune(
     return TuneResult(folder.output, plan, rungs_recorded, results, finished)
 
 
+def _check_arguments(
+    sampler: str, sampler_seed: int, rungs: int | None, settings: Mapping[str, object]
+) -> None:
+    if sampler not in SAMPLERS:
+        raise InvalidInput(f"sampler must be one of {', '.join(SAMPLERS)}, got {sampler!r}")
+    if (
+        not isinstance(sampler_seed, int)
+        or isinstance(sampler_seed, bool)
+        or not (0 <= sampler_seed < 2**32)
+    ):
+        raise InvalidInput(f"sampler_seed must be an integer in [0, 2**32), got {sampler_seed!r}")
+    if rungs is not None and (isinstance(rungs, bool) or not isinstance(rungs, int) or rungs < 0):
+        raise InvalidInput(f"rungs must be a count of rungs (0 or more), got {rungs!r}")
+    stray = sorted(set(settings) - set(CONFIG_FIELDS))
+    if stray:
+        raise InvalidInput(
+            f"a tune takes run-shape settings ({', '.join(CONFIG_FIELDS)}), not "
+            f"{', '.join(stray)}: the hyperparameters are its search space"
+        )
+
+
+def _check_budget(budget: int | None, budgets: Mapping[str, TaskBudget]) -> None:
+    """A budget given is one every task's design fits in (racing's fits by its making)."""
+    for task, planned in budgets.items():
+        needed = planned.get("full_runs_per_arm", 0.0)
+        if budget is not None and needed > budget:
+            raise InvalidInput(
+                f"successive halving and the validation race train {needed:g} full runs per "
+                f"arm on {task}, more than the budget of {budget}: give fewer trials, fewer "
+                "seeds, fewer finalists or validation seeds, or a larger budget"
+            )
+
+
 def _task_tune(
     task: str,
     prepared: Prepared,
     arms: list[Surrogate],
     drawn: dict[str, list[dict[str, float]]],
-    scheduler: SuccessiveHalving,
+    chosen: TuneDesign,
     chunk: int | None,
     directory: Path,
     optuna_storage: tuple[Any, Any],
     progress: bool,
 ) -> TaskTune:
-    """`task`'s tune: the population of the `drawn` trials, trained as `scheduler` says."""
+    """`task`'s tune: the population of the `drawn` trials, trained as the design's scheduler
+    says, scored as it says."""
     settings = {arm: [setting_of(params) for params in trials] for arm, trials in drawn.items()}
+    scheduler = chosen.scheduler_for([arm.name for arm in arms], prepared)
 
     def say(line: str) -> None:
         if progress:
             print(line, file=sys.stderr, flush=True)
 
-    population = Population(prepared, arms, settings, scheduler.updates_per_call, chunk, say)
+    episodes = chosen.eval_episodes if chosen.score == "eval" else None
+    population = Population(
+        prepared, arms, settings, scheduler.updates_per_call, chunk, say, episodes
+    )
     return TaskTune(task, population, scheduler, directory, *optuna_storage)
 
 
@@ -306,10 +322,8 @@ def make_plan(
     runs: dict[str, Prepared],
     arms: list[Surrogate],
     spaces: dict[str, SearchSpace],
-    schedules: dict[str, Rungs],
-    trials: int,
-    seeds: list[int],
-    eta: int,
+    chosen: TuneDesign,
+    budgets: dict[str, TaskBudget],
     baseline: str,
     sampler: str,
     sampler_seed: int,
@@ -318,15 +332,8 @@ def make_plan(
     """What ``tune.json`` records, before any run."""
     from importlib.metadata import version
 
-    budget: dict[str, TaskBudget] = {}
-    for task, run in runs.items():
-        samples = run.config.samples_per_update
-        updates = schedules[task].updates_per_arm(len(seeds))
-        budget[task] = {
-            "env_steps_per_arm": updates * samples,
-            "env_steps_per_full_run": run.config.num_updates * samples,
-            "rungs": schedules[task].to_json(samples),
-        }
+    fields = chosen.plan_fields()
+    halving = {"eta": chosen.eta} if chosen.scheduler == "halving" else {}
     return cast(
         TunePlan,
         json_value(
@@ -334,19 +341,21 @@ def make_plan(
                 "tasks": list(runs),
                 "variants": [arm.name for arm in arms],
                 "baseline": baseline,
-                "trials": trials,
+                "trials": chosen.trials,
                 "trial_0": "each arm's default setting",
-                "seeds": seeds,
-                "eta": eta,
-                "budget": budget,
+                "seeds": chosen.seeds,
+                **halving,
+                "budget": budgets,
                 "space": {arm: space.to_json() for arm, space in spaces.items()},
                 "sampler": {
                     "name": sampler,
                     "seed": sampler_seed,
                     "package": f"optuna {version('optuna')}",
                 },
-                "score": SCORE,
-                "selection": SELECTION,
+                "score": fields["score"],
+                "selection": fields["selection"],
+                "search": fields["search"],
+                "validation": fields["validation"],
                 "settings": settings,
                 "protocol": {task: run.record().to_json() for task, run in runs.items()},
                 **identities(arms),

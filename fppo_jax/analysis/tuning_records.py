@@ -28,12 +28,14 @@ class RungPlan(TypedDict):
 
 
 class TaskBudget(TypedDict):
-    """A task's budget in ``tune.json``: the env steps every arm trains over the rungs, those
-    of one full run, and the rungs."""
+    """A task's budget in ``tune.json``: the env steps every arm trains (at most, for a race
+    over seeds), those of one full run, halving's rungs, and the full runs per arm they make
+    (tunes from before the validation race lack it)."""
 
     env_steps_per_arm: int
     env_steps_per_full_run: int
-    rungs: list[RungPlan]
+    rungs: NotRequired[list[RungPlan]]
+    full_runs_per_arm: NotRequired[float]
 
 
 class SamplerRecord(TypedDict):
@@ -44,8 +46,29 @@ class SamplerRecord(TypedDict):
     package: str
 
 
+class SearchRecord(TypedDict):
+    """The search's scheduler in ``tune.json``: its name, halving's η or racing's seeds per
+    round and level."""
+
+    name: str
+    eta: NotRequired[int]
+    seeds_per_round: NotRequired[int]
+    level: NotRequired[float]
+
+
+class ValidationRecord(TypedDict):
+    """The validation race in ``tune.json``: its finalists per arm, its seeds, its level and its
+    test (an id and a version)."""
+
+    finalists: int
+    seeds: list[int]
+    level: float
+    test: dict[str, str | int]
+
+
 class TunePlan(TypedDict):
-    """A tune's plan, ``tune.json`` (:func:`make_plan`)."""
+    """A tune's plan, ``tune.json`` (:func:`make_plan`). Tunes from before the validation race
+    lack `search` and `validation` (they searched by successive halving, with `eta`)."""
 
     tasks: list[str]
     variants: list[str]
@@ -53,12 +76,14 @@ class TunePlan(TypedDict):
     trials: int
     trial_0: str
     seeds: list[int]
-    eta: int
+    eta: NotRequired[int]
     budget: dict[str, TaskBudget]
     space: dict[str, dict[str, Axis]]  # per arm, its axes by hyperparameter
     sampler: SamplerRecord
     score: str
     selection: str
+    search: NotRequired[SearchRecord]
+    validation: NotRequired[ValidationRecord]
     settings: dict[str, RunShapeValue]
     protocol: dict[str, dict[str, Any]]  # per task, its run record's JSON (RunRecord.to_json)
     surrogates: NotRequired[dict[str, SurrogateIdentity]]  # own surrogates', if any
@@ -75,12 +100,52 @@ class TrialScore(TypedDict):
     diverged: bool
 
 
+class RaceTest(TypedDict):
+    """A test as a plan and a record name it: a stable id and its version."""
+
+    id: str
+    version: int
+
+
+class RaceRecord(TypedDict):
+    """What the validation race recorded of an arm (:mod:`fppo_jax.analysis.validation_race`):
+    its test and level, its finalists (best first), each finalist's score in the search (its
+    last rung's) beside the race, each one's one-sided p against the default and Holm-adjusted
+    p, P(finalist > default) with its bootstrap interval ([point, low, high]; None where no run
+    scored), the default's and each finalist's mean validation score, and the trial chosen (0:
+    the default stays)."""
+
+    test: RaceTest
+    level: float
+    finalists: list[int]
+    search_scores: list[float | None]
+    default_score: float | None
+    validation_scores: list[float | None]
+    p: list[float]
+    adjusted: list[float]
+    probability_of_improvement: list[list[float | None]]
+    chosen: int
+
+
+class RungEvidence(TypedDict):
+    """What a rung's scores say about cutting on them (:mod:`fppo_jax.analysis.rung_evidence`):
+    whether its trials tied, the one-way ANOVA's F (between- over within-trial mean square)
+    and its p, and Spearman's ρ with the rung before (None where not computable)."""
+
+    tied: bool
+    variance_ratio: float | None
+    p: float | None
+    rank_correlation: float | None
+
+
 class ArmRung(TypedDict):
     """An arm's part of a rung's ``scores.json``: its live trials' rows, and the trials that go
-    on to the next rung."""
+    on to the next rung; the validation race's rung also holds what the race decided."""
 
     trials: list[TrialScore]
     survivors: list[int]
+    race: NotRequired[RaceRecord]
+    evidence: NotRequired[RungEvidence]
 
 
 class RungScores(TypedDict):
@@ -165,7 +230,7 @@ class ExpectedBestCurve(TypedDict):
 
 class ArmResults(TypedDict):
     """What ``results.json`` holds of an arm on one task (see the module). Tunes from before
-    `trials`, `expected_best` and `tied_rungs` were recorded lack them."""
+    `trials`, `expected_best`, `tied_rungs` and the validation `race` were recorded lack them."""
 
     chosen: Chosen | None  # None: every trial diverged
     default: DefaultResult
@@ -177,6 +242,7 @@ class ArmResults(TypedDict):
     expected_best: NotRequired[ExpectedBestCurve | None]  # None: no trial scored
     diverged_trials: list[int]
     tied_rungs: NotRequired[list[int]]
+    race: NotRequired[RaceRecord]
 
 
 class TrialAcrossTasks(TypedDict):

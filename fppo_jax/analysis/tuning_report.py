@@ -26,7 +26,6 @@ from pathlib import Path
 
 import numpy as np
 
-from fppo_jax.analysis.halving import ranked
 from fppo_jax.analysis.population import Window
 from fppo_jax.analysis.tuning_records import (
     ArmResults,
@@ -36,10 +35,12 @@ from fppo_jax.analysis.tuning_records import (
     ExpectedBestCurve,
     RungScores,
     Spread,
+    TaskBudget,
     TrialAcrossTasks,
     TrialScore,
     TunePlan,
 )
+from fppo_jax.analysis.validation_race import race_lines
 from fppo_jax.core.checks import positive_int
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats.statistics import CONFIDENCE, RESAMPLES, check_confidence
@@ -117,19 +118,19 @@ def arm_results(
         curve.append({"rung": rung, "env_steps": spent, "best": best, "trials": len(rows)})
         if _score(rows, 0) is not None:
             reached, score_there = rung, _score(rows, 0)
-    last_rung = ranked(rungs_scores[-1]["arms"][arm]["trials"])
+    last = rungs_scores[-1]["arms"][arm]
     chosen: Chosen | None = None
-    if last_rung:
-        top = last_rung[0]
+    if last["survivors"]:  # the one left after the last rung: the race's choice, or the search's
+        trial = last["survivors"][0]
         chosen = {
-            "trial": top["trial"],
-            "score": top["score"],
-            "setting": settings[arm][top["trial"]],
+            "trial": trial,
+            "score": _score(last["trials"], trial),
+            "setting": settings[arm][trial],
         }
     diverged = sorted(
         {row["trial"] for s in rungs_scores for row in s["arms"][arm]["trials"] if row["diverged"]}
     )
-    return {
+    found: ArmResults = {
         "chosen": chosen,
         "default": {
             "setting": settings[arm][0],
@@ -151,6 +152,9 @@ def arm_results(
         "diverged_trials": diverged,
         "tied_rungs": [r for r, s in enumerate(rungs_scores[:-1]) if _tied(s["arms"][arm])],
     }
+    if "race" in last:
+        found["race"] = last["race"]
+    return found
 
 
 def across_tasks(rungs: dict[str, list[RungScores]], arm: str) -> TrialAcrossTasks | None:
@@ -264,21 +268,15 @@ def write_report(output: Path, plan: TunePlan, results: dict[str, dict[str, ArmR
         "# Tune",
         "",
         f"Variants {', '.join(plan['variants'])} on {', '.join(plan['tasks'])}: {plan['trials']} "
-        f"trials each (trial 0 the default), {len(plan['seeds'])} tuning seeds per trial "
-        f"({_seed_text(plan['seeds'])}), successive halving with η = {plan['eta']}. "
+        f"trials each (trial 0 the default), {_search_text(plan)}. "
         f"Score: {plan['score']}. Selection: {plan['selection']}. Code at {plan['commit']}.",
     ]
     for task, arms in results.items():
-        budget = plan["budget"][task]
-        ends = ", ".join(f"{rung['env_steps_per_run']:,}" for rung in budget["rungs"])
         lines += [
             "",
             f"## {task}",
             "",
-            f"Every arm trained {budget['env_steps_per_arm']:,} env steps "
-            f"({' → '.join(str(r['trials']) for r in budget['rungs'])} trials over rungs "
-            f"ending at {ends} "
-            "env steps per run).",
+            _budget_text(plan["budget"][task]),
             "",
             "| arm | default, rung 1 | best, rung 1 | chosen trial | chosen score | "
             f"sampled settings above {plan['baseline']}'s default | diverged | env steps |",
@@ -295,6 +293,8 @@ def write_report(output: Path, plan: TunePlan, results: dict[str, dict[str, ArmR
                 f"{found['env_steps']:,} |"
             )
         lines += _first_rung_lines(plan["trials"], arms)
+        if "validation" in plan:
+            lines += race_lines(arms, len(plan["validation"]["seeds"]))
         tied = [
             f"{arm} at rung {', '.join(str(r + 1) for r in found['tied_rungs'])}"
             for arm, found in arms.items()
@@ -327,8 +327,8 @@ def write_report(output: Path, plan: TunePlan, results: dict[str, dict[str, ArmR
         "## Checklist (Eimer, Lindauer and Raileanu, ICML 2023)",
         "",
         f"- Search space: {_space_text(plan)}.",
-        f"- Budget: {plan['trials']} trials per arm and task, η = {plan['eta']}; env steps per "
-        "arm: "
+        f"- Budget: {plan['trials']} trials per arm and task, {_search_text(plan)}; env steps "
+        "per arm: "
         + ", ".join(f"{t} {b['env_steps_per_arm']:,}" for t, b in plan["budget"].items())
         + ".",
         f"- Tuning seeds: {_seed_text(plan['seeds'])}.",
@@ -340,6 +340,40 @@ def write_report(output: Path, plan: TunePlan, results: dict[str, dict[str, ArmR
     ]
     write_atomically(output / "report.md", ("\n".join(lines) + "\n").encode())
     _figure(output, results)
+
+
+def _search_text(plan: TunePlan) -> str:
+    """How the plan's search spent its budget, in words."""
+    search = plan.get("search", {"name": "halving", "eta": plan.get("eta", 0)})
+    seeds = f"({_seed_text(plan['seeds'])})"
+    if search["name"] == "racing":
+        return (
+            f"racing over {len(plan['seeds'])} tuning seeds {seeds}, "
+            f"{search.get('seeds_per_round')} a round for the trials still in, a trial dropped "
+            f"where shown worse than the incumbent at level {search.get('level')}"
+        )
+    return (
+        f"{len(plan['seeds'])} tuning seeds per trial {seeds}, successive halving with "
+        f"η = {search.get('eta')}"
+    )
+
+
+def _budget_text(budget: TaskBudget) -> str:
+    """A task's budget per arm, in words."""
+    rungs = budget.get("rungs")
+    if rungs is None:
+        runs = budget.get("full_runs_per_arm", 0)
+        return (
+            f"Every arm had a budget of {budget['env_steps_per_arm']:,} env steps ({runs:g} full "
+            "runs, the validation race's included); racing spends less where trials drop."
+        )
+    ends = ", ".join(f"{rung['env_steps_per_run']:,}" for rung in rungs)
+    trials = " → ".join(str(r["trials"]) for r in rungs)
+    return (
+        f"Every arm trained {budget['env_steps_per_arm']:,} env steps ({trials} trials over "
+        f"rungs ending at {ends} env steps per run"
+        + (", then the validation race)." if "full_runs_per_arm" in budget else ").")
+    )
 
 
 def _first_rung_lines(trials: int, arms: dict[str, ArmResults]) -> list[str]:

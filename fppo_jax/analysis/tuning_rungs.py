@@ -28,7 +28,7 @@ from fppo_jax.analysis.tune_files import (
     read_share,
     rung_directory,
 )
-from fppo_jax.analysis.tuning_records import ArmResults, RungScores, ShareScores
+from fppo_jax.analysis.tuning_records import ArmResults, ArmRung, RungScores, ShareScores
 from fppo_jax.analysis.tuning_report import arm_results
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.plan import share_bounds
@@ -97,39 +97,53 @@ class TaskTune:
 
     def _recorded(self, scores: RungScores) -> None:
         """A rung's scores: taken as recorded, and told to Optuna (again, if a kill came
-        between): each trial's score at the rung's end, a diverged trial failed, one no longer
-        in pruned, and once the task is tuned each trial still in told its score (failed
-        without one)."""
+        between): each trial's score at the rung's end, a diverged trial failed; once the task
+        is tuned, the trial chosen told its score (failed without one) and every other trial
+        not yet ended pruned. A trial out of one rung may come back in a later one (a race's
+        finalist), so none is pruned before the end."""
         window = self.window
         assert window is not None
         self.scores.append(scores)
         done = self.finished
+        states = self.optuna.trial.TrialState
         for arm, measured in scores["arms"].items():
             study = self.optuna.load_study(study_name=f"{self.task}/{arm}", storage=self.storage)
             by_number = {t.number: t for t in study.get_trials(deepcopy=False)}
-            states = self.optuna.trial.TrialState
             for row in measured["trials"]:
-                trial, frozen = row["trial"], by_number[row["trial"]]
+                frozen = by_number[row["trial"]]
                 if frozen.state.is_finished():
                     continue
                 value = math.nan if row["score"] is None else row["score"]
                 if window.end not in frozen.intermediate_values:
                     self.optuna.trial.Trial(study, frozen._trial_id).report(value, window.end)
-                if row["diverged"] or (done and row["score"] is None):
-                    study.tell(trial, state=states.FAIL)  # no score: diverged, or no episode
-                elif trial not in measured["survivors"]:
-                    study.tell(trial, state=states.PRUNED)
-                elif done:
-                    study.tell(trial, value)
+                if row["diverged"]:
+                    study.tell(row["trial"], state=states.FAIL)
+            if done:
+                self._end(study, measured)
+
+    def _end(self, study: Any, measured: ArmRung) -> None:
+        """The arm's trials ended in Optuna: the one chosen with its score, the others pruned."""
+        states = self.optuna.trial.TrialState
+        rows = {row["trial"]: row for row in measured["trials"]}
+        for frozen in study.get_trials(deepcopy=False):
+            if frozen.state.is_finished():
+                continue
+            row = rows.get(frozen.number)
+            if frozen.number not in measured["survivors"] or row is None:
+                study.tell(frozen.number, state=states.PRUNED)
+            elif row["score"] is None:
+                study.tell(frozen.number, state=states.FAIL)  # no episode finished: no score
+            else:
+                study.tell(frozen.number, row["score"])
 
     def _record(self, window: Window, shares: list[Trained]) -> None:
         """Records the next rung from its `shares`, in order: its scores and the state the
         window after it goes on from; then tells Optuna (the join alone writes to it)."""
         rung = len(self.scores)
         assert [run for share in shares for run in share.runs] == list(window.runs)
-        last = np.concatenate([share.last for share in shares])
+        scores_of_runs = np.concatenate([self._scored(share) for share in shares])
         diverged = np.concatenate([share.diverged for share in shares])
-        arms = self.scheduler.measured(self.scores, last, diverged)
+        arms = self.scheduler.measured(self.scores, scores_of_runs, diverged)
         seconds = sum(share.seconds for share in shares)
         compile_seconds = sum(share.compile_seconds for share in shares)
         scores: RungScores = {"arms": arms, "seconds": seconds, "compile_seconds": compile_seconds}
@@ -173,7 +187,7 @@ class TaskTune:
         recorded: ShareScores = {
             "part": [k, n],
             "runs": share.runs,
-            "scores": [float(v) if math.isfinite(v) else None for v in share.last],
+            "scores": [float(v) if math.isfinite(v) else None for v in self._scored(share)],
             "diverged": share.diverged.tolist(),
             "seconds": share.seconds,
             "compile_seconds": share.compile_seconds,
@@ -240,6 +254,11 @@ class TaskTune:
             recorded["seconds"],
             recorded["compile_seconds"],
         )
+
+    def _scored(self, share: Trained) -> np.ndarray:
+        """The tune's score of each of `share`'s runs: its evaluation where the population
+        evaluates, else its training return."""
+        return share.last if share.evaluated is None else share.evaluated
 
     def _keeps_state(self, rung: int) -> bool:
         """Whether a window may go on from rung `rung`'s state: all but the scheduler's last."""

@@ -10,7 +10,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TypedDict
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -176,6 +176,7 @@ def _study(args: argparse.Namespace) -> int:
         reuse=args.reuse,
         part=part,
         tuned=args.tuned,
+        tune=_tune_arguments(args) if args.tune else None,
         with_defaults=args.with_defaults,
         across_tasks=args.across_tasks,
         progress=not args.quiet,
@@ -201,6 +202,24 @@ def _study(args: argparse.Namespace) -> int:
     return 0
 
 
+def _tune_arguments(args: argparse.Namespace) -> dict[str, Any]:
+    """What a command's search flags give :func:`~fppo_jax.tune`."""
+    return {
+        "trials": args.trials,
+        "seeds": args.seeds_per_trial,
+        "eta": args.eta,
+        "scheduler": args.scheduler,
+        "budget": args.budget,
+        "finalists": args.finalists,
+        "validation_seeds": args.validation_seeds,
+        "race_level": args.race_level,
+        "space": args.space,
+        "sampler": args.sampler,
+        "sampler_seed": args.sampler_seed,
+        "storage": args.storage,
+    }
+
+
 def _tune(args: argparse.Namespace) -> int:
     from fppo_jax.analysis.tuning import tune
 
@@ -209,19 +228,15 @@ def _tune(args: argparse.Namespace) -> int:
         args.tasks,
         args.variants,
         output=args.output,
-        trials=args.trials,
-        seeds=args.seeds_per_trial,
-        eta=args.eta,
+        score=args.score,
+        eval_episodes=args.eval_episodes,
         baseline=args.baseline,
-        space=args.space,
-        sampler=args.sampler,
-        sampler_seed=args.sampler_seed,
-        storage=args.storage,
         rungs=args.rungs,
         chunk=args.chunk,
         part=part,
         backend=args.backend,
         progress=not args.quiet,
+        **_tune_arguments(args),
         **config_overrides(args),
     )
     if part is not None:

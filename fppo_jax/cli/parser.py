@@ -30,6 +30,7 @@ from fppo_jax.cli.flags import (
     variant,
     variants,
 )
+from fppo_jax.cli.tune_parser import add_search_flags, add_tune
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.variants import DEFAULT_VARIANT, VARIANTS
 from fppo_jax.errors import install_hint
@@ -54,7 +55,7 @@ def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParse
     _add_train(commands, surrogates)
     _add_sweep(commands, surrogates)
     _add_study(commands, surrogates)
-    _add_tune(commands)
+    add_tune(commands)
     _add_reading(commands)
     _add_policy_commands(commands)
 
@@ -295,96 +296,17 @@ def _add_study_running(studied: Parser) -> None:
         "tasks of its scores normalised per task at the deepest rung its trials reached on "
         "all of them, instead of each task's best (docs/tuning.md)",
     )
+    tuning = studied.add_argument_group(
+        "tuning first (--tune)",
+        "--tune tunes every arm in --output/tune with the same budget, scoring on the study's "
+        "endpoint, then studies the settings its validation race chose: the flags of "
+        "fppo-jax tune",
+    )
+    tuning.add_argument(
+        "--tune", action="store_true", help="tune every arm first (instead of --tuned DIR)"
+    )
+    add_search_flags(tuning)
     add_option_flags(studied, only=("eval_every", "eval_episodes"))
-
-
-def _add_tune(commands: argparse._SubParsersAction[Parser]) -> None:
-    """``tune``: every arm tuned with the same budget, each rung one program."""
-    tuned = commands.add_parser(
-        "tune",
-        help="tune every variant with the same budget (successive halving, one program a rung)",
-        description="Tune each variant on each task with the same budget: --trials settings "
-        "per variant (trial 0 its default, the others drawn by Optuna from the search space, "
-        "the same points on the axes every variant shares), each trained with --seeds-per-trial "
-        "tuning seeds, all variants' trials of a task as one compiled program per rung; after "
-        "each rung the best 1/eta of each variant's trials, on their mean score over the seeds, "
-        "go on from where they stopped. Before any run --output gets tune.json (the plan); each "
-        "rung is recorded as it ends, and the same command again goes on from there (a changed "
-        "plan is refused). At the end results.json holds each variant's chosen setting and "
-        "report.md the tuning report; fppo-jax study --tuned DIR tests them on fresh seeds.",
-        formatter_class=Defaults,
-    )
-    tuned.add_argument(
-        "--variants",
-        type=variants,
-        required=True,
-        help="variants, e.g. ppo,spo, or module:attribute for a surrogate of one's own",
-    )
-    tuned.add_argument(
-        "--tasks", type=names, required=True, help="tasks, e.g. cartpole,acrobot (fppo-jax list)"
-    )
-    tuned.add_argument("--trials", type=count, default=27, help="settings per variant and task")
-    tuned.add_argument(
-        "--seeds-per-trial",
-        type=count,
-        default=2,
-        help="tuning seeds each setting trains with (1000000 on: studies count from 0)",
-    )
-    tuned.add_argument("--eta", type=count, default=3, help="the halving rate (at least 2)")
-    tuned.add_argument(
-        "--space",
-        type=path,
-        metavar="FILE",
-        help="a search space (JSON or YAML) replacing intervals of the default: "
-        '{"learning_rate": {"low": 1e-4, "high": 1e-3, "scale": "log"}, "fppo-lp": {"alpha": '
-        "[1, 1.5]}}",
-    )
-    tuned.add_argument(
-        "--sampler",
-        default="qmc",
-        choices=["qmc", "random"],
-        help="how trials are drawn: Optuna's scrambled Sobol sequence, or at random",
-    )
-    tuned.add_argument("--sampler-seed", type=int, default=0, help="the sampler's seed")
-    tuned.add_argument(
-        "--storage",
-        metavar="URL",
-        help="Optuna's storage (default: optuna.db, a SQLite file in --output), such as "
-        "postgresql://user@host/db",
-    )
-    tuned.add_argument(
-        "--baseline",
-        help="the variant whose default the report measures sampled settings against (default: "
-        "ppo if tuned, else the first)",
-    )
-    tuned.add_argument(
-        "--rungs",
-        type=looks,
-        metavar="N",
-        help="train at most N more rungs now, then stop (the same command goes on later); 0 "
-        "trains none, but joins the parts of a rung that --part recorded",
-    )
-    tuned.add_argument(
-        "--chunk",
-        type=count,
-        help="runs per compiled call, a multiple of --seeds-per-trial: a rung's runs train in "
-        "groups of that many, the same for every part and the join (default: each rung's runs "
-        "in one call)",
-    )
-    tuned.add_argument(
-        "--part",
-        type=part,
-        metavar="K/N",
-        help="train only the K-th of N shares of the groups of --chunk runs of each task's next "
-        "rung, record it and stop, ranking nothing (auto: a SLURM job array task's share); the "
-        "same command without --part, once every share is recorded, joins them into the rung "
-        "trained unsplit, bit for bit, and goes on",
-    )
-    tuned.add_argument(
-        "--output", type=path, required=True, metavar="DIR", help="the tune's directory"
-    )
-    add_shape_flags(tuned)
-    tuned.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
 def _add_reading(commands: argparse._SubParsersAction[Parser]) -> None:

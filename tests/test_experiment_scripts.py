@@ -111,23 +111,23 @@ def test_the_dose_response_names_the_seed_and_update_where_a_control_parts(monke
     # Walker2d's seed 5, where both part from it at one update.
     monkeypatch.syspath_prepend(str(EXPERIMENTS))
     monkeypatch.syspath_prepend(str(EXPERIMENTS / "studies"))
-    dose_response = importlib.import_module("dose_response")
+    checks = importlib.import_module("_dose_controls")  # checks.py's controls
     plan = json.loads((EXPERIMENTS / "plans" / "dose-response.json").read_text())
     parts = EXPERIMENTS / "results" / "dose_response"
     hopper = SweepResult.read(parts / "hopper" / "paper" / "seeds-6-6_dose-response")
     walker = SweepResult.read(parts / "walker2d" / "paper" / "seeds-5-5_dose-response")
-    assert dose_response.controls(hopper, None, plan)[:2] == [
+    assert checks.controls(hopper, None, plan)[:2] == [
         "- fppo-lp at α = 1: identical to the sweep's PPO run on every recorded metric in 1 of 1 "
         "seeds",
         "- fppo-qp at k = 0: identical to the sweep's PPO run on every recorded metric in 1 of 1 "
         "seeds",
     ]
-    parted = dose_response.controls(walker, None, plan)[:2]
+    parted = checks.controls(walker, None, plan)[:2]
     assert all(line.endswith("in 0 of 1 seeds; apart: seed 5 from update 126") for line in parted)
-    ppo_index = dose_response.setting_index(walker, "ppo", None, None)
-    ppo = walker.metrics["negative_fraction_after"][dose_response.by_seed(walker, ppo_index)[5]]
-    index = dose_response.setting_index(walker, "fppo-lp", "alpha", 1.0)
-    control = walker.metrics["negative_fraction_after"][dose_response.by_seed(walker, index)[5]]
+    ppo_index = checks.setting_index(walker, "ppo", None, None)
+    ppo = walker.metrics["negative_fraction_after"][checks.by_seed(walker, ppo_index)[5]]
+    index = checks.setting_index(walker, "fppo-lp", "alpha", 1.0)
+    control = walker.metrics["negative_fraction_after"][checks.by_seed(walker, index)[5]]
     np.testing.assert_array_equal(control[:125], ppo[:125])
     assert control[125] != ppo[125]
 
@@ -212,23 +212,23 @@ def test_every_script_of_a_folder_runs_tiny_into_a_temporary_directory(folder):
 
 def test_an_interval_is_at_the_edge_only_within_its_bounds_monte_carlo_error(monkeypatch):
     monkeypatch.syspath_prepend(str(EXPERIMENTS))
-    common = importlib.import_module("common")
+    edges = importlib.import_module("edges")
     seeds = []
 
     def draw(seed):  # an upper bound that moves by 0.03 with the seed
         seeds.append(seed)
         return (0.3, 0.1, 0.51 + 0.03 * (seed % 2))
 
-    at_edge = common.edge((0.3, 0.1, 0.51), draw, 0.5)
+    at_edge = edges.edge((0.3, 0.1, 0.51), draw, 0.5)
     assert at_edge is not None and at_edge.bound == "upper"
     assert (at_edge.low, at_edge.high) == (0.51, 0.54) and seeds == list(range(1, 20))
-    assert common.outcome((0.3, 0.1, 0.51), at_edge) == "at the edge"
+    assert edges.outcome((0.3, 0.1, 0.51), at_edge) == "at the edge"
     assert "upper bound runs 0.510 to 0.540 over 20 resampling seeds" in at_edge.text()
-    assert common.edge((0.3, 0.1, 0.6), draw, 0.5) is None  # clears it by more than 0.03
+    assert edges.edge((0.3, 0.1, 0.6), draw, 0.5) is None  # clears it by more than 0.03
     seeds.clear()
-    assert common.edge((0.2, 0.1, 0.3), draw, 0.5) is None and not seeds  # far: not drawn again
-    assert common.edge((0.5, 0.5, 0.5), lambda seed: (0.5, 0.5, 0.5), 0.5) is None  # all tied
-    assert common.outcome((0.3, 0.1, 0.45)) == "worse"
+    assert edges.edge((0.2, 0.1, 0.3), draw, 0.5) is None and not seeds  # far: not drawn again
+    assert edges.edge((0.5, 0.5, 0.5), lambda seed: (0.5, 0.5, 0.5), 0.5) is None  # all tied
+    assert edges.outcome((0.3, 0.1, 0.45)) == "worse"
 
 
 def test_the_plan_converter_names_the_rule_by_id_and_changes_nothing_else(tmp_path):

@@ -44,17 +44,17 @@ from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
+from _dose_controls import controls, controls_lines, doses, setting_index
 from common import (
     RESULTS,
     add_force_flag,
     argument_parser,
-    edge,
-    edge_note,
     header,
     recorded_parts,
     refuse_to_replace,
     write_result,
 )
+from edges import edge, edge_note
 
 EXPERIMENTS = Path(__file__).resolve().parents[1]
 PLAN = EXPERIMENTS / "plans" / "dose-response.json"
@@ -71,64 +71,11 @@ TREND_NAMES = {
 PERMUTATIONS = 10_000  # statistics.trend_test's
 P_DECIMALS = 2  # what the permutation p's Monte Carlo error (0.003 to 0.005 here) allows
 DPI = 80
-# Why a control can part from PPO's run (tests/test_variants.py shows the gradients).
-PARTED = (
-    "A control equals PPO's objective in real arithmetic, not always in float32: where r lies "
-    "within rounding of 1 ± ε, rA and (1 ± ε)A can round to the same number, and PPO's "
-    "min(rA, clip(r, 1 − ε, 1 + ε)A) is then a tie, whose gradient JAX splits between the two "
-    "terms (½A), while at α = 1 and k = 0 the pulled term is r itself and the gradient A. One "
-    "such sample sets the parameters apart in their last bits, and the runs part from there."
-)
-
-
-def doses(plan: dict) -> dict[str, tuple[str, list[float]]]:
-    """Each dosed variant's hyperparameter and its doses: ``{"fppo-lp": ("alpha", [1.0, …])}``."""
-    return {
-        variant: next((k, v) for k, v in spec.items() if isinstance(v, list))
-        for variant, spec in plan["doses"].items()
-        if isinstance(spec, dict)
-    }
 
 
 def plan_parts(results: Path, task: str) -> list[SweepResult]:
     """Each part of `task` recorded for the plan: a sweep compiled and run on its own."""
     return list(recorded_parts(results / FOLDER / task / "paper").values())
-
-
-def seed_ranges(parts: list[SweepResult]) -> list[str]:
-    """Each part's seeds, in order: ``["0–1", "2–3", "6"]``."""
-    ranges = []
-    for part in parts:
-        seeds = sorted({run["seed"] for run in part.runs})
-        low, high = seeds[0], seeds[-1]
-        ranges.append(f"{low}" if low == high else f"{low}–{high}")
-    return sorted(ranges, key=lambda r: int(r.split("–")[0]))
-
-
-def compiled_parts(plan: dict, parts: dict[str, list[SweepResult]]) -> str:
-    """How the runs were compiled: the plan's one sweep per task, or the parts they ran in."""
-    per_task = "; ".join(
-        f"{task}, {len(of_task)} part{'s' if len(of_task) > 1 else ''} "
-        f"(seeds {', '.join(seed_ranges(of_task))})"
-        for task, of_task in parts.items()
-    )
-    return (
-        f'How the runs were compiled: the plan says "{plan["seeds"]}"; they ran instead in '
-        "parts, "
-        f"each a sweep of the task's settings at its own seeds, compiled and run on its own: "
-        f"{per_task}. A seed's settings are always in one part, so each control is checked "
-        "against the PPO run of its own program; runs of different parts come from programs "
-        "of different batch sizes, which may round differently, as the seed study's PPO does "
-        "against the sweep's (below)."
-    )
-
-
-def setting_index(result: SweepResult, variant: str, name: str | None, dose: float | None) -> int:
-    """The index of `variant`'s setting at `dose` of its hyperparameter `name` (PPO: no dose)."""
-    for index, setting in enumerate(result.settings):
-        if setting["variant"] == variant and (name is None or setting.get(name) == dose):
-            return index
-    raise KeyError(f"{variant} {name}={dose}")
 
 
 def missing(plan: dict, merged: dict[str, SweepResult | None]) -> list[str]:
@@ -154,58 +101,6 @@ def missing(plan: dict, merged: dict[str, SweepResult | None]) -> list[str]:
                 short.append(f"{variant}{dosed} {count}")
         if short:
             lines.append(f"{task}: {', '.join(short)} of {SEEDS} seeds")
-    return lines
-
-
-def by_seed(result: SweepResult, index: int) -> dict[int, int]:
-    """Setting `index`'s runs by seed: ``{seed: run}``."""
-    return {run["seed"]: i for i, run in enumerate(result.runs) if run["setting"] == index}
-
-
-def first_difference(result: SweepResult, a: int, b: int) -> int | None:
-    """The first update (from 1) at which runs `a` and `b` differ on a recorded metric; None
-    if they never do."""
-    updates = [
-        int(np.argmax(differ)) + 1
-        for values in result.metrics.values()
-        if (differ := ~np.isclose(values[a], values[b], rtol=0, atol=0, equal_nan=True)).any()
-    ]
-    return min(updates, default=None)
-
-
-def controls(result: SweepResult, study: SweepResult | None, plan: dict) -> list[str]:
-    """A line per control: in how many seeds it trains as the sweep's PPO run, bit for bit on
-    every recorded metric, and how the seed study's recorded PPO runs compare."""
-    ppo = by_seed(result, setting_index(result, "ppo", None, None))
-    lines = []
-    for variant, (name, values) in doses(plan).items():
-        control = by_seed(result, setting_index(result, variant, name, values[0]))
-        parted = {seed: first_difference(result, run, ppo[seed]) for seed, run in control.items()}
-        same = [seed for seed, update in parted.items() if update is None]
-        apart = [f"seed {s} from update {u}" for s, u in sorted(parted.items()) if u is not None]
-        lines.append(
-            f"- {variant} at {SYMBOLS.get(name, name)} = {values[0]:g}: identical to the sweep's "
-            f"PPO run on every recorded metric in {len(same)} of {len(control)} seeds"
-            + (f"; apart: {', '.join(apart)}" if apart else "")
-        )
-    if study is None:
-        lines.append("- the seed study has no recorded PPO runs of this task to set beside them")
-    else:
-        recorded_ppo = by_seed(study, setting_index(study, "ppo", None, None))
-        seeds = sorted(set(ppo) & set(recorded_ppo))
-        same = [
-            s
-            for s in seeds
-            if np.array_equal(
-                study.metrics["average_return"][recorded_ppo[s]],
-                result.metrics["average_return"][ppo[s]],
-                equal_nan=True,
-            )
-        ]
-        lines.append(
-            f"- the sweep's PPO against the seed study's recorded PPO runs (another compiled "
-            f"program): the same learning curve in {len(same)} of {len(seeds)} seeds"
-        )
     return lines
 
 
@@ -293,6 +188,8 @@ def report(
     checks: dict,
     parts: dict[str, list[SweepResult]],
 ) -> list[str]:
+    """The report: the plan, its controls (`checks`, by task) and how its runs were compiled
+    (`parts`), the planned test of the trends, the other trends, and each dose against PPO."""
     lines = [
         *header(f"{plan['question']} The planned dose-response"),
         "",
@@ -302,14 +199,18 @@ def report(
         "among themselves; P(X > Y) counts ties as ½. Runs that diverged are left out and "
         "counted below.",
         "",
-        "## The controls",
-        "",
+        *controls_lines(plan, checks, parts),
     ]
-    lines += [compiled_parts(plan, parts), ""]
-    for task, lines_of_task in checks.items():
-        lines += [f"{task}:", "", *lines_of_task, ""]
-    if any("; apart: " in line for task_lines in checks.values() for line in task_lines):
-        lines += [PARTED, ""]
+    rows = trend_rows(tasks)
+    lines += planned_trends(rows) + other_trends(rows)
+    for task, outcome in tasks.items():
+        lines += doses_against_ppo(task, outcome, results[task])
+    return lines
+
+
+def trend_rows(tasks: dict[str, dict]) -> list[dict]:
+    """A row per task and dosed variant, with the planned test's Holm p over the family of
+    trends and its reading."""
     rows = [
         {"task": task, "variant": variant, **analysis}
         for task, outcome in tasks.items()
@@ -320,8 +221,14 @@ def report(
     )
     for row, trend in zip(rows, trends, strict=True):
         row["holm"], row["reading"] = trend.holm, READINGS[trend.verdict]
+    return rows
+
+
+def planned_trends(rows: list[dict]) -> list[str]:
+    """The planned test: each trend of final return with the dose, its permutation p and
+    Holm's p, and its reading."""
     errors = [permutation_error(row["p"]) for row in rows]
-    lines += [
+    lines = [
         "## The planned test: the trend of final return with the dose",
         "",
         f"The permutation p is a Monte Carlo estimate: its standard error, "
@@ -339,7 +246,7 @@ def report(
             f"| {interval_cell(row['trend']['final'], '.2f')} | {row['p']:.{P_DECIMALS}f} "
             f"| {row['holm']:.{P_DECIMALS}f} | {row['reading']} |"
         )
-    lines += edge_note(
+    return lines + edge_note(
         [
             f"{row['task']} {row['variant']}, final: {row['edges']['final'].text()}"
             for row in rows
@@ -347,7 +254,12 @@ def report(
         ],
         "0",
     )
-    lines += [
+
+
+def other_trends(rows: list[dict]) -> list[str]:
+    """The trends described, not tested: of the escape share, the area under the curve and
+    the steps to each threshold."""
+    lines = [
         "",
         "## The other trends (described, not tested)",
         "",
@@ -363,7 +275,7 @@ def report(
         trend = row["trend"]
         cells = [interval_cell(trend[s], ".2f") for s in ("escape", "auc", *THRESHOLDS)]
         lines.append(f"| {row['task']} | {row['variant']} | {' | '.join(cells)} |")
-    lines += edge_note(
+    return lines + edge_note(
         [
             f"{row['task']} {row['variant']}, {TREND_NAMES[score]}: {at_edge.text()}"
             for row in rows
@@ -372,58 +284,71 @@ def report(
         ],
         "0",
     )
-    for task, outcome in tasks.items():
-        result, ppo = results[task], outcome["ppo"]
-        total = float(result.metrics["env_steps"][0, -1])
-        level = ", ".join(f"{s:.0%}: {v:,.1f}" for s, v in outcome["levels"].items())
-        ppo_final = interval_cell(statistics.interval(ppo["final"]), ".1f")
-        lines += [
-            "",
-            f"## {task}: each dose against PPO",
-            "",
-            f"PPO's IQM final return {ppo_final} over "
-            f"{ppo['final'].size} runs; thresholds {level}. Reaching a threshold: runs that do, "
-            "and their median env steps.",
-            "",
-            "| setting | runs | IQM final [95% CI] | P(> PPO), final [95% CI] "
-            "| Δ IQM final [95% CI] | the interval rules out | P(> PPO), AUC [95% CI] "
-            "| IQM escape share [95% CI] | reach 50% | reach 80% |",
-            "|---|---|---|---|---|---|---|---|---|---|",
-            f"| ppo | {ppo['final'].size} | {ppo_final} "
-            f"| – | – | – | – | {interval_cell(statistics.interval(ppo['escape']), '.3f')} "
-            f"| {reached(ppo[0.5], total)} | {reached(ppo[0.8], total)} |",
-        ]
-        names = dict(zip(map(_key, result.settings), labels(result.settings), strict=True))
-        edges = []
-        for variant, analysis in outcome["variants"].items():
-            for dose, runs in zip(analysis["doses"], analysis["runs"], strict=True):
-                on_final = statistics.compare(runs["final"], ppo["final"])
-                on_area = statistics.compare(runs["auc"], ppo["auc"])
-                label = names[_key({"variant": variant, analysis["name"]: dose})]
-                for score, key, on in (("final", "final", on_final), ("AUC", "auc", on_area)):
-                    at_edge = edge(
-                        on["probability_of_improvement"],
-                        lambda seed, key=key, runs=runs, ppo=ppo: statistics.compare(
-                            runs[key], ppo[key], seed=seed
-                        )["probability_of_improvement"],
-                        0.5,
-                    )
-                    if at_edge is not None:
-                        edges.append(f"{label}'s P(> PPO), {score}: {at_edge.text()}")
-                lines.append(
-                    f"| {label} | {runs['final'].size} "
-                    f"| {interval_cell(statistics.interval(runs['final']), '.1f')} "
-                    f"| {interval_cell(on_final['probability_of_improvement'], '.2f')} "
-                    f"| {interval_cell(on_final['iqm_difference'], '.1f')} "
-                    f"| {ruled_out(on_final['iqm_difference'], outcome['ppo_iqm'])} "
-                    f"| {interval_cell(on_area['probability_of_improvement'], '.2f')} "
-                    f"| {interval_cell(statistics.interval(runs['escape']), '.3f')} "
-                    f"| {reached(runs[0.5], total)} | {reached(runs[0.8], total)} |"
-                )
-        lines += edge_note(edges, "0.5")
-        diverged = int(np.count_nonzero(result.diverged))
-        lines += ["", f"Runs that diverged and are left out: {diverged}."]
-    return lines
+
+
+def doses_against_ppo(task: str, outcome: dict, result: SweepResult) -> list[str]:
+    """`task`'s section: PPO's runs, then a row per dose against them (described)."""
+    ppo = outcome["ppo"]
+    total = float(result.metrics["env_steps"][0, -1])
+    level = ", ".join(f"{s:.0%}: {v:,.1f}" for s, v in outcome["levels"].items())
+    ppo_final = interval_cell(statistics.interval(ppo["final"]), ".1f")
+    lines = [
+        "",
+        f"## {task}: each dose against PPO",
+        "",
+        f"PPO's IQM final return {ppo_final} over "
+        f"{ppo['final'].size} runs; thresholds {level}. Reaching a threshold: runs that do, "
+        "and their median env steps.",
+        "",
+        "| setting | runs | IQM final [95% CI] | P(> PPO), final [95% CI] "
+        "| Δ IQM final [95% CI] | the interval rules out | P(> PPO), AUC [95% CI] "
+        "| IQM escape share [95% CI] | reach 50% | reach 80% |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+        f"| ppo | {ppo['final'].size} | {ppo_final} "
+        f"| – | – | – | – | {interval_cell(statistics.interval(ppo['escape']), '.3f')} "
+        f"| {reached(ppo[0.5], total)} | {reached(ppo[0.8], total)} |",
+    ]
+    names = dict(zip(map(_key, result.settings), labels(result.settings), strict=True))
+    edges: list[str] = []
+    for variant, analysis in outcome["variants"].items():
+        for dose, runs in zip(analysis["doses"], analysis["runs"], strict=True):
+            label = names[_key({"variant": variant, analysis["name"]: dose})]
+            lines.append(dose_row(label, runs, outcome, total, edges))
+    diverged = int(np.count_nonzero(result.diverged))
+    return [
+        *lines,
+        *edge_note(edges, "0.5"),
+        "",
+        f"Runs that diverged and are left out: {diverged}.",
+    ]
+
+
+def dose_row(label: str, runs: dict, outcome: dict, total: float, edges: list[str]) -> str:
+    """One dose's row against PPO's runs (`outcome`'s), its intervals at the edge of 0.5 added
+    to `edges`."""
+    ppo = outcome["ppo"]
+    on_final = statistics.compare(runs["final"], ppo["final"])
+    on_area = statistics.compare(runs["auc"], ppo["auc"])
+    for score, key, on in (("final", "final", on_final), ("AUC", "auc", on_area)):
+        at_edge = edge(
+            on["probability_of_improvement"],
+            lambda seed, key=key: statistics.compare(runs[key], ppo[key], seed=seed)[
+                "probability_of_improvement"
+            ],
+            0.5,
+        )
+        if at_edge is not None:
+            edges.append(f"{label}'s P(> PPO), {score}: {at_edge.text()}")
+    return (
+        f"| {label} | {runs['final'].size} "
+        f"| {interval_cell(statistics.interval(runs['final']), '.1f')} "
+        f"| {interval_cell(on_final['probability_of_improvement'], '.2f')} "
+        f"| {interval_cell(on_final['iqm_difference'], '.1f')} "
+        f"| {ruled_out(on_final['iqm_difference'], outcome['ppo_iqm'])} "
+        f"| {interval_cell(on_area['probability_of_improvement'], '.2f')} "
+        f"| {interval_cell(statistics.interval(runs['escape']), '.3f')} "
+        f"| {reached(runs[0.5], total)} | {reached(runs[0.8], total)} |"
+    )
 
 
 def permutation_error(p: float) -> float:

@@ -40,18 +40,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: sh
 
 from common import (
     CLASSIC_TASKS,
-    EDGE_SEEDS,
     RESULTS,
     add_force_flag,
     argument_parser,
     by_variant,
-    edge,
     header,
-    outcome,
     recorded_parts,
     refuse_to_replace,
     write_result,
 )
+from edges import EDGE_SEEDS, edge, outcome
 
 EXPERIMENTS = Path(__file__).resolve().parents[1]
 SEEDS = {**dict.fromkeys(CLASSIC_TASKS, 50), **dict.fromkeys(MUJOCO_TASKS, 20)}
@@ -295,6 +293,8 @@ def high_cluster(plan: dict, every: dict[str, dict[str, Arm]]) -> list[str]:
 def report(
     plan: dict, name: str, rows: list[dict], every: dict[str, dict[str, Arm]], results: Path
 ) -> list[str]:
+    """The verdict: the plan, a row per comparison, and the notes and descriptive tables
+    beside the family."""
     baseline, candidates = arm_names(plan)
     lines = [
         *header(f"{plan['question']} The planned verdict"),
@@ -320,7 +320,15 @@ def report(
             f"| {interval_cell(row['area'], '.2f')} |"
         )
     lines += ceiling(plan, rows, every) + other_baseline(plan, rows, every, results)
+    return lines + across_mujoco(plan, every) + high_cluster(plan, every)
+
+
+def across_mujoco(plan: dict, every: dict[str, dict[str, Arm]]) -> list[str]:
+    """Where the plan has several MuJoCo tasks, each candidate's P(> baseline) averaged over
+    them, with a bootstrap stratified by task (secondary, not in the family)."""
+    baseline, candidates = arm_names(plan)
     mujoco = [t for t in every if t in MUJOCO_TASKS]
+    lines: list[str] = []
     if len(mujoco) > 1:
         lines += [
             "",
@@ -351,7 +359,7 @@ def report(
                 "At the edge: a bound within the bootstrap's Monte Carlo error of 0.5 (the "
                 f"range of that bound over {EDGE_SEEDS} resampling seeds): " + "; ".join(edges),
             ]
-    return lines + high_cluster(plan, every)
+    return lines
 
 
 def main() -> int:

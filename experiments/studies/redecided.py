@@ -201,10 +201,32 @@ def report(
     identity: tuple[str, str, str],
     where: str,
 ) -> list[str]:
+    """The re-decided verdicts: the plan and how it decides, a row per comparison beside its
+    earlier verdict, each family's count, where the two differ, and where the studies are."""
+    failed = sum(r["failed"] for r in rows)
+    return [
+        *preamble(plan, studies, identity),
+        *comparisons_table(rows),
+        *family_counts(rows),
+        *changed_lines(rows),
+        "",
+        f"Runs that diverged or finished no episode (ranked below every other): {failed}.",
+        "",
+        f"Each study whole (plan.json, decisions.json, report.md with the IQM differences and "
+        f"what each interval rules out, figures): `{where}/<family>-<schedule>/` "
+        f"({', '.join(s['name'] for s in studies)}).",
+    ]
+
+
+def preamble(
+    plan: dict[str, Any], studies: list[dict[str, Any]], identity: tuple[str, str, str]
+) -> list[str]:
+    """The report's title, the plan (its commit and digest) and how each comparison is
+    decided now and was decided before."""
     margin = plan["margin"]
     digest, commit, note = identity
     low, high = 0.5 - margin, 0.5 + margin
-    lines = [
+    return [
         *header(
             f"Which recorded FPPO, SPO and DPO comparisons with PPO are equivalent within "
             f"±{margin:g}? The re-decided verdicts"
@@ -241,6 +263,13 @@ def report(
         "at a level above 95%). *Earlier verdict*: the original plan's test "
         "recomputed from the same runs (Mann–Whitney's p, Holm over the family).",
         "",
+    ]
+
+
+def comparisons_table(rows: list[dict]) -> list[str]:
+    """A row per comparison: its decision, seeds, P with its repeated interval, and the
+    earlier verdict with its Holm p."""
+    lines = [
         "| family | task | candidate | decision | seeds | P(> ppo) [repeated CI] "
         "| earlier verdict (Holm p) |",
         "|---|---|---|---|---|---|---|",
@@ -252,7 +281,13 @@ def report(
             f"| {row['seeds']} | {row['theta']:.2f} [{interval[0]:.2f}, {interval[1]:.2f}] "
             f"| {row['earlier']} ({_p(row['holm'])}) |"
         )
-    lines += ["", "Per family:", ""]
+    return lines
+
+
+def family_counts(rows: list[dict]) -> list[str]:
+    """Each family's decisions counted, with the comparisons decided better, worse or
+    equivalent."""
+    lines = ["", "Per family:", ""]
     for family in dict.fromkeys(r["family"] for r in rows):
         members = [r for r in rows if r["family"] == family]
         counts = {
@@ -266,12 +301,17 @@ def report(
         lines.append(
             f"- {family} ({len(members)} comparisons, earlier: {EARLIER[family]}): {said}."
         )
+    return lines
+
+
+def changed_lines(rows: list[dict]) -> list[str]:
+    """The comparisons whose better or worse differs from the earlier verdict's, and why."""
     changed = [
         r
         for r in rows
         if {r["decision"], r["earlier"]} & {"better", "worse"} and r["decision"] != r["earlier"]
     ]
-    lines += [""]
+    lines = [""]
     if changed:
         lines += [
             "Where the difference decision differs from the earlier verdict (the study's z test "
@@ -286,15 +326,6 @@ def report(
         ]
     else:
         lines.append("Every better and worse of the earlier verdicts is decided the same way here.")
-    failed = sum(r["failed"] for r in rows)
-    lines += [
-        "",
-        f"Runs that diverged or finished no episode (ranked below every other): {failed}.",
-        "",
-        f"Each study whole (plan.json, decisions.json, report.md with the IQM differences and "
-        f"what each interval rules out, figures): `{where}/<family>-<schedule>/` "
-        f"({', '.join(s['name'] for s in studies)}).",
-    ]
     return lines
 
 

@@ -43,7 +43,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: sh
 
 from common import (
     CLASSIC_TASKS,
-    EDGE_SEEDS,
     ESCAPE_FRACTIONS,
     ESCAPE_VARIANTS,
     PAPER_VARIANTS,
@@ -51,14 +50,12 @@ from common import (
     TABLE1,
     argument_parser,
     by_variant,
-    edge,
-    edge_note,
-    outcome,
     read_fractions,
     read_run_record,
     recorded_parts,
     write_result,
 )
+from edges import EDGE_SEEDS, edge, edge_note, outcome
 
 BASELINE = "ppo"
 CHALLENGERS = ("fppo-lp", "fppo-qp")
@@ -133,6 +130,11 @@ def holm_adjusted(results: dict[str, SweepResult], protocol: str) -> dict[tuple[
     return {key: verdict.holm for key, verdict in zip(family, verdicts, strict=True)}
 
 
+def ordered(result: SweepResult) -> dict[str, int]:
+    """Each variant's setting in `result`, the exploratory variants last."""
+    return dict(sorted(by_variant(result).items(), key=lambda item: item[0] in EXPLORATORY))
+
+
 def task_section(
     task: str,
     protocol: str,
@@ -140,9 +142,18 @@ def task_section(
     records: list[dict],
     adjusted: dict[tuple[str, str], float],
 ) -> list[str]:
-    # The exploratory variants' rows last.
-    index = dict(sorted(by_variant(result).items(), key=lambda item: item[0] in EXPLORATORY))
-    names = labels(result.settings)
+    """`task`'s section under `protocol`: its parts, each variant's runs beside the paper's
+    Table 1, and each variant against PPO (the planned ones with their Holm p, `adjusted`)."""
+    lines = runs_table(task, protocol, result, records)
+    if BASELINE not in by_variant(result):
+        return [*lines, ""]
+    return [*lines, *against_baseline(task, protocol, result, adjusted), ""]
+
+
+def runs_table(task: str, protocol: str, result: SweepResult, records: list[dict]) -> list[str]:
+    """`task`'s parts under `protocol` (their runs, hours, machines and commits) and each
+    variant's IQMs, spread and max average return beside the paper's."""
+    index, names = ordered(result), labels(result.settings)
     final, area = result.scores("final"), result.scores("auc")
     wall = sum(r["wall_seconds"] for r in records)
     commits = sorted({r["commit"] for r in records})
@@ -169,10 +180,17 @@ def task_section(
             f"| {interval_cell(statistics.interval(area[i]), '.1f')} "
             f"| {statistics.sample_std(final[i]):.1f} | {best:.1f} ± {std:.1f} | {paper} |"
         )
-    if BASELINE not in index:
-        return [*lines, ""]
-    base = index[BASELINE]
-    lines += [
+    return lines
+
+
+def against_baseline(
+    task: str, protocol: str, result: SweepResult, adjusted: dict[tuple[str, str], float]
+) -> list[str]:
+    """Each variant against PPO on `task`: P(variant > PPO) and its outcome, the planned
+    comparisons' Holm p (`adjusted`), and the paper's gap beside the one measured here."""
+    index, names = ordered(result), labels(result.settings)
+    final, area, base = result.scores("final"), result.scores("auc"), index[BASELINE]
+    lines = [
         "",
         f"Against {BASELINE}: P(variant > {BASELINE}) on final returns and on AUC, the "
         "difference in IQM of final returns, and the difference in the paper's statistic "
@@ -186,7 +204,6 @@ def task_section(
         "| Δ max average return, share of PPO's | paper's Δ, share of its PPO's | in the CI |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    paper_base = TABLE1[task][PAPER_VARIANTS.index(BASELINE)]
     curves = {v: result.setting_metrics(i)["average_return"] for v, i in index.items()}
     scale = abs(max_average_return(curves[BASELINE])[0])
     edges: list[str] = []
@@ -196,11 +213,6 @@ def task_section(
         on_final = statistics.compare(final[i], final[base])
         on_area = statistics.compare(area[i], area[base])
         gap = statistics.max_average_difference(curves[variant], curves[BASELINE])
-        paper_gap = TABLE1[task][PAPER_VARIANTS.index(variant)] - paper_base
-        inside = "yes" if gap[1] <= paper_gap <= gap[2] else "no"
-        share = tuple(g / scale for g in gap)
-        paper_share = paper_gap / abs(paper_base)
-        inside_share = "yes" if share[1] <= paper_share <= share[2] else "no"
         probability = on_final["probability_of_improvement"]
         at_edge = edge(
             probability,
@@ -216,11 +228,26 @@ def task_section(
             f"| {names[i]} | {interval_cell(probability, '.2f')} | {outcome(probability, at_edge)} "
             f"| {'–' if holm is None else f'{holm:.2f}'} "
             f"| {interval_cell(on_area['probability_of_improvement'], '.2f')} "
-            f"| {interval_cell(on_final['iqm_difference'], '.1f')} | {interval_cell(gap, '.1f')} "
-            f"| {paper_gap:+.1f} | {inside} | {percent(share)} | {paper_share:+.0%} "
-            f"| {inside_share} |"
+            f"| {interval_cell(on_final['iqm_difference'], '.1f')} "
+            + paper_gap_cells(task, variant, gap, scale)
         )
-    return [*lines, *edge_note(edges, "0.5"), ""]
+    return [*lines, *edge_note(edges, "0.5")]
+
+
+def paper_gap_cells(task: str, variant: str, gap: tuple[float, float, float], scale: float) -> str:
+    """The gap in max average return to PPO measured here (`gap`) beside the paper's, in
+    return and as a share of each one's PPO (`scale`: PPO's here), with whether the paper's
+    lies in the interval, as the table's last cells."""
+    paper_base = TABLE1[task][PAPER_VARIANTS.index(BASELINE)]
+    paper_gap = TABLE1[task][PAPER_VARIANTS.index(variant)] - paper_base
+    inside = "yes" if gap[1] <= paper_gap <= gap[2] else "no"
+    share = tuple(g / scale for g in gap)
+    paper_share = paper_gap / abs(paper_base)
+    inside_share = "yes" if share[1] <= paper_share <= share[2] else "no"
+    return (
+        f"| {interval_cell(gap, '.1f')} | {paper_gap:+.1f} | {inside} | {percent(share)} "
+        f"| {paper_share:+.0%} | {inside_share} |"
+    )
 
 
 def percent(values: tuple[float, ...]) -> str:
@@ -320,12 +347,9 @@ def figures(results: dict[str, SweepResult], out: Path, protocol: str) -> Path:
     return path
 
 
-def main() -> None:
-    parser = argument_parser(__doc__)
-    parser.add_argument("--results", type=Path, default=RESULTS, help="where the parts are")
-    args = parser.parse_args()
-    out = args.results / "study"
-    preamble = [
+def preamble() -> list[str]:
+    """The report's title and what it holds: its endpoints, statistics, planned test and runs."""
+    return [
         "# Does FPPO beat PPO? The seed study",
         "",
         "Written by `python experiments/studies/verdict.py` from the parts that "
@@ -364,13 +388,32 @@ def main() -> None:
         "not the paper's (MuJoCo 1.5, gym v2).",
         "",
     ]
-    done, missing, parts = [], [], []
+
+
+def merged_parts(
+    results: Path,
+) -> tuple[dict[str, dict[str, SweepResult]], list[tuple[str, str, list[dict]]]]:
+    """Every task's recorded parts under each protocol, merged (by protocol, then task), and
+    each (task, protocol) recorded, with its parts' run records."""
     merged: dict[str, dict[str, SweepResult]] = {p: {} for p in PROTOCOLS}
+    parts = []
+    for task, (_, _, protocols) in PLAN.items():
+        for protocol in protocols:
+            result, records = recorded(results, task, protocol)
+            if result is not None:
+                merged[protocol][task] = result
+                parts.append((task, protocol, records))
+    return merged, parts
+
+
+def standing_lines(merged: dict[str, dict[str, SweepResult]]) -> list[str]:
+    """Where the study stands: what is complete, what is still to run and what of the
+    exploratory variants ran."""
+    done, missing = [], []
     for task, (variants, seeds, protocols) in PLAN.items():
         for protocol in protocols:
-            result, records = recorded(args.results, task, protocol)
-            counts = run_counts(result, variants)
-            short = {v: n for v, n in counts.items() if n < seeds}
+            result = merged[protocol].get(task)
+            short = {v: n for v, n in run_counts(result, variants).items() if n < seeds}
             label = f"{task} ({protocol})"
             if result is None:
                 missing.append(f"{label}: not started")
@@ -380,23 +423,12 @@ def main() -> None:
                 )
             else:
                 done.append(label)
-            if result is not None:
-                merged[protocol][task] = result
-                parts.append((task, protocol, records))
     explored = []
     for task in MUJOCO_TASKS:
         counts = run_counts(merged["paper"].get(task), EXPLORATORY)
         if any(counts.values()):
             explored.append(f"{task} ({', '.join(f'{v} {n}' for v, n in counts.items())})")
-    adjusted = {p: holm_adjusted(results, p) for p, results in merged.items()}
-    sections = [
-        line
-        for task, protocol, records in parts
-        for line in task_section(
-            task, protocol, merged[protocol][task], records, adjusted[protocol]
-        )
-    ]
-    head = [
+    return [
         "## Where the study stands",
         "",
         f"- Complete: {', '.join(done) or 'nothing yet'}.",
@@ -405,9 +437,41 @@ def main() -> None:
         f"{EXPLORATORY_SEEDS} seeds on the MuJoCo tasks): {'; '.join(explored) or 'none yet'}.",
         "",
     ]
+
+
+def figure_lines(results: Path, merged: dict[str, dict[str, SweepResult]]) -> list[str]:
+    """The figures: each protocol's learning curves, drawn into <results>/study/, and the
+    library's studies' own."""
+    out = results / "study"
+    out.mkdir(parents=True, exist_ok=True)
+    pictures = [f"study/{figures(runs, out, p).name}" for p, runs in merged.items() if runs]
+    for folder, *_ in FAMILIES:
+        for name in ("improvement.png", "profiles.png"):
+            if (results / "study-command" / folder / name).exists():
+                pictures.append(f"study-command/{folder}/{name}")
+    return [
+        "## Figures",
+        "",
+        *(f"![{p.removesuffix('.png').replace('/', ', ')}]({p})" for p in pictures),
+    ]
+
+
+def main() -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--results", type=Path, default=RESULTS, help="where the parts are")
+    args = parser.parse_args()
+    merged, parts = merged_parts(args.results)
+    adjusted = {p: holm_adjusted(results, p) for p, results in merged.items()}
+    sections = [
+        line
+        for task, protocol, records in parts
+        for line in task_section(
+            task, protocol, merged[protocol][task], records, adjusted[protocol]
+        )
+    ]
     lines = [
-        *preamble,
-        *head,
+        *preamble(),
+        *standing_lines(merged),
         "## The library's report",
         "",
         *library_reports(args.results),
@@ -418,17 +482,8 @@ def main() -> None:
             args.results / ESCAPE_FRACTIONS,
             "`results/escape_speed/`, as `results/escape_speed.md` records it",
         ),
+        *figure_lines(args.results, merged),
     ]
-    out.mkdir(parents=True, exist_ok=True)
-    pictures = [
-        f"study/{figures(results, out, p).name}" for p, results in merged.items() if results
-    ]
-    for folder, *_ in FAMILIES:
-        for name in ("improvement.png", "profiles.png"):
-            if (args.results / "study-command" / folder / name).exists():
-                pictures.append(f"study-command/{folder}/{name}")
-    lines += ["## Figures", ""]
-    lines += [f"![{p.removesuffix('.png').replace('/', ', ')}]({p})" for p in pictures]
     path = args.results / "study.md"
     write_result(path, lines)
     print(f"wrote {path}")

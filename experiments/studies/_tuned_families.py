@@ -17,9 +17,8 @@ import sys
 from pathlib import Path
 
 import fppo_jax
-from fppo_jax import StudyResult
+from fppo_jax import MissingFile, StudyResult
 from fppo_jax.analysis.study_runs import run_scores
-from fppo_jax.errors import MissingFile
 from fppo_jax.stats.sequential import Decision, Design, decide
 
 # A decision reached, in the plan's words; "undecided" is the last look's, None awaits seeds.

@@ -34,11 +34,10 @@ from pathlib import Path
 import numpy as np
 
 import fppo_jax
-from fppo_jax import StudyResult, SweepResult, TuneResult, merge
+from fppo_jax import MissingFile, StudyResult, SweepResult, TuneResult, merge
 from fppo_jax.analysis.report_kit import interval_cell
 from fppo_jax.analysis.study_files import task_folder
 from fppo_jax.analysis.study_runs import run_scores
-from fppo_jax.errors import MissingFile
 from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules

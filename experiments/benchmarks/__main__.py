@@ -22,6 +22,8 @@ SMOKE = {
     "bench_logging.py": "--steps 4096 --repeats 1 --results {tmp}",
     "bench_startup.py": "--smoke",
     "bench_tune.py": "--trials 4 --eta 2 --steps 1024 --tiny --results {tmp}",
+    "bench_trust.py": "--tasks cartpole --tiny --steps 1024 --budget 58 --test-seeds 4 "
+    "--results {tmp}",
 }
 
 if __name__ == "__main__":

@@ -1,0 +1,206 @@
+"""Does tuning leave PPO at least as strong as its default? PPO tuned by racing with the
+validation race (``fppo_jax.tune(..., scheduler="racing")``), then the chosen setting and the
+default trained side by side on fresh test seeds, per task.
+
+    python experiments/benchmarks/bench_trust.py --tasks cartpole,acrobot,mountaincar
+    python experiments/benchmarks/bench_trust.py --tasks hopper        # a part of its own
+    python experiments/benchmarks/bench_trust.py --report              # the write-up alone
+
+Per task, in <results>/trust/<task>/: the tune (``tune/``: racing over 9 trials, 2 tuning seeds
+a round, then the default and 3 finalists on 10 validation seeds, within --budget full runs),
+then one sweep of the chosen setting and the default on test seeds 0 … 19, evaluated once at
+the end (``test/``: the deterministic policy's mean return over 10 episodes, the study's eval
+endpoint). A task recorded is not trained again: the same command goes on where it stopped.
+The write-up, ``bench_trust.md``, gives per task P(tuned > default) with its 95% bootstrap
+interval, the IQM of both on the test seeds beside RL Zoo's tuned PPO, the race's outcome, the
+tune's wall time and its budget in full runs; and the goals: P ≥ 0.5 on every task, its interval
+above 0.5 on the MuJoCo ones, tuned PPO at RL Zoo's level. Nothing here is a test of FPPO.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import fppo_jax
+from fppo_jax.stats import statistics
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
+
+from common import (
+    argument_parser,
+    header,
+    read_run_record,
+    write_result,
+    write_run_record,
+)
+
+TEST_SEEDS = 20
+EVAL_EPISODES = 10
+TRIALS, SEEDS_PER_ROUND, FINALISTS, VALIDATION_SEEDS = 9, 2, 3, 10
+MUJOCO = ("hopper", "halfcheetah", "swimmer", "walker2d", "ant", "reacher")
+# RL Baselines3 Zoo's tuned PPO (benchmark.md, one run, deterministic evaluation, 1M steps).
+ZOO = {"hopper": 2410.0, "halfcheetah": 5819.0, "swimmer": 282.0}
+GOAL = {"halfcheetah": 3000.0}  # at least this IQM where RL Zoo's is out of reach
+
+
+def tune_task(task: str, where: Path, budget: int, tiny: dict[str, int], steps: int | None) -> None:
+    """The task's tune, to its end (it goes on from what is recorded)."""
+    began = time.perf_counter()
+    fppo_jax.tune(
+        task,
+        "ppo",
+        output=where,
+        scheduler="racing",
+        trials=TRIALS,
+        seeds=SEEDS_PER_ROUND,
+        budget=budget,
+        finalists=FINALISTS,
+        validation_seeds=VALIDATION_SEEDS,
+        eval_episodes=EVAL_EPISODES,
+        total_steps=steps,
+        **tiny,
+    )
+    write_run_record(where, time.perf_counter() - began)
+
+
+def test_task(task: str, tuned: Path, where: Path, seeds: int, tiny: dict[str, int]) -> None:
+    """The chosen setting and the default, side by side on test seeds 0 … seeds − 1."""
+    recorded = fppo_jax.load_tune(tuned)
+    chosen, default = recorded.chosen(task, "ppo"), recorded.results[task]["ppo"]["default"]
+    grid = [{"variant": "ppo", **chosen}]
+    if chosen != default["setting"]:
+        grid.append({"variant": "ppo", **default["setting"]})
+    budget = recorded.plan["budget"][task]
+    began = time.perf_counter()
+    result = fppo_jax.sweep(
+        task,
+        grid,
+        seeds=seeds,
+        total_steps=budget["env_steps_per_full_run"],
+        eval_every=10**9,  # once, after the final update
+        eval_episodes=EVAL_EPISODES,
+        log_dir=where,
+        progress=False,
+        **tiny,
+    )
+    write_run_record(where, time.perf_counter() - began, settings=str(len(result.settings)))
+
+
+def task_lines(task: str, directory: Path) -> tuple[list[str], dict[str, Any]]:
+    """The task's row of the write-up and what the goals read of it."""
+    tuned = fppo_jax.load_tune(directory / "tune")
+    test = fppo_jax.SweepResult.read(directory / "test")
+    scores = test.scores("eval")
+    ours, theirs = scores[0], scores[-1]  # one setting: the race kept the default
+    race = tuned.results[task]["ppo"]["race"]
+    kept = race["chosen"] == 0
+    # Where the race kept the default, both arms are the same runs: P is ½, exactly.
+    p = (0.5, 0.5, 0.5) if kept else statistics.compare(ours, theirs)["probability_of_improvement"]
+    spent = read_run_record(directory / "tune")["wall_seconds"]
+    runs = (
+        tuned.results[task]["ppo"]["env_steps"]
+        / tuned.plan["budget"][task]["env_steps_per_full_run"]
+    )
+    iqm = statistics.interval(ours, "iqm")
+    zoo = f"{ZOO[task]:,.0f}" if task in ZOO else "—"
+    outcome = "default kept" if kept else f"trial {race['chosen']}"
+    row = (
+        f"| {task} | {outcome} | "
+        f"{p[0]:.2f} [{p[1]:.2f}, {p[2]:.2f}] | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
+        f"{statistics.iqm(theirs):.1f} | {zoo} | {runs:.0f} | {spent / 60:.1f} |"
+    )
+    return [row], {"task": task, "p": p, "iqm": iqm[0], "seeds": len(test.seeds)}
+
+
+def goal_lines(found: list[dict[str, Any]]) -> list[str]:
+    """The goals, each met or missed, in words."""
+    lines = []
+    below = [f["task"] for f in found if f["p"][0] < 0.5]
+    lines.append(
+        "- Tuned PPO never below its default (P ≥ 0.5 on every task): "
+        + ("met." if not below else f"**missed** on {', '.join(below)}.")
+    )
+    mujoco = [f for f in found if f["task"] in MUJOCO]
+    unclear = [f["task"] for f in mujoco if f["p"][1] <= 0.5]
+    if mujoco:
+        lines.append(
+            "- On the MuJoCo tasks the interval above 0.5: "
+            + ("met." if not unclear else f"**missed** on {', '.join(unclear)}.")
+        )
+    for f in found:
+        bar = ZOO.get(f["task"]) if f["task"] not in GOAL else GOAL[f["task"]]
+        if bar is not None:
+            met = f["iqm"] >= bar
+            lines.append(
+                f"- {f['task']}: IQM {f['iqm']:.0f} against {bar:,.0f}: "
+                + ("met." if met else "**missed**.")
+            )
+    return lines
+
+
+def report(results: Path, output: Path) -> None:
+    """The write-up of every task recorded under `results`/trust."""
+    rows: list[str] = []
+    found: list[dict[str, Any]] = []
+    for directory in sorted((results / "trust").glob("*/test")):
+        task = directory.parent.name
+        lines, facts = task_lines(task, directory.parent)
+        rows += lines
+        found.append(facts)
+    last_seed = max((f["seeds"] for f in found), default=TEST_SEEDS) - 1
+    write_result(
+        output,
+        [
+            *header("Tuned PPO against its default, on fresh test seeds"),
+            "",
+            f"PPO tuned per task by racing ({TRIALS} trials, {SEEDS_PER_ROUND} tuning seeds a "
+            f"round), then {FINALISTS} finalists and the default raced on {VALIDATION_SEEDS} "
+            "validation seeds (one-sided Wilcoxon signed-rank, paired by seed, Holm, level "
+            f"0.05); then the chosen setting and the default trained on test seeds 0 … "
+            f"{last_seed}, each scored by its deterministic policy's mean return over "
+            f"{EVAL_EPISODES} episodes after the final update. P(tuned > default) with its 95% "
+            "percentile bootstrap interval; IQM with its interval. Where the race kept the "
+            "default, both arms are the same runs (P = 0.5).",
+            "",
+            "| task | race | P(tuned > default) | tuned IQM | default IQM | RL Zoo's tuned PPO | "
+            "full runs in the tune | tune minutes |",
+            "|---|---|---|---|---|---|---|---|",
+            *rows,
+            "",
+            "Goals:",
+            "",
+            *goal_lines(found),
+        ],
+    )
+
+
+def main() -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--tasks", default="", help="tasks to tune and test, e.g. hopper")
+    parser.add_argument("--budget", type=int, default=100, help="full runs per task, the race's in")
+    parser.add_argument("--test-seeds", type=int, default=TEST_SEEDS)
+    parser.add_argument("--steps", type=int, default=None, help="env steps per run (tiny runs)")
+    parser.add_argument("--tiny", action="store_true", help="a tiny run shape (smoke runs)")
+    parser.add_argument(
+        "--results", type=Path, default=Path(__file__).resolve().parents[1] / "results"
+    )
+    parser.add_argument("--report", action="store_true", help="the write-up alone")
+    args = parser.parse_args()
+    tiny = (
+        {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2} if args.tiny else {}
+    )
+    for task in [t for t in args.tasks.split(",") if t and not args.report]:
+        where = args.results / "trust" / task
+        if not (where / "tune" / "results.json").exists():
+            tune_task(task, where / "tune", args.budget, tiny, args.steps)
+        if not (where / "test" / "sweep.json").exists():
+            test_task(task, where / "tune", where / "test", args.test_seeds, tiny)
+    report(args.results, args.results / "bench_trust.md")
+    print((args.results / "bench_trust.md").read_text())
+
+
+if __name__ == "__main__":
+    main()

@@ -3,7 +3,7 @@ refusal naming whose they are."""
 
 import pytest
 
-from fppo_jax.analysis.arms import names_of_tasks, resolve_arms
+from fppo_jax.analysis.arms import names_of_tasks, resolve_arms, task_folder
 from fppo_jax.errors import InvalidInput
 
 
@@ -27,3 +27,8 @@ def test_arms_resolved_in_order_none_twice():
         resolve_arms(["ppo", "ppo"], "a tune")
     with pytest.raises(InvalidInput, match="unknown variant"):
         resolve_arms(["ppo", "no-such-variant"], "a tune")
+
+
+def test_a_namespaced_task_has_a_folder_of_one_level():
+    assert task_folder("native/Hopper-v4") == "native__Hopper-v4"
+    assert task_folder("cartpole") == "cartpole"

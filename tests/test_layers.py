@@ -104,7 +104,7 @@ def test_no_module_imports_itself_through_others():
 def test_an_import_circle_of_any_form_is_found():
     graph = _graph()
     graph["analysis.tune_files"] = graph["analysis.tune_files"] | {"analysis.study_tuned"}
-    assert ["analysis.study_tuned", "analysis.tune_files"] in _circles(graph)
+    assert any({"analysis.study_tuned", "analysis.tune_files"} <= set(c) for c in _circles(graph))
     assert _circles({"a": {"a"}, "b": set()}) == [["a"]]
 
 

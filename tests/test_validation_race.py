@@ -76,3 +76,13 @@ def test_a_finalist_clearly_better_is_chosen_and_its_search_score_kept_beside():
     lines = race_lines({"ppo": {"race": record}}, len(VALIDATION))
     assert "| ppo | 2 | 20.0 |" in "\n".join(lines)
     assert "- ppo: trial 2 replaces the default" in lines[-1]
+
+
+def test_an_arm_without_a_finalist_keeps_its_default():
+    searched = [{"arms": {"ppo": {"trials": [row(0, 5.0), row(1, None)], "survivors": [0]}}}]
+    race = ValidationRace(TwoRungs(), ["ppo"], 1, VALIDATION, end=8, level=0.05)
+    window = race.next_window([*searched, *searched])
+    assert {t for _, t, _ in window.runs} == {0}
+    scores = np.arange(len(window.runs), dtype=float)
+    found = race.measured([*searched, *searched], scores, np.zeros(len(scores), bool))["ppo"]
+    assert found["survivors"] == [0] and found["race"]["finalists"] == []

@@ -35,8 +35,8 @@ import numpy as np
 
 import fppo_jax
 from fppo_jax import MissingFile, StudyResult, SweepResult, TuneResult, merge
+from fppo_jax.analysis.arms import task_folder
 from fppo_jax.analysis.report_kit import interval_cell
-from fppo_jax.analysis.study_files import task_folder
 from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.stats import statistics
 

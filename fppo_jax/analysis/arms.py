@@ -26,6 +26,12 @@ def names_of_tasks(tasks: str | Sequence[str], what: str) -> list[str]:
     return tasks
 
 
+def task_folder(task: str) -> str:
+    """A task's folder in an experiment's: its name, a namespace's slash made a double
+    underscore (``native/Hopper-v4`` in ``native__Hopper-v4/``)."""
+    return task.replace("/", "__")
+
+
 def resolve_arms(variants: Variants, what: str, role: str = "variant") -> list[Surrogate]:
     """`variants` resolved to their surrogates, in order: at least one, none named twice, and no
     two different surrogates under one name (`what` has them as its `role`s: "a tune"'s

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import cast
 
+from fppo_jax.analysis.arms import task_folder
 from fppo_jax.analysis.reuse import runs_alone
 from fppo_jax.analysis.study_plan import (
     DECISIONS_FILE,
@@ -43,11 +44,6 @@ class StudyResult:
     results: dict[str, SweepResult]
     finished: bool
     defaults: dict[str, SweepResult] = dataclasses.field(default_factory=dict)
-
-
-def task_folder(task: str) -> str:
-    """A task's folder in the study: its name, a namespace's slash made a double underscore."""
-    return task.replace("/", "__")
 
 
 def group_folder(study: Path, task: str, group: int, defaults: bool = False) -> Path:

@@ -13,10 +13,11 @@ from typing import TypedDict, cast
 
 import numpy as np
 
+from fppo_jax.analysis.arms import task_folder
 from fppo_jax.analysis.preregistration import commit
 from fppo_jax.analysis.reuse import Taken, protocol_differences
 from fppo_jax.analysis.study_figures import write_figures
-from fppo_jax.analysis.study_files import DEFAULTS, StudyResult, task_folder
+from fppo_jax.analysis.study_files import DEFAULTS, StudyResult
 from fppo_jax.analysis.study_plan import (
     DECISIONS_FILE,
     REPORT_FILE,

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from fppo_jax.analysis.arms import task_folder
 from fppo_jax.analysis.preregistration import plan_digest
 from fppo_jax.analysis.tuning_records import ArmResults, RungScores, ShareScores, TunePlan
 from fppo_jax.errors import InvalidInput
@@ -29,13 +30,13 @@ Results = dict[str, dict[str, ArmResults]]
 
 
 def task_directory(directory: Path, task: str) -> Path:
-    """Where a tune in `directory` records `task`'s rungs."""
-    return directory / task
+    """Where a tune in `directory` records `task`'s rungs (a study's folder name for it)."""
+    return directory / task_folder(task)
 
 
-def rung_directory(task_folder: Path, rung: int) -> Path:
-    """Where rung `rung` (from 0) of a task is recorded, in the task's folder."""
-    return task_folder / f"rung-{rung}"
+def rung_directory(folder: Path, rung: int) -> Path:
+    """Where rung `rung` (from 0) of a task is recorded, in the task's `folder`."""
+    return folder / f"rung-{rung}"
 
 
 def read_plan(directory: Path) -> TunePlan:
@@ -63,11 +64,11 @@ def read_share(path: Path) -> ShareScores:
     return found
 
 
-def recorded_rungs(task_folder: Path) -> list[RungScores]:
-    """The scores of a task's rungs recorded in `task_folder`, in order, up to the first rung
+def recorded_rungs(folder: Path) -> list[RungScores]:
+    """The scores of a task's rungs recorded in its `folder`, in order, up to the first rung
     not recorded."""
     found: list[RungScores] = []
-    while (path := rung_directory(task_folder, len(found)) / SCORES_FILE).exists():
+    while (path := rung_directory(folder, len(found)) / SCORES_FILE).exists():
         found.append(read_rung(path))
     return found
 

@@ -110,7 +110,7 @@ def tune(
     total_steps: int | None = None,
     preset: str = "paper",
     backend: str = "auto",
-    progress: bool = True,
+    progress: bool = False,
     **settings: Any,
 ) -> TuneResult:
     """Tune every one of `variants` on each of `tasks` with the same budget (see the module).
@@ -138,8 +138,10 @@ def tune(
     of that many. ``part=(K, N)`` (with `chunk`) trains the K-th of N shares of those groups of
     each task's next rung, records it in ``<task>/rung-<r>/part-<K>/`` and returns; a call
     without `part` joins the shares into the rung trained unsplit with the same `chunk`, bit
-    for bit. `total_steps`, `preset`, `backend` and `settings` (run-shape fields of
-    :class:`~fppo_jax.core.config.TrainConfig`) are every run's.
+    for bit. `progress` prints each rung's lines on stderr, as a study's, a sweep's and a run's
+    (the command line shows them unless ``--quiet``). `total_steps`, `preset`, `backend` and
+    `settings` (run-shape fields of :class:`~fppo_jax.core.config.TrainConfig`) are every
+    run's.
     """
     tasks = names_of_tasks(tasks, "a tune")
     arms = resolve_arms(variants, "a tune")

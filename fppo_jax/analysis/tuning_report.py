@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from fppo_jax.analysis.population import Window
+from fppo_jax.analysis.tune_files import REPORT_FILE
 from fppo_jax.analysis.tuning_records import (
     ArmResults,
     ArmRung,
@@ -338,7 +339,7 @@ def write_report(output: Path, plan: TunePlan, results: dict[str, dict[str, ArmR
         "- Test: on seeds disjoint from the tuning seeds (`fppo-jax study --tuned`, which "
         "refuses an overlap).",
     ]
-    write_atomically(output / "report.md", ("\n".join(lines) + "\n").encode())
+    write_atomically(output / REPORT_FILE, ("\n".join(lines) + "\n").encode())
     _figure(output, results)
 
 

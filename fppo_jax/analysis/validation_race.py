@@ -31,7 +31,7 @@ from fppo_jax.analysis.tuning_records import (
     TrialScore,
 )
 from fppo_jax.stats import statistics
-from fppo_jax.stats.race import race
+from fppo_jax.stats.race import RaceOutcome, race
 
 # The race's test, as a plan names it: an id and version, never words.
 RACE_TEST: RaceTest = {"id": "wilcoxon-signed-rank-holm", "version": 1}
@@ -107,7 +107,12 @@ class ValidationRace:
         """The race of `rows`' finalists (all but the first, the default) against the default."""
         default = _scores(rows[0])
         contenders = [row["trial"] for row in rows[1:]]
-        found = race(default, np.array([_scores(row) for row in rows[1:]]), self.level)
+        # No finalist (every sampled trial diverged or never scored): the default stays.
+        found = (
+            race(default, np.array([_scores(row) for row in rows[1:]]), self.level)
+            if contenders
+            else RaceOutcome((), (), (), None)
+        )
         improvement = [_improvement(_scores(row), default) for row in rows[1:]]
         return {
             "test": {**RACE_TEST},

@@ -79,3 +79,10 @@ def test_an_array_task_lets_go_to_train_its_share(tmp_path):
 def test_the_commit_is_the_checkouts_or_unknown():
     found = commit()
     assert found == "unknown" or len(found) == 40
+
+
+def test_a_folder_holding_another_kind_of_experiment_is_refused(tmp_path):
+    (tmp_path / "plan.json").write_text("{}")
+    with pytest.raises(InvalidInput, match=r"holds a study \(plan\.json\): a tune is written"):
+        Preregistered(tmp_path, "a tune", apart_from={"plan.json": "a study"})
+    assert not (tmp_path / ".lock").exists()  # refused before anything is written

@@ -15,6 +15,11 @@ def test_a_tune_not_finished_is_no_source_of_settings(tmp_path):
     tune("cartpole", ARMS, output=tmp_path / "tune", rungs=0, **SMALL)
     with pytest.raises(InvalidInput, match="not finished"):
         study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", tuned=tmp_path / "tune")
+    # Its plan's path names the tune too; its folder is no study's.
+    with pytest.raises(InvalidInput, match="not finished"):
+        study("cartpole", "fppo-lp", output=tmp_path / "s", tuned=tmp_path / "tune/tune.json")
+    with pytest.raises(InvalidInput, match=r"holds a tune \(tune\.json\): a study is written"):
+        study("cartpole", "fppo-lp", output=tmp_path / "tune")
 
 
 def test_study_tune_tunes_races_and_decides_in_one_command_and_one_folder(tmp_path, capsys):

@@ -35,6 +35,9 @@ def test_the_streams_of_seeds_never_meet():
         ({"eta": 1}, "eta .* at least 2"),
         ({"scheduler": "racing"}, "racing spends a budget"),
         ({"scheduler": "racing", "budget": 45}, r"cannot hold one round of 4 trials × 2 seeds"),
+        ({"seeds": 1}, "at least 2 tuning seeds per trial, got 1"),
+        ({"seeds": [0, 1]}, r"seeds \[0, 1\] are a study's test seeds"),
+        ({"validation_seeds": list(range(3, 13))}, r"seeds \[3, 4, 5, 6, 7\] … are a study's"),
     ],
 )
 def test_a_design_that_cannot_work_is_refused_by_name(change, message):

@@ -109,7 +109,22 @@ class Preregistered:
     throughout, except that an array task's (`shared`) lets go once it has read what the tasks
     must read in turn (:meth:`share_out`), to train its share beside the others."""
 
-    def __init__(self, output: str | Path, what: str, *, shared: bool = False) -> None:
+    def __init__(
+        self,
+        output: str | Path,
+        what: str,
+        *,
+        shared: bool = False,
+        apart_from: Mapping[str, str] | None = None,
+    ) -> None:
+        """`apart_from`: the plan files of other kinds of experiment (by file, what it is),
+        whose folder this one refuses: its files would be written over theirs."""
+        for name, other in (apart_from or {}).items():
+            if (Path(output) / name).is_file():
+                raise InvalidInput(
+                    f"{output} holds {other} ({name}): {what} is written in a folder of its own "
+                    "(give another --output)"
+                )
         self.output = writable_directory(output)
         self.what, self.shared = what, shared
         self._lock = DirectoryLock(self.output, what, wait=PART_LOCK_WAIT if shared else 0.0)

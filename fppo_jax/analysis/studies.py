@@ -40,6 +40,7 @@ from fppo_jax.analysis.study_looks import run_looks, shown_progress
 from fppo_jax.analysis.study_plan import ENDPOINTS, PLAN_FILE, make_plan, upgraded
 from fppo_jax.analysis.study_runs import OWN_SETTINGS, Shape, Source
 from fppo_jax.analysis.study_tuned import check_tuned_protocol, tuned_settings
+from fppo_jax.analysis.tune_files import PLAN_FILE as TUNE_PLAN
 from fppo_jax.analysis.tuning import tune as tune_every_arm
 from fppo_jax.core.checks import check_part, positive_int
 from fppo_jax.core.config import CONFIG_FIELDS
@@ -149,7 +150,8 @@ def study(
         bool(with_defaults),
     )
     # Array tasks that start together take turns to check the plan (each holds the lock briefly).
-    with Preregistered(output, "a study", shared=part is not None) as folder:
+    apart = {TUNE_PLAN: "a tune"}
+    with Preregistered(output, "a study", shared=part is not None, apart_from=apart) as folder:
         plan = folder.check(plan, PLAN_FILE, _RECORDED_ONLY, upgraded)
         folder.share_out()  # the array's tasks train their shares side by side
         if shown_progress(settings):

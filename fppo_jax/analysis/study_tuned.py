@@ -9,6 +9,7 @@ from pathlib import Path
 
 from fppo_jax.analysis.study_plan import TunedChoice
 from fppo_jax.analysis.study_runs import Source
+from fppo_jax.analysis.tune_files import PLAN_FILE as TUNE_PLAN
 from fppo_jax.analysis.tune_files import RESULTS_FILE, TuneResult, load_tune, tune_digest
 from fppo_jax.analysis.tuning_records import TrialAcrossTasks
 from fppo_jax.analysis.tuning_report import across_tasks as trial_across_tasks
@@ -45,6 +46,8 @@ def tuned_settings(
     tune is not finished, lacks a task or a variant, or used a seed the study would, or, with
     `with_defaults`, if a trial 0 is not the default this code trains."""
     directory = Path(directory)
+    if directory.name == TUNE_PLAN and directory.is_file():  # the tune's plan named for it
+        directory = directory.parent
     digest = tune_digest(directory)
     recorded = load_tune(directory)
     if not recorded.finished:

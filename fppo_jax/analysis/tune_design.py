@@ -19,7 +19,7 @@ from fppo_jax.analysis.racing import Racing
 from fppo_jax.analysis.scheduling import Scheduler
 from fppo_jax.analysis.tuning_records import TaskBudget
 from fppo_jax.analysis.validation_race import RACE_TEST, ValidationRace
-from fppo_jax.core.checks import check_seeds, positive_int
+from fppo_jax.core.checks import MAX_SEEDS, check_seeds, positive_int
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.execution import updates_per_call
 from fppo_jax.run.prepare import Prepared
@@ -28,6 +28,7 @@ from fppo_jax.stats.sequential import check_level
 
 TUNING_SEED_START = 1_000_000
 VALIDATION_SEED_START = 2_000_000
+TEST_SEEDS_BELOW = MAX_SEEDS  # a study's test seeds count from 0, at most MAX_SEEDS of them
 
 SCHEDULERS = ("halving", "racing")
 SCORES = ("eval", "train")
@@ -159,6 +160,11 @@ def design(
     if scheduler == "halving":
         tuning = check_seeds(seeds, first=TUNING_SEED_START)
         per_round = len(tuning)
+        if per_round < 2:
+            raise InvalidInput(
+                "successive halving ranks each trial on the mean of its seeds: give at least 2 "
+                f"tuning seeds per trial, got {per_round}"
+            )
     else:
         per_round = positive_int("seeds (per round)", seeds) if isinstance(seeds, int) else 0
         if not per_round:
@@ -167,6 +173,12 @@ def design(
     overlap = sorted(set(tuning) & set(validation))
     if overlap:
         raise InvalidInput(f"validation seeds {overlap} are also tuning seeds: keep them apart")
+    tests = sorted(seed for seed in {*tuning, *validation} if seed < TEST_SEEDS_BELOW)
+    if tests:
+        raise InvalidInput(
+            f"seeds {tests[:5]}{' …' if len(tests) > 5 else ''} are a study's test seeds (it "
+            f"counts from 0): tune and validate on seeds from {TEST_SEEDS_BELOW:,} on"
+        )
     halving_eta = _eta(eta) if scheduler == "halving" else 0
     return TuneDesign(
         scheduler,

@@ -42,6 +42,7 @@ from typing import Any, cast
 from fppo_jax.analysis.arms import Variants, names_of_tasks, resolve_arms
 from fppo_jax.analysis.population import Population
 from fppo_jax.analysis.preregistration import Preregistered, commit
+from fppo_jax.analysis.study_plan import PLAN_FILE as STUDY_PLAN
 from fppo_jax.analysis.tune_design import TuneDesign, design
 from fppo_jax.analysis.tune_files import (
     PLAN_FILE,
@@ -184,7 +185,8 @@ def tune(
     verbosity = optuna.logging.get_verbosity()
     # Array tasks that start together take turns with the folder: each holds it while it reads
     # and writes the plan and Optuna's storage, then lets go to train its share.
-    with Preregistered(output, "a tune", shared=part is not None) as folder:
+    apart = {STUDY_PLAN: "a study"}
+    with Preregistered(output, "a tune", shared=part is not None, apart_from=apart) as folder:
         try:
             # Optuna's line per study made and per trial told, and its note that the Sobol
             # sampler is experimental, are not this tune's progress: quiet for the call.

@@ -112,12 +112,17 @@ def task_lines(task: str, directory: Path) -> tuple[list[str], dict[str, Any]]:
         f"{p[0]:.2f} [{p[1]:.2f}, {p[2]:.2f}] | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
         f"{statistics.iqm(theirs):.1f} | {zoo} | {runs:.0f} | {spent / 60:.1f} |"
     )
-    return [row], {"task": task, "p": p, "iqm": iqm[0], "seeds": len(test.seeds)}
+    facts = {"task": task, "p": p, "iqm": iqm[0], "seeds": len(test.seeds), "kept": kept}
+    return [row], facts
 
 
 def goal_lines(found: list[dict[str, Any]]) -> list[str]:
     """The goals, each met or missed, in words."""
-    lines = []
+    kept = [f["task"] for f in found if f["kept"]]
+    lines = [
+        f"- The race kept the default on {len(kept)} of {len(found)} tasks"
+        + (f" ({', '.join(kept)}): there tuning changed nothing." if kept else ".")
+    ]
     below = [f["task"] for f in found if f["p"][0] < 0.5]
     lines.append(
         "- Tuned PPO never below its default (P ≥ 0.5 on every task): "
@@ -125,7 +130,11 @@ def goal_lines(found: list[dict[str, Any]]) -> list[str]:
     )
     mujoco = [f for f in found if f["task"] in MUJOCO]
     unclear = [f["task"] for f in mujoco if f["p"][1] <= 0.5]
-    if mujoco:
+    if not mujoco:
+        lines.append(
+            "- The MuJoCo tasks' parts are not recorded yet: their goals are not measured."
+        )
+    else:
         lines.append(
             "- On the MuJoCo tasks the interval above 0.5: "
             + ("met." if not unclear else f"**missed** on {', '.join(unclear)}.")

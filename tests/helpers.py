@@ -116,7 +116,12 @@ def run_script(path: Path, *args: str, cwd: Path) -> subprocess.CompletedProcess
 
 # A tiny tune: four trials per arm halved by 2 over 8 updates, rungs of 4, 2 and 1 trials ending
 # at updates 2, 4 and 8.
-TUNE_SMALL = dict(trials=4, eta=2, seeds=2, total_steps=8 * 128, progress=False, **TINY)
+# The race at its cheapest: the default and one finalist on 4 validation seeds (at level 0.1, the
+# smallest that 4 seeds can reach) make 16 runs, the first rung's shape, so its program is the
+# first rung's; trials ranked on the training return, which needs no evaluation program.
+TUNE_RACE = dict(finalists=1, validation_seeds=4, race_level=0.1, score="train")
+TUNE_SMALL = dict(trials=4, eta=2, seeds=2, total_steps=8 * 128, progress=False, **TUNE_RACE)
+TUNE_SMALL |= TINY
 TUNE_ARMS = ["ppo", "fppo-lp"]
 
 

@@ -28,7 +28,8 @@ def test_study_tune_tunes_races_and_decides_in_one_command_and_one_folder(tmp_pa
     from fppo_jax.cli import main
 
     flags = ["study", "--tune", "--tasks", "cartpole", "--candidates", "fppo-lp"]
-    flags += ["--trials", "4", "--eta", "2", "--validation-seeds", "7", "--max-seeds", "4"]
+    flags += ["--trials", "4", "--eta", "2", "--finalists", "1", "--validation-seeds", "4"]
+    flags += ["--race-level", "0.1", "--max-seeds", "4"]
     flags += ["--group-size", "4", "--endpoint", "eval", "--eval-every", "8"]
     flags += ["--eval-episodes", "5", "--steps", "1024", *TINY_FLAGS, "--quiet"]
     assert main([*flags, "--output", str(tmp_path)]) == 0

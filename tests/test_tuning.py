@@ -56,24 +56,24 @@ def test_a_tune_halves_each_arm_in_one_program_per_rung(tuned):
     *scores, race = rung_scores(output)
     for arm in ARMS:
         assert [len(rung["arms"][arm]["trials"]) for rung in scores] == [4, 2, 1]
-        # Then the default and the 3 finalists race on the validation seeds.
-        assert race["arms"][arm]["trials"][0]["trial"] == 0
-        assert len(race["arms"][arm]["trials"][0]["seed_scores"]) == 10
+        # Then the default and the finalist race on the validation seeds.
+        assert [row["trial"] for row in race["arms"][arm]["trials"]][:1] == [0]
+        assert len(race["arms"][arm]["trials"][0]["seed_scores"]) == 4
         # The survivors of a rung are the live trials of the next.
         for rung, following in itertools.pairwise(scores):
             assert [row["trial"] for row in following["arms"][arm]["trials"]] == rung["arms"][arm][
                 "survivors"
             ]
     # Every arm's live trials × seeds in one program per rung, none compiled twice.
-    assert compiled == [2 * 4 * 2, 2 * 2 * 2, 2 * 1 * 2, 2 * 4 * 10]
+    assert compiled == [2 * 4 * 2, 2 * 2 * 2, 2 * 1 * 2, 2 * 2 * 4]
     assert all(seed == TUNING_SEED_START + i for i, seed in enumerate(result.plan["seeds"]))
 
 
 def test_every_arm_spends_the_planned_env_steps(tuned):
     _output, result, _ = tuned
     planned = result.plan["budget"]["cartpole"]["env_steps_per_arm"]
-    # Halving's 2 seeds × (4 × 2 + 2 × 2 + 1 × 4) updates, then 4 entrants × 10 full runs.
-    assert planned == (2 * (4 * 2 + 2 * 2 + 1 * 4) + 4 * 10 * 8) * 128
+    # Halving's 2 seeds × (4 × 2 + 2 × 2 + 1 × 4) updates, then 2 entrants × 4 full runs.
+    assert planned == (2 * (4 * 2 + 2 * 2 + 1 * 4) + 2 * 4 * 8) * 128
     assert [result.results["cartpole"][arm]["env_steps"] for arm in ARMS] == [planned] * 2
 
 
@@ -506,7 +506,8 @@ def test_the_command_line_plans_tunes_and_refuses_in_one_line(tuned, tmp_path, c
 
     flags = ["tune", "--variants", "ppo,fppo-lp", "--tasks", "cartpole", "--trials", "4"]
     flags += ["--eta", "2", "--steps", "1024", "--num-envs", "4", "--num-steps", "32"]
-    flags += ["--minibatches", "4", "--epochs", "2", "--quiet"]
+    flags += ["--minibatches", "4", "--epochs", "2", "--quiet", "--score", "train"]
+    flags += ["--finalists", "1", "--validation-seeds", "4", "--race-level", "0.1"]
     assert main([*flags, "--output", str(tmp_path / "a"), "--rungs", "0"]) == 0
     assert "the same command goes on" in capsys.readouterr().out
     plan = json.loads((tmp_path / "a/tune.json").read_text())

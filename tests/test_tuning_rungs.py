@@ -15,7 +15,7 @@ from fppo_jax.errors import InvalidInput
 
 # Runs per compiled call of the split tunes: 3 trials × 2 seeds. Rung 0's 16 runs train in
 # groups of 6, 6 and 4 (filled up to 6), rung 1's 8 in groups of 6 and 2, rung 2's 4 in one,
-# the validation race's 80 in 14.
+# the validation race's 16 as rung 0's.
 CHUNK = 6
 
 
@@ -64,7 +64,7 @@ def test_a_tune_split_into_parts_joins_into_the_unsplit_tune_bit_for_bit(tmp_pat
     }
     assert optuna_trials(tmp_path / "split") == optuna_trials(tmp_path / "whole")
     # Rung 1's 8 runs make 2 groups and rung 2's 4 one: the parts past them train nothing.
-    # The validation race's 2 arms × 4 entrants × 10 seeds make 14 groups, in every part.
+    # The validation race's 2 arms × 2 entrants × 4 seeds make 3 groups, one a part.
     shares = [sorted(p.name for p in rung.glob("part-*")) for rung in _rungs(tmp_path / "split")]
     three = ["part-1", "part-2", "part-3"]
     assert shares == [three, ["part-1", "part-2"], ["part-1"], three]

@@ -125,19 +125,7 @@ class SuccessiveHalving:
         going_on = self.rungs.trials[min(len(recorded) + 1, self.rounds - 1)]
         measured: dict[str, ArmRung] = {}
         for arm, trials in self.live(recorded).items():
-            rows: list[TrialScore] = []
-            for trial in trials:
-                runs = [i for i, (a, t, _) in enumerate(window.runs) if a == arm and t == trial]
-                values = np.asarray(scores)[runs].astype(float)
-                mean = float(np.mean(values))
-                rows.append(
-                    {
-                        "trial": trial,
-                        "score": mean if math.isfinite(mean) else None,
-                        "seed_scores": [float(v) if math.isfinite(v) else None for v in values],
-                        "diverged": bool(np.asarray(diverged)[runs].any()),
-                    }
-                )
+            rows = [trial_row(window, scores, diverged, arm, trial) for trial in trials]
             before = recorded[-1]["arms"][arm]["trials"] if recorded else None
             found = evidence(rows, before)
             # A tie cuts none: the trials' numbers, not their scores, would choose.
@@ -145,3 +133,31 @@ class SuccessiveHalving:
             survivors = sorted(r["trial"] for r in kept)
             measured[arm] = {"trials": rows, "survivors": survivors, "evidence": found}
         return measured
+
+
+def trial_row(
+    window: Window,
+    scores: np.ndarray,
+    diverged: np.ndarray,
+    arm: str,
+    trial: int,
+    before: TrialScore | None = None,
+) -> TrialScore:
+    """`arm`'s `trial`'s row after `window`: its runs' scores there (after `before`'s, for a
+    trial that goes on adding seeds), their mean (None where not finite: a run without a score)
+    and whether a run diverged."""
+    runs = [i for i, (a, t, _) in enumerate(window.runs) if a == arm and t == trial]
+    new = [float(v) if math.isfinite(v) else None for v in np.asarray(scores, float)[runs]]
+    seed_scores = [*(before["seed_scores"] if before else []), *new]
+    mean = float(np.mean(seed_values(seed_scores)))
+    return {
+        "trial": trial,
+        "score": mean if math.isfinite(mean) else None,
+        "seed_scores": seed_scores,
+        "diverged": bool(np.asarray(diverged)[runs].any()) or bool(before and before["diverged"]),
+    }
+
+
+def seed_values(seed_scores: Sequence[float | None]) -> np.ndarray:
+    """A row's seed scores as numbers, NaN for a run without a score."""
+    return np.array([math.nan if v is None else v for v in seed_scores], float)

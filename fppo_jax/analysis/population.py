@@ -163,7 +163,7 @@ class Population:
             evaluator = make_evaluator(self.prepared.trainer.env, self.eval_episodes)
             self._evaluator = jax.jit(jax.vmap(evaluator))
         policy = make_policy(self.prepared.trainer, state)
-        runs = len(fetch_diverged(state))
+        runs = state.nonfinite_update.shape[0]
         key = evaluation_key()
         keys = jax.numpy.broadcast_to(key, (runs, *key.shape))
         returns = np.asarray(self._evaluator(policy, keys), dtype=float)

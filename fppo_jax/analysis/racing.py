@@ -13,11 +13,11 @@ race (:mod:`fppo_jax.analysis.validation_race`) decides what replaces the defaul
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
 
+from fppo_jax.analysis.halving import seed_values, trial_row
 from fppo_jax.analysis.population import Window
 from fppo_jax.analysis.tuning_records import ArmRung, RungScores, TrialScore
 from fppo_jax.stats.race import signed_rank_p
@@ -74,7 +74,7 @@ class Racing:
         for arm, trials in self.live(recorded).items():
             last = recorded[-1]["arms"][arm]["trials"] if recorded else []
             before = {row["trial"]: row for row in last}
-            rows = [_row(window, scores, diverged, arm, t, before.get(t)) for t in trials]
+            rows = [trial_row(window, scores, diverged, arm, t, before.get(t)) for t in trials]
             measured[arm] = {"trials": rows, "survivors": self._still_in(rows)}
         return measured
 
@@ -84,40 +84,15 @@ class Racing:
         if not alive:
             return []
         incumbent = max(alive, key=lambda r: (_mean(r), -r["trial"]))
-        best = _values(incumbent)
+        best = seed_values(incumbent["seed_scores"])
         return sorted(
             row["trial"]
             for row in alive
-            if row is incumbent or signed_rank_p(best, _values(row)) >= self.level
+            if row is incumbent
+            or signed_rank_p(best, seed_values(row["seed_scores"])) >= self.level
         )
 
 
-def _row(
-    window: Window,
-    scores: np.ndarray,
-    diverged: np.ndarray,
-    arm: str,
-    trial: int,
-    before: TrialScore | None,
-) -> TrialScore:
-    """`trial`'s row after this round: its scores on every seed so far, their mean."""
-    runs = [i for i, (a, t, _) in enumerate(window.runs) if a == arm and t == trial]
-    new = [float(v) if math.isfinite(v) else None for v in np.asarray(scores, float)[runs]]
-    seed_scores = [*(before["seed_scores"] if before else []), *new]
-    values = np.array([math.nan if v is None else v for v in seed_scores], float)
-    mean = float(np.mean(values))
-    return {
-        "trial": trial,
-        "score": mean if math.isfinite(mean) else None,
-        "seed_scores": seed_scores,
-        "diverged": bool(np.asarray(diverged)[runs].any()) or bool(before and before["diverged"]),
-    }
-
-
-def _values(row: TrialScore) -> np.ndarray:
-    return np.array([math.nan if v is None else v for v in row["seed_scores"]], float)
-
-
 def _mean(row: TrialScore) -> float:
-    values = _values(row)
+    values = seed_values(row["seed_scores"])
     return float(np.mean(np.where(np.isfinite(values), values, -np.inf)))

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fppo_jax.analysis.halving import ranked
+from fppo_jax.analysis.halving import ranked, seed_values, trial_row
 from fppo_jax.analysis.population import Window
 from fppo_jax.analysis.scheduling import Scheduler
 from fppo_jax.analysis.tuning_records import (
@@ -96,7 +96,7 @@ class ValidationRace:
         assert window is not None
         measured: dict[str, ArmRung] = {}
         for arm, trials in self.entrants(recorded).items():
-            rows = [_row(window, scores, diverged, arm, trial) for trial in trials]
+            rows = [trial_row(window, scores, diverged, arm, trial) for trial in trials]
             record = self._raced(recorded, arm, rows)
             measured[arm] = {"trials": rows, "survivors": [record["chosen"]], "race": record}
         return measured
@@ -200,22 +200,8 @@ def search_score(recorded: Sequence[RungScores], arm: str, trial: int) -> float 
     return found
 
 
-def _row(
-    window: Window, scores: np.ndarray, diverged: np.ndarray, arm: str, trial: int
-) -> TrialScore:
-    runs = [i for i, (a, t, _) in enumerate(window.runs) if a == arm and t == trial]
-    values = np.asarray(scores, float)[runs]
-    mean = float(np.mean(values))
-    return {
-        "trial": trial,
-        "score": mean if math.isfinite(mean) else None,
-        "seed_scores": [float(v) if math.isfinite(v) else None for v in values],
-        "diverged": bool(np.asarray(diverged)[runs].any()),
-    }
-
-
 def _scores(row: TrialScore) -> np.ndarray:
-    return np.array([math.nan if v is None else v for v in row["seed_scores"]], float)
+    return seed_values(row["seed_scores"])
 
 
 def _improvement(finalist: np.ndarray, default: np.ndarray) -> list[float | None]:

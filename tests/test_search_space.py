@@ -49,6 +49,23 @@ def test_a_space_file_replaces_the_intervals_it_names(tmp_path):
     assert read_space_file(yaml_path) == {"epsilon": {"low": 0.1, "high": 0.3}}
 
 
+def test_a_yaml_space_file_reads_an_exponent_without_a_dot_as_a_number(tmp_path):
+    # PyYAML alone reads 1e-4 as the text "1e-4", which the interval refused as not finite.
+    path = tmp_path / "space.yaml"
+    path.write_text("learning_rate: {low: 1e-4, high: 3E-3, scale: log}\nentropy_coef: [0, 1e-2]\n")
+    given = read_space_file(path)
+    assert given == {
+        "learning_rate": {"low": 1e-4, "high": 3e-3, "scale": "log"},
+        "entropy_coef": [0, 1e-2],
+    }
+    assert search_spaces([BUILTINS["ppo"]], given)["ppo"].shared["learning_rate"] == Interval(
+        1e-4, 3e-3, "log"
+    )
+    path.write_text("learning_rate: {low: '1e-4', high: 1e-3, scale: log}\n")  # quoted: text
+    with pytest.raises(InvalidInput, match="must be finite"):
+        search_spaces([BUILTINS["ppo"]], read_space_file(path))
+
+
 @pytest.mark.parametrize(
     ("value", "message"),
     [

@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypedDict
@@ -151,9 +152,7 @@ def read_space_file(path: str | Path) -> dict[str, Any]:
         raise InvalidInput(f"cannot read the space file {path}: {error}") from None
     try:
         if path.suffix in (".yaml", ".yml"):
-            import yaml
-
-            data = yaml.safe_load(text)
+            data = _yaml_with_numbers(text)
         else:
             data = json.loads(text)
     except Exception as error:  # JSON's and YAML's own errors, whose text names the place
@@ -161,6 +160,22 @@ def read_space_file(path: str | Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise InvalidInput(f"the space file {path} must map names to intervals, got {data!r}")
     return data
+
+
+# A number in exponent form without a dot (1e-4, 2E+3): YAML 1.2 and JSON read it as a number,
+# but PyYAML follows YAML 1.1, whose floats need the dot, and reads it as text.
+_EXPONENT = re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$")
+
+
+def _yaml_with_numbers(text: str) -> Any:
+    """`text` as PyYAML's safe loader reads it, but for :data:`_EXPONENT`, read as a number:
+    an interval written ``{low: 1e-4, high: 1e-2}`` means numbers, as in a JSON file."""
+    import yaml
+
+    # On a class of its own: PyYAML's resolvers are class-wide, and SafeLoader is everyone's.
+    loader: Any = type("Loader", (yaml.SafeLoader,), {})
+    loader.add_implicit_resolver("tag:yaml.org,2002:float", _EXPONENT, list("-+0123456789"))
+    return yaml.load(text, Loader=loader)  # a SafeLoader, with one more resolver
 
 
 def search_spaces(

@@ -3,6 +3,7 @@ import importlib.util
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -21,6 +22,7 @@ from fppo_jax.analysis.plots import (
     plot_objectives,
     plot_profiles,
     plot_sweep,
+    plot_tuning_curves,
 )
 from fppo_jax.core.trainer import METRICS
 from fppo_jax.run.results import SweepResult
@@ -181,6 +183,32 @@ def test_runs_that_diverged_are_left_out_of_the_ablation_chart(result):
     best = [result.metrics["average_return"][2, 1:].max()]  # α = 1.1: its one seed left
     best.append(np.nanmax(result.metrics["average_return"][4:].mean(axis=0)))
     np.testing.assert_allclose(line.get_ydata(), best)
+
+
+def curve_of(bests, steps=120_000):
+    """An arm's results as the tuning curves read them: its best score at each rung."""
+    curve = [{"env_steps": steps * (r + 1), "best": best} for r, best in enumerate(bests)]
+    return {"curve": curve, "expected_best": None}
+
+
+def test_tuning_curves_write_env_steps_short_enough_not_to_run_together():
+    figure = plot_tuning_curves({"cartpole": {"ppo": curve_of([50.0, 120.0, 180.0])}})
+    figure.canvas.draw()
+    labels = [t.get_text() for t in figure.axes[0].get_xticklabels() if t.get_text()]
+    assert labels and all(len(label) <= 4 for label in labels), labels  # 240k, not 240000
+    assert "240k" in labels
+
+
+def test_tuning_curves_of_a_task_where_no_trial_scored_say_so_without_a_warning():
+    nothing = {"ppo": curve_of([None, None]), "spo": curve_of([None, None])}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # matplotlib's "No artists with labels" among them
+        figure = plot_tuning_curves({"mountaincar": nothing, "cartpole": {"ppo": curve_of([9.0])}})
+    empty, scored = figure.axes
+    assert empty.get_legend() is None and scored.get_legend() is not None
+    assert [text.get_text() for text in empty.texts] == [
+        "no trial scored: each diverged\nor finished no episode"
+    ]
 
 
 def test_importing_plots_leaves_the_backend_alone():

@@ -1,7 +1,7 @@
 """Figures: every variant's surrogate and slope against the ratio (the paper's Figs. 1 and 3), a
-sweep's learning curves (Figs. 4–5) and α/k chart (Fig. 6), the escape-speed chart, and the
-comparisons of :mod:`fppo_jax.stats.statistics` (performance profiles, probabilities of
-improvement).
+sweep's learning curves (Figs. 4–5) and α/k chart (Fig. 6), the escape-speed chart, a tune's
+tuning curves, and the comparisons of :mod:`fppo_jax.stats.statistics` (performance profiles,
+probabilities of improvement).
 
 Each function draws on the Axes it is given, or on a new figure, and returns the figure. Saving
 is the caller's (``fig.savefig``); :func:`plot_sweep` does it for a sweep's directory. No
@@ -22,8 +22,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
-from matplotlib.ticker import PercentFormatter
+from matplotlib.ticker import EngFormatter, MaxNLocator, PercentFormatter
 
+from fppo_jax.analysis.tuning_records import ArmResults
 from fppo_jax.core.resolution import VARIANT_SPECIFIC, objective
 from fppo_jax.core.variants import EPSILON, VARIANTS
 from fppo_jax.errors import InvalidInput
@@ -299,6 +300,56 @@ def plot_sweep(result: SweepResult, directory: str | Path) -> list[Path]:
         fig.savefig(paths[-1], dpi=120)
         plt.close(fig)
     return paths
+
+
+def plot_tuning_curves(results: Mapping[str, Mapping[str, ArmResults]]) -> Figure:
+    """A tune's tuning curves (``tuning_curves.png``), a panel per task of `results` (as
+    ``results.json`` holds them): per arm the best trial's score at each rung against the env
+    steps the arm spent (solid), and the expected best of n first-rung settings (dashed) with
+    its bootstrap band (shaded). A task where no trial scored says so in its panel."""
+    figure, axes = plt.subplots(
+        1, len(results), figsize=(5 * len(results), 3.5), squeeze=False, layout="constrained"
+    )
+    for ax, (task, arms) in zip(axes[0], results.items(), strict=True):
+        for arm, found in arms.items():
+            points = [(c["env_steps"], c["best"]) for c in found["curve"] if c["best"] is not None]
+            if not points:  # no trial scored at any rung: then none on the first, no band
+                continue
+            (line,) = ax.plot(*zip(*points, strict=True), marker="o", label=arm)
+            if found["expected_best"] is not None:
+                steps, best, low, high = (
+                    [point[key] for point in found["expected_best"]["points"]]
+                    for key in ("env_steps", "expected_best", "low", "high")
+                )
+                ax.plot(steps, best, linestyle="--", color=line.get_color())
+                ax.fill_between(steps, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
+        ax.set(title=task, xlabel="env steps spent by the arm", ylabel="best score")
+        steps_axis(ax)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+        else:  # a legend of nothing is matplotlib's warning, and an empty panel says nothing
+            ax.set(xticks=[], yticks=[])
+            ax.text(
+                0.5,
+                0.5,
+                "no trial scored: each diverged\nor finished no episode",
+                ha="center",
+                va="center",
+                transform=ax.transAxes,
+            )
+    figure.suptitle(
+        "solid: the best trial at each rung; dashed: the expected best of n first-rung "
+        "settings,\nshaded: its 95% bootstrap band over the trials",
+        fontsize=8,
+    )
+    return figure
+
+
+def steps_axis(ax: Axes) -> None:
+    """Env steps on `ax`'s x axis as 250k or 1.5M, at most six ticks: written out in full
+    (250000, 1500000) they run together in a narrow panel."""
+    ax.xaxis.set_major_formatter(EngFormatter(sep=""))
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=5))
 
 
 def _axes(ax: Axes | None, figsize: tuple[float, float]) -> Axes:

@@ -448,31 +448,8 @@ def _space_text(plan: TunePlan) -> str:
 def _figure(output: Path, results: dict[str, dict[str, ArmResults]]) -> None:
     import matplotlib.pyplot as plt
 
-    tasks = list(results)
-    figure, axes = plt.subplots(
-        1, len(tasks), figsize=(5 * len(tasks), 3.5), squeeze=False, layout="constrained"
-    )
-    for ax, task in zip(axes[0], tasks, strict=True):
-        for arm, found in results[task].items():
-            points = [(c["env_steps"], c["best"]) for c in found["curve"] if c["best"] is not None]
-            if not points:  # no trial scored at any rung: then none on the first, no band
-                continue
-            (line,) = ax.plot(*zip(*points, strict=True), marker="o", label=arm)
-            if found["expected_best"] is not None:
-                steps, best, low, high = (
-                    [point[key] for point in found["expected_best"]["points"]]
-                    for key in ("env_steps", "expected_best", "low", "high")
-                )
-                ax.plot(steps, best, linestyle="--", color=line.get_color())
-                ax.fill_between(steps, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
-        ax.set_title(task)
-        ax.set_xlabel("env steps spent by the arm")
-        ax.set_ylabel("best score")
-        ax.legend(fontsize=8)
-    figure.suptitle(
-        "solid: the best trial at each rung; dashed: the expected best of n first-rung "
-        "settings,\nshaded: its 95% bootstrap band over the trials",
-        fontsize=8,
-    )
+    from fppo_jax.analysis.plots import plot_tuning_curves
+
+    figure = plot_tuning_curves(results)
     figure.savefig(output / "tuning_curves.png", dpi=90)
     plt.close(figure)

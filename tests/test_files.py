@@ -1,6 +1,7 @@
 """fppo_jax.store.files: writable directories, one writer per directory, whole-or-nothing writes,
 JSON as written, array digests and one-line error messages."""
 
+import errno
 import hashlib
 import json
 import os
@@ -14,6 +15,7 @@ from fppo_jax.store.files import (
     DirectoryBusy,
     DirectoryLock,
     DirectoryLost,
+    NotWritten,
     json_value,
     tree_digest,
     writable_directory,
@@ -54,6 +56,36 @@ def test_a_write_that_fails_leaves_the_previous_file_as_it_was(tmp_path, monkeyp
     with pytest.raises(OSError, match="disk full"):
         write_json(path, {"update": 2})
     assert json.loads(path.read_text()) == {"update": 1}
+
+
+def full_disk(*_):
+    """What a full disk gives a write: the system's error, which names no file."""
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+def test_a_full_disk_is_one_line_naming_the_file_and_leaves_no_part_of_it(tmp_path, monkeypatch):
+    path = tmp_path / "record.json"
+    write_json(path, {"update": 1})
+    monkeypatch.setattr(os, "fsync", full_disk)
+    with pytest.raises(NotWritten) as refused:
+        write_json(path, {"update": 2})
+    assert str(refused.value) == f"cannot write {path}: No space left on device"
+    assert isinstance(refused.value, OSError)  # as the system's error was
+    assert json.loads(path.read_text()) == {"update": 1}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["record.json"]  # no temporary
+
+
+def test_a_command_that_finds_the_disk_full_says_so_in_one_line(tmp_path, monkeypatch, capsys):
+    from fppo_jax.cli import main
+
+    monkeypatch.setattr(os, "fsync", full_disk)
+    output = tmp_path / "tune"
+    flags = ["--variants", "ppo", "--tasks", "cartpole", "--trials", "4", "--eta", "2"]
+    flags += ["--steps", "1024", "--num-envs", "4", "--num-steps", "32", "--quiet"]
+    assert main(["tune", *flags, "--output", str(output)]) == 2  # its plan, before any run
+    assert capsys.readouterr().err == (
+        f"fppo-jax: error: cannot write {output / 'tune.json'}: No space left on device\n"
+    )
 
 
 def test_write_json_writes_indented_json_with_numpy_scalars_as_numbers(tmp_path):

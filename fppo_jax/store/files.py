@@ -5,6 +5,7 @@ half-written file."""
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import os
@@ -17,7 +18,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from fppo_jax.errors import InvalidInput
+from fppo_jax.errors import FppoError, InvalidInput
 from fppo_jax.store.numpy_policy import digest
 
 
@@ -130,14 +131,26 @@ def _identity(directory: Path) -> tuple[int, int] | None:
     return (status.st_dev, status.st_ino) if os.path.isdir(directory) else None
 
 
+class NotWritten(FppoError, OSError):
+    """A file that could not be written (a full disk, a quota, a read-only filesystem): what
+    stood at its path before is kept, and no part of the new one is left."""
+
+
 def write_atomically(path: Path, data: bytes) -> None:
-    """`data` at `path`, written under a temporary name, flushed to disk and renamed."""
+    """`data` at `path`, written under a temporary name, flushed to disk and renamed;
+    :class:`NotWritten` naming `path` if the system refuses it."""
     temporary = path.with_name(f".{path.name}.tmp")
-    with open(temporary, "wb") as file:
-        file.write(data)
-        file.flush()
-        os.fsync(file.fileno())
-    os.replace(temporary, path)
+    try:
+        with open(temporary, "wb") as file:
+            file.write(data)
+            file.flush()
+            os.fsync(file.fileno())
+        os.replace(temporary, path)
+    except OSError as error:
+        # A full disk fails the write or the flush, whose error names no file: this names it.
+        with contextlib.suppress(OSError):
+            temporary.unlink(missing_ok=True)
+        raise NotWritten(f"cannot write {path}: {error.strerror or error}") from None
 
 
 def write_json(path: Path, value: Any) -> None:

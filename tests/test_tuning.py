@@ -477,12 +477,23 @@ def test_a_study_across_tasks_takes_each_arms_trial_for_every_task(tuned, tmp_pa
         ({"part": "x", "chunk": 2}, "part must be the K-th of N parts, 1 <= K <= N, got 'x'"),
         ({"part": (1, 2)}, "part 1 of 2 needs chunk"),
         ({"chunk": 3}, "must be a multiple of the 2 seeds per trial, got 3"),
+        (
+            {"space": [("learning_rate", (1e-4, 1e-3))]},
+            "space must be a space file's path or a mapping of names to intervals, such as .*, "
+            "got \\[\\('learning_rate'",
+        ),
     ],
 )
 def test_bad_input_is_refused_before_any_plan(tmp_path, arguments, message):
     with pytest.raises(InvalidInput, match=message):
         tune("cartpole", ARMS, output=tmp_path / "tune", **{**SMALL, **arguments})
     assert not (tmp_path / "tune").exists()
+
+
+@pytest.mark.parametrize("output", [None, "", 3])
+def test_an_output_that_is_no_path_is_refused_in_one_line(output):
+    with pytest.raises(InvalidInput, match=f"output must be a folder's path .*, got {output!r}$"):
+        tune("cartpole", ARMS, output=output, **SMALL)
 
 
 def c_scaled(ratio, advantage, c):

@@ -144,6 +144,7 @@ def tune(
     `settings` (run-shape fields of :class:`~fppo_jax.core.config.TrainConfig`) are every
     run's.
     """
+    _check_places(output, space)
     tasks = names_of_tasks(tasks, "a tune")
     arms = resolve_arms(variants, "a tune")
     chosen = design(
@@ -228,6 +229,19 @@ def tune(
         write_report(folder.output, plan, results)
     rungs_recorded = {each.task: each.scores for each in tuned}
     return TuneResult(folder.output, plan, rungs_recorded, results, finished)
+
+
+def _check_places(output: object, space: object) -> None:
+    """`output` a folder's path and `space` a space file's path or its content (a mapping),
+    else one line naming what was given: a list's pairs, say, read as a mapping, would be an
+    error far from its cause, and None as a path a TypeError."""
+    if not isinstance(output, str | Path) or not str(output):
+        raise InvalidInput(f"output must be a folder's path (a str or Path), got {output!r}")
+    if space is not None and not isinstance(space, str | Path | Mapping):
+        raise InvalidInput(
+            "space must be a space file's path or a mapping of names to intervals, such as "
+            f"{{'learning_rate': (1e-4, 1e-3, 'log')}}, got {space!r}"
+        )
 
 
 def _check_arguments(

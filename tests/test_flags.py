@@ -88,3 +88,22 @@ def test_bad_values_are_refused_saying_why(text, message, capsys):
     with pytest.raises(SystemExit):
         main(["sweep", "--alpha", text])
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["tune", "sweep", "study"])
+@pytest.mark.parametrize("given", [["--part", "-1/2"], ["--part=-1/2"]])
+def test_a_part_that_starts_with_a_dash_is_refused_by_its_own_check(command, given, capsys):
+    # argparse took -1/2 for a flag and said only "expected one argument".
+    with pytest.raises(SystemExit) as refused:
+        main([command, *given, "--output", "x"])
+    assert refused.value.code == 2
+    assert capsys.readouterr().err == (
+        f"fppo-jax {command}: error: argument --part: part must be the K-th of N parts, "
+        f"1 <= K <= N, got '-1/2' (see fppo-jax {command} --help)\n"
+    )
+
+
+def test_a_flag_without_its_value_before_another_flag_is_still_missing_one(capsys):
+    with pytest.raises(SystemExit):
+        main(["tune", "--part", "--output", "x"])
+    assert "argument --part: expected one argument" in capsys.readouterr().err

@@ -453,6 +453,28 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
+    def parse_known_args(  # type: ignore[override]  # argparse's overloads, one signature here
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        return super().parse_known_args(
+            None if args is None else _dashed_values_joined(self, list(args)), namespace
+        )
+
+
+def _dashed_values_joined(parser: argparse.ArgumentParser, args: list[str]) -> list[str]:
+    """`args` with a dash-and-digit value given to a flag that takes one (``--part -1/2``) joined
+    to it (``--part=-1/2``): argparse takes such a token for a flag, all but plain negative
+    numbers, and would say only "expected one argument"; joined, the flag's own check names
+    the value and what it must be."""
+    takes_one = {name for a in parser._actions if a.nargs is None for name in a.option_strings}
+    joined: list[str] = []
+    for token in args:
+        if joined and joined[-1] in takes_one and token[:1] == "-" and token[1:2].isdigit():
+            joined[-1] = f"{joined[-1]}={token}"
+        else:
+            joined.append(token)
+    return joined
+
 
 class Defaults(argparse.ArgumentDefaultsHelpFormatter):
     """Shows a flag's default where it has one worth reading (not None, not off)."""

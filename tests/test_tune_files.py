@@ -65,3 +65,31 @@ def test_a_folder_without_a_tune_or_unfinished(tmp_path):
     task, arm = unfinished.plan["tasks"][0], unfinished.plan["variants"][0]
     with pytest.raises(InvalidInput, match=f"did not tune {arm} on {task}"):
         unfinished.chosen(task, arm)
+
+
+@pytest.mark.parametrize(
+    ("written", "message"),
+    [
+        ([], r"results\.json holds a list, not an object"),
+        ({}, r"results\.json is not the tune's results .*: it lacks cartpole, acrobot, "),
+        ("first task emptied", r"results\.json is .*: it lacks ppo on cartpole, spo on cartpole,"),
+        ("one arm removed", r"results\.json is .*: it lacks spo on cartpole, which the plan tunes"),
+    ],
+)
+def test_results_emptied_or_cut_are_named_not_read_as_a_tune_that_left_a_task_out(
+    tmp_path, written, message
+):
+    copy = _copy(tmp_path)
+    results = json.loads((copy / "results.json").read_text())
+    assert list(results)[:2] == ["cartpole", "acrobot"] and list(results["cartpole"])[:2] == [
+        "ppo",
+        "spo",
+    ]
+    if written == "first task emptied":
+        written = {**results, "cartpole": {}}
+    elif written == "one arm removed":
+        del results["cartpole"]["spo"]
+        written = results
+    (copy / "results.json").write_text(json.dumps(written))
+    with pytest.raises(DamagedArtifact, match=message):
+        load_tune(copy)  # as the study on its settings reads it

@@ -15,7 +15,7 @@ from fppo_jax.analysis.arms import task_folder
 from fppo_jax.analysis.preregistration import plan_digest
 from fppo_jax.analysis.tuning_records import ArmResults, RungScores, ShareScores, TunePlan
 from fppo_jax.errors import InvalidInput
-from fppo_jax.store.artifact import read_typed
+from fppo_jax.store.artifact import DamagedArtifact, read_typed
 
 PLAN_FILE, RESULTS_FILE, REPORT_FILE, STORAGE_FILE = (
     "tune.json",
@@ -45,10 +45,25 @@ def read_plan(directory: Path) -> TunePlan:
     return found
 
 
-def read_results(directory: Path) -> Results:
-    """A finished tune's ``results.json`` in `directory`, checked."""
+def read_results(directory: Path, plan: TunePlan) -> Results:
+    """A finished tune's ``results.json`` in `directory`, checked: of its shape, and holding
+    every task and arm of its `plan`."""
     path = directory / RESULTS_FILE
-    found: Results = read_typed(path, Results, f"the tune's results in {directory}")
+    what = f"the tune's results in {directory}"
+    found: Results = read_typed(path, Results, what)
+    # Of the right shape but emptied ({}) or cut, it would read as a tune that left the task
+    # out, and be refused for the wrong reason ("did not tune cartpole").
+    missing = [
+        f"{arm} on {task}" if task in found else task
+        for task in plan["tasks"]
+        for arm in (plan["variants"] if task in found else plan["variants"][:1])
+        if task not in found or arm not in found[task]
+    ]
+    if missing:
+        raise DamagedArtifact(
+            f"{path} is not {what} as fppo-jax writes it: it lacks {', '.join(missing)}, which "
+            f"the plan tunes; restore it, or remove it and run the tune again to write it"
+        )
     return found
 
 
@@ -111,4 +126,5 @@ def load_tune(directory: str | Path) -> TuneResult:
     plan = read_plan(directory)
     rungs = {task: recorded_rungs(task_directory(directory, task)) for task in plan["tasks"]}
     finished = (directory / RESULTS_FILE).is_file()
-    return TuneResult(directory, plan, rungs, read_results(directory) if finished else {}, finished)
+    results = read_results(directory, plan) if finished else {}
+    return TuneResult(directory, plan, rungs, results, finished)

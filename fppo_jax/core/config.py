@@ -59,6 +59,9 @@ class TrainConfig:
         "reset states drawn per environment per rollout (default: one per step, so every "
         "episode starts fresh)",
     )
+    initial_log_std: float = _field(
+        0.0, "the Gaussian policy's log-std at initialisation (continuous actions only)"
+    )
 
     def __post_init__(self) -> None:
         for name in ("total_steps", "num_envs", "num_steps", "num_minibatches", "num_epochs"):
@@ -87,6 +90,15 @@ class TrainConfig:
         ):
             if not isinstance(getattr(self, name), bool | np.bool_):
                 raise InvalidInput(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if (
+            isinstance(self.initial_log_std, bool)
+            or not isinstance(self.initial_log_std, int | float)
+            or not np.isfinite(self.initial_log_std)
+        ):
+            raise InvalidInput(
+                f"initial_log_std must be a finite number, got {self.initial_log_std!r}"
+            )
+        object.__setattr__(self, "initial_log_std", float(self.initial_log_std))
         if self.samples_per_update % self.num_minibatches:
             raise InvalidInput(
                 f"num_minibatches ({self.num_minibatches}) must divide the samples per update "

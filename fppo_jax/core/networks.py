@@ -18,6 +18,7 @@ from flax.typing import VariableDict
 
 from fppo_jax.core.distributions import Categorical, DiagonalGaussian, Distribution
 from fppo_jax.envs import Box, Discrete
+from fppo_jax.errors import InvalidInput
 
 
 def orthogonal(scale: float) -> nn.initializers.Initializer:
@@ -60,15 +61,17 @@ class CategoricalPolicy(nn.Module):
 
 
 class GaussianPolicy(nn.Module):
-    """Diagonal Gaussian with a state-independent log-std, initialised to 0."""
+    """Diagonal Gaussian with a state-independent log-std, initialised to `initial_log_std`."""
 
     hidden_sizes: Sequence[int]
     action_size: int
+    initial_log_std: float = 0.0
 
     @nn.compact
     def __call__(self, obs: jax.Array) -> DiagonalGaussian:
         mean = MLP(self.hidden_sizes, self.action_size, 0.01)(obs)
-        log_std = self.param("log_std", nn.initializers.zeros, (self.action_size,))
+        start = nn.initializers.constant(self.initial_log_std)
+        log_std = self.param("log_std", start, (self.action_size,))
         return DiagonalGaussian(mean, jnp.broadcast_to(log_std, mean.shape))
 
 
@@ -122,12 +125,20 @@ def policy_layers(params: VariableDict) -> list[dict[str, jax.Array]]:
     return [mlp[f"Dense_{i}"] for i in range(len(mlp))]
 
 
-def make_networks(action_space: Discrete | Box, hidden_sizes: Sequence[int]) -> Networks:
-    """The policy for `action_space` (categorical or Gaussian) and the value function."""
+def make_networks(
+    action_space: Discrete | Box, hidden_sizes: Sequence[int], initial_log_std: float = 0.0
+) -> Networks:
+    """The policy for `action_space` (categorical, or Gaussian starting at `initial_log_std`)
+    and the value function."""
     hidden_sizes = tuple(hidden_sizes)
     policy: CategoricalPolicy | GaussianPolicy
     if isinstance(action_space, Discrete):
+        if initial_log_std != 0.0:
+            raise InvalidInput(
+                f"initial_log_std ({initial_log_std:g}) sets a Gaussian policy's start: this "
+                "task's actions are discrete"
+            )
         policy = CategoricalPolicy(hidden_sizes, action_space.n)
     else:
-        policy = GaussianPolicy(hidden_sizes, action_space.size)
+        policy = GaussianPolicy(hidden_sizes, action_space.size, initial_log_std)
     return Networks(policy, ValueFunction(hidden_sizes), action_space)

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any, TypedDict
 
 from fppo_jax.core.resolution import HYPERPARAMETER_DEFAULTS, hyperparameters, table2
+from fppo_jax.core.shape_space import SHAPE_AXES, Choice, ChoiceValue
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.variants import EPSILON
 from fppo_jax.errors import InvalidInput
@@ -129,17 +130,22 @@ def interval(name: str, value: Any, where: str) -> Interval:
 
 @dataclasses.dataclass(frozen=True)
 class SearchSpace:
-    """The intervals of one arm: the shared ones, then its surrogate's own."""
+    """The intervals of one arm: the shared ones, then its surrogate's own; on a task, the
+    run-shape axes every arm shares (`shape`, :mod:`fppo_jax.core.shape_space`) with each
+    one's value at trial 0 (`shape_default`)."""
 
     shared: Mapping[str, Interval]
     own: Mapping[str, Interval]
+    shape: Mapping[str, Choice] = dataclasses.field(default_factory=dict)
+    shape_default: Mapping[str, ChoiceValue] = dataclasses.field(default_factory=dict)
 
     @property
-    def axes(self) -> dict[str, Interval]:
-        return {**self.shared, **self.own}
+    def axes(self) -> dict[str, Interval | Choice]:
+        return {**self.shared, **self.shape, **self.own}
 
     def to_json(self) -> dict[str, Axis]:
-        return {name: axis.to_json() for name, axis in self.axes.items()}
+        """The intervals (a task's run-shape axes are recorded apart, per task)."""
+        return {name: axis.to_json() for name, axis in {**self.shared, **self.own}.items()}
 
 
 def read_space_file(path: str | Path) -> dict[str, Any]:
@@ -182,14 +188,15 @@ def search_spaces(
     surrogates: list[Surrogate], given: Mapping[str, Any] | None = None
 ) -> dict[str, SearchSpace]:
     """Each arm's search space: :data:`SHARED` and the arm's own intervals, replaced where
-    `given` (a space file's content) names them. Every interval is checked against the
+    `given` (a space file's content) names them (its run-shape axes are
+    :func:`~fppo_jax.core.shape_space.shape_space`'s). Every interval is checked against the
     hyperparameter's valid range at both ends, so that every point of it can train."""
     given = dict(given or {})
     arms = {s.name for s in surrogates}
     shared = dict(SHARED)
-    for name in [n for n in given if n not in arms]:
+    for name in [n for n in given if n not in arms and n not in SHAPE_AXES]:
         if name not in SHARED:
-            valid = ", ".join([*SHARED, *sorted(arms)])
+            valid = ", ".join([*SHARED, *SHAPE_AXES, *sorted(arms)])
             raise InvalidInput(f"the search space has no axis {name!r}; it takes: {valid}")
         shared[name] = interval(name, given.pop(name), "the search space")
     for name, axis in shared.items():

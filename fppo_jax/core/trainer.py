@@ -399,4 +399,6 @@ def make_train(config: TrainConfig, env: Environment) -> Trainer:
     `env` is checked against the interface first (:func:`~fppo_jax.envs.core.check_environment`),
     so that a broken one is named here rather than deep in a trace."""
     check_environment(env)
-    return Trainer(config, env, make_networks(env.action_space, config.hidden_sizes))
+    return Trainer(
+        config, env, make_networks(env.action_space, config.hidden_sizes, config.initial_log_std)
+    )

@@ -16,6 +16,9 @@ from fppo_jax.core.surrogates import SurrogateIdentity
 from fppo_jax.store.files import IncompatibleFormat, check_format, json_value
 
 _SHAPE = [field.name for field in dataclasses.fields(TrainConfig)]
+# Shape fields added after records were first written, with the value every earlier run had:
+# a record leaves one out at that value, so that those records and these read alike.
+_LATER: dict[str, Any] = {"initial_log_std": 0.0}
 # The keys a record's JSON holds beside TrainConfig's fields; any other is a train's setting.
 _OWN = ("env", "backend", "grid", "seed", "seeds", "part", "surrogates", "preset", "runs_per_call")
 
@@ -69,7 +72,11 @@ class RunRecord:
             "surrogates": self.surrogates or None,
             "preset": self.preset,
         }
-        shape = dataclasses.asdict(self.config)
+        shape = {
+            name: value
+            for name, value in dataclasses.asdict(self.config).items()
+            if name not in _LATER or value != _LATER[name]
+        }
         last = {} if self.runs_per_call is None else {"runs_per_call": self.runs_per_call}
         present = {name: value for name, value in own.items() if value is not None}
         return cast(dict[str, Any], json_value({**self.setting, **present, **shape, **last}))
@@ -81,7 +88,7 @@ class RunRecord:
         if not isinstance(value, dict):
             raise IncompatibleFormat(f"{what} is not a run's record: {value!r}")
         check_format(value, what, cls.FORMAT)
-        missing = [key for key in ("env", "preset", *_SHAPE) if key not in value]
+        missing = [key for key in ("env", "preset", *_SHAPE) if key not in {*value, *_LATER}]
         if missing:
             raise IncompatibleFormat(
                 f"{what} lacks {', '.join(missing)}: it was written by another version of "
@@ -99,7 +106,9 @@ class RunRecord:
             env=value["env"],
             backend=value.get("backend"),
             preset=value["preset"],
-            config=TrainConfig(**{name: value[name] for name in _SHAPE}),
+            config=TrainConfig(
+                **{name: value[name] if name in value else _LATER[name] for name in _SHAPE}
+            ),
             setting={k: v for k, v in value.items() if k not in known},
             seed=value.get("seed"),
             grid=value.get("grid"),

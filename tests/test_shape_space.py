@@ -46,7 +46,7 @@ def test_a_space_file_narrows_an_axis_and_halving_searches_only_what_it_gives():
 @pytest.mark.parametrize(
     ("given", "fixed", "message"),
     [
-        ({"num_minibatches": [32, 3]}, (), r"num_minibatches 3 makes no valid run: num_minibatches \(3\) must divide"),
+        ({"num_minibatches": [32, 3]}, (), r"num_minibatches 3 makes no valid run: .* divide"),
         ({"num_steps": [256, 4096]}, (), r"num_steps 4096 makes no valid run: total_steps"),
         ({"num_epochs": [5, 20]}, (), r"leave out the task's own 10, trial 0's"),
         ({"num_epochs": [10, 10]}, (), "lists a value twice"),

@@ -18,8 +18,9 @@ shape (n steps per rollout, m minibatches):
 - ``initial_log_std``: 0, −0.5, −1 and −2, on tasks with continuous actions alone.
 
 An axis the run's settings fix (``--num-steps …``) is not searched. A space file gives an axis
-its own values (``{"num_epochs": [10, 20]}``), the configured one among them (trial 0's). Every combination of the values is checked on the
-task before any compile, and one that makes no valid run is refused by name. A searched shape
+its own values (``{"num_epochs": [10, 20]}``), the configured one among them (trial 0's).
+Every combination of the values is checked on the task before any compile, and one that makes
+no valid run is refused by name. A searched shape
 changes the number of updates in a run, so only schedulers whose runs are whole (racing, the
 validation race) search it: :func:`~fppo_jax.analysis.tune_design.design` says so.
 """

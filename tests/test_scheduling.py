@@ -12,10 +12,10 @@ from conftest import TINY
 
 from fppo_jax.analysis import population as population_module
 from fppo_jax.analysis.population import Population, Window, read_leaves
+from fppo_jax.analysis.tune_storage import open_storage
 from fppo_jax.analysis.tuning_draws import (
     draw_population,
     import_optuna,
-    open_storage,
     setting_of,
 )
 from fppo_jax.analysis.tuning_rungs import TaskTune

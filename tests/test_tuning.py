@@ -81,7 +81,8 @@ def test_trial_0_is_each_arms_default_and_the_shared_axes_are_the_same_points(tu
     output, result, _ = tuned
     ppo, lp = (
         import_optuna().load_study(
-            study_name=f"cartpole/{arm}", storage=f"sqlite:///{output}/optuna.db"
+            study_name=f"{result.plan['storage']['studies']}/cartpole/{arm}",
+            storage=f"sqlite:///{output}/optuna.db",
         )
         for arm in ARMS
     )
@@ -355,14 +356,16 @@ def test_across_tasks_the_best_mean_normalised_score_at_the_deepest_rung_every_t
 
 
 def test_a_tune_draws_the_same_trials_on_every_task(tmp_path):
-    tune(["cartpole", "acrobot"], ARMS, output=tmp_path, rungs=0, **SMALL)
+    tuned = tune(["cartpole", "acrobot"], ARMS, output=tmp_path, rungs=0, **SMALL)
+    studies = tuned.plan["storage"]["studies"]
     optuna = import_optuna()
     for arm in ARMS:
         drawn = [
             [
                 t.params
                 for t in optuna.load_study(
-                    study_name=f"{task}/{arm}", storage=f"sqlite:///{tmp_path}/optuna.db"
+                    study_name=f"{studies}/{task}/{arm}",
+                    storage=f"sqlite:///{tmp_path}/optuna.db",
                 ).trials
             ]
             for task in ("cartpole", "acrobot")

@@ -2,15 +2,17 @@
 on the axes they share, the same storage and seed give the same population again, and a
 storage that cannot be opened is one error."""
 
+import warnings
+
 import pytest
 from helpers import TUNE_ARMS as ARMS
 from helpers import TUNE_SMALL as SMALL
 
+from fppo_jax.analysis.tune_storage import open_storage
 from fppo_jax.analysis.tuning import tune
 from fppo_jax.analysis.tuning_draws import (
     draw_population,
     import_optuna,
-    open_storage,
     setting_of,
 )
 from fppo_jax.core.resolution import resolve
@@ -51,5 +53,20 @@ def test_the_same_storage_and_seed_give_the_same_population_again(tmp_path):
 
 
 def test_a_storage_that_cannot_be_opened_is_one_error(tmp_path):
-    with pytest.raises(InvalidInput, match="cannot open Optuna's storage nosuch://here"):
+    with pytest.raises(InvalidInput, match="cannot open Optuna's storage nosuch://here: SQLAlc"):
         tune("cartpole", ARMS, output=tmp_path, storage="nosuch://here", **SMALL)
+
+
+def test_a_space_that_leaves_the_default_out_keeps_it_as_trial_0_without_optunas_warning(
+    tmp_path,
+):
+    optuna = import_optuna()
+    arms = [resolve("ppo")]
+    spaces = search_spaces(arms, {"learning_rate": {"low": 1e-3, "high": 1e-2, "scale": "log"}})
+    storage = open_storage(optuna, f"sqlite:///{tmp_path / 'optuna.db'}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # Optuna's "Fixed parameter ... is out of range" included
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)  # as tune() does
+        drawn = draw_population(optuna, storage, "cartpole", arms, spaces, 4, "qmc", 0)
+    rates = [setting_of(params)["learning_rate"] for params in drawn["ppo"]]
+    assert rates[0] == 3e-4 and all(1e-3 <= rate <= 1e-2 for rate in rates[1:])

@@ -47,14 +47,13 @@ from fppo_jax.analysis.tune_design import TuneDesign, design
 from fppo_jax.analysis.tune_files import (
     PLAN_FILE,
     RESULTS_FILE,
-    STORAGE_FILE,
     TuneResult,
     task_directory,
 )
+from fppo_jax.analysis.tune_storage import storage_record, tune_storage
 from fppo_jax.analysis.tuning_draws import (
     draw_population,
     import_optuna,
-    open_storage,
     setting_of,
 )
 from fppo_jax.analysis.tuning_records import (
@@ -81,8 +80,9 @@ SAMPLERS = ("qmc", "random")
 
 
 # Every trial is drawn before the first rung trains, so a tune goes on under another Optuna
-# release as under another commit: both are recorded, neither compared.
-_RECORDED_ONLY = frozenset({"commit", "sampler.package"})
+# release as under another commit: both are recorded, neither compared. The storage is checked
+# on its own (tune_storage), by a message that says which to give.
+_RECORDED_ONLY = frozenset({"commit", "sampler.package", "storage"})
 
 
 def tune(
@@ -131,7 +131,8 @@ def tune(
     `race_level`, shows it better. `space` is a space file or its content
     (:func:`~fppo_jax.core.search_space.search_spaces`); `sampler` (``qmc``: Optuna's scrambled
     Sobol sampler, or ``random``) draws the trials from `sampler_seed`; `storage` is Optuna's
-    storage URL (default: a SQLite file in `output`). `baseline` (default: ``ppo`` if tuned,
+    storage, a database URL or a journal file ending ``.log`` (default: a SQLite file in
+    `output`; :mod:`~fppo_jax.analysis.tune_storage`). `baseline` (default: ``ppo`` if tuned,
     else the first variant) is the arm whose default the report measures the others' sampled
     settings against. `rungs` limits the rungs this call trains (the same call later goes on;
     0 trains none, but joins the shares recorded). `chunk` is the runs each compiled call
@@ -183,6 +184,7 @@ def tune(
         **settings,
     }
     plan = make_plan(runs, arms, spaces, chosen, budgets, baseline, sampler, sampler_seed, shape)
+    plan["storage"] = storage_record(plan, storage, output)
     verbosity = optuna.logging.get_verbosity()
     # Array tasks that start together take turns with the folder: each holds it while it reads
     # and writes the plan and Optuna's storage, then lets go to train its share.
@@ -195,9 +197,7 @@ def tune(
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
                 plan = folder.check(plan, PLAN_FILE, _RECORDED_ONLY)
-                store = open_storage(
-                    optuna, storage or f"sqlite:///{(folder.output / STORAGE_FILE).absolute()}"
-                )
+                store = tune_storage(optuna, storage, folder.output, plan)
                 tuned = [
                     _task_tune(
                         task,

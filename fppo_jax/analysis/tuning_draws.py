@@ -5,24 +5,22 @@ to. Trial 0 is each arm's default (:func:`~fppo_jax.core.search_space.default_se
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+import functools
+import warnings
+from collections.abc import Callable, Mapping
+from typing import Any, ParamSpec, TypeVar
 
+from fppo_jax.analysis.tune_storage import study_name
 from fppo_jax.core.search_space import (
     Interval,
     SearchSpace,
     default_setting,
 )
 from fppo_jax.core.surrogates import Surrogate
-from fppo_jax.errors import InvalidInput, MissingPackage, first_line, install_hint
+from fppo_jax.errors import MissingPackage, install_hint
 
-
-def open_storage(optuna: Any, url: str) -> Any:
-    """Optuna's storage at `url`, opened (a SQLite file is made if need be)."""
-    try:
-        return optuna.storages.RDBStorage(url)
-    except Exception as error:  # SQLAlchemy's and the database driver's own errors
-        raise InvalidInput(f"cannot open Optuna's storage {url}: {first_line(error)}") from None
+P = ParamSpec("P")
+R = TypeVar("R")
 
 
 def import_optuna() -> Any:
@@ -33,6 +31,21 @@ def import_optuna() -> Any:
     return optuna
 
 
+def _defaults_kept(draw: Callable[P, R]) -> Callable[P, R]:
+    """`draw` without Optuna's warning that an enqueued value lies outside its interval: trial
+    0 is each arm's default, the baseline the report measures the others against, even where
+    a space file's interval leaves it out (docs/tuning.md says so); it is never a draw."""
+
+    @functools.wraps(draw)
+    def quiet(*args: P.args, **kwargs: P.kwargs) -> R:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", r"Fixed parameter .* is out of range", UserWarning)
+            return draw(*args, **kwargs)
+
+    return quiet
+
+
+@_defaults_kept
 def draw_population(
     optuna: Any,
     storage: Any,
@@ -45,17 +58,18 @@ def draw_population(
 ) -> dict[str, list[dict[str, float]]]:
     """Each arm's trials on `task`, as settings: trial 0 its default, the others drawn.
 
-    The draws are one Optuna study (``<task>/draws``) over the shared axes and every arm's own
+    The draws are one Optuna study (``draws``) over the shared axes and every arm's own
     (``<arm>.<name>``), so that the arms share their points on the shared axes; each draw is
     told ``PRUNED`` (drawn, not scored: Optuna's samplers learn a space from trials that
-    ended). Each arm's trials are then a study of their own (``<task>/<arm>``) that the rungs
-    report their scores to. A study cut short while it was being drawn is drawn again from its
-    seed: the same points."""
+    ended). Each arm's trials are then a study of their own (named after the arm) that the
+    rungs report their scores to; the studies' names carry the task and the tune's identity
+    (:func:`~fppo_jax.analysis.tune_storage.study_name`). A study cut short while it was
+    being drawn is drawn again from its seed: the same points."""
     draws = _draws(optuna, storage, task, arms, spaces, trials, sampler, seed)
     population = {}
     for arm in arms:
         axes = spaces[arm.name].axes
-        name = f"{task}/{arm.name}"
+        name = study_name(storage, task, arm.name)
         study = _complete_study(optuna, storage, name, trials)
         if study is None:
             study = optuna.create_study(study_name=name, storage=storage, direction="maximize")
@@ -94,7 +108,7 @@ def _draws(
             axes[f"{arm.name}.{key}"] = axis
             defaults[f"{arm.name}.{key}"] = own[key]
     first = {_param(k, axis): _internal(defaults[k], axis) for k, axis in axes.items()}
-    name = f"{task}/draws"
+    name = study_name(storage, task, "draws")
     study = _complete_study(optuna, storage, name, trials)
     if study is None:
         drawn = (

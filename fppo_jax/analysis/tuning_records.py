@@ -46,6 +46,15 @@ class SamplerRecord(TypedDict):
     package: str
 
 
+class StorageRecord(TypedDict):
+    """Optuna's storage in ``tune.json`` (:mod:`fppo_jax.analysis.tune_storage`): its URL with
+    the password masked (``optuna.db``: the file in the output), and the prefix of the tune's
+    study names there."""
+
+    url: str
+    studies: str
+
+
 class SearchRecord(TypedDict):
     """The search's scheduler in ``tune.json``: its name, halving's η or racing's seeds per
     round and level."""
@@ -80,6 +89,7 @@ class TunePlan(TypedDict):
     budget: dict[str, TaskBudget]
     space: dict[str, dict[str, Axis]]  # per arm, its axes by hyperparameter
     sampler: SamplerRecord
+    storage: NotRequired[StorageRecord]  # tunes from before it name their studies plainly
     score: str
     selection: str
     search: NotRequired[SearchRecord]

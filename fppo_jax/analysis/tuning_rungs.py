@@ -28,6 +28,7 @@ from fppo_jax.analysis.tune_files import (
     read_share,
     rung_directory,
 )
+from fppo_jax.analysis.tune_storage import study_name
 from fppo_jax.analysis.tuning_records import ArmResults, ArmRung, RungScores, ShareScores
 from fppo_jax.analysis.tuning_report import arm_results
 from fppo_jax.errors import InvalidInput
@@ -107,7 +108,8 @@ class TaskTune:
         done = self.finished
         states = self.optuna.trial.TrialState
         for arm, measured in scores["arms"].items():
-            study = self.optuna.load_study(study_name=f"{self.task}/{arm}", storage=self.storage)
+            name = study_name(self.storage, self.task, arm)
+            study = self.optuna.load_study(study_name=name, storage=self.storage)
             by_number = {t.number: t for t in study.get_trials(deepcopy=False)}
             for row in measured["trials"]:
                 frozen = by_number[row["trial"]]

@@ -1,5 +1,6 @@
 """fppo_jax.analysis.tuning_rungs: a rung split into shares joins into the rung trained whole,
-bit for bit; a missing share is refused by name and a recorded one not trained again; a trial
+bit for bit; a missing share is refused by name, a recorded one not trained again and another
+split of a rung refused, naming the one recorded; a trial
 that diverges scores below every other and stops."""
 
 import numpy as np
@@ -92,7 +93,17 @@ def test_a_missing_part_is_refused_by_name_and_a_recorded_one_not_trained_again(
     with monkeypatch.context() as patch:
         patch.setattr(population, "compile_program", compiled)
         assert not tune("cartpole", ARMS, output=tmp_path, part=(1, 2), **arguments).finished
+        # Another split of the same rung is refused, naming the one recorded, whichever part.
+        for part in ((1, 3), (3, 3)):
+            with pytest.raises(
+                InvalidInput,
+                match=r"^cartpole: rung 1 is split into 2 parts, not 3 \(part 1 of 2 is recorded "
+                r"in .*rung-0/part-1\): train its others with --part K/2 \(part=\(K, 2\)\), or "
+                r"remove .*rung-0/part-\* to split it into 3$",
+            ):
+                tune("cartpole", ARMS, output=tmp_path, part=part, **arguments)
     assert share.read_text() == recorded
+    assert sorted(p.name for p in share.parent.parent.iterdir()) == ["part-1"]
     with pytest.raises(
         InvalidInput,
         match=r"cartpole: rung 1 is split into 2 parts and part 2 is missing .* --part 2/2",

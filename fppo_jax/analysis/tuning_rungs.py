@@ -172,6 +172,7 @@ class TaskTune:
         rung, (k, n) = len(self.scores), part
         where = self._where(rung) / f"part-{k}"
         said = f"{self.task}: rung {rung + 1} of {self.scheduler.rounds}, part {k} of {n}"
+        self._check_split(rung, n)
         if (where / SCORES_FILE).exists():
             self._say(f"{said}: recorded already (a call without a part joins the rung's parts)")
             return
@@ -196,6 +197,20 @@ class TaskTune:
         }
         write_json(where / SCORES_FILE, recorded)  # last: a share with its scores is whole
         self._say(f"{said}: {len(share.runs)} runs recorded in {share.seconds:.1f} s")
+
+    def _check_split(self, rung: int, n: int) -> None:
+        """Refuses a share of rung `rung` split into `n` parts where one of another split is
+        recorded: its part-<K> would be taken for this one's ("recorded already"), or the join
+        refuse the mix once every array task had trained."""
+        for path in sorted(self._where(rung).glob(f"part-*/{SCORES_FILE}")):
+            k, split = read_share(path)["part"]
+            if split != n:
+                raise InvalidInput(
+                    f"{self.task}: rung {rung + 1} is split into {split} parts, not {n} (part {k} "
+                    f"of {split} is recorded in {path.parent}): train its others with --part "
+                    f"K/{split} (part=(K, {split})), or remove {path.parent.parent}/part-* to "
+                    f"split it into {n}"
+                )
 
     def _read_shares(self, window: Window) -> list[Trained]:
         """The next rung's shares that array tasks recorded, every one that has runs to train,

@@ -34,3 +34,14 @@ def unmoved(ratio, advantage):
 
 
 frozen = fppo_jax.surrogate("frozen", unmoved)
+
+
+def nan_above_half(ratio, advantage, epsilon, beta):
+    """PPO's clipped objective where beta <= 1/2, and NaN above: a surrogate not finite over
+    part of its search interval."""
+    return clipped(ratio, advantage, epsilon) + jnp.where(beta > 0.5, jnp.nan, 0.0)
+
+
+half_finite = fppo_jax.surrogate(
+    "half-finite", nan_above_half, beta=0.25, ranges={"beta": "[0, 1]"}, search={"beta": (0, 1)}
+)

@@ -10,6 +10,7 @@ import sys
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from own_surrogates import half_finite
 
 import fppo_jax
 from fppo_jax import VARIANTS, objective
@@ -24,6 +25,7 @@ from fppo_jax.core.resolution import (
     table2,
 )
 from fppo_jax.envs import MUJOCO_TASKS, lookup
+from fppo_jax.errors import InvalidInput
 
 
 @pytest.mark.parametrize(
@@ -157,6 +159,18 @@ def test_resolve_hyperparameters_reports_the_setting_as_plain_decimals():
     assert "alpha" not in resolve_hyperparameters("ppo", "hopper")[1]
     with pytest.raises(ValueError, match="unknown variant 'lp'"):
         resolve_hyperparameters("lp", "hopper")
+
+
+def test_a_surrogate_not_finite_at_given_values_says_what_to_narrow():
+    objective(half_finite, beta=0.5)  # finite up to 1/2
+    with pytest.raises(
+        InvalidInput,
+        match=r"^surrogate 'half-finite' has a value that is not finite \(nan\) at ratio .* "
+        r"beta = 0.75: give it beta or epsilon where it is finite \(a tune draws them from its "
+        r"search space and stops at such a point: narrow the interval of beta or epsilon to "
+        r"where it is finite, in a space file, --space, and tune into a new output\)$",
+    ):
+        objective(half_finite, beta=0.75)
 
 
 def test_as_float_is_the_shortest_decimal_of_the_float32():

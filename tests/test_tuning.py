@@ -12,6 +12,7 @@ from conftest import TINY
 from helpers import TUNE_ARMS as ARMS
 from helpers import TUNE_SMALL as SMALL
 from helpers import rung_scores
+from own_surrogates import half_finite
 
 import fppo_jax
 from fppo_jax.analysis import population, tuning_rungs
@@ -513,6 +514,20 @@ def test_a_surrogate_without_a_search_interval_is_refused_by_name(tmp_path):
     assert plan["space"]["c-scaled"]["c"] == {"low": 0.5, "high": 2.0, "scale": "log"}
     with pytest.raises(InvalidInput, match="search names 'd', which it does not take"):
         fppo_jax.surrogate("c-scaled", c_scaled, c=1.0, search={"d": (0.5, 2.0)})
+
+
+def test_a_surrogate_not_finite_over_part_of_its_interval_stops_the_tune_naming_what_to_narrow(
+    tmp_path,
+):
+    # Tried at a drawn point before it trains, it cannot fail that trial alone: it stops the
+    # tune at the rung, saying which interval to narrow.
+    with pytest.raises(
+        InvalidInput,
+        match=r"^surrogate 'half-finite' has a value that is not finite \(nan\) .* beta = "
+        r"0\.[5-9]\d*: .* narrow the interval of beta or epsilon to where it is finite, in a "
+        r"space file, --space, and tune into a new output\)$",
+    ):
+        tune("cartpole", ["ppo", half_finite], output=tmp_path, **SMALL)
 
 
 def test_the_command_line_plans_tunes_and_refuses_in_one_line(tuned, tmp_path, capsys):

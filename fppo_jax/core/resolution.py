@@ -147,13 +147,28 @@ def objective(
     eps = check_in_range("epsilon", epsilon, EPSILON_RANGE)
     values = {key: s.check(key, value) for key, value in {**s.defaults, **given}.items()}
     if not s.builtin:
-        probe(s, values, eps)
+        try:
+            probe(s, values, eps)
+        except InvalidInput as error:
+            raise InvalidInput(f"{error}{_where_finite(s)}") from None
     menu = union([s])
     # NumPy's scalars, put on the device as they are: JAX's own conversion of a Python number
     # is a small program, compiled for each dtype on every start.
     own = {key: np.float32(values.get(key, 0.0)) for key in hyperparameter_names(menu)}
     index, epsilon_value, own = jax.device_put((np.int32(menu.index(s)), np.float32(eps), own))
     return Objective(variant=index, epsilon=epsilon_value, hyperparameters=own, surrogates=menu)
+
+
+def _where_finite(surrogate: Surrogate) -> str:
+    """What to do about a surrogate of one's own that fails at hyperparameters other than
+    those its declaration tried (its defaults, which passed): a tune draws them from its search
+    space, and one such point stops the tune, so the space is what to narrow."""
+    names = " or ".join([*surrogate.defaults, "epsilon"])
+    return (
+        f": give it {names} where it is finite (a tune draws them from its search space and "
+        f"stops at such a point: narrow the interval of {names} to where it is finite, in a "
+        "space file, --space, and tune into a new output)"
+    )
 
 
 def resolve(variant: object) -> Surrogate:

@@ -64,6 +64,20 @@ def test_finalists_that_are_the_default_in_disguise_leave_the_default():
     found = _measured(lambda trial, seed: float(seed % 5))  # every trial alike, seed by seed
     assert found["survivors"] == [0] and found["race"]["chosen"] == 0
     assert found["race"]["p"] == [1.0, 1.0, 1.0]
+    # Not shown better, and no worse: the report says so plainly, and what would tell them apart.
+    assert race_lines({"ppo": found}, len(VALIDATION))[-1] == (
+        "- ppo: the default stays, undecided: no finalist was shown better than it, nor worse, "
+        "on 8 validation seeds; more seeds would be needed to tell them apart."
+    )
+
+
+def test_finalists_all_below_the_default_leave_it_and_are_not_called_undecided():
+    found = _measured(lambda trial, seed: float(seed % 5) - (0.0 if trial == 0 else 3.0))
+    assert found["race"]["chosen"] == 0
+    assert race_lines({"ppo": found}, len(VALIDATION))[-1] == (
+        "- ppo: the default stays: no finalist was shown better than it, and each one's "
+        "P(trial > default) interval lies below ½."
+    )
 
 
 def test_a_finalist_clearly_better_is_chosen_and_its_search_score_kept_beside():
@@ -86,3 +100,6 @@ def test_an_arm_without_a_finalist_keeps_its_default():
     scores = np.arange(len(window.runs), dtype=float)
     found = race.measured([*searched, *searched], scores, np.zeros(len(scores), bool))["ppo"]
     assert found["survivors"] == [0] and found["race"]["finalists"] == []
+    assert race_lines({"ppo": found}, len(VALIDATION))[-1] == (
+        "- ppo: the default stays: no sampled trial scored without diverging to race it."
+    )

@@ -157,15 +157,29 @@ def race_lines(arms: dict[str, ArmResults], seeds: int) -> list[str]:
                 f"{record['adjusted'][j]:.3g} |"
             )
     lines.append("")
-    for arm, record in raced.items():
-        chosen = record["chosen"]
-        lines.append(
-            f"- {arm}: the default stays: no finalist was shown better than it."
-            if chosen == 0
-            else f"- {arm}: trial {chosen} replaces the default, shown better on the validation "
-            "seeds."
-        )
+    lines += [_outcome(arm, record, seeds) for arm, record in raced.items()]
     return lines
+
+
+def _outcome(arm: str, record: RaceRecord, seeds: int) -> str:
+    """`arm`'s race in a sentence: the finalist chosen, or why the default stays, said plainly
+    where the race could not tell them apart (a one-sided test shows no finalist worse)."""
+    if record["chosen"] != 0:
+        return (
+            f"- {arm}: trial {record['chosen']} replaces the default, shown better on the "
+            "validation seeds."
+        )
+    if not record["finalists"]:
+        return f"- {arm}: the default stays: no sampled trial scored without diverging to race it."
+    if all(high is not None and high < 0.5 for *_, high in record["probability_of_improvement"]):
+        return (
+            f"- {arm}: the default stays: no finalist was shown better than it, and each one's "
+            "P(trial > default) interval lies below ½."
+        )
+    return (
+        f"- {arm}: the default stays, undecided: no finalist was shown better than it, nor worse, "
+        f"on {seeds} validation seeds; more seeds would be needed to tell them apart."
+    )
 
 
 def _number(x: float | None) -> str:

@@ -167,6 +167,12 @@ def test_the_command_decides_at_the_first_look_and_refuses_a_changed_plan(tmp_pa
     assert main([*common, "--max-seeds", "16", "--groups", "0"]) == 0
     assert "frozen against ppo: worse with 8 seeds" in capsys.readouterr().out
     assert (output / "report.md").read_bytes() == report
+    # With its progress (no --quiet) the decision is said once, on stderr as it is made.
+    shown = [flag for flag in common if flag != "--quiet"]
+    assert main([*shown, "--max-seeds", "16", "--groups", "0"]) == 0
+    said = capsys.readouterr()
+    assert said.err.count("frozen against ppo: worse with 8 seeds") == 1
+    assert "against" not in said.out and f"wrote {output}/plan.json" in said.out
     with pytest.raises(SystemExit) as refused:
         main([*common, "--max-seeds", "16", "--groups", "-1"])
     assert refused.value.code == 2

@@ -192,10 +192,13 @@ def _study(args: argparse.Namespace) -> int:
         )
         return 0
     for row in result.decisions:
-        print(
-            f"{row['task']}: {row['candidate']} against {row['baseline']}: {row['decision']} "
-            f"with {row['seeds']} seeds ({row['reason']})"
-        )
+        # With its progress, the study said each decision on stderr as it was made; said here
+        # again, the terminal showed it twice. Unless --quiet, only those still waiting.
+        if args.quiet or not row["final"]:
+            print(
+                f"{row['task']}: {row['candidate']} against {row['baseline']}: {row['decision']} "
+                f"with {row['seeds']} seeds ({row['reason']})"
+            )
     print(f"wrote {args.output}/plan.json, decisions.json, report.md")
     if not result.finished:
         print("not finished: the same command again goes on")

@@ -122,7 +122,10 @@ def run_usual(args: Any, where: Path, tuned: Path, shape: dict[str, Any]) -> dic
     recorded = fppo_jax.load_tune(tuned)
     plan, trials = recorded.plan, recorded.results[args.env]["ppo"]["trials"]
     first = plan["budget"][args.env]["rungs"][0]["ends_at_update"]
-    drawn = optuna.load_study(study_name=f"{args.env}/ppo", storage=f"sqlite:///{tuned}/optuna.db")
+    studies = f"{plan['storage']['studies']}/" if "storage" in plan else ""  # the tune's own
+    drawn = optuna.load_study(
+        study_name=f"{studies}{args.env}/ppo", storage=f"sqlite:///{tuned}/optuna.db"
+    )
     storage = f"sqlite:///{where}/usual.db"  # the usual way's own study, its trials the same
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = optuna.create_study(

@@ -123,9 +123,11 @@ def add_search_flags(parser: argparse._ActionsContainer) -> None:
     parser.add_argument("--sampler-seed", type=int, default=0, help="the sampler's seed")
     parser.add_argument(
         "--storage",
-        metavar="URL",
-        help="Optuna's storage (default: optuna.db, a SQLite file in --output), such as "
-        "postgresql://user@host/db",
+        metavar="URL|FILE.log",
+        help="Optuna's storage (default: optuna.db, a SQLite file in --output), which many "
+        "tunes may share: a database URL, such as postgresql://user@host/db (the postgres "
+        "extra's driver) or sqlite:////shared/tunes.db, or a journal file ending .log on a "
+        "shared filesystem",
     )
     _add_race_flags(parser)
 

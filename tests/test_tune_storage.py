@@ -380,3 +380,32 @@ def test_tunes_that_make_one_new_database_at_once_all_open_it(tmp_path):
         for k in range(8):  # each new database made by three processes at once
             url, start = f"sqlite:///{tmp_path / f'new-{k}.db'}", manager.Barrier(3)
             assert pool.starmap(_open_at_once, [(url, start)] * 3) == ["opened"] * 3
+
+
+def test_the_command_line_says_a_storage_refused_or_unreachable_in_one_line(tmp_path, capsys):
+    from fppo_jax.cli import main
+
+    flags = ["tune", "--variants", "ppo,fppo-lp", "--tasks", "cartpole", "--trials", "4"]
+    flags += ["--eta", "2", "--steps", "1024", "--num-envs", "4", "--num-steps", "32"]
+    flags += ["--minibatches", "4", "--epochs", "2", "--quiet", "--output", str(tmp_path / "t")]
+    assert main([*flags, "--storage", ""]) == 2
+    said = capsys.readouterr().err
+    assert said.startswith("fppo-jax: error: storage must name Optuna's storage, a database URL")
+    assert said.count("\n") == 1 and not (tmp_path / "t").exists()
+    assert main([*flags, "--storage", "sqlite://"]) == 2
+    assert capsys.readouterr().err == (
+        "fppo-jax: error: storage sqlite:// is a database in memory, lost when the tune ends: "
+        "give a file (sqlite:///path/optuna.db), a server's URL or a journal file "
+        "(path/optuna.log)\n"
+    )
+    pytest.importorskip("psycopg", reason="the postgres extra's driver is not installed")
+    with socket.socket() as closed:  # a port nothing listens on
+        closed.bind(("127.0.0.1", 0))
+        port = closed.getsockname()[1]
+    assert main([*flags, "--storage", f"postgresql://fppo:s3cret@127.0.0.1:{port}/optuna"]) == 2
+    said = capsys.readouterr().err
+    assert said.startswith(
+        f"fppo-jax: error: cannot open Optuna's storage postgresql://fppo:***@127.0.0.1:{port}/"
+        "optuna: connection failed: "
+    )
+    assert said.count("\n") == 1 and "s3cret" not in said

@@ -137,7 +137,9 @@ def open_storage(optuna: Any, url: str, studies: str | None = None) -> Any:
 def _database(optuna: Any, url: str, shown: str) -> Any:
     """The database at `url`, opened, its connections checked before each use: tried again
     while other processes are making the same new database's tables."""
-    for tried in range(1, OPEN_TRIES + 1):
+    tried = 0
+    while True:
+        tried += 1
         try:
             return optuna.storages.RDBStorage(url, engine_kwargs={"pool_pre_ping": True})
         except Exception as error:  # SQLAlchemy's and the database driver's own errors
@@ -147,7 +149,6 @@ def _database(optuna: Any, url: str, shown: str) -> Any:
             raise StorageFailed(
                 f"cannot open Optuna's storage {shown}: {_reason(error, _password(url))}"
             ) from None
-    raise AssertionError("unreachable: the last try raises")
 
 
 def _made_meanwhile(error: Exception) -> bool:

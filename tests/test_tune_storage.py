@@ -25,6 +25,7 @@ from fppo_jax.analysis.tune_files import read_plan
 from fppo_jax.analysis.tune_storage import (
     StorageFailed,
     open_storage,
+    storage_record,
     storage_shown,
     study_name,
     tune_storage,
@@ -76,6 +77,21 @@ def test_tunes_on_one_storage_keep_their_own_studies(tmp_path):
     # The same call again goes on with its own studies.
     again = tune("cartpole", ARMS, output=tmp_path / "b", storage=shared, **DRAWN)
     assert again.plan["storage"] == same_seed.plan["storage"] and len(_names(shared)) == 12
+
+
+def test_a_tunes_studies_are_named_after_its_plan_storage_and_folder(tmp_path):
+    plan = {"space": {"ppo": {"learning_rate": {"low": 1e-4, "high": 1e-3}}}, "trials": 4}
+    named = storage_record(plan, None, tmp_path / "a")
+    assert named == storage_record(plan, None, tmp_path / "a")  # the same tune, the same names
+    assert named["url"] == "optuna.db" and len(named["studies"]) == 12
+    narrower = {**plan, "space": {"ppo": {"learning_rate": {"low": 2e-3, "high": 1e-2}}}}
+    others = [
+        storage_record(narrower, None, tmp_path / "a"),  # a space outside the first's
+        storage_record({**plan, "trials": 6}, None, tmp_path / "a"),
+        storage_record(plan, "sqlite:///shared.db", tmp_path / "a"),
+        storage_record(plan, None, tmp_path / "b"),
+    ]
+    assert len({named["studies"], *(other["studies"] for other in others)}) == 5
 
 
 def test_a_plan_made_again_in_its_folder_draws_its_own_trials(tmp_path):

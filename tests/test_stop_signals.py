@@ -1,5 +1,6 @@
 """A cluster's stop signals: a checkpointed run stops at the end of its chunk of updates,
-checkpointed, and leaves the process's signal handlers as it found them."""
+checkpointed, and leaves the process's signal handlers as it found them; the command catches
+them from its first moment, before it imports JAX."""
 
 import os
 import signal
@@ -182,3 +183,48 @@ def test_ctrl_c_ends_the_command_in_a_line_keeping_what_it_wrote(tmp_path):
     logged = (tmp_path / "run" / "metrics.csv").read_text().splitlines()
     assert 2 <= len(logged) < 1 + 4096 // 128  # a header and whole rows, stopped mid-run
     assert all(row.count(",") == logged[0].count(",") for row in logged)
+
+
+# The command in a process of its own, which sends itself a signal as it first imports JAX:
+# seconds into its start, before which a command that caught signals once it had imported what
+# its flags need ended at once, with no line.
+SIGNALLED_AS_JAX_IS_IMPORTED = textwrap.dedent("""
+    import os, sys
+
+    number, sys.argv[1:] = int(sys.argv[1]), sys.argv[2:]
+
+    class SignalledOnImport:
+        def find_spec(self, name, path=None, target=None):
+            if name == "jax":
+                sys.meta_path.remove(self)
+                os.kill(os.getpid(), number)
+
+    sys.meta_path.insert(0, SignalledOnImport())
+    from fppo_jax.cli import entry_point
+
+    entry_point()
+""")
+
+
+def signalled_as_jax_is_imported(number, flags):
+    return subprocess.run(
+        [sys.executable, "-c", SIGNALLED_AS_JAX_IS_IMPORTED, str(int(number)), *flags],
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+    )
+
+
+def test_a_signal_as_the_command_imports_jax_stops_a_checkpointed_run_once_compiled(tmp_path):
+    flags = [*FLAGS, "--checkpoint-dir", str(tmp_path)]
+    done = signalled_as_jax_is_imported(signal.SIGTERM, flags)
+    assert done.returncode == 143, done.stderr[-3000:]
+    assert done.stderr.splitlines()[-1].startswith(
+        "fppo-jax: stopped by SIGTERM before training (while starting or compiling)"
+    )
+
+
+def test_a_command_that_does_not_catch_signals_gets_the_one_that_came_as_it_started():
+    # Held while the command imported JAX, then acting as it would have: the end of the process.
+    done = signalled_as_jax_is_imported(signal.SIGTERM, ["list"])
+    assert done.returncode == -signal.SIGTERM and done.stdout == ""

@@ -10,6 +10,8 @@ them; :mod:`.parser` assembles the commands; :mod:`.settings` reads ``--config F
 
 from __future__ import annotations
 
+# Light imports alone (no JAX): the command catches a cluster's stop signals before it imports
+# anything heavy, which takes seconds (fppo_jax.run.stop_signals).
 import argparse
 import contextlib
 import gc
@@ -19,31 +21,42 @@ import warnings
 from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from fppo_jax.cli.flags import own_surrogates, surrogates_named
-from fppo_jax.cli.parser import build_parser
-from fppo_jax.cli.settings import check_preset, check_settings, settings_file
-from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import FppoError
-from fppo_jax.run.stop_signals import STOP_SIGNALS, caught
+from fppo_jax.run.stop_signals import STOP_SIGNALS, caught, let_go
 
 if TYPE_CHECKING:
     from sys import UnraisableHookArgs
 
+    from fppo_jax.core.surrogates import Surrogate
+
 __all__ = ["build_parser", "entry_point", "main"]
+
+
+def build_parser(surrogates: Sequence[Surrogate] = ()) -> argparse.ArgumentParser:
+    """The command line (:func:`fppo_jax.cli.parser.build_parser`), imported on first use."""
+    from fppo_jax.cli.parser import build_parser as build
+
+    return build(surrogates)
 
 
 def entry_point() -> NoReturn:
     """``fppo-jax`` in a process of its own: the installed command and ``python -m fppo_jax``."""
-    # What is imported by now lives as long as the process. Frozen, it is left out of the
-    # collector's full passes, which tracing a program sets off, and of those at the exit:
-    # together a tenth of a short run's wall time.
-    gc.freeze()
-    sys.unraisablehook = _without_closed_loop_reports(sys.unraisablehook)
-    try:
-        sys.exit(main())
-    except KeyboardInterrupt:
-        print(INTERRUPTED, file=sys.stderr)
-        sys.exit(128 + signal.SIGINT)  # what a shell reports for a program Ctrl-C ended
+    # A cluster's stop signals are held from the first moment, before the seconds that JAX's
+    # import takes; a command that does not catch them lets them act once it knows (main).
+    with caught(STOP_SIGNALS):
+        import fppo_jax.cli.parser  # noqa: F401  # what every command needs, frozen with it
+
+        # What is imported by now lives as long as the process. Frozen, it is left out of
+        # the collector's full passes, which tracing a program sets off, and of those at the
+        # exit: together a tenth of a short run's wall time.
+        gc.freeze()
+        sys.unraisablehook = _without_closed_loop_reports(sys.unraisablehook)
+        try:
+            status = main()
+        except KeyboardInterrupt:
+            print(INTERRUPTED, file=sys.stderr)
+            status = 128 + signal.SIGINT  # what a shell reports for a program Ctrl-C ended
+    sys.exit(status)
 
 
 # What a command writes is written as it goes (a run's metrics.csv update by update, each
@@ -75,6 +88,8 @@ def _without_closed_loop_reports(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from fppo_jax.cli.flags import surrogates_named
+
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
         surrogates = surrogates_named(argv)  # their hyperparameters become flags
@@ -94,9 +109,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     # A checkpointed command, in one process, catches a cluster's stop signals from its start:
     # one that comes while it imports or compiles stops it once compiled, in a line and with
     # the exit status a signal stopping it in training gives (fppo_jax.run.driver). Joined
-    # processes leave SIGTERM to JAX's preemption service.
+    # processes leave SIGTERM to JAX's preemption service; any other command, to the signal's
+    # own action.
     checkpointed = getattr(args, "checkpoint_dir", None) is not None
     catch = checkpointed and not getattr(args, "distributed", False)
+    if not catch:
+        let_go()
     with caught(STOP_SIGNALS if catch else ()):
         return _run(args)
 
@@ -141,6 +159,9 @@ def _with_settings_file(
 ) -> argparse.Namespace:
     """`argv` parsed with the settings of ``--config FILE`` as the command's defaults (a flag
     given wins), its own surrogates' flags included, once the file's names are checked."""
+    from fppo_jax.cli.flags import own_surrogates
+    from fppo_jax.cli.settings import check_preset, check_settings, settings_file
+
     settings = settings_file(args.config)
     named = own_surrogates(_variants(settings.get("variant")))
     if named:

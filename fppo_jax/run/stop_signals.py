@@ -3,8 +3,9 @@ stops cleanly: SIGTERM on preemption, at its time limit and on scancel; SIGUSR1 
 ahead of the time limit (``sbatch --signal=USR1@SECONDS``).
 
 Light on purpose (no JAX): the command line catches them from its start, before it imports
-what training needs, and the driver, within that, acts on them (:mod:`fppo_jax.run.training`),
-stopping with :class:`StoppedBySignal`.
+anything heavy, and lets them go (:func:`let_go`) once it knows that its command does not
+catch them; within that, the driver acts on them (:mod:`fppo_jax.run.training`), stopping with
+:class:`StoppedBySignal`.
 """
 
 from __future__ import annotations
@@ -14,10 +15,14 @@ import signal
 import threading
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
 
-_received: list[int] | None = None  # the outermost `caught` block's, while one catches
+# The outermost `caught` block's, while one catches: what it received, and the handlers it
+# replaced.
+_received: list[int] | None = None
+_previous: dict[int, Any] = {}
 
 
 @contextlib.contextmanager
@@ -39,13 +44,28 @@ def caught(numbers: tuple[int, ...]) -> Iterator[list[int]]:
                 previous[number] = signal.signal(number, lambda n, _: received.append(n))
     if previous:
         _received = received
+        _previous.update(previous)
     try:
         yield received
     finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
-        if previous:
-            _received = None
+        if previous and _received is received:  # not let go of already
+            let_go(act=False)
+
+
+def let_go(act: bool = True) -> None:
+    """Ends the outermost block's catching now, for a command that turns out to leave the
+    signals their own action (no checkpoints; joined processes, where JAX's preemption service
+    takes SIGTERM): the handlers it replaced are back, and where `act`, each signal it held
+    meanwhile acts as it would have (the end of the process, by default). The block's end
+    then restores nothing."""
+    global _received
+    held = _received or []
+    for number, handler in _previous.items():
+        signal.signal(number, handler)
+    _previous.clear()
+    _received = None
+    for number in dict.fromkeys(held) if act else ():
+        signal.raise_signal(number)
 
 
 class StoppedBySignal(Exception):

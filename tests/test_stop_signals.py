@@ -1,6 +1,7 @@
 """A cluster's stop signals: a checkpointed run stops at the end of its chunk of updates,
 checkpointed, and leaves the process's signal handlers as it found them; the command catches
-them from its first moment, before it imports JAX."""
+them from its first moment, before it imports JAX; a stopped command's exit status is its own,
+whatever the interpreter's teardown would do."""
 
 import os
 import signal
@@ -228,3 +229,39 @@ def test_a_command_that_does_not_catch_signals_gets_the_one_that_came_as_it_star
     # Held while the command imported JAX, then acting as it would have: the end of the process.
     done = signalled_as_jax_is_imported(signal.SIGTERM, ["list"])
     assert done.returncode == -signal.SIGTERM and done.stdout == ""
+
+
+# A checkpointed run that a signal stops after its first chunk, in a process whose interpreter
+# crashes as it tears down, as it did when the compiled call dispatched ahead of that chunk was
+# still running (3 stops in 27 here, status 139).
+CRASHES_AS_IT_ENDS = textwrap.dedent("""
+    import atexit, ctypes, os, signal, sys
+    import fppo_jax.run.training as training
+    from fppo_jax.cli import entry_point
+
+    run_chunks = training.run_chunks
+
+    def chunks_then_signal(*args):
+        for index, chunk in enumerate(run_chunks(*args)):
+            if index == 0:
+                os.kill(os.getpid(), signal.SIGTERM)
+            yield chunk
+
+    training.run_chunks = chunks_then_signal
+    atexit.register(ctypes.string_at, 0)  # a segmentation fault
+    sys.argv[1:] = sys.argv[2:]
+    entry_point()
+""")
+
+
+def test_a_stopped_command_exits_with_its_status_whatever_the_teardown_would_do(tmp_path):
+    flags = [*FLAGS, "--checkpoint-dir", str(tmp_path)]
+    done = subprocess.run(
+        [sys.executable, "-c", CRASHES_AS_IT_ENDS, "--", *flags],
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 143, done.stderr[-3000:]
+    assert done.stderr.splitlines()[-1].startswith("fppo-jax: stopped by SIGTERM after update 1")
+    assert read_policy(tmp_path)[1]["update"] == 1

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
+import os
 import signal
 import sys
 import warnings
@@ -56,7 +57,26 @@ def entry_point() -> NoReturn:
         except KeyboardInterrupt:
             print(INTERRUPTED, file=sys.stderr)
             status = 128 + signal.SIGINT  # what a shell reports for a program Ctrl-C ended
+    if status in _STOPPED:
+        _exit_now(status)
     sys.exit(status)
+
+
+# The statuses of a command a stop signal stopped (128 + the signal: 143, 138).
+_STOPPED = frozenset(128 + number for number in STOP_SIGNALS)
+
+
+def _exit_now(status: int) -> NoReturn:
+    """Ends the process with `status` once what it printed is out, skipping the interpreter's
+    teardown. A run stopped by a signal leaves its next compiled call running on XLA's threads
+    (dispatched ahead of the chunk it stopped at, run_chunks); the C library's exit, running the
+    shared libraries' destructors meanwhile, crashed that call's compiled code in 3 stops of 27
+    here (status 139), which a job script keyed on the status takes for a failure. All the
+    command wrote is closed by now: the checkpoint waited for and its manager closed, the logs
+    released (fppo_jax.run.driver), a tune's and a study's records written as they went."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
 
 
 # What a command writes is written as it goes (a run's metrics.csv update by update, each

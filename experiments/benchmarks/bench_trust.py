@@ -10,7 +10,9 @@ Per task, in <results>/trust/<task>/: the tune (``tune/``: racing over 9 trials,
 a round, then the default and 3 finalists on 10 validation seeds, within --budget full runs),
 then one sweep of the chosen setting and the default on test seeds 0 … 19, evaluated once at
 the end (``test/``: the deterministic policy's mean return over 10 episodes, the study's eval
-endpoint). A task recorded is not trained again: the same command goes on where it stopped.
+endpoint; where the race chose a run shape of its own, the default's runs in ``test-default/``).
+The tune searches the run's shape as racing does by default (``fppo_jax.core.shape_space``).
+A task recorded is not trained again: the same command goes on where it stopped.
 The write-up, ``bench_trust.md``, gives per task P(tuned > default) with its 95% bootstrap
 interval, the IQM of both on the test seeds beside RL Zoo's tuned PPO, the race's outcome, the
 tune's wall time and its budget in full runs; and the goals: P ≥ 0.5 on every task, its interval
@@ -25,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import fppo_jax
+from fppo_jax.core.shape_space import config_values, split_setting
 from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
@@ -67,12 +70,31 @@ def tune_task(task: str, where: Path, budget: int, tiny: dict[str, int], steps: 
 
 
 def test_task(task: str, tuned: Path, where: Path, seeds: int, tiny: dict[str, int]) -> None:
-    """The chosen setting and the default, side by side on test seeds 0 … seeds − 1."""
+    """The chosen setting and the default, side by side on test seeds 0 … seeds − 1: one
+    sweep, or where the race chose another run shape, the default's apart in ``test-default``."""
     recorded = fppo_jax.load_tune(tuned)
     chosen, default = recorded.chosen(task, "ppo"), recorded.results[task]["ppo"]["default"]
-    grid = [{"variant": "ppo", **chosen}]
-    if chosen != default["setting"]:
-        grid.append({"variant": "ppo", **default["setting"]})
+    (ours, shape), (theirs, own) = split_setting(chosen), split_setting(default["setting"])
+    apart = shape != own
+    grid = [{"variant": "ppo", **ours}]
+    if chosen != default["setting"] and not apart:
+        grid.append({"variant": "ppo", **theirs})
+    test_sweep(task, grid, recorded, where, seeds, {**tiny, **config_values(shape)})
+    if apart:
+        default_where = where.parent / "test-default"
+        grid = [{"variant": "ppo", **theirs}]
+        test_sweep(task, grid, recorded, default_where, seeds, {**tiny, **config_values(own)})
+
+
+def test_sweep(
+    task: str,
+    grid: list[dict[str, Any]],
+    recorded: fppo_jax.TuneResult,
+    where: Path,
+    seeds: int,
+    shape: dict[str, Any],
+) -> None:
+    """`grid` on test seeds 0 … seeds − 1, evaluated once at the end, in run shape `shape`."""
     budget = recorded.plan["budget"][task]
     began = time.perf_counter()
     result = fppo_jax.sweep(
@@ -84,7 +106,7 @@ def test_task(task: str, tuned: Path, where: Path, seeds: int, tiny: dict[str, i
         eval_episodes=EVAL_EPISODES,
         log_dir=where,
         progress=False,
-        **tiny,
+        **shape,
     )
     write_run_record(where, time.perf_counter() - began, settings=str(len(result.settings)))
 
@@ -95,6 +117,8 @@ def task_lines(task: str, directory: Path) -> tuple[list[str], dict[str, Any]]:
     test = fppo_jax.SweepResult.read(directory / "test")
     scores = test.scores("eval")
     ours, theirs = scores[0], scores[-1]  # one setting: the race kept the default
+    if (directory / "test-default" / "sweep.json").exists():  # the chosen in a shape of its own
+        theirs = fppo_jax.SweepResult.read(directory / "test-default").scores("eval")[0]
     race = tuned.results[task]["ppo"]["race"]
     kept = race["chosen"] == 0
     # Where the race kept the default, both arms are the same runs: P is ½, exactly.

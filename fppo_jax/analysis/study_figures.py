@@ -11,6 +11,7 @@ import numpy as np
 from fppo_jax.analysis.study_plan import DecisionRow, StudyPlan
 from fppo_jax.analysis.study_report import normalised_scores
 from fppo_jax.analysis.study_sections import Scores
+from fppo_jax.analysis.study_shapes import ShapedRuns, TaskRuns
 from fppo_jax.run.results import SweepResult
 from fppo_jax.stats import statistics
 
@@ -32,7 +33,7 @@ def write_figures(
     output: Path,
     plan: StudyPlan,
     rows: Sequence[DecisionRow],
-    results: dict[str, SweepResult],
+    results: dict[str, TaskRuns],
     scores: dict[str, Scores],
 ) -> list[Path]:
     """In `output`: ``curves.png``, each task's learning curves (IQM over each setting's runs
@@ -50,7 +51,9 @@ def write_figures(
         1, len(tasks), figsize=(6 * len(tasks), 4), squeeze=False, layout="constrained"
     )
     for ax, task in zip(axes[0], tasks, strict=True):
-        plot_curves(results[task], band="iqm", names=arm_names(results[task]), ax=ax)
+        runs = results[task]
+        for part in runs.parts if isinstance(runs, ShapedRuns) else (runs,):
+            plot_curves(part, band="iqm", names=arm_names(part), ax=ax)
     endpoint = plan["primary_endpoint"]
     improvements: dict[str, tuple[float, float, float]] = {}
     for row in rows:

@@ -23,6 +23,7 @@ from fppo_jax.analysis.study_plan import (
     StudyPlan,
     upgraded,
 )
+from fppo_jax.analysis.study_shapes import Shape, TaskRuns, merged, shape_folder
 from fppo_jax.errors import InvalidInput, MissingFile
 from fppo_jax.run.merge import merge
 from fppo_jax.run.results import SweepResult
@@ -36,19 +37,25 @@ DEFAULTS = "defaults"
 class StudyResult:
     """What a study holds so far: its `plan` (as ``plan.json`` has it), one row per comparison
     in `decisions` (as ``decisions.json`` has them), each task's recorded runs merged into one
-    sweep (`results`, by task), whether every comparison is `finished`, and with
-    ``with_defaults`` each task's runs of each arm's default setting (`defaults`, by task)."""
+    sweep (`results`, by task; one per run shape, where a tune chose its arms' shapes:
+    :class:`~fppo_jax.analysis.study_shapes.ShapedRuns`), whether every comparison is
+    `finished`, and with ``with_defaults`` each task's runs of each arm's default setting
+    (`defaults`, by task)."""
 
     plan: StudyPlan
     decisions: list[DecisionRow]
-    results: dict[str, SweepResult]
+    results: dict[str, TaskRuns]
     finished: bool
-    defaults: dict[str, SweepResult] = dataclasses.field(default_factory=dict)
+    defaults: dict[str, TaskRuns] = dataclasses.field(default_factory=dict)
 
 
-def group_folder(study: Path, task: str, group: int, defaults: bool = False) -> Path:
-    """Where group `group` (from 1) of `task` is recorded in the study in `study`."""
-    return study / (DEFAULTS if defaults else "") / task_folder(task) / f"group-{group}"
+def group_folder(
+    study: Path, task: str, group: int, defaults: bool = False, shape: Shape = ()
+) -> Path:
+    """Where group `group` (from 1) of `task` in run shape `shape` is recorded in the study in
+    `study`."""
+    where = study / (DEFAULTS if defaults else "") / task_folder(task) / shape_folder(shape)
+    return where / f"group-{group}"
 
 
 def read_plan(directory: Path) -> StudyPlan:
@@ -86,20 +93,21 @@ def load_study(directory: str | Path) -> StudyResult:
     for entry in decisions["groups"]:
         key = (entry["task"], entry.get("defaults", False))
         runs[key] += _group_runs(directory, entry)
-    merged = {key: merge(parts) for key, parts in runs.items() if parts}
+    found = {key: merged(parts) for key, parts in runs.items() if parts}
     return StudyResult(
         plan,
         decisions["comparisons"],
-        {task: result for (task, defaults), result in merged.items() if not defaults},
+        {task: result for (task, defaults), result in found.items() if not defaults},
         decisions["finished"],
-        {task: result for (task, defaults), result in merged.items() if defaults},
+        {task: result for (task, defaults), result in found.items() if defaults},
     )
 
 
 def _group_runs(study: Path, entry: GroupEntry) -> list[SweepResult]:
     """The runs of one group that ``decisions.json`` lists: those recorded in the study's own
     folder (whole or joined from its shares), and those taken from recorded sweeps."""
-    where = group_folder(study, entry["task"], entry["group"], entry.get("defaults", False))
+    shape = tuple(sorted(entry.get("shape", {}).items()))
+    where = group_folder(study, entry["task"], entry["group"], entry.get("defaults", False), shape)
     found = []
     if (where / "sweep.json").is_file():
         found.append(SweepResult.read(where))

@@ -38,9 +38,19 @@ from fppo_jax.analysis.study_runs import (
     share_commits,
 )
 from fppo_jax.analysis.study_sections import SHARES, START, Scores, steps_name
+from fppo_jax.analysis.study_shapes import (
+    Shape,
+    ShapedRuns,
+    TaskRuns,
+    holding,
+    merged,
+    shape_folder,
+    shape_record,
+    shaped_protocol,
+)
+from fppo_jax.core.shape_space import ChoiceValue
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
-from fppo_jax.run.merge import merge
 from fppo_jax.run.results import SweepResult
 from fppo_jax.stats import statistics
 from fppo_jax.stats.rules import DecisionRule
@@ -76,6 +86,7 @@ class _Group:
     taken: dict[str, Taken]
     source: Source
     defaults: bool
+    shape: Shape = ()
 
     @property
     def to_train(self) -> bool:
@@ -108,12 +119,14 @@ def run_looks(
             break
         group_seeds = list(range(design.looks[look - 1] if look else 0, seeds))
         found = [
-            _group(output, source, task, look, group_seeds, [*variants, baseline], beside)
+            _group(output, source, task, look, group_seeds, arms, beside, shape)
             # each arm's default at the same looks, on the same seeds, as its tuned setting
             for beside in ((False, True) if source.defaults else (False,))
             for task in tasks
             # the baseline only while one of its task's candidates waits
             if (variants := [c for c in candidates if (task, c.name) in waiting])
+            # arms in run shapes of their own (a tune's choice) train apart, by shape
+            for shape, arms in _by_shape(source, task, [*variants, baseline], beside).items()
         ]
         to_train = [group for group in found if group.to_train]
         if source.part is not None and to_train:
@@ -142,7 +155,7 @@ def run_looks(
         if source.part is None:  # an array task writes no decision: the job after the array does
             _write_decisions(output, decisions, baseline, trained, plan)  # a killed one keeps them
             for where, runs in ((output, recorded), (output / DEFAULTS, defaults)):
-                _write_merged(where, runs, [group.task for group in found])
+                _write_merged(where, runs, found)
     return _finish(output, plan, recorded, defaults, decisions, baseline, trained, source.part)
 
 
@@ -173,15 +186,22 @@ def _decision_line(task: str, candidate: str, baseline: str, decision: Decision)
     )
 
 
-def _write_merged(output: Path, recorded: dict[str, list[SweepResult]], tasks: list[str]) -> None:
-    """Each of `tasks`' runs so far as one sweep, ``<task>/curves.csv`` and ``sweep.json``
-    merged over its groups (:func:`~fppo_jax.merge`: one ``run`` numbering, where each group's
-    restarts), beside the groups; not for a task whose runs were all taken from recorded
-    sweeps (it has no directory in the study's)."""
-    for task in dict.fromkeys(tasks):
+def _write_merged(
+    output: Path, recorded: dict[str, list[SweepResult]], groups: list[_Group]
+) -> None:
+    """Each task's runs so far as one sweep, ``<task>/curves.csv`` and ``sweep.json`` merged
+    over its groups (:func:`~fppo_jax.merge`: one ``run`` numbering, where each group's
+    restarts), beside the groups, one per run shape where its arms train in several (in the
+    shape's folder); not for a task whose runs were all taken from recorded sweeps (it has no
+    directory in the study's)."""
+    for task, group in {group.task: group for group in groups}.items():
         where = output / task_folder(task)
-        if recorded[task] and where.is_dir():
-            merge(recorded[task]).write(where)
+        if not recorded[task] or not where.is_dir():
+            continue
+        runs = merged(recorded[task])
+        for part in runs.parts if isinstance(runs, ShapedRuns) else (runs,):
+            shape = group.source.shape_of(task, str(part.settings[0]["variant"]))
+            part.write(where / shape_folder(shape))
 
 
 def _group(
@@ -192,24 +212,38 @@ def _group(
     seeds: list[int],
     variants: list[Surrogate],
     defaults: bool = False,
+    shape: Shape = (),
 ) -> _Group:
-    """`task`'s group at `look` (with `defaults`, of each arm's default, in ``defaults/``): of
-    `variants`, those whose runs `source` takes from recorded sweeps, and the others, to train
-    in the study's own directory unless recorded there."""
+    """`task`'s group at `look` (with `defaults`, of each arm's default, in ``defaults/``) of
+    `variants` in run shape `shape`: those whose runs `source` takes from recorded sweeps, and
+    the others, to train in the study's own directory unless recorded there."""
     if defaults:
         source, output = cast(Source, source.defaults), output / DEFAULTS
     taken = {v.name: t for v in variants if (t := source.take(task, v, seeds))}
     variants = [v for v in variants if v.name not in taken]
-    where = output / task_folder(task) / f"group-{look + 1}"
+    where = output / task_folder(task) / shape_folder(shape) / f"group-{look + 1}"
     result = recorded_group(where, variants, seeds) if variants else None
-    differences = protocol_differences(result.config, source.expected[task][0]) if result else []
+    protocol = shaped_protocol(source.expected[task][0], shape)
+    differences = protocol_differences(result.config, protocol) if result else []
     if differences:
         raise InvalidInput(
             f"{where} was trained under another protocol than this call would train "
             f"({'; '.join(differences)}): a study's groups share one protocol. Go on on a "
             "machine that trains as this one did (a plan's backend auto is chosen by the machine)"
         )
-    return _Group(task, look, seeds, variants, where, result, taken, source, defaults)
+    return _Group(task, look, seeds, variants, where, result, taken, source, defaults, shape)
+
+
+def _by_shape(
+    source: Source, task: str, variants: list[Surrogate], defaults: bool
+) -> dict[Shape, list[Surrogate]]:
+    """`variants` by the run shape each trains on `task` (each arm's default: the task's)."""
+    found: dict[Shape, list[Surrogate]] = {}
+    for variant in variants:
+        found.setdefault(() if defaults else source.shape_of(task, variant.name), []).append(
+            variant
+        )
+    return found
 
 
 class _Said(TypedDict, total=False):
@@ -217,6 +251,7 @@ class _Said(TypedDict, total=False):
     every entry has), spread each in its place."""
 
     defaults: bool
+    shape: dict[str, ChoiceValue]
     commit: str
     shares: list[str]
     reused: dict[str, list[str]]
@@ -240,6 +275,8 @@ def _gather(group: _Group, recorded: dict[str, list[SweepResult]]) -> GroupEntry
     if not said:
         return None
     of: _Said = {"defaults": True} if group.defaults else {}
+    if group.shape:
+        of["shape"] = shape_record(group.shape)
     return {"task": group.task, "group": group.look + 1, **of, "seeds": group.seeds, **said}
 
 
@@ -256,8 +293,8 @@ def _finish(
     """The study as it stands; unless this call trained a `part`, its decisions, report and
     figures written, with the comparisons of each arm's default beside them where the plan
     trains them."""
-    results = {task: merge(parts) for task, parts in recorded.items() if parts}
-    at_defaults = {task: merge(parts) for task, parts in defaults.items() if parts}
+    results = {task: merged(parts) for task, parts in recorded.items() if parts}
+    at_defaults = {task: merged(parts) for task, parts in defaults.items() if parts}
     if part is not None:
         rows = _rows(decisions, baseline)
         return StudyResult(plan, rows, results, all(row["final"] for row in rows), at_defaults)
@@ -277,7 +314,7 @@ def _finish(
     return StudyResult(plan, rows, results, finished, at_defaults)
 
 
-def _task_scores(result: SweepResult, plan: StudyPlan) -> Scores:
+def _task_scores(result: TaskRuns, plan: StudyPlan) -> Scores:
     """What the report shows of a task's runs: each variant's scores by endpoint, and its env
     steps to each share of the baseline's final IQM (``steps to 50%``; none where that IQM is
     not positive, where a share of it is no lower bar)."""
@@ -285,15 +322,15 @@ def _task_scores(result: SweepResult, plan: StudyPlan) -> Scores:
     shown = ("final", plan["primary_endpoint"], *plan["secondary_endpoints"], REPORTED)
     scores = {v: {e: run_scores(result, v, e) for e in dict.fromkeys(shown)} for v in variants}
     for variant in variants:  # where each run starts: the untrained policy's first return
-        curves = result.metrics["average_return"][runs_of(result, variant)]
+        curves = holding(result, variant).metrics["average_return"][runs_of(result, variant)]
         scores[variant][START] = np.array([_first_finite(row) for row in curves])
     final = scores[plan["baseline"]]["final"]
     target = float(statistics.iqm(final[np.isfinite(final)]))
     if not target > 0:
         return scores
     for variant in variants:
-        runs = runs_of(result, variant)
-        curves, steps = result.metrics["average_return"][runs], result.metrics["env_steps"][runs]
+        runs, metrics = runs_of(result, variant), holding(result, variant).metrics
+        curves, steps = metrics["average_return"][runs], metrics["env_steps"][runs]
         for share in SHARES:
             reached = statistics.steps_to_threshold(curves, steps, share * target)
             scores[variant][steps_name(share)] = reached
@@ -378,11 +415,9 @@ def _write_decisions(
     taken from, earlier calls' groups kept."""
     path = output / DECISIONS_FILE
     earlier = json.loads(path.read_text()).get("groups", []) if path.exists() else []
-    by_group: dict[tuple[str, int, bool], GroupEntry] = {
-        (g["task"], g["group"], g.get("defaults", False)): g for g in earlier
-    }
+    by_group: dict[tuple[str, int, bool, str], GroupEntry] = {_key(g): g for g in earlier}
     for entry in trained:  # a group trained earlier keeps its commit when runs are taken now
-        key = (entry["task"], entry["group"], entry.get("defaults", False))
+        key = _key(entry)
         before = by_group.get(key)
         by_group[key] = entry if before is None else {**before, **entry}
     groups = list(by_group.values())
@@ -394,7 +429,15 @@ def _write_decisions(
         **margin,
         "comparisons": rows,
         **measured,
-        "groups": sorted(groups, key=lambda g: (g["group"], g.get("defaults", False), g["task"])),
+        "groups": sorted(
+            groups, key=lambda g: (g["group"], g.get("defaults", False), g["task"], _key(g)[3])
+        ),
     }
     write_json(path, record)
     return rows
+
+
+def _key(group: GroupEntry) -> tuple[str, int, bool, str]:
+    """A group's place in ``decisions.json``: its task, look, kind and run shape."""
+    shape = json.dumps(group.get("shape", {}), sort_keys=True)
+    return group["task"], group["group"], group.get("defaults", False), shape

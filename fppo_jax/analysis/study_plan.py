@@ -12,6 +12,7 @@ from typing import NotRequired, TypedDict, cast
 from fppo_jax.analysis.preregistration import commit
 from fppo_jax.core.config import Setting
 from fppo_jax.core.objectives import identities
+from fppo_jax.core.shape_space import ChoiceValue
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats import statistics
@@ -121,11 +122,12 @@ class GroupEntry(TypedDict):
     or, trained in shares by array tasks, the commit of each share (`shares`, ``""`` for one
     that recorded none), or the recorded sweeps its runs were taken from, by variant
     (`reused`), or these together; `defaults` where it is of each arm's default setting
-    (with_defaults)."""
+    (with_defaults); `shape` where its arms train in a run shape a tune chose."""
 
     task: str
     group: int
     defaults: NotRequired[bool]
+    shape: NotRequired[dict[str, ChoiceValue]]  # a run shape a tune chose for some arms
     seeds: list[int]
     commit: NotRequired[str]
     shares: NotRequired[list[str]]

@@ -16,6 +16,7 @@ from fppo_jax.core.search_space import (
     SearchSpace,
     default_setting,
 )
+from fppo_jax.core.shape_space import Choice
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import MissingPackage, install_hint
 
@@ -74,7 +75,7 @@ def draw_population(
         if study is None:
             study = optuna.create_study(study_name=name, storage=storage, direction="maximize")
             for draw in draws:
-                shared = spaces[arm.name].shared
+                shared = {**spaces[arm.name].shared, **spaces[arm.name].shape}
                 study.enqueue_trial(
                     {
                         _param(k, axis): draw[_param(k if k in shared else f"{arm.name}.{k}", axis)]
@@ -100,19 +101,23 @@ def _draws(
     sampler: str,
     seed: int,
 ) -> list[dict[str, float]]:
-    axes = dict(next(iter(spaces.values())).shared)
-    defaults = {k: default_setting(arms[0], task)[k] for k in axes}
+    first_space = next(iter(spaces.values()))
+    axes: dict[str, Interval | Choice] = {**first_space.shared, **first_space.shape}
+    defaults: dict[str, Any] = {k: default_setting(arms[0], task)[k] for k in first_space.shared}
+    defaults |= first_space.shape_default
     for arm in arms:
         own = default_setting(arm, task)
-        for key, axis in spaces[arm.name].own.items():
-            axes[f"{arm.name}.{key}"] = axis
+        for key, interval in spaces[arm.name].own.items():
+            axes[f"{arm.name}.{key}"] = interval
             defaults[f"{arm.name}.{key}"] = own[key]
     first = {_param(k, axis): _internal(defaults[k], axis) for k, axis in axes.items()}
     name = study_name(storage, task, "draws")
     study = _complete_study(optuna, storage, name, trials)
     if study is None:
         drawn = (
-            optuna.samplers.QMCSampler(scramble=True, seed=seed)
+            # A run-shape axis is categorical: Sobol points cover the intervals, and its values
+            # come from the sampler's own seeded random draws, which need no warning.
+            optuna.samplers.QMCSampler(scramble=True, seed=seed, warn_independent_sampling=False)
             if sampler == "qmc"
             else optuna.samplers.RandomSampler(seed=seed)
         )
@@ -143,24 +148,26 @@ def _complete_study(optuna: Any, storage: Any, name: str, trials: int) -> Any:
     return None
 
 
-def _param(name: str, axis: Interval) -> str:
+def _param(name: str, axis: Interval | Choice) -> str:
     """What Optuna calls axis `name`: on a log1m scale it draws ``1-<name>``, log-uniformly."""
-    return f"1-{name}" if axis.scale == "log1m" else name
+    return f"1-{name}" if isinstance(axis, Interval) and axis.scale == "log1m" else name
 
 
-def _internal(value: float, axis: Interval) -> float:
-    return 1 - value if axis.scale == "log1m" else value
+def _internal(value: Any, axis: Interval | Choice) -> Any:
+    return 1 - value if isinstance(axis, Interval) and axis.scale == "log1m" else value
 
 
-def _suggest(trial: Any, name: str, axis: Interval) -> None:
+def _suggest(trial: Any, name: str, axis: Interval | Choice) -> None:
     """`trial`'s value of `name` on `axis`, drawn (or taken, if enqueued) and recorded."""
-    if axis.scale == "log1m":
+    if isinstance(axis, Choice):
+        trial.suggest_categorical(name, list(axis.values))
+    elif axis.scale == "log1m":
         trial.suggest_float(_param(name, axis), 1 - axis.high, 1 - axis.low, log=True)
     else:
         trial.suggest_float(name, axis.low, axis.high, log=axis.scale == "log")
 
 
-def setting_of(params: Mapping[str, float]) -> dict[str, float]:
+def setting_of(params: Mapping[str, Any]) -> dict[str, Any]:
     """A trial's parameters as a setting (``1-gamma`` drawn is γ)."""
     return {
         (key[2:] if key.startswith("1-") else key): (1 - value if key.startswith("1-") else value)

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from typing import Any, NotRequired, TypedDict
 
 from fppo_jax.core.search_space import Axis
+from fppo_jax.core.shape_space import ChoiceAxis
 from fppo_jax.core.surrogates import SurrogateIdentity
 
 # A run-shape setting's value, as a tune's plan records it for every run: a TrainConfig field's
@@ -88,6 +89,7 @@ class TunePlan(TypedDict):
     eta: NotRequired[int]
     budget: dict[str, TaskBudget]
     space: dict[str, dict[str, Axis]]  # per arm, its axes by hyperparameter
+    run_shape: NotRequired[dict[str, dict[str, ChoiceAxis]]]  # per task, where one is searched
     sampler: SamplerRecord
     storage: NotRequired[StorageRecord]  # tunes from before it name their studies plainly
     score: str

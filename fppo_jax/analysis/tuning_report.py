@@ -314,7 +314,7 @@ def write_report(output: Path, plan: TunePlan, results: dict[str, dict[str, ArmR
             shown = (
                 "none (every trial diverged)"
                 if chosen is None
-                else ", ".join(f"{k} = {v:.4g}" for k, v in chosen["setting"].items())
+                else ", ".join(f"{k} = {_value(v)}" for k, v in chosen["setting"].items())
             )
             lines.append(f"- {arm}: {shown}")
     lines += [
@@ -442,7 +442,15 @@ def _space_text(plan: TunePlan) -> str:
         for k, v in axes.items():
             if k not in shared:
                 parts.append(f"{arm}'s {k} [{v['low']:g}, {v['high']:g}] {v['scale']}")
+    for task, shape in plan.get("run_shape", {}).items():
+        choices = (f"{k} {{{', '.join(map(str, v['choices']))}}}" for k, v in shape.items())
+        parts.append(f"the run shape on {task}: {', '.join(choices)}")
     return "; ".join(parts)
+
+
+def _value(value: object) -> str:
+    """A setting's value as the report shows it (a run shape's as it is)."""
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
 def _figure(output: Path, results: dict[str, dict[str, ArmResults]]) -> None:

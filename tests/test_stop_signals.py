@@ -1,8 +1,10 @@
 """A cluster's stop signals: a checkpointed run stops at the end of its chunk of updates,
 checkpointed, and leaves the process's signal handlers as it found them; the command catches
-them from its first moment, before it imports JAX; a stopped command's exit status is its own,
-whatever the interpreter's teardown would do."""
+them from its first moment, before it imports JAX; a tune and a study stop at their next safe
+point and go on bit for bit; a stopped command's exit status is its own, whatever the
+interpreter's teardown would do."""
 
+import dataclasses
 import os
 import signal
 import subprocess
@@ -10,13 +12,19 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
+from conftest import TINY
+from helpers import TUNE_ARMS, TUNE_SMALL, rung_scores
 
 import fppo_jax
 import fppo_jax.run.training as training
 from fppo_jax import train
+from fppo_jax.analysis import population
+from fppo_jax.analysis.studies import study
+from fppo_jax.analysis.tuning import tune
 from fppo_jax.cli import INTERRUPTED, main
-from fppo_jax.run.stop_signals import STOP_SIGNALS
+from fppo_jax.run.stop_signals import STOP_SIGNALS, StoppedAtSafePoint
 from fppo_jax.store.saved_policy import read_policy
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -205,6 +213,9 @@ SIGNALLED_AS_JAX_IS_IMPORTED = textwrap.dedent("""
 
     entry_point()
 """)
+TUNE_FLAGS = ["tune", "--variants", ",".join(TUNE_ARMS), "--tasks", "cartpole", "--trials", "4"]
+TUNE_FLAGS += ["--eta", "2", "--steps", "1024", *FLAGS[7:15], "--score", "train", "--quiet"]
+TUNE_FLAGS += ["--finalists", "1", "--validation-seeds", "4", "--race-level", "0.1"]
 
 
 def signalled_as_jax_is_imported(number, flags):
@@ -225,10 +236,95 @@ def test_a_signal_as_the_command_imports_jax_stops_a_checkpointed_run_once_compi
     )
 
 
+def test_a_signal_as_the_command_imports_jax_stops_a_tune_before_its_first_rung(tmp_path):
+    done = signalled_as_jax_is_imported(signal.SIGUSR1, [*TUNE_FLAGS, "--output", str(tmp_path)])
+    assert done.returncode == 138, done.stderr[-3000:]
+    assert done.stderr.splitlines()[-1] == (
+        "fppo-jax: stopped by SIGUSR1 at rung 1 of 4 of cartpole; the same command goes on "
+        "from rung 1"
+    )
+    assert (tmp_path / "tune.json").is_file() and not list(tmp_path.glob("cartpole/rung-*"))
+
+
 def test_a_command_that_does_not_catch_signals_gets_the_one_that_came_as_it_started():
     # Held while the command imported JAX, then acting as it would have: the end of the process.
     done = signalled_as_jax_is_imported(signal.SIGTERM, ["list"])
     assert done.returncode == -signal.SIGTERM and done.stdout == ""
+
+
+def signal_in_first_call(monkeypatch, number):
+    """The process sends itself `number` while the first compiled call of the next program a
+    tune compiles is in flight."""
+    compile_program = population.compile_program
+
+    def compiled(*args, **kwargs):
+        program = compile_program(*args, **kwargs)
+        run = program.run
+
+        def signalled(*inputs):
+            output = run(*inputs)
+            if not sent:
+                sent.append(os.kill(os.getpid(), number))
+            return output
+
+        return dataclasses.replace(program, run=signalled)
+
+    sent: list[None] = []
+    monkeypatch.setattr(population, "compile_program", compiled)
+
+
+def test_a_tune_stops_after_the_call_in_flight_and_goes_on_bit_for_bit(tmp_path, monkeypatch):
+    whole, stopped = tmp_path / "whole", tmp_path / "stopped"
+    tune("cartpole", TUNE_ARMS, output=whole, rungs=1, **TUNE_SMALL)
+    before = {n: signal.getsignal(n) for n in STOP_SIGNALS}
+    with monkeypatch.context() as patch:
+        signal_in_first_call(patch, signal.SIGUSR1)  # the first of rung 1's 2 calls
+        with pytest.raises(StoppedAtSafePoint) as raised:
+            tune("cartpole", TUNE_ARMS, output=stopped, **TUNE_SMALL)
+    assert str(raised.value) == (
+        "stopped by SIGUSR1 at rung 1 of 4 of cartpole; the same command goes on from rung 1"
+    )
+    assert isinstance(raised.value, fppo_jax.StoppedBySignal) and raised.value.signal == 10
+    assert {n: signal.getsignal(n) for n in STOP_SIGNALS} == before
+    assert not (stopped / "cartpole/rung-0").exists()  # nothing of the rung stopped in
+    tune("cartpole", TUNE_ARMS, output=stopped, rungs=1, **TUNE_SMALL)
+    assert [r["arms"] for r in rung_scores(stopped)] == [r["arms"] for r in rung_scores(whole)]
+    with (
+        np.load(whole / "cartpole/rung-0/state.npz") as a,
+        np.load(stopped / "cartpole/rung-0/state.npz") as b,
+    ):
+        assert all(np.array_equal(a[name], b[name], equal_nan=True) for name in a.files)
+    # A share of a split rung (here its one group, the program above) trains again whole.
+    signal_in_first_call(monkeypatch, signal.SIGTERM)
+    with pytest.raises(StoppedAtSafePoint, match="at rung 1 of 4 of cartpole, part 1 of 2; the"):
+        tune("cartpole", TUNE_ARMS, output=tmp_path / "part", chunk=16, part=(1, 2), **TUNE_SMALL)
+    assert not (tmp_path / "part/cartpole/rung-0/part-1").exists()
+
+
+def test_a_study_stops_after_the_chunk_in_flight_and_goes_on_from_its_groups(tmp_path, monkeypatch):
+    arguments = dict(max_seeds=4, group_size=2, total_steps=8 * 128, progress=False, **TINY)
+    whole = study("cartpole", "fppo-lp", "ppo", output=tmp_path / "whole", **arguments)
+    run_chunks, sweeps = training.run_chunks, []
+
+    def second_group_signalled(*args):  # the second group's sweep, after its first chunk
+        sweeps.append(None)
+        for index, chunk in enumerate(run_chunks(*args)):
+            if len(sweeps) == 2 and index == 0:
+                os.kill(os.getpid(), signal.SIGTERM)
+            yield chunk
+
+    monkeypatch.setattr(training, "run_chunks", second_group_signalled)
+    with pytest.raises(StoppedAtSafePoint) as raised:
+        study("cartpole", "fppo-lp", "ppo", output=tmp_path / "stopped", **arguments)
+    assert str(raised.value) == (
+        "stopped by SIGTERM at cartpole's group-2 (seeds 2–3), the groups before it recorded; "
+        "the same command goes on from there"
+    )
+    monkeypatch.undo()
+    again = study("cartpole", "fppo-lp", "ppo", output=tmp_path / "stopped", **arguments)
+    assert again.decisions == whole.decisions
+    for name, values in whole.results["cartpole"].metrics.items():
+        assert np.array_equal(again.results["cartpole"].metrics[name], values, equal_nan=True)
 
 
 # A checkpointed run that a signal stops after its first chunk, in a process whose interpreter

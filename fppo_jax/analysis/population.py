@@ -33,6 +33,7 @@ from fppo_jax.run.execution import Program, compile_program, run_keys
 from fppo_jax.run.memory import check_host_memory
 from fppo_jax.run.plan import share_bounds
 from fppo_jax.run.prepare import Prepared
+from fppo_jax.run.stop_signals import stop_if_signalled
 from fppo_jax.store.files import write_atomically
 
 # A run of a population: its arm (a variant's name), its trial (the setting's number) and seed.
@@ -217,6 +218,9 @@ class Population:
         calls = -(-(window.end - window.start) // self.updates_per_call)
         began = time.perf_counter()
         for call in range(calls):
+            # A stop signal's safe point: after the call in flight (or once compiled), with
+            # nothing of the call after it dispatched.
+            stop_if_signalled(said)
             state, metrics = program.run(state, budgeted)
             returns, steps = jax.device_get((metrics.average_return, metrics.env_steps))
             ran = steps[0] >= 0

@@ -49,6 +49,7 @@ from fppo_jax.core.resolution import resolve
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.options import Options
+from fppo_jax.run.stop_signals import STOP_SIGNALS, caught
 from fppo_jax.stats.decidable import plan_lines
 from fppo_jax.stats.rules import SequentialMannWhitney
 from fppo_jax.stats.sequential import Design
@@ -150,8 +151,13 @@ def study(
         bool(with_defaults),
     )
     # Array tasks that start together take turns to check the plan (each holds the lock briefly).
+    # A stop signal stops the study before a group of seeds, or in one after the chunk in flight
+    # (Source.train), as one stops a checkpointed run: its recorded groups are its checkpoint.
     apart = {TUNE_PLAN: "a tune"}
-    with Preregistered(output, "a study", shared=part is not None, apart_from=apart) as folder:
+    with (
+        caught(STOP_SIGNALS),
+        Preregistered(output, "a study", shared=part is not None, apart_from=apart) as folder,
+    ):
         plan = folder.check(plan, PLAN_FILE, _RECORDED_ONLY, upgraded)
         folder.share_out()  # the array's tasks train their shares side by side
         if shown_progress(settings):

@@ -26,6 +26,8 @@ from fppo_jax.run.merge import merge
 from fppo_jax.run.plan import part_runs
 from fppo_jax.run.prepare import prepare
 from fppo_jax.run.results import SweepResult
+from fppo_jax.run.options import Snapshot
+from fppo_jax.run.stop_signals import stop_if_signalled
 from fppo_jax.run.sweeps import expand_grid, sweep
 from fppo_jax.stats import statistics
 from fppo_jax.store.files import write_json
@@ -120,7 +122,22 @@ class Source:
         if self.tuned is not None:
             chosen = self.tuned["settings"][task]
             grid = [{"variant": v, **chosen[v.name]} for v in variants]
-        return sweep_group(task, grid, seeds, where, part=self.part, **self.shape, **fixed)
+        # A stop signal stops the study before the group, or after the chunk in flight but
+        # the group's last (the group, recorded when it ends, then trains again from its start).
+        said = (
+            f"at {task}'s {where.name} (seeds {seeds[0]}–{seeds[-1]}), the groups before it "
+            "recorded; the same command goes on from there"
+        )
+        stop_if_signalled(said)
+        last = self.expected[task][0].config.num_updates
+
+        def stop(snapshot: Snapshot) -> None:
+            if snapshot.update < last:
+                stop_if_signalled(said)
+
+        return sweep_group(
+            task, grid, seeds, where, part=self.part, callback=stop, **self.shape, **fixed
+        )
 
     def at_defaults(self, everyone: list[Surrogate]) -> Source:
         """The like of this source for each arm's default setting: the settings a study without

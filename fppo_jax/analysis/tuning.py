@@ -74,6 +74,7 @@ from fppo_jax.core.search_space import (
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.prepare import Prepared, prepare
+from fppo_jax.run.stop_signals import STOP_SIGNALS, caught
 from fppo_jax.store.files import json_value, write_json
 
 SAMPLERS = ("qmc", "random")
@@ -189,7 +190,12 @@ def tune(
     # Array tasks that start together take turns with the folder: each holds it while it reads
     # and writes the plan and Optuna's storage, then lets go to train its share.
     apart = {STUDY_PLAN: "a study"}
-    with Preregistered(output, "a tune", shared=part is not None, apart_from=apart) as folder:
+    # A stop signal stops the tune at its next safe point (TaskTune.train), as one stops a
+    # checkpointed run: its recorded rungs are its checkpoint.
+    with (
+        caught(STOP_SIGNALS),
+        Preregistered(output, "a tune", shared=part is not None, apart_from=apart) as folder,
+    ):
         try:
             # Optuna's line per study made and per trial told, and its note that the Sobol
             # sampler is experimental, are not this tune's progress: quiet for the call.

@@ -33,6 +33,7 @@ from fppo_jax.analysis.tuning_records import ArmResults, ArmRung, RungScores, Sh
 from fppo_jax.analysis.tuning_report import arm_results
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.plan import share_bounds
+from fppo_jax.run.stop_signals import StoppedAtSafePoint, stop_if_signalled
 from fppo_jax.store.files import write_json
 
 
@@ -80,17 +81,32 @@ class TaskTune:
     def train(self, allowed: float, part: tuple[int, int] | None) -> int:
         """Trains up to `allowed` rungs after those read, each as its one share; with `part`,
         that share of the next rung alone, recorded for the join. Returns how many rungs it
-        trained (or trained a share of)."""
-        if part is not None:
-            window = self.window
-            if window is None or allowed < 1:
-                return 0
-            self._train_part(window, part)
-            return 1
+        trained (or trained a share of). A stop signal (SIGTERM, SIGUSR1) stops it before the
+        next rung, or in one after the compiled call in flight, with
+        :class:`~fppo_jax.run.stop_signals.StoppedAtSafePoint` saying where the same call goes
+        on: the rungs before are recorded, and the rung (or share) stopped in trains again from
+        its start, bit for bit."""
         trained = 0
-        while (window := self.window) is not None and trained < allowed:
-            self._record(window, [self._share(window, (1, 1))])
-            trained += 1
+        try:
+            while (window := self.window) is not None and trained < allowed:
+                stop_if_signalled("")
+                if part is not None:
+                    self._train_part(window, part)
+                    return 1
+                self._record(window, [self._share(window, (1, 1))])
+                trained += 1
+        except StoppedAtSafePoint as stopped:
+            rung, rounds = len(self.scores) + 1, self.scheduler.rounds
+            said = f"at rung {rung} of {rounds} of {self.task}"
+            if part is None:
+                said += f"; the same command goes on from rung {rung}"
+            else:
+                said += (
+                    f", part {part[0]} of {part[1]}; the same command trains that part again from "
+                    "its start (one that cannot end within the job's time limit never ends: "
+                    "split the rung into more parts)"
+                )
+            raise StoppedAtSafePoint(stopped.signal, said) from None
         return trained
 
     def _where(self, rung: int) -> Path:

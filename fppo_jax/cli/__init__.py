@@ -126,13 +126,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         except FppoError as error:
             print(f"fppo-jax: error: {error}", file=sys.stderr)
             return 2
-    # A checkpointed command, in one process, catches a cluster's stop signals from its start:
-    # one that comes while it imports or compiles stops it once compiled, in a line and with
-    # the exit status a signal stopping it in training gives (fppo_jax.run.driver). Joined
-    # processes leave SIGTERM to JAX's preemption service; any other command, to the signal's
-    # own action.
+    # A checkpointed command, a tune and a study, in one process, catch a cluster's stop
+    # signals from its start: one that comes while it imports or compiles stops it once
+    # compiled, in a line and with the exit status a signal stopping it in training gives
+    # (fppo_jax.run.driver). Joined processes leave SIGTERM to JAX's preemption service; any
+    # other command, to the signal's own action.
     checkpointed = getattr(args, "checkpoint_dir", None) is not None
-    catch = checkpointed and not getattr(args, "distributed", False)
+    recorded = args.command in ("tune", "study")  # each goes on from what it recorded
+    catch = (checkpointed or recorded) and not getattr(args, "distributed", False)
     if not catch:
         let_go()
     with caught(STOP_SIGNALS if catch else ()):

@@ -5,7 +5,8 @@ ahead of the time limit (``sbatch --signal=USR1@SECONDS``).
 Light on purpose (no JAX): the command line catches them from its start, before it imports
 anything heavy, and lets them go (:func:`let_go`) once it knows that its command does not
 catch them; within that, the driver acts on them (:mod:`fppo_jax.run.training`), stopping with
-:class:`StoppedBySignal`.
+:class:`StoppedBySignal`, and a tune or a study at its next safe point
+(:func:`stop_if_signalled`), with :class:`StoppedAtSafePoint`.
 """
 
 from __future__ import annotations
@@ -68,11 +69,26 @@ def let_go(act: bool = True) -> None:
         signal.raise_signal(number)
 
 
+def signalled() -> int | None:
+    """The first stop signal the outermost catching block received, if any."""
+    return _received[0] if _received else None
+
+
+def stop_if_signalled(said: str) -> None:
+    """At a safe point of a tune or a study: raises :class:`StoppedAtSafePoint` if a stop
+    signal came (`said` says where it stopped and how to go on)."""
+    number = signalled()
+    if number is not None:
+        raise StoppedAtSafePoint(number, said)
+
+
 class StoppedBySignal(Exception):
     """A checkpointed run stopped on SIGTERM or SIGUSR1 at the end of a chunk of updates, its
     checkpoint written, or before training if the signal came while it started or compiled
     (`trained` False), with nothing new checkpointed: resuming goes on from `update` (the
     newest checkpoint's, 0 if none)."""
+
+    update: int | None
 
     def __init__(
         self, signal_number: int, update: int, checkpoint_dir: str | Path, trained: bool = True
@@ -88,3 +104,16 @@ class StoppedBySignal(Exception):
             said += f"resume (--resume) to go on from the newest checkpoint in {where}, or from "
             said += "the start if there is none"
         super().__init__(f"stopped by {self.signal.name} {said}")
+
+
+class StoppedAtSafePoint(StoppedBySignal):
+    """A tune or a study stopped on SIGTERM or SIGUSR1 at its next safe point: after the
+    compiled call in flight, or between rungs or groups of seeds, with what it finished
+    recorded. The same call goes on from there, bit for bit; what `said` names was not
+    recorded, and trains again. `update` is None: it goes on from its records, not from a
+    checkpoint's update."""
+
+    def __init__(self, signal_number: int, said: str):
+        Exception.__init__(self, f"stopped by {signal.Signals(signal_number).name} {said}")
+        self.signal = signal.Signals(signal_number)
+        self.update, self.trained, self.said = None, True, said

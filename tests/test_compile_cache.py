@@ -110,6 +110,32 @@ def test_the_command_says_whether_it_compiled_or_loaded_its_program(tmp_path):
     assert re.fullmatch(r"loaded from the compilation cache in \d+\.\d s", said[1]), said
 
 
+def test_a_tune_says_whether_it_compiled_or_loaded_a_rungs_program(tmp_path):
+    flags = ["tune", "--variants", "ppo", "--tasks", "cartpole", "--trials", "2", "--eta", "2"]
+    flags += ["--steps", "256", "--num-envs", "4", "--num-steps", "32", "--minibatches", "4"]
+    flags += ["--epochs", "2", "--score", "train", "--finalists", "1", "--validation-seeds", "4"]
+    flags += ["--race-level", "0.1", "--rungs", "1"]
+    said = []
+    for output in ("a", "b"):  # the second process finds the first rung's program in the cache
+        run = [*flags, "--output", str(tmp_path / output)]
+        done = start(f"from fppo_jax.cli import main; main({run!r})", tmp_path)
+        _, err = done.communicate()
+        assert done.returncode == 0, err.decode()[-3000:]
+        lines = err.decode().splitlines()
+        said.append(
+            next(
+                line
+                for line in lines
+                if line.startswith("cartpole: rung 1 ")
+                and ("compiled in" in line or "loaded from" in line)
+            )
+        )
+    assert re.fullmatch(r"cartpole: rung 1 compiled in \d+\.\d s", said[0]), said
+    assert re.fullmatch(
+        r"cartpole: rung 1 loaded from the compilation cache in \d+\.\d s", said[1]
+    ), said
+
+
 def test_off_by_the_environment_variable(tmp_path):
     ran = run(TRAIN, tmp_path, FPPO_JAX_CACHE_DIR="off")
     assert ran["dir"] is None and ran["written"] == ran["loaded"] == 0

@@ -134,7 +134,8 @@ class Population:
                 program = compile_program(
                     self.prepared.trainer, keys, group_hps, jax.vmap, self.updates_per_call
                 )
-                self.say(f"{label} compiled in {program.compile_seconds:.1f} s")
+                how = "loaded from the compilation cache" if program.loaded else "compiled"
+                self.say(f"{label} {how} in {program.compile_seconds:.1f} s")
             said = label + (f", group {group + 1} of {groups}" if groups > 1 else "")
             state = self._start(program, window, keys, group_hps, index, saved)
             state, last = self._train(program, state, group_hps, window, len(index), said)

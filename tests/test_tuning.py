@@ -556,3 +556,19 @@ def test_the_command_line_plans_tunes_and_refuses_in_one_line(tuned, tmp_path, c
         said = capsys.readouterr().err
         assert "argument --part: " in said and f"got '{part}'" in said
     assert not (tmp_path / "c").exists()
+
+
+def test_a_study_on_a_tune_takes_its_steps_and_refuses_others_by_name(tuned, tmp_path, capsys):
+    output, _, _ = tuned
+    arguments = dict(max_seeds=2, group_size=2, groups=0, progress=False, **TINY)
+    found = study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", tuned=output, **arguments)
+    assert found.plan["settings"]["total_steps"] == 8 * 128  # the tune's, not the task's
+    with pytest.raises(InvalidInput, match=r"total_steps = 1024 \(--steps\) per run, not 2048"):
+        study("cartpole", "fppo-lp", output=tmp_path / "t", tuned=output, total_steps=2048)
+    from fppo_jax.cli import main
+
+    flags = ["study", "--tuned", str(output), "--candidates", "fppo-lp", "--tasks", "cartpole"]
+    assert main([*flags, "--steps", "2048", "--output", str(tmp_path / "u")]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"fppo-jax: error: the tune in {output} trained total_steps = 1024 (--steps) per run"
+    )

@@ -41,6 +41,7 @@ from fppo_jax.analysis.study_plan import ENDPOINTS, PLAN_FILE, make_plan, upgrad
 from fppo_jax.analysis.study_runs import OWN_SETTINGS, Shape, Source
 from fppo_jax.analysis.study_tuned import check_tuned_protocol, tuned_settings
 from fppo_jax.analysis.tune_files import PLAN_FILE as TUNE_PLAN
+from fppo_jax.analysis.tune_files import read_plan
 from fppo_jax.analysis.tuning import tune as tune_every_arm
 from fppo_jax.core.checks import check_part, positive_int
 from fppo_jax.core.config import CONFIG_FIELDS
@@ -120,6 +121,8 @@ def study(
         )
     design = Design(group_size, max_seeds, level, margin)
     _check_arguments(endpoint, groups, chunk, part, settings)
+    if tuned is not None:
+        total_steps = _steps_of_tune(tuned, total_steps)
     sources = [str(d) for d in ([reuse] if isinstance(reuse, str | Path) else reuse or [])]
     shape: Shape = {"total_steps": total_steps, "preset": preset, "backend": backend}
     everyone = [*candidates, baseline]
@@ -207,6 +210,26 @@ def _tuned_first(
     if not done.finished:
         raise InvalidInput(f"the tune in {where} did not finish (rungs?): run this again")
     return where
+
+
+def _steps_of_tune(tuned: str | Path, given: int | None) -> int | None:
+    """The env steps of each run (`total_steps`) of the tune in `tuned`, as its plan records
+    them, where the study gives none; one given that differs is refused by name (the other
+    run-shape fields by :func:`~fppo_jax.analysis.study_tuned.check_tuned_protocol`)."""
+    directory = Path(tuned)
+    if directory.name == TUNE_PLAN and directory.is_file():  # the tune's plan named for it
+        directory = directory.parent
+    if not (directory / TUNE_PLAN).is_file():
+        return given  # no tune there: tuned_settings says so
+    recorded = read_plan(directory)["settings"].get("total_steps")
+    steps = recorded if isinstance(recorded, int) else None  # None: the task's own
+    if given is None or steps is None or given == steps:
+        return steps if given is None else given
+    raise InvalidInput(
+        f"the tune in {directory} trained total_steps = {steps} (--steps) per run, not "
+        f"{given}: a study on its settings trains as it did; leave total_steps out to take "
+        "the tune's"
+    )
 
 
 def _check_arguments(

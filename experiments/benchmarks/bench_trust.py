@@ -4,6 +4,7 @@ default trained side by side on fresh test seeds, per task.
 
     python experiments/benchmarks/bench_trust.py --tasks cartpole,acrobot,mountaincar
     python experiments/benchmarks/bench_trust.py --tasks hopper        # a part of its own
+    python experiments/benchmarks/bench_trust.py --tasks hopper --rounds 1   # one round of it
     python experiments/benchmarks/bench_trust.py --report              # the write-up alone
 
 Per task, in <results>/trust/<task>/: the tune (``tune/``: racing over 9 trials, 2 tuning seeds
@@ -33,6 +34,7 @@ from fppo_jax.stats import statistics
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
 from common import (
+    RUN_RECORD,
     argument_parser,
     header,
     read_run_record,
@@ -49,8 +51,11 @@ ZOO = {"hopper": 2410.0, "halfcheetah": 5819.0, "swimmer": 282.0}
 GOAL = {"halfcheetah": 3000.0}  # at least this IQM where RL Zoo's is out of reach
 
 
-def tune_task(task: str, where: Path, budget: int, tiny: dict[str, int], steps: int | None) -> None:
-    """The task's tune, to its end (it goes on from what is recorded)."""
+def tune_task(
+    task: str, where: Path, budget: int, tiny: dict[str, int], steps: int | None, rounds: int | None
+) -> None:
+    """The task's tune, `rounds` rounds of it (all if None): it goes on from what is recorded,
+    and its record adds up the wall time of its parts."""
     began = time.perf_counter()
     fppo_jax.tune(
         task,
@@ -64,9 +69,13 @@ def tune_task(task: str, where: Path, budget: int, tiny: dict[str, int], steps: 
         validation_seeds=VALIDATION_SEEDS,
         eval_episodes=EVAL_EPISODES,
         total_steps=steps,
+        rungs=rounds,
         **tiny,
     )
-    write_run_record(where, time.perf_counter() - began)
+    spent = time.perf_counter() - began
+    before = read_run_record(where) if (where / RUN_RECORD).exists() else {}
+    parts = str(int(before.get("parts", 0)) + 1)
+    write_run_record(where, before.get("wall_seconds", 0.0) + spent, parts=parts)
 
 
 def test_task(task: str, tuned: Path, where: Path, seeds: int, tiny: dict[str, int]) -> None:
@@ -221,6 +230,9 @@ def main() -> None:
         "--results", type=Path, default=Path(__file__).resolve().parents[1] / "results"
     )
     parser.add_argument("--report", action="store_true", help="the write-up alone")
+    parser.add_argument(
+        "--rounds", type=int, default=None, help="rounds of each tune this call trains (a part)"
+    )
     args = parser.parse_args()
     tiny = (
         {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2} if args.tiny else {}
@@ -228,8 +240,10 @@ def main() -> None:
     for task in [t for t in args.tasks.split(",") if t and not args.report]:
         where = args.results / "trust" / task
         if not (where / "tune" / "results.json").exists():
-            tune_task(task, where / "tune", args.budget, tiny, args.steps)
-        if not (where / "test" / "sweep.json").exists():
+            tune_task(task, where / "tune", args.budget, tiny, args.steps, args.rounds)
+        if not (where / "tune" / "results.json").exists():
+            print(f"{task}: the tune goes on in a later part (--rounds)")
+        elif not (where / "test" / "sweep.json").exists():
             test_task(task, where / "tune", where / "test", args.test_seeds, tiny)
     report(args.results, args.results / "bench_trust.md")
     print((args.results / "bench_trust.md").read_text())

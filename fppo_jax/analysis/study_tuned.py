@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Collection
 from pathlib import Path
+from typing import Any
 
 from fppo_jax.analysis.study_plan import TunedChoice
 from fppo_jax.analysis.study_runs import Source
@@ -146,7 +147,7 @@ def _across_tasks(recorded: TuneResult, everyone: list[Surrogate]) -> dict[str, 
 
 
 def _check_trial_0(
-    directory: Path, task: str, variant: Surrogate, trial_0: dict[str, float]
+    directory: Path, task: str, variant: Surrogate, trial_0: dict[str, Any]
 ) -> None:
     """Refuses a tune whose trial 0 of `variant` on `task` is not the default setting that the
     study trains beside the tuned one (defaults changed since the tune): the gain from tuning

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any
 
 from fppo_jax.analysis.arms import task_folder
 from fppo_jax.analysis.preregistration import plan_digest
@@ -106,7 +107,7 @@ class TuneResult:
     results: Results
     finished: bool
 
-    def chosen(self, task: str, arm: str) -> dict[str, float]:
+    def chosen(self, task: str, arm: str) -> dict[str, Any]:
         """The setting chosen for `arm` on `task` (refused where every trial diverged)."""
         if task not in self.results or arm not in self.results[task]:
             raise InvalidInput(f"the tune in {self.directory} did not tune {arm} on {task}")

@@ -56,7 +56,7 @@ def draw_population(
     trials: int,
     sampler: str,
     seed: int,
-) -> dict[str, list[dict[str, float]]]:
+) -> dict[str, list[dict[str, Any]]]:
     """Each arm's trials on `task`, as settings: trial 0 its default, the others drawn.
 
     The draws are one Optuna study (``draws``) over the shared axes and every arm's own
@@ -100,7 +100,7 @@ def _draws(
     trials: int,
     sampler: str,
     seed: int,
-) -> list[dict[str, float]]:
+) -> list[dict[str, Any]]:
     first_space = next(iter(spaces.values()))
     axes: dict[str, Interval | Choice] = {**first_space.shared, **first_space.shape}
     defaults: dict[str, Any] = {k: default_setting(arms[0], task)[k] for k in first_space.shared}

@@ -10,13 +10,17 @@ from collections.abc import Sequence
 from typing import Any, NotRequired, TypedDict
 
 from fppo_jax.core.search_space import Axis
-from fppo_jax.core.shape_space import ChoiceAxis
+from fppo_jax.core.shape_space import ChoiceAxis, ChoiceValue
 from fppo_jax.core.surrogates import SurrogateIdentity
 
 # A run-shape setting's value, as a tune's plan records it for every run: a TrainConfig field's
 # (hidden_sizes a sequence), total_steps's (None: the task's budget), the preset, the backend or
 # the chunk.
 RunShapeValue = int | bool | str | Sequence[int] | None
+
+
+# A trial's setting as records hold it: each hyperparameter's value, and its run shape's.
+TrialSetting = dict[str, ChoiceValue]
 
 
 class RungPlan(TypedDict):
@@ -174,14 +178,14 @@ class Chosen(TypedDict):
 
     trial: int
     score: float | None
-    setting: dict[str, float]
+    setting: TrialSetting
 
 
 class DefaultResult(TypedDict):
     """Trial 0, the arm's default: its setting, its first rung's score, and the last rung it
     reached with its score there."""
 
-    setting: dict[str, float]
+    setting: TrialSetting
     first_rung_score: float | None
     last_rung_reached: int
     score_there: float | None
@@ -249,7 +253,7 @@ class ArmResults(TypedDict):
     curve: list[CurvePoint]
     env_steps: int
     beat_baseline_default: BaselineBeaten
-    trials: NotRequired[list[dict[str, float]]]  # each trial's setting, by number
+    trials: NotRequired[list[TrialSetting]]  # each trial's setting, by number
     first_rung_spread: Spread
     expected_best: NotRequired[ExpectedBestCurve | None]  # None: no trial scored
     diverged_trials: list[int]

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -93,7 +94,7 @@ def arm_results(
     arm: str,
     baseline: str,
     rungs_scores: list[RungScores],
-    settings: dict[str, list[dict[str, float]]],
+    settings: dict[str, list[dict[str, Any]]],
     windows: Sequence[Window],
     samples_per_update: int,
 ) -> ArmResults:

@@ -146,9 +146,7 @@ def _across_tasks(recorded: TuneResult, everyone: list[Surrogate]) -> dict[str, 
     return trials
 
 
-def _check_trial_0(
-    directory: Path, task: str, variant: Surrogate, trial_0: dict[str, Any]
-) -> None:
+def _check_trial_0(directory: Path, task: str, variant: Surrogate, trial_0: dict[str, Any]) -> None:
     """Refuses a tune whose trial 0 of `variant` on `task` is not the default setting that the
     study trains beside the tuned one (defaults changed since the tune): the gain from tuning
     would be measured over another setting than the tune's."""

@@ -24,12 +24,13 @@ import numpy as np
 from fppo_jax.core.config import Hyperparameters, stack_hyperparameters, with_budget
 from fppo_jax.core.policy import make_policy
 from fppo_jax.core.resolution import resolve_hyperparameters
+from fppo_jax.core.shape_space import ChoiceValue, split_setting
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.trainer import TrainState
 from fppo_jax.envs import resets_itself
 from fppo_jax.errors import InvalidInput, MissingFile
 from fppo_jax.run.evaluation import evaluation_key, make_evaluator
-from fppo_jax.run.execution import Program, compile_program, run_keys
+from fppo_jax.run.execution import Program, compile_program, run_keys, updates_per_call
 from fppo_jax.run.memory import check_host_memory
 from fppo_jax.run.plan import share_bounds
 from fppo_jax.run.prepare import Prepared
@@ -38,6 +39,8 @@ from fppo_jax.store.files import write_atomically
 
 # A run of a population: its arm (a variant's name), its trial (the setting's number) and seed.
 Run = tuple[str, int, int]
+# A run's shape as a key: its setting's run-shape values by name, sorted (empty: the task's own).
+Shape = tuple[tuple[str, ChoiceValue], ...]
 
 
 CALLS_A_WINDOW = 10  # progress lines a window gives, at most
@@ -77,6 +80,19 @@ class Trained:
     seconds: float
     compile_seconds: float
     evaluated: np.ndarray | None = None
+    positions: np.ndarray | None = None  # where each run is in the window
+
+
+@dataclasses.dataclass
+class _Group:
+    """What one group of a share trained: its own runs' `positions` in the window (the fill
+    left out), and theirs of :class:`Trained`'s fields."""
+
+    positions: np.ndarray
+    last: np.ndarray
+    diverged: np.ndarray
+    leaves: list[np.ndarray]
+    evaluated: np.ndarray | None
 
 
 class Population:
@@ -85,90 +101,164 @@ class Population:
     call `updates_per_call` updates; with `eval_episodes`, each run's deterministic policy is
     evaluated over that many episodes at the window's end (the episodes of
     :func:`~fppo_jax.run.evaluation.evaluation_key`, as a study's evaluations); `say` takes
-    progress lines."""
+    progress lines. A setting with run-shape values (:mod:`fppo_jax.core.shape_space`) trains
+    on the task as `shaped` prepares it for them, in groups of its shape alone, whole runs."""
 
     def __init__(
         self,
         prepared: Prepared,
         arms: Sequence[Surrogate],
-        settings: dict[str, list[dict[str, float]]],
+        settings: dict[str, list[dict[str, Any]]],
         updates_per_call: int,
         chunk: int | None,
         say: Callable[[str], None],
         eval_episodes: int | None = None,
+        shaped: Callable[[Shape], Prepared] | None = None,
     ):
         self.prepared, self.arms, self.settings = prepared, {a.name: a for a in arms}, settings
         self.updates_per_call, self.chunk, self.say = updates_per_call, chunk, say
-        self.eval_episodes = eval_episodes
-        self._evaluator: Callable[..., Any] | None = None
+        self.eval_episodes, self._shaped = eval_episodes, shaped
+        self._prepared: dict[Shape, Prepared] = {(): prepared}
+        self._evaluators: dict[int, Callable[..., Any]] = {}  # by the trainer's id
 
-    def groups(self, runs: int) -> tuple[int, int]:
-        """The size and the count of the groups that a window of `runs` runs trains in: `chunk`
-        runs each (all of them if it has fewer), as the window trained whole and its shares
-        alike."""
-        size = min(self.chunk or runs, runs)
-        return size, -(-runs // size)
+    def shape_of(self, run: Run) -> Shape:
+        """The run-shape values of `run`'s setting, as a key (empty: the task's own shape)."""
+        arm, trial, _ = run
+        return tuple(sorted(split_setting(self.settings[arm][trial])[1].items()))
+
+    def groups(self, window: Window) -> list[np.ndarray]:
+        """The groups that `window` trains in, as the window trained whole and its shares
+        alike: each the window's indices of its runs, `chunk` of one shape each (all of them
+        if it has fewer), shapes in the order the window first names them, the last group of a
+        shape filled up with its last run (one program, one batch size)."""
+        by_shape: dict[Shape, list[int]] = {}
+        for index, run in enumerate(window.runs):
+            by_shape.setdefault(self.shape_of(run), []).append(index)
+        groups = []
+        for indices in by_shape.values():
+            size = min(self.chunk or len(indices), len(indices))
+            for first in range(0, len(indices), size):
+                members = indices[first : first + size]
+                groups.append(np.asarray(members + [members[-1]] * (size - len(members))))
+        return groups
+
+    def positions(self, window: Window, part: tuple[int, int]) -> np.ndarray:
+        """Where the runs of `part`'s share of `window` are in the window, in the share's
+        order (:meth:`share`'s)."""
+        groups = self.groups(window)
+        first, stop = share_bounds(part, len(groups))
+        own = [i for group in groups[first:stop] for i in dict.fromkeys(group.tolist())]
+        return np.asarray(own, dtype=int)
+
+    def prepared_for(self, shape: Shape) -> Prepared:
+        """The task prepared for run-shape values `shape`."""
+        if shape not in self._prepared:
+            if self._shaped is None:
+                raise InvalidInput("this population trains the task's own run shape alone")
+            self._prepared[shape] = self._shaped(shape)
+        return self._prepared[shape]
 
     def share(
         self, window: Window, part: tuple[int, int], saved: Path | None, keep: bool, label: str
     ) -> Trained:
-        """Trains `part`'s share of `window`: whole groups of its runs (the last one filled up
-        with the window's last run), each a call of one program, from the states in `saved`
-        (one per run of the window, in its order) where it goes on from the window before;
-        `keep`: the state is returned for a later window."""
-        size, groups = self.groups(len(window.runs))
-        first, stop = share_bounds(part, groups)
-        runs = list(window.runs[first * size : stop * size])
-        if not runs:
-            return Trained([], np.zeros(0), np.zeros(0, bool), [], 0.0, 0.0)
-        check_host_memory(self.prepared.trainer, size)
+        """Trains `part`'s share of `window`: whole groups of its runs (:meth:`groups`), each a
+        call of one program, from the states in `saved` (one per run of the window, in its
+        order) where it goes on from the window before; `keep`: the state is returned for a
+        later window. Its runs are in the groups' order (`Trained.positions`: where each is in
+        the window)."""
+        groups = self.groups(window)
+        first, stop = share_bounds(part, len(groups))
+        if first == stop:
+            return Trained([], np.zeros(0), np.zeros(0, bool), [], 0.0, 0.0, None, np.zeros(0, int))
         hps = self._hyperparameters(window.runs)
-        began, program = time.perf_counter(), None
-        lasts, diverged, leaves, evaluated = [], [], [], []
-        for group in range(first, stop):
-            # Every group has one shape, so one program: the window's last run fills up its last.
-            index = np.minimum(np.arange(group * size, (group + 1) * size), len(window.runs) - 1)
-            keys = run_keys([window.runs[i][2] for i in index])
-            group_hps = _rows(hps, index)
-            if program is None:
-                program = compile_program(
-                    self.prepared.trainer, keys, group_hps, jax.vmap, self.updates_per_call
-                )
+        began, compiled, programs = time.perf_counter(), 0.0, {}
+        trained: list[_Group] = []
+        for number in range(first, stop):
+            index = groups[number]
+            shape = self.shape_of(window.runs[index[0]])
+            if (shape, len(index)) not in programs:
+                program = self._compile(shape, window, index, hps)
+                programs[shape, len(index)] = program
+                compiled += program.compile_seconds
                 how = "loaded from the compilation cache" if program.loaded else "compiled"
                 self.say(f"{label} {how} in {program.compile_seconds:.1f} s")
-            said = label + (f", group {group + 1} of {groups}" if groups > 1 else "")
-            state = self._start(program, window, keys, group_hps, index, saved)
-            state, last = self._train(program, state, group_hps, window, len(index), said)
-            kept = slice(0, len(window.runs) - group * size)  # the group's own runs, not the fill
-            lasts.append(last[kept])
-            diverged.append(fetch_diverged(state)[kept])
-            if self.eval_episodes:
-                evaluated.append(self._evaluate(state)[kept])
-            if keep:
-                leaves.append([_plain(leaf)[kept] for leaf in jax.tree.leaves(state)])
-        assert program is not None
+            said = label + (f", group {number + 1} of {len(groups)}" if len(groups) > 1 else "")
+            trained.append(
+                self._group(programs[shape, len(index)], window, index, hps, saved, keep, said)
+            )
         return Trained(
-            runs,
-            np.concatenate(lasts),
-            np.concatenate(diverged),
-            [np.concatenate(leaf) for leaf in zip(*leaves, strict=True)],
-            time.perf_counter() - began - program.compile_seconds,
-            program.compile_seconds,
-            np.concatenate(evaluated) if evaluated else None,
+            [window.runs[i] for group in trained for i in group.positions],
+            np.concatenate([group.last for group in trained]),
+            np.concatenate([group.diverged for group in trained]),
+            [np.concatenate(leaf) for leaf in zip(*(g.leaves for g in trained), strict=True)],
+            time.perf_counter() - began - compiled,
+            compiled,
+            None if self.eval_episodes is None else np.concatenate([g.evaluated for g in trained]),
+            np.concatenate([group.positions for group in trained]),
         )
 
-    def _evaluate(self, state: TrainState) -> np.ndarray:
+    def _compile(
+        self, shape: Shape, window: Window, index: np.ndarray, hps: Hyperparameters
+    ) -> Program:
+        """The program of a group of `index`'s runs of run shape `shape`, through `window`."""
+        prepared = self.prepared_for(shape)
+        check_host_memory(prepared.trainer, len(index))
+        per_call = self._span(window, prepared)[2]
+        keys = run_keys([window.runs[i][2] for i in index])
+        return compile_program(prepared.trainer, keys, _rows(hps, index), jax.vmap, per_call)
+
+    def _span(self, window: Window, prepared: Prepared) -> tuple[int, int, int]:
+        """`window`'s first and last update and the updates per call on `prepared`'s shape:
+        the window's own on the task's shape, the whole run on another (so that
+        it takes as many calls)."""
+        if prepared is self.prepared:
+            return window.start, window.end, self.updates_per_call
+        whole = self.prepared.config.num_updates
+        if (window.start, window.end) != (0, whole):
+            raise InvalidInput(
+                "a searched run shape trains whole runs alone: its updates are not the task's"
+            )
+        end = prepared.config.num_updates
+        return 0, end, updates_per_call(end, -(-whole // self.updates_per_call))
+
+    def _group(
+        self,
+        program: Program,
+        window: Window,
+        index: np.ndarray,
+        hps: Hyperparameters,
+        saved: Path | None,
+        keep: bool,
+        said: str,
+    ) -> _Group:
+        """A group of `index`'s runs trained by `program` through `window`."""
+        keys = run_keys([window.runs[i][2] for i in index])
+        group_hps = _rows(hps, index)
+        state = self._start(program, window, keys, group_hps, index, saved)
+        span = self._span(window, self.prepared_for(self.shape_of(window.runs[index[0]])))
+        state, last = self._train(program, state, group_hps, span, len(index), said)
+        own = len(set(index.tolist()))  # the group's own runs, not the fill after them
+        return _Group(
+            index[:own],
+            last[:own],
+            fetch_diverged(state)[:own],
+            [_plain(leaf)[:own] for leaf in jax.tree.leaves(state)] if keep else [],
+            self._evaluate(program, state)[:own] if self.eval_episodes else None,
+        )
+
+    def _evaluate(self, program: Program, state: TrainState) -> np.ndarray:
         """Each run's deterministic policy's mean return over the population's evaluation
         episodes, every run on the same episodes' keys (its own environments)."""
         assert self.eval_episodes is not None
-        if self._evaluator is None:
-            evaluator = make_evaluator(self.prepared.trainer.env, self.eval_episodes)
-            self._evaluator = jax.jit(jax.vmap(evaluator))
-        policy = make_policy(self.prepared.trainer, state)
+        trainer = program.trainer
+        if id(trainer) not in self._evaluators:
+            evaluator = make_evaluator(trainer.env, self.eval_episodes)
+            self._evaluators[id(trainer)] = jax.jit(jax.vmap(evaluator))
+        policy = make_policy(trainer, state)
         runs = state.nonfinite_update.shape[0]
         key = evaluation_key()
         keys = jax.numpy.broadcast_to(key, (runs, *key.shape))
-        returns = np.asarray(self._evaluator(policy, keys), dtype=float)
+        returns = np.asarray(self._evaluators[id(trainer)](policy, keys), dtype=float)
         return cast(np.ndarray, returns.mean(axis=-1))
 
     def _hyperparameters(self, runs: Sequence[Run]) -> Hyperparameters:
@@ -176,7 +266,9 @@ class Population:
         surrogates."""
         return stack_hyperparameters(
             [
-                resolve_hyperparameters(self.arms[arm], None, **self.settings[arm][trial])[0]
+                resolve_hyperparameters(
+                    self.arms[arm], None, **split_setting(self.settings[arm][trial])[0]
+                )[0]
                 for arm, trial, _ in runs
             ]
         )
@@ -207,16 +299,17 @@ class Population:
         program: Program,
         state: TrainState,
         hps: Hyperparameters,
-        window: Window,
+        span: tuple[int, int, int],
         runs: int,
         said: str,
     ) -> tuple[TrainState, np.ndarray]:
-        """`state` trained by `program` through the window: the state and each run's score
-        (`said` names the runs in progress lines)."""
-        trainer = self.prepared.trainer
+        """`state` trained by `program` over `span` (the first and last update, the updates
+        per call): the state and each run's score (`said` names the runs in progress lines)."""
+        trainer = program.trainer
+        start, end, per_call = span
         budgeted = with_budget(hps, trainer.config.num_updates)
         last = np.full(runs, np.nan)
-        calls = -(-(window.end - window.start) // self.updates_per_call)
+        calls = -(-(end - start) // per_call)
         began = time.perf_counter()
         for call in range(calls):
             # A stop signal's safe point: after the call in flight (or once compiled), with
@@ -228,10 +321,10 @@ class Population:
             if ran.any():
                 last = returns[:, ran][:, -1]
             if (call + 1) % -(-calls // CALLS_A_WINDOW) == 0 and call + 1 < calls:
-                done = min(window.start + (call + 1) * self.updates_per_call, window.end)
-                rate = (done - window.start) * trainer.config.samples_per_update * runs
+                done = min(start + (call + 1) * per_call, end)
+                rate = (done - start) * trainer.config.samples_per_update * runs
                 self.say(
-                    f"{said}: update {done} of {window.end}, "
+                    f"{said}: update {done} of {end}, "
                     f"{rate / (time.perf_counter() - began):,.0f} env steps/s"
                 )
         return state, last

@@ -16,17 +16,20 @@ import numpy as np
 from fppo_jax.analysis.preregistration import commit
 from fppo_jax.analysis.reuse import Pool, Taken
 from fppo_jax.analysis.study_plan import TunedChoice
+from fppo_jax.analysis.study_shapes import Shape as RunShape
+from fppo_jax.analysis.study_shapes import TaskRuns, holding, shape_of, shaped_protocol
 from fppo_jax.core.config import Setting
 from fppo_jax.core.objectives import hyperparameter_names, identities, takers
 from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
+from fppo_jax.core.shape_space import config_values, configured, split_setting
 from fppo_jax.core.surrogates import Surrogate
 from fppo_jax.core.variants import BUILTINS
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.merge import merge
+from fppo_jax.run.options import Snapshot
 from fppo_jax.run.plan import part_runs
 from fppo_jax.run.prepare import prepare
 from fppo_jax.run.results import SweepResult
-from fppo_jax.run.options import Snapshot
 from fppo_jax.run.stop_signals import stop_if_signalled
 from fppo_jax.run.sweeps import expand_grid, sweep
 from fppo_jax.stats import statistics
@@ -119,9 +122,10 @@ class Source:
             if name not in self.specific or takers(name, by_name)
         }
         grid: Grid = {"variant": variants}
+        shape = self.shape_of(task, variants[0].name)  # the group's arms share theirs
         if self.tuned is not None:
             chosen = self.tuned["settings"][task]
-            grid = [{"variant": v, **chosen[v.name]} for v in variants]
+            grid = [{"variant": v, **split_setting(chosen[v.name])[0]} for v in variants]
         # A stop signal stops the study before the group, or after the chunk in flight but
         # the group's last (the group, recorded when it ends, then trains again from its start).
         said = (
@@ -129,15 +133,23 @@ class Source:
             "recorded; the same command goes on from there"
         )
         stop_if_signalled(said)
-        last = self.expected[task][0].config.num_updates
+        last = shaped_protocol(self.expected[task][0], shape).config.num_updates
 
         def stop(snapshot: Snapshot) -> None:
             if snapshot.update < last:
                 stop_if_signalled(said)
 
+        fixed |= config_values(dict(shape))
         return sweep_group(
             task, grid, seeds, where, part=self.part, callback=stop, **self.shape, **fixed
         )
+
+    def shape_of(self, task: str, variant: str) -> RunShape:
+        """The run shape `variant` trains on `task` where its tuned setting's differs from the
+        task's (empty: the task's)."""
+        chosen = shape_of(None if self.tuned is None else self.tuned["settings"][task][variant])
+        config = self.expected[task][0].config
+        return tuple((name, v) for name, v in chosen if v != configured(config, name))
 
     def at_defaults(self, everyone: list[Surrogate]) -> Source:
         """The like of this source for each arm's default setting: the settings a study without
@@ -156,8 +168,8 @@ class Source:
         """`variant`'s runs on `task` at `seeds` from the recorded sweeps, if they hold them
         all under the study's protocol and setting (and evaluated, where the study evaluates:
         how often and over how many episodes, a sweep's record does not say)."""
-        if self.pool is None:
-            return None
+        if self.pool is None or self.shape_of(task, variant.name):
+            return None  # an arm in a shape of its own trains its runs
         protocol, setting_of = self.expected[task]
         name = variant.name
         taken = self.pool.take(protocol, setting_of[name], self.identity.get(name), seeds)
@@ -187,7 +199,11 @@ def _checked_settings(
     if tuned is None:
         grid = expand_grid({"variant": everyone, **run.hyperparameters}, task)
     else:
-        grid = expand_grid([{"variant": s, **tuned[s.name]} for s in everyone], task)
+        for chosen in {shape_of(setting) for setting in tuned.values()} - {()}:
+            # each run shape a tune chose, checked to make a run of the study's budget
+            prepare(task, {**settings, **config_values(dict(chosen))}, (), **shape)
+        picked = [{"variant": s, **split_setting(tuned[s.name])[0]} for s in everyone]
+        grid = expand_grid(picked, task)
     for setting in grid:
         values = {k: v for k, v in setting.items() if k != "variant"}
         resolve_hyperparameters(by_name[str(setting["variant"])], None, **values)
@@ -288,17 +304,20 @@ def refuse_missing_shares(where: Path) -> None:
         ) from None
 
 
-def runs_of(result: SweepResult, variant: str) -> list[int]:
-    """`variant`'s runs in `result` (indices), in seed order."""
+def runs_of(result: TaskRuns, variant: str) -> list[int]:
+    """`variant`'s runs in `result` (indices in the sweep that holds them,
+    :func:`~fppo_jax.analysis.study_shapes.holding`), in seed order."""
+    result = holding(result, variant)
     index = [s["variant"] for s in result.settings].index(variant)
     runs = [i for i, run in enumerate(result.runs) if run["setting"] == index]
     return sorted(runs, key=lambda i: result.runs[i]["seed"])
 
 
-def run_scores(result: SweepResult, variant: str, endpoint: str) -> np.ndarray:
+def run_scores(result: TaskRuns, variant: str, endpoint: str) -> np.ndarray:
     """`variant`'s score per run in `result`, in seed order; a run that diverged or finished no
     episode (or, for ``eval``, no evaluation) scores −inf, below every other (a run that
     failed)."""
+    result = holding(result, variant)
     runs = runs_of(result, variant)
     metric = "eval_return" if endpoint == "eval" else "average_return"
     if metric not in result.metrics:

@@ -35,12 +35,12 @@ from __future__ import annotations
 import math
 import sys
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, cast
 
 from fppo_jax.analysis.arms import Variants, names_of_tasks, resolve_arms
-from fppo_jax.analysis.population import Population
+from fppo_jax.analysis.population import Population, Shape
 from fppo_jax.analysis.preregistration import Preregistered, commit
 from fppo_jax.analysis.study_plan import PLAN_FILE as STUDY_PLAN
 from fppo_jax.analysis.tune_design import TuneDesign, design
@@ -50,6 +50,7 @@ from fppo_jax.analysis.tune_files import (
     TuneResult,
     task_directory,
 )
+from fppo_jax.analysis.tune_shapes import plan_record, preparer, task_axes, with_axes
 from fppo_jax.analysis.tune_storage import storage_record, tune_storage
 from fppo_jax.analysis.tuning_draws import (
     draw_population,
@@ -173,6 +174,8 @@ def tune(
         )
         for task in tasks
     }
+    axes = {task: task_axes(run, settings, given or {}, scheduler) for task, run in runs.items()}
+    task_spaces = {task: with_axes(spaces, axes[task], run) for task, run in runs.items()}
     budgets = {task: chosen.budget_of(run) for task, run in runs.items()}
     _check_budget(budget, budgets)
     shape: dict[str, RunShapeValue] = {
@@ -185,6 +188,8 @@ def tune(
         **settings,
     }
     plan = make_plan(runs, arms, spaces, chosen, budgets, baseline, sampler, sampler_seed, shape)
+    if plan_record(axes):  # a tune that searches no run shape has the plan it always had
+        plan["run_shape"] = plan_record(axes)
     plan["storage"] = storage_record(plan, storage, output)
     verbosity = optuna.logging.get_verbosity()
     # Array tasks that start together take turns with the folder: each holds it while it reads
@@ -210,13 +215,21 @@ def tune(
                         runs[task],
                         arms,
                         draw_population(
-                            optuna, store, task, arms, spaces, chosen.trials, sampler, sampler_seed
+                            optuna,
+                            store,
+                            task,
+                            arms,
+                            task_spaces[task],
+                            chosen.trials,
+                            sampler,
+                            sampler_seed,
                         ),
                         chosen,
                         chunk,
                         task_directory(folder.output, task),
                         (optuna, store),
                         progress,
+                        preparer(task, settings, total_steps, preset, backend),
                     )
                     for task in tasks
                 ]
@@ -287,15 +300,17 @@ def _task_tune(
     task: str,
     prepared: Prepared,
     arms: list[Surrogate],
-    drawn: dict[str, list[dict[str, float]]],
+    drawn: dict[str, list[dict[str, Any]]],
     chosen: TuneDesign,
     chunk: int | None,
     directory: Path,
     optuna_storage: tuple[Any, Any],
     progress: bool,
+    shaped: Callable[[Shape], Prepared],
 ) -> TaskTune:
     """`task`'s tune: the population of the `drawn` trials, trained as the design's scheduler
-    says, scored as it says."""
+    says, scored as it says (a trial of another run shape on the task as `shaped` prepares
+    it)."""
     settings = {arm: [setting_of(params) for params in trials] for arm, trials in drawn.items()}
     scheduler = chosen.scheduler_for([arm.name for arm in arms], prepared)
 
@@ -305,7 +320,7 @@ def _task_tune(
 
     episodes = chosen.eval_episodes if chosen.score == "eval" else None
     population = Population(
-        prepared, arms, settings, scheduler.updates_per_call, chunk, say, episodes
+        prepared, arms, settings, scheduler.updates_per_call, chunk, say, episodes, shaped
     )
     return TaskTune(task, population, scheduler, directory, *optuna_storage)
 

@@ -6,6 +6,7 @@ unsplit. The loop knows no scheduler (:mod:`fppo_jax.analysis.scheduling`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -32,7 +33,6 @@ from fppo_jax.analysis.tune_storage import study_name
 from fppo_jax.analysis.tuning_records import ArmResults, ArmRung, RungScores, ShareScores
 from fppo_jax.analysis.tuning_report import arm_results
 from fppo_jax.errors import InvalidInput
-from fppo_jax.run.plan import share_bounds
 from fppo_jax.run.stop_signals import StoppedAtSafePoint, stop_if_signalled
 from fppo_jax.store.files import write_json
 
@@ -158,9 +158,13 @@ class TaskTune:
         """Records the next rung from its `shares`, in order: its scores and the state the
         window after it goes on from; then tells Optuna (the join alone writes to it)."""
         rung = len(self.scores)
-        assert [run for share in shares for run in share.runs] == list(window.runs)
-        scores_of_runs = np.concatenate([self._scored(share) for share in shares])
-        diverged = np.concatenate([share.diverged for share in shares])
+        # A window of several run shapes trains in groups of one shape: back in its order.
+        order = np.argsort(np.concatenate([_positions(share) for share in shares]), kind="stable")
+        assert [[run for share in shares for run in share.runs][i] for i in order] == list(
+            window.runs
+        )
+        scores_of_runs = np.concatenate([self._scored(share) for share in shares])[order]
+        diverged = np.concatenate([share.diverged for share in shares])[order]
         arms = self.scheduler.measured(self.scores, scores_of_runs, diverged)
         seconds = sum(share.seconds for share in shares)
         compile_seconds = sum(share.compile_seconds for share in shares)
@@ -171,7 +175,7 @@ class TaskTune:
         if after is not None and after.continues is not None:
             leaves = zip(*(share.leaves for share in shares), strict=True)
             kept = list(after.continues)
-            save_leaves(where / STATE_FILE, [np.concatenate(leaf)[kept] for leaf in leaves])
+            save_leaves(where / STATE_FILE, [np.concatenate(leaf)[order][kept] for leaf in leaves])
         write_json(where / SCORES_FILE, scores)
         self._recorded(scores)
         best = ", ".join(
@@ -194,10 +198,10 @@ class TaskTune:
             return
         share = self._share(window, part)
         if not share.runs:
-            size, groups = self.population.groups(len(window.runs))
+            groups = len(self.population.groups(window))
             self._say(
                 f"{said}: nothing to train, the rung's {len(window.runs)} runs make {groups} "
-                f"group{'s' * (groups > 1)} of {size}, fewer than the parts"
+                f"group{'s' * (groups > 1)}, fewer than the parts"
             )
             return
         where.mkdir(parents=True, exist_ok=True)
@@ -244,12 +248,11 @@ class TaskTune:
                 "remove those of the split not carried through, then run this again"
             )
         n = splits[0]
-        size, groups = self.population.groups(len(window.runs))
-        later = self._keeps_state(rung)
+        later = self._keeps_state(rung, window)
         shares = []
         for k in range(1, n + 1):
-            first, stop = share_bounds((k, n), groups)
-            runs = list(window.runs[first * size : stop * size])
+            positions = self.population.positions(window, (k, n))
+            runs = [window.runs[i] for i in positions]
             if not runs:
                 continue  # a share past the rung's groups: nothing to train, nothing recorded
             if (k, n) not in found:
@@ -258,7 +261,8 @@ class TaskTune:
                     f"missing ({where}/part-{k}): train it with --part {k}/{n} (part=({k}, {n})), "
                     "then run this again"
                 )
-            shares.append(self._share_read(where / f"part-{k}", found[k, n], runs, later, k, n))
+            share = self._share_read(where / f"part-{k}", found[k, n], runs, later, k, n)
+            shares.append(dataclasses.replace(share, positions=positions))
         self._say(
             f"{self.task}: rung {rung + 1}: joining its parts ({len(shares)} of {n} had runs to "
             "train)"
@@ -293,23 +297,24 @@ class TaskTune:
         evaluates, else its training return."""
         return share.last if share.evaluated is None else share.evaluated
 
-    def _keeps_state(self, rung: int) -> bool:
-        """Whether a window may go on from rung `rung`'s state: all but the scheduler's last."""
-        return rung + 1 < self.scheduler.rounds
+    def _keeps_state(self, rung: int, window: Window) -> bool:
+        """Whether a window may go on from rung `rung`'s state: all but the scheduler's last,
+        where its runs have one shape (runs of several shapes are whole)."""
+        shapes = {self.population.shape_of(run) for run in window.runs}
+        return rung + 1 < self.scheduler.rounds and len(shapes) == 1
 
     def _share(self, window: Window, part: tuple[int, int]) -> Trained:
         """Trains `part`'s share of `window`, from the state the rung before saved."""
         rung = len(self.scores)
-        size, groups = self.population.groups(len(window.runs))
-        first, stop = share_bounds(part, groups)
-        runs = len(window.runs[first * size : stop * size])
+        groups = self.population.groups(window)
+        runs = len(self.population.positions(window, part))
         if runs:
             live: dict[str, set[int]] = {}
             for arm, trial, _ in window.runs:
                 live.setdefault(arm, set()).add(trial)
             seeds = len({seed for _, _, seed in window.runs})
             split = "" if part == (1, 1) else f", part {part[0]} of {part[1]}"
-            grouped = "" if groups == 1 else f" in groups of {size}, {runs} of them here"
+            grouped = "" if len(groups) == 1 else f" in {len(groups)} groups, {runs} runs here"
             self._say(
                 f"{self.task}: rung {rung + 1} of {self.scheduler.rounds}{split}: trials "
                 f"{', '.join(f'{len(t)} {arm}' for arm, t in live.items())} × {seeds} seeds = "
@@ -318,7 +323,7 @@ class TaskTune:
             )
         saved = self._where(rung - 1) / STATE_FILE if window.continues is not None else None
         label = f"{self.task}: rung {rung + 1}"
-        return self.population.share(window, part, saved, self._keeps_state(rung), label)
+        return self.population.share(window, part, saved, self._keeps_state(rung, window), label)
 
     def results(self, baseline: str) -> dict[str, ArmResults]:
         """Per arm: the chosen setting, trial 0's and the rungs' scores, the steps used."""
@@ -334,3 +339,9 @@ class TaskTune:
             )
             for arm in self.population.arms
         }
+
+
+def _positions(share: Trained) -> np.ndarray:
+    """Where `share`'s runs are in their window."""
+    assert share.positions is not None
+    return share.positions

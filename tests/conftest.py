@@ -36,6 +36,7 @@ LONGEST_FIRST = (
     "test_sweeps.py",
     "test_tuning.py",
     "test_tuning_rungs.py",
+    "test_tune_shapes.py",
     "test_study_tuned.py",
     "test_study_files.py",
     "test_studies.py",

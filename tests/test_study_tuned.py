@@ -22,6 +22,25 @@ def test_a_tune_not_finished_is_no_source_of_settings(tmp_path):
         study("cartpole", "fppo-lp", output=tmp_path / "tune")
 
 
+def test_a_surrogate_edited_since_its_tune_is_refused_before_any_run(tmp_path):
+    from own_surrogates import clipped, my_ppo
+
+    import fppo_jax
+
+    tune("cartpole", ["ppo", my_ppo], output=tmp_path / "tune", rungs=0, **SMALL)
+
+    def edited(ratio, advantage, epsilon):
+        return 2 * clipped(ratio, advantage, epsilon)
+
+    changed = fppo_jax.surrogate("my-ppo", edited)
+    with pytest.raises(InvalidInput, match=r"tuned another my-ppo than this code's \(digest '"):
+        study("cartpole", changed, "ppo", output=tmp_path / "s", tuned=tmp_path / "tune")
+    assert not (tmp_path / "s").exists()
+    # The same surrogate passes this check, and stops at the tune not finished.
+    with pytest.raises(InvalidInput, match="not finished"):
+        study("cartpole", my_ppo, "ppo", output=tmp_path / "s", tuned=tmp_path / "tune")
+
+
 def test_study_tune_tunes_races_and_decides_in_one_command_and_one_folder(tmp_path, capsys):
     from conftest import TINY_FLAGS
 

@@ -4,7 +4,7 @@ seeds."""
 
 from __future__ import annotations
 
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -15,8 +15,9 @@ from fppo_jax.analysis.tune_files import RESULTS_FILE, TuneResult, load_tune, tu
 from fppo_jax.analysis.tuning_records import TrialAcrossTasks
 from fppo_jax.analysis.tuning_report import across_tasks as trial_across_tasks
 from fppo_jax.core.config import Setting
+from fppo_jax.core.objectives import identities
 from fppo_jax.core.resolution import resolve_hyperparameters, sweepable
-from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.core.surrogates import Surrogate, SurrogateIdentity
 from fppo_jax.errors import InvalidInput
 from fppo_jax.stats.sequential import Design
 from fppo_jax.store.record import RunRecord
@@ -51,6 +52,7 @@ def tuned_settings(
         directory = directory.parent
     digest = tune_digest(directory)
     recorded = load_tune(directory)
+    _check_surrogates(directory, recorded.plan.get("surrogates", {}), everyone)
     if not recorded.finished:
         raise InvalidInput(
             f"the tune in {directory} is not finished ({RESULTS_FILE} is missing): run it to "
@@ -144,6 +146,30 @@ def _across_tasks(recorded: TuneResult, everyone: list[Surrogate]) -> dict[str, 
             )
         trials[variant.name] = found
     return trials
+
+
+def _check_surrogates(
+    directory: Path, tuned: Mapping[str, SurrogateIdentity], everyone: list[Surrogate]
+) -> None:
+    """Refuses a surrogate of one's own that is not the one the tune tuned (another function or
+    defaults under its name, or a built-in's name it had): its settings were tuned for that."""
+    now = identities(everyone).get("surrogates", {})
+    for variant in everyone:
+        was, here = tuned.get(variant.name), now.get(variant.name)
+        if (was is None) != (here is None) or (
+            was is not None
+            and here is not None
+            and (was["digest"], was["hyperparameters"]) != (here["digest"], here["hyperparameters"])
+        ):
+            said = {
+                v: "a built-in" if i is None else repr(i["digest"])
+                for v, i in (("then", was), ("now", here))
+            }
+            raise InvalidInput(
+                f"the tune in {directory} tuned another {variant.name} than this code's "
+                f"(digest {said['then']} then, {said['now']} now): its settings were tuned for "
+                "that one; restore it, or tune this one"
+            )
 
 
 def _check_trial_0(directory: Path, task: str, variant: Surrogate, trial_0: dict[str, Any]) -> None:

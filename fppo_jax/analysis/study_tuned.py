@@ -156,20 +156,21 @@ def _check_surrogates(
     now = identities(everyone).get("surrogates", {})
     for variant in everyone:
         was, here = tuned.get(variant.name), now.get(variant.name)
-        if (was is None) != (here is None) or (
-            was is not None
-            and here is not None
-            and (was["digest"], was["hyperparameters"]) != (here["digest"], here["hyperparameters"])
-        ):
-            said = {
-                v: "a built-in" if i is None else repr(i["digest"])
-                for v, i in (("then", was), ("now", here))
-            }
+        if _pinned(was) != _pinned(here):
             raise InvalidInput(
                 f"the tune in {directory} tuned another {variant.name} than this code's "
-                f"(digest {said['then']} then, {said['now']} now): its settings were tuned for "
+                f"(digest {_shown(was)} then, {_shown(here)} now): its settings were tuned for "
                 "that one; restore it, or tune this one"
             )
+
+
+def _pinned(identity: SurrogateIdentity | None) -> object:
+    """What makes a surrogate the one tuned: its function's digest and its defaults."""
+    return None if identity is None else (identity["digest"], identity["hyperparameters"])
+
+
+def _shown(identity: SurrogateIdentity | None) -> str:
+    return "a built-in" if identity is None else repr(identity["digest"])
 
 
 def _check_trial_0(directory: Path, task: str, variant: Surrogate, trial_0: dict[str, Any]) -> None:

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import jax
 import jaxlib
+import pytest
 from conftest import TINY
 
 from fppo_jax.cli import build_parser
@@ -110,6 +111,7 @@ def test_the_command_says_whether_it_compiled_or_loaded_its_program(tmp_path):
     assert re.fullmatch(r"loaded from the compilation cache in \d+\.\d s", said[1]), said
 
 
+@pytest.mark.slow  # the message alone in tests/test_stop_signals.py, in the default suite
 def test_a_tune_says_whether_it_compiled_or_loaded_a_rungs_program(tmp_path):
     flags = ["tune", "--variants", "ppo", "--tasks", "cartpole", "--trials", "2", "--eta", "2"]
     flags += ["--steps", "256", "--num-envs", "4", "--num-steps", "32", "--minibatches", "4"]

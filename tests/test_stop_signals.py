@@ -6,6 +6,7 @@ interpreter's teardown would do."""
 
 import dataclasses
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -273,7 +274,9 @@ def signal_in_first_call(monkeypatch, number):
     monkeypatch.setattr(population, "compile_program", compiled)
 
 
-def test_a_tune_stops_after_the_call_in_flight_and_goes_on_bit_for_bit(tmp_path, monkeypatch):
+def test_a_tune_stops_after_the_call_in_flight_and_goes_on_bit_for_bit(
+    tmp_path, monkeypatch, capsys
+):
     whole, stopped = tmp_path / "whole", tmp_path / "stopped"
     tune("cartpole", TUNE_ARMS, output=whole, rungs=1, **TUNE_SMALL)
     before = {n: signal.getsignal(n) for n in STOP_SIGNALS}
@@ -287,7 +290,18 @@ def test_a_tune_stops_after_the_call_in_flight_and_goes_on_bit_for_bit(tmp_path,
     assert isinstance(raised.value, fppo_jax.StoppedBySignal) and raised.value.signal == 10
     assert {n: signal.getsignal(n) for n in STOP_SIGNALS} == before
     assert not (stopped / "cartpole/rung-0").exists()  # nothing of the rung stopped in
-    tune("cartpole", TUNE_ARMS, output=stopped, rungs=1, **TUNE_SMALL)
+    # Gone on with, its program (the process's own, here said to be the compilation cache's).
+    compile_program = population.compile_program
+
+    def loaded(*args, **kwargs):
+        return dataclasses.replace(compile_program(*args, **kwargs), loaded=True)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(population, "compile_program", loaded)
+        tune("cartpole", TUNE_ARMS, output=stopped, rungs=1, **{**TUNE_SMALL, "progress": True})
+    said = capsys.readouterr().err
+    line = r"^cartpole: rung 1 loaded from the compilation cache in \d+\.\d s$"
+    assert re.search(line, said, re.MULTILINE), said
     assert [r["arms"] for r in rung_scores(stopped)] == [r["arms"] for r in rung_scores(whole)]
     with (
         np.load(whole / "cartpole/rung-0/state.npz") as a,

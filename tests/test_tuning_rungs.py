@@ -3,6 +3,8 @@ bit for bit; a missing share is refused by name, a recorded one not trained agai
 split of a rung refused, naming the one recorded; a trial
 that diverges scores below every other and stops."""
 
+import json
+
 import numpy as np
 import pytest
 from helpers import TUNE_ARMS as ARMS
@@ -33,11 +35,15 @@ def split_tune(output, parts, **arguments):
 
 
 def optuna_trials(directory):
+    """Each arm's trials in the tune's Optuna studies (named after the tune, as its plan
+    records)."""
+    prefix = json.loads((directory / "tune.json").read_text())["storage"]["studies"]
+    storage = f"sqlite:///{directory}/optuna.db"
     return {
         arm: [
             (t.number, t.state, t.value, t.intermediate_values, t.params)
             for t in import_optuna()
-            .load_study(study_name=f"cartpole/{arm}", storage=f"sqlite:///{directory}/optuna.db")
+            .load_study(study_name=f"{prefix}/cartpole/{arm}", storage=storage)
             .trials
         ]
         for arm in ARMS

@@ -211,6 +211,18 @@ def test_tuning_curves_of_a_task_where_no_trial_scored_say_so_without_a_warning(
     ]
 
 
+def test_tuning_curves_end_in_the_validation_race_each_finalists_and_the_chosen_score():
+    race = {"finalists": [4, 2], "validation_scores": [150.0, 90.0], "default_score": 100.0}
+    arm = {**curve_of([50.0, 180.0]), "env_steps": 300_000, "race": {**race, "chosen": 4}}
+    ax = plot_tuning_curves({"cartpole": {"ppo": arm}}).axes[0]
+    finalists, chosen = ax.collections
+    assert finalists.get_offsets().tolist() == [[300_000, 150.0], [300_000, 90.0]]
+    assert chosen.get_offsets().tolist() == [[300_000, 150.0]]
+    kept = {**arm, "race": {**race, "chosen": 0}}  # the default stayed: its score is the chosen
+    (_, chosen) = plot_tuning_curves({"cartpole": {"ppo": kept}}).axes[0].collections
+    assert chosen.get_offsets().tolist() == [[300_000, 100.0]]
+
+
 def test_importing_plots_leaves_the_backend_alone():
     code = "import matplotlib, fppo_jax.analysis.plots; print(matplotlib.get_backend())"
     env = {**os.environ, "MPLBACKEND": "svg"}

@@ -14,7 +14,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import cast
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -24,7 +24,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import EngFormatter, MaxNLocator, PercentFormatter
 
-from fppo_jax.analysis.tuning_records import ArmResults
+from fppo_jax.analysis.tuning_records import ArmResults, RaceRecord
 from fppo_jax.core.resolution import VARIANT_SPECIFIC, objective
 from fppo_jax.core.variants import EPSILON, VARIANTS
 from fppo_jax.errors import InvalidInput
@@ -323,6 +323,8 @@ def plot_tuning_curves(results: Mapping[str, Mapping[str, ArmResults]]) -> Figur
                 )
                 ax.plot(steps, best, linestyle="--", color=line.get_color())
                 ax.fill_between(steps, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
+            if "race" in found:
+                _validation_points(ax, found["race"], found["env_steps"], line.get_color())
         ax.set(title=task, xlabel="env steps spent by the arm", ylabel="best score")
         steps_axis(ax)
         if ax.get_legend_handles_labels()[0]:
@@ -339,10 +341,27 @@ def plot_tuning_curves(results: Mapping[str, Mapping[str, ArmResults]]) -> Figur
             )
     figure.suptitle(
         "solid: the best trial at each rung; dashed: the expected best of n first-rung "
-        "settings,\nshaded: its 95% bootstrap band over the trials",
+        "settings,\nshaded: its 95% bootstrap band over the trials; at the budget's end, the "
+        "validation race: x each finalist's validation score, * the chosen setting's",
         fontsize=8,
     )
     return figure
+
+
+def _validation_points(ax: Axes, race: RaceRecord, spent: int, color: Any) -> None:
+    """The validation race at the arm's whole spend `spent`: each finalist's mean validation
+    score (x) and the chosen setting's (*, the default's where it stayed), on seeds that chose
+    nothing, beside the search's curve, whose best is biased upward by the choosing."""
+    scores = [score for score in race["validation_scores"] if score is not None]
+    ax.scatter([spent] * len(scores), scores, marker="x", color=color)
+    chosen = race["chosen"]
+    score = (
+        race["default_score"]
+        if chosen == 0
+        else race["validation_scores"][race["finalists"].index(chosen)]
+    )
+    if score is not None:
+        ax.scatter([spent], [score], marker="*", s=120, color=color, edgecolors="black")
 
 
 def steps_axis(ax: Axes) -> None:

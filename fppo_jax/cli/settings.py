@@ -10,17 +10,16 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, cast
 
-from fppo_jax.core.config import PRESETS, TrainConfig
+from fppo_jax.core.config import PRESETS
 from fppo_jax.core.resolution import resolve
 from fppo_jax.core.surrogates import SurrogateIdentity
 from fppo_jax.errors import InvalidInput, MissingFile
-from fppo_jax.store.record import RunRecord
+from fppo_jax.store.record import REQUIRED, RunRecord
 
 # What a run's config.json records beside its settings (metric_log.environment_record).
 RECORD_ONLY = ("versions", "platform")
 # What every run's record holds: a file that holds them all is read as one, a file written by
 # hand (flag names, as many as it sets) as it is.
-RECORDED = ("env", "preset", *(field.name for field in dataclasses.fields(TrainConfig)))
 
 
 def settings_file(path: Path) -> dict[str, Any]:
@@ -49,7 +48,7 @@ def settings_file(path: Path) -> dict[str, Any]:
     settings = {k: v for k, v in settings.items() if k not in RECORD_ONLY}
     if isinstance(settings.get("devices"), list):  # the record's device kinds, not a count
         del settings["devices"]
-    if all(key in settings for key in RECORDED):
+    if all(key in settings for key in REQUIRED):
         return _rerun(path, RunRecord.from_json(settings, str(path)))
     return settings
 

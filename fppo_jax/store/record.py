@@ -19,6 +19,8 @@ _SHAPE = [field.name for field in dataclasses.fields(TrainConfig)]
 # Shape fields added after records were first written, with the value every earlier run had:
 # a record leaves one out at that value, so that those records and these read alike.
 _LATER: dict[str, Any] = {"initial_log_std": 0.0}
+# The keys every record holds, whichever version wrote it.
+REQUIRED = ("env", "preset", *(name for name in _SHAPE if name not in _LATER))
 # The keys a record's JSON holds beside TrainConfig's fields; any other is a train's setting.
 _OWN = ("env", "backend", "grid", "seed", "seeds", "part", "surrogates", "preset", "runs_per_call")
 
@@ -88,7 +90,7 @@ class RunRecord:
         if not isinstance(value, dict):
             raise IncompatibleFormat(f"{what} is not a run's record: {value!r}")
         check_format(value, what, cls.FORMAT)
-        missing = [key for key in ("env", "preset", *_SHAPE) if key not in {*value, *_LATER}]
+        missing = [key for key in REQUIRED if key not in value]
         if missing:
             raise IncompatibleFormat(
                 f"{what} lacks {', '.join(missing)}: it was written by another version of "

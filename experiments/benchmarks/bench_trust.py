@@ -140,8 +140,10 @@ def task_lines(task: str, directory: Path) -> tuple[list[str], dict[str, Any]]:
     iqm = statistics.interval(ours, "iqm")
     zoo = f"{ZOO[task]:,.0f}" if task in ZOO else "—"
     outcome = "default kept" if kept else f"trial {race['chosen']}"
+    # Tunes recorded before the run-shape axes searched the optimisation settings alone.
+    shape = "searched" if task in tuned.plan.get("run_shape", {}) else "fixed"
     row = (
-        f"| {task} | {outcome} | "
+        f"| {task} | {shape} | {outcome} | "
         f"{p[0]:.2f} [{p[1]:.2f}, {p[2]:.2f}] | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
         f"{statistics.iqm(theirs):.1f} | {zoo} | {runs:.0f} | {spent / 60:.1f} |"
     )
@@ -205,11 +207,14 @@ def report(results: Path, output: Path) -> None:
             f"{last_seed}, each scored by its deterministic policy's mean return over "
             f"{EVAL_EPISODES} episodes after the final update. P(tuned > default) with its 95% "
             "percentile bootstrap interval; IQM with its interval. Where the race kept the "
-            "default, both arms are the same runs (P = 0.5).",
+            "default, both arms are the same runs (P = 0.5). Run shape: whether the tune "
+            "searched it (fppo_jax.core.shape_space: steps per rollout, minibatches, epochs, "
+            "hidden sizes, observation normalisation, initial log-std), or kept the task's, as "
+            "tunes recorded before those axes did.",
             "",
-            "| task | race | P(tuned > default) | tuned IQM | default IQM | RL Zoo's tuned PPO | "
-            "full runs in the tune | tune minutes |",
-            "|---|---|---|---|---|---|---|---|",
+            "| task | run shape | race | P(tuned > default) | tuned IQM | default IQM | "
+            "RL Zoo's tuned PPO | full runs in the tune | tune minutes |",
+            "|---|---|---|---|---|---|---|---|---|",
             *rows,
             "",
             "Goals:",

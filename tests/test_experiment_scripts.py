@@ -398,3 +398,25 @@ def test_the_tune_benchmark_runs_tiny_into_a_temporary_directory(tmp_path):
     assert done.returncode == 0, done.stdout + done.stderr
     written = (tmp_path / "bench_tune_cartpole.md").read_text()
     assert "| fppo-jax tune (one program per rung) |" in written and "Wall time" in written
+
+
+def test_bench_trust_names_a_tune_going_on_by_its_rounds_runs_and_parts(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    monkeypatch.syspath_prepend(str(EXPERIMENTS / "benchmarks"))
+    bench_trust = importlib.import_module("bench_trust")
+    tune = tmp_path / "trust" / "hopper" / "tune"
+    for rung, seeds in enumerate((2, 4)):
+        trials = [{"trial": t, "seed_scores": [1.0] * seeds} for t in range(3 - rung)]
+        (tune / "hopper" / f"rung-{rung}").mkdir(parents=True)
+        scores = {"arms": {"ppo": {"trials": trials}}}
+        (tune / "hopper" / f"rung-{rung}" / "scores.json").write_text(json.dumps(scores))
+    plan = {"budget": {"hopper": {"full_runs_per_arm": 94.0}}, "search": {"seeds_per_round": 2}}
+    (tune / "tune.json").write_text(json.dumps(plan))
+    record = {"parts": "3", "wall_seconds": 5400.0, "commit": "210407d8b7"}
+    (tune / "run.json").write_text(json.dumps(record))
+    assert bench_trust.progress_lines(tmp_path) == [
+        "- hopper: its tune goes on: 2 rounds, 10 of its 94 full runs, 3 parts of 90 minutes "
+        "in all (the last at 210407d)."
+    ]
+    (tune / "results.json").write_text("{}")
+    assert bench_trust.progress_lines(tmp_path) == []

@@ -22,6 +22,7 @@ above 0.5 on the MuJoCo ones, tuned PPO at RL Zoo's level. Nothing here is a tes
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -185,6 +186,29 @@ def goal_lines(found: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def progress_lines(results: Path) -> list[str]:
+    """A line per tune still going on: the rounds and full runs its parts have recorded of
+    its budget, and their wall time."""
+    lines = []
+    for tune in sorted((results / "trust").glob("*/tune")):
+        if (tune / "results.json").exists() or not (tune / RUN_RECORD).exists():
+            continue
+        task, record = tune.parent.name, read_run_record(tune)
+        rounds = sorted((tune / task).glob("rung-*/scores.json"))
+        plan = json.loads((tune / "tune.json").read_text())
+        trained = [len(json.loads(s.read_text())["arms"]["ppo"]["trials"]) for s in rounds]
+        runs = sum(trained) * plan["search"]["seeds_per_round"]  # each trial's new seeds
+        budget = plan["budget"][task]
+        parts = int(record["parts"])
+        lines.append(
+            f"- {task}: its tune goes on: {len(rounds)} round{'s' * (len(rounds) != 1)}, {runs} "
+            f"of its {budget['full_runs_per_arm']:.0f} full runs, {parts} "
+            f"part{'s' * (parts != 1)} of {record['wall_seconds'] / 60:.0f} minutes in all "
+            f"(the last at {record['commit'][:7]})."
+        )
+    return lines
+
+
 def report(results: Path, output: Path) -> None:
     """The write-up of every task recorded under `results`/trust."""
     rows: list[str] = []
@@ -220,6 +244,7 @@ def report(results: Path, output: Path) -> None:
             "Goals:",
             "",
             *goal_lines(found),
+            *(["", "In progress:", "", *going] if (going := progress_lines(results)) else []),
         ],
     )
 

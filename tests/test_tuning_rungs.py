@@ -12,6 +12,7 @@ from helpers import TUNE_SMALL as SMALL
 from helpers import rung_scores
 
 from fppo_jax.analysis import population
+from fppo_jax.analysis.preregistration import commit
 from fppo_jax.analysis.tuning import tune
 from fppo_jax.analysis.tuning_draws import import_optuna
 from fppo_jax.errors import InvalidInput
@@ -77,6 +78,10 @@ def test_a_tune_split_into_parts_joins_into_the_unsplit_tune_bit_for_bit(tmp_pat
     assert shares == [three, ["part-1", "part-2"], ["part-1"], three]
     said = capsys.readouterr().err
     assert "cartpole: rung 2 of 4, part 3 of 3: nothing to train, the rung's 8 runs make 2" in said
+    # Each rung and each share names the code that recorded it, for parts run at other commits.
+    recorded = [json.loads(p.read_text()) for p in (tmp_path / "split").rglob("scores.json")]
+    assert len(recorded) == 4 + 3 + 2 + 1 + 3
+    assert {found["commit"] for found in recorded} == {commit()}
 
 
 def _rungs(directory):

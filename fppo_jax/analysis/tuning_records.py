@@ -165,12 +165,14 @@ class ArmRung(TypedDict):
 
 
 class RungScores(TypedDict):
-    """A rung's ``scores.json``: each arm's part, and the seconds the rung trained and
-    compiled."""
+    """A rung's ``scores.json``: each arm's part, the seconds the rung trained and compiled,
+    and the commit of the code that recorded it (rungs recorded before it was kept have
+    none)."""
 
     arms: dict[str, ArmRung]
     seconds: float
     compile_seconds: float
+    commit: NotRequired[str]
 
 
 class Chosen(TypedDict):
@@ -273,7 +275,8 @@ class TrialAcrossTasks(TypedDict):
 class ShareScores(TypedDict):
     """A share's ``part-<K>/scores.json``: which `part` (K, N) of the rung it is, its runs
     (arm, trial, seed, in the rung's order), each run's score (None where no episode finished)
-    and whether it diverged, and the seconds it trained and compiled."""
+    and whether it diverged, the seconds it trained and compiled, and the commit of the code
+    that trained it (shares recorded before it was kept have none)."""
 
     part: list[int]
     runs: Sequence[Sequence[str | int]]
@@ -281,3 +284,4 @@ class ShareScores(TypedDict):
     diverged: list[bool]
     seconds: float
     compile_seconds: float
+    commit: NotRequired[str]

@@ -21,6 +21,7 @@ from fppo_jax.analysis.population import (
     read_leaves,
     save_leaves,
 )
+from fppo_jax.analysis.preregistration import commit
 from fppo_jax.analysis.scheduling import Scheduler
 from fppo_jax.analysis.tune_files import (
     SCORES_FILE,
@@ -168,7 +169,12 @@ class TaskTune:
         arms = self.scheduler.measured(self.scores, scores_of_runs, diverged)
         seconds = sum(share.seconds for share in shares)
         compile_seconds = sum(share.compile_seconds for share in shares)
-        scores: RungScores = {"arms": arms, "seconds": seconds, "compile_seconds": compile_seconds}
+        scores: RungScores = {
+            "arms": arms,
+            "seconds": seconds,
+            "compile_seconds": compile_seconds,
+            "commit": commit(),
+        }
         where = self._where(rung)
         where.mkdir(exist_ok=True)
         after = self.scheduler.next_window([*self.scores, scores])
@@ -214,6 +220,7 @@ class TaskTune:
             "diverged": share.diverged.tolist(),
             "seconds": share.seconds,
             "compile_seconds": share.compile_seconds,
+            "commit": commit(),
         }
         write_json(where / SCORES_FILE, recorded)  # last: a share with its scores is whole
         self._say(f"{said}: {len(share.runs)} runs recorded in {share.seconds:.1f} s")

@@ -3,6 +3,7 @@
 import datetime
 import importlib
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -420,3 +421,26 @@ def test_bench_trust_names_a_tune_going_on_by_its_rounds_runs_and_parts(tmp_path
     ]
     (tune / "results.json").write_text("{}")
     assert bench_trust.progress_lines(tmp_path) == []
+
+
+def test_tuned_v2_writes_each_recorded_rung_its_runs_race_and_what_remains(tmp_path):
+    # The trust benchmark's CartPole tune stands in for the classic family's: one arm, three
+    # rounds of 9 trials × 2 seeds, then 3 finalists and the default on 10 validation seeds.
+    shutil.copytree(EXPERIMENTS / "results/trust/cartpole/tune", tmp_path / "tuned-v2/classic/tune")
+    output = tmp_path / "tuned-v2.md"
+    done = run_script(
+        EXPERIMENTS / "studies/tuned_v2.py",
+        *("--results", str(tmp_path), "--output", str(output)),
+        cwd=EXPERIMENTS,
+    )
+    assert done.returncode == 0, done.stderr
+    rows = [
+        line.split(" | ")[:4] for line in output.read_text().splitlines() if "| classic |" in line
+    ]
+    assert rows == [
+        *(["| classic", "cartpole", f"round {k}", "18"] for k in (1, 2, 3)),
+        ["| classic", "cartpole", "validation race", "40"],
+    ]
+    assert "| ppo: default kept |" in output.read_text()
+    assert "- classic: the study not started." in done.stdout
+    assert "- mujoco: the tune not started." in done.stdout

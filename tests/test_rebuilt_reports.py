@@ -2,7 +2,8 @@
 the committed files: the seed study's (``verdict.py``: ``study.md`` and the three
 ``study-command/<family>/report.md``), the planned verdicts (``planned_verdict.py``:
 ``spo-dpo.md``, ``baseline-shape.md``), the dose-response (``dose_response.py``) and the tuned
-verdict (``tuned_verdict.py``: ``tuned.md``). Nothing
+verdict (``tuned_verdict.py``: ``tuned.md``) and its second plan's parts so far
+(``tuned_v2.py``: ``tuned-v2.md``). Nothing
 is trained; the bootstrap and permutation seeds are the scripts' own, fixed, so a rebuild is
 the committed text line for line but for what names when, where and at which commit it was
 made. A number or decision edited by hand, or a report left stale by a change to its script,
@@ -30,6 +31,7 @@ REPORTS = (
     "baseline-shape.md",
     "dose_response.md",
     "tuned.md",
+    "tuned-v2.md",
 )
 # What a rebuild may write differently without any result changing: the header's machine, date,
 # command and commit, the commit a study's plan was written at, and where its parts were read.
@@ -81,6 +83,7 @@ def rebuilt(tmp_path_factory) -> Path:
         run_script(
             studies / "tuned_verdict.py", "--output", str(out / "tuned.md"), cwd=EXPERIMENTS
         ),
+        run_script(studies / "tuned_v2.py", "--output", str(out / "tuned-v2.md"), cwd=EXPERIMENTS),
     ]
     for done in runs:
         assert done.returncode == 0, done.stdout + done.stderr

@@ -24,6 +24,7 @@ SMOKE = {
     "equivalence_rule.py": "--smoke",
     "redecided.py": "--studies {tmp}/redecided --output {tmp}/redecided.md",
     "tuned_verdict.py": "--output {tmp}/tuned.md",
+    "tuned_v2.py": "--output {tmp}/tuned-v2.md",
 }
 
 if __name__ == "__main__":

@@ -168,3 +168,14 @@ def test_a_lock_notices_its_directory_vanishing_or_replaced(tmp_path):
     elsewhere.rename(directory)  # the one locked, back in its place
     lock.check()
     lock.release()
+
+
+def test_a_lock_on_a_full_disk_is_refused_naming_its_file_and_holds_nothing(tmp_path, monkeypatch):
+    def full(*_):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))  # as a write names no file
+
+    with monkeypatch.context() as patch:
+        patch.setattr(os, "pwrite", full)
+        with pytest.raises(NotWritten, match=f"cannot write {tmp_path / '.lock'}: No space left"):
+            DirectoryLock(tmp_path, "a tune")
+    DirectoryLock(tmp_path, "a tune").release()  # the refused lock was let go

@@ -78,7 +78,8 @@ class DirectoryLock:
         """`what` the directory holds, for messages ("checkpoints", "a run's outputs"); `wait`,
         the seconds to wait for another holder to let go (for holders that take turns)."""
         self.directory, self.what = Path(directory), what
-        descriptor = os.open(self.directory / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+        path = self.directory / ".lock"
+        descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         deadline = time.monotonic() + wait
         while not _locked(descriptor):
             if time.monotonic() >= deadline:
@@ -89,8 +90,12 @@ class DirectoryLock:
                     "wait for it to end, or choose another directory"
                 )
             time.sleep(0.05)
-        os.ftruncate(descriptor, 0)
-        os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
+        try:
+            os.ftruncate(descriptor, 0)
+            os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
+        except OSError as error:  # a full disk: the lock is held, its holder's pid unwritten
+            os.close(descriptor)
+            raise NotWritten(f"cannot write {path}: {error.strerror or error}") from None
         self._descriptor: int | None = descriptor
         self._identity = _identity(self.directory)
 

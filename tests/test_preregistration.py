@@ -47,6 +47,11 @@ def test_a_plan_that_is_not_an_object_is_named(tmp_path):
     (tmp_path / "plan.json").write_text("[1, 2]")
     with pytest.raises(InvalidInput, match=r"plan\.json: it holds no JSON object"):
         check_plan(tmp_path, PLAN, "a study", "plan.json")
+    (tmp_path / "tune.json").write_text(json.dumps(PLAN)[:20])  # cut short
+    with pytest.raises(
+        InvalidInput, match=r"cannot read the plan .*tune\.json: Unterminated string"
+    ):
+        check_plan(tmp_path, PLAN, "a tune", "tune.json")
 
 
 def test_a_plan_is_known_by_its_digest(tmp_path):

@@ -93,3 +93,20 @@ def test_results_emptied_or_cut_are_named_not_read_as_a_tune_that_left_a_task_ou
     (copy / "results.json").write_text(json.dumps(written))
     with pytest.raises(DamagedArtifact, match=message):
         load_tune(copy)  # as the study on its settings reads it
+
+
+def test_results_cut_short_and_a_rung_of_another_shape_are_named(tmp_path):
+    copy = _copy(tmp_path)
+    results = copy / "results.json"
+    results.write_text(results.read_text()[:100])
+    with pytest.raises(DamagedArtifact, match=r"results\.json is not valid JSON"):
+        load_tune(copy)
+    copy = _copy(tmp_path / "again")
+    task = load_tune(copy).plan["tasks"][0]
+    (copy / task / "rung-0" / "scores.json").write_text('{"seconds": 1}')
+    with pytest.raises(
+        DamagedArtifact,
+        match=r"rung-0/scores\.json is not a rung's scores as fppo-jax writes it: "
+        r"\.arms: missing \(and 1 more\); restore it or remove it",
+    ):
+        recorded_rungs(copy / task)

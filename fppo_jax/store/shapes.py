@@ -48,7 +48,9 @@ def _record_mismatches(value: object, kind: Any, where: str) -> list[str]:
         return [f"{where}: {value!r} is not an object"]
     hints = typing.get_type_hints(kind)  # NotRequired[X] read as X; required keys apart
     found = [f"{where}.{key}: not in {kind.__name__}" for key in value if key not in hints]
-    found += [f"{where}.{key}: missing" for key in kind.__required_keys__ if key not in value]
+    # In the order the type declares them (its set of required keys has none, from run to run).
+    required = [key for key in hints if key in kind.__required_keys__]
+    found += [f"{where}.{key}: missing" for key in required if key not in value]
     for key, item in value.items():
         if key in hints:
             found += mismatches(item, hints[key], f"{where}.{key}")

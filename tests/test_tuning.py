@@ -15,12 +15,12 @@ from helpers import rung_scores
 from own_surrogates import half_finite
 
 import fppo_jax
-from fppo_jax.analysis import population, tuning_rungs
+from fppo_jax.analysis import population, tuning, tuning_rungs
 from fppo_jax.analysis.studies import study
 from fppo_jax.analysis.study_runs import run_scores
 from fppo_jax.analysis.tune_design import TUNING_SEED_START
 from fppo_jax.analysis.tune_files import recorded_rungs, tune_digest
-from fppo_jax.analysis.tuning import tune
+from fppo_jax.analysis.tuning import default_chunk, tune
 from fppo_jax.analysis.tuning_draws import import_optuna
 from fppo_jax.analysis.tuning_report import across_tasks
 from fppo_jax.errors import InvalidInput
@@ -65,8 +65,10 @@ def test_a_tune_halves_each_arm_in_one_program_per_rung(tuned):
             assert [row["trial"] for row in following["arms"][arm]["trials"]] == rung["arms"][arm][
                 "survivors"
             ]
-    # Every arm's live trials × seeds in one program per rung, none compiled twice.
-    assert compiled == [2 * 4 * 2, 2 * 2 * 2, 2 * 1 * 2, 2 * 2 * 4]
+    # On a CPU every rung and the race train in groups of one trial's 2 seeds: one program,
+    # compiled once for the whole tune, which the plan records.
+    assert compiled == [2]
+    assert result.plan["settings"]["chunk"] == 2
     assert all(seed == TUNING_SEED_START + i for i, seed in enumerate(result.plan["seeds"]))
 
 
@@ -479,7 +481,6 @@ def test_a_study_across_tasks_takes_each_arms_trial_for_every_task(tuned, tmp_pa
         ({"part": (0, 2), "chunk": 2}, r"part must be the K-th of N parts, .* got \(0, 2\)"),
         ({"part": (3, 2), "chunk": 2}, r"part must be the K-th of N parts, .* got \(3, 2\)"),
         ({"part": "x", "chunk": 2}, "part must be the K-th of N parts, 1 <= K <= N, got 'x'"),
-        ({"part": (1, 2)}, "part 1 of 2 needs chunk"),
         ({"chunk": 3}, "must be a multiple of the 2 seeds per trial, got 3"),
         (
             {"space": [("learning_rate", (1e-4, 1e-3))]},
@@ -572,3 +573,48 @@ def test_a_study_on_a_tune_takes_its_steps_and_refuses_others_by_name(tuned, tmp
     assert capsys.readouterr().err.startswith(
         f"fppo-jax: error: the tune in {output} trained total_steps = 1024 (--steps) per run"
     )
+
+
+class _Task:
+    """A prepared task as :func:`default_chunk` sees it: its environment."""
+
+    def __init__(self, on_host):
+        self.environment = type("Env", (), {"resets_itself": on_host})()
+
+
+def test_the_default_chunk_is_one_trials_seeds_on_a_cpu_for_tasks_stepped_in_jax(
+    tmp_path, monkeypatch
+):
+    assert default_chunk(tmp_path, {"a": _Task(False), "b": _Task(False)}, 3) == 3
+    # Environments on the host (native MuJoCo) and accelerators gain from a rung's runs in one
+    # wide call.
+    assert default_chunk(tmp_path, {"a": _Task(False), "b": _Task(True)}, 3) is None
+    monkeypatch.setattr(tuning.jax, "default_backend", lambda: "gpu")
+    assert default_chunk(tmp_path, {"a": _Task(False)}, 3) is None
+
+
+@pytest.mark.parametrize(("settings", "chunk"), [({"chunk": 8}, 8), ({}, None)])
+def test_a_tune_planned_before_goes_on_in_the_groups_its_plan_records(tmp_path, settings, chunk):
+    (tmp_path / "tune.json").write_text(json.dumps({"settings": {"preset": "paper", **settings}}))
+    assert default_chunk(tmp_path, {"a": _Task(False)}, 2) == chunk
+
+
+def test_a_tune_planned_without_a_chunk_trains_each_rung_whole_and_splits_only_with_one(
+    tmp_path, monkeypatch
+):
+    output = tmp_path / "tune"
+    tune("cartpole", ARMS, output=output, rungs=0, **SMALL)
+    plan = json.loads((output / "tune.json").read_text())
+    del plan["settings"]["chunk"]  # as a tune planned before the default chunk recorded it
+    (output / "tune.json").write_text(json.dumps(plan))
+    with pytest.raises(InvalidInput, match="part 1 of 2 needs chunk"):
+        tune("cartpole", ARMS, output=output, part=(1, 2), **SMALL)
+    compiled = []
+    original = population.compile_program
+    monkeypatch.setattr(
+        population,
+        "compile_program",
+        lambda *a, **k: compiled.append(a[1].shape[0]) or original(*a, **k),
+    )
+    tune("cartpole", ARMS, output=output, rungs=1, **SMALL)
+    assert compiled == [2 * 4 * 2]  # the first rung's runs, every arm's, in one call

@@ -120,6 +120,9 @@ class Population:
         self.eval_episodes, self._shaped = eval_episodes, shaped
         self._prepared: dict[Shape, Prepared] = {(): prepared}
         self._evaluators: dict[int, Callable[..., Any]] = {}  # by the trainer's id
+        # Every window's groups of one shape and size train by one program, compiled once
+        # for the whole population.
+        self._programs: dict[tuple[Shape, int], Program] = {}
 
     def shape_of(self, run: Run) -> Shape:
         """The run-shape values of `run`'s setting, as a key (empty: the task's own shape)."""
@@ -150,6 +153,17 @@ class Population:
         own = [i for group in groups[first:stop] for i in dict.fromkeys(group.tolist())]
         return np.asarray(own, dtype=int)
 
+    def compiles(self, window: Window, part: tuple[int, int]) -> bool:
+        """Whether `part`'s share of `window` needs a program not compiled yet."""
+        groups = self.groups(window)
+        first, stop = share_bounds(part, len(groups))
+        return any(
+            self._program_key(window, groups[n]) not in self._programs for n in range(first, stop)
+        )
+
+    def _program_key(self, window: Window, index: np.ndarray) -> tuple[Shape, int]:
+        return self.shape_of(window.runs[index[0]]), len(index)
+
     def prepared_for(self, shape: Shape) -> Prepared:
         """The task prepared for run-shape values `shape`."""
         if shape not in self._prepared:
@@ -171,21 +185,19 @@ class Population:
         if first == stop:
             return Trained([], np.zeros(0), np.zeros(0, bool), [], 0.0, 0.0, None, np.zeros(0, int))
         hps = self._hyperparameters(window.runs)
-        began, compiled, programs = time.perf_counter(), 0.0, {}
+        began, compiled = time.perf_counter(), 0.0
         trained: list[_Group] = []
         for number in range(first, stop):
             index = groups[number]
-            shape = self.shape_of(window.runs[index[0]])
-            if (shape, len(index)) not in programs:
-                program = self._compile(shape, window, index, hps)
-                programs[shape, len(index)] = program
+            key = self._program_key(window, index)
+            if key not in self._programs:
+                program = self._compile(key[0], window, index, hps)
+                self._programs[key] = program
                 compiled += program.compile_seconds
                 how = "loaded from the compilation cache" if program.loaded else "compiled"
                 self.say(f"{label} {how} in {program.compile_seconds:.1f} s")
             said = label + (f", group {number + 1} of {len(groups)}" if len(groups) > 1 else "")
-            trained.append(
-                self._group(programs[shape, len(index)], window, index, hps, saved, keep, said)
-            )
+            trained.append(self._group(self._programs[key], window, index, hps, saved, keep, said))
         return Trained(
             [window.runs[i] for group in trained for i in group.positions],
             np.concatenate([group.last for group in trained]),

@@ -32,12 +32,15 @@ tuning seeds that the test never uses; successive halving is Jamieson and Talwal
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, cast
+
+import jax
 
 from fppo_jax.analysis.arms import Variants, names_of_tasks, resolve_arms
 from fppo_jax.analysis.population import Population, Shape
@@ -73,6 +76,7 @@ from fppo_jax.core.search_space import (
     search_spaces,
 )
 from fppo_jax.core.surrogates import Surrogate
+from fppo_jax.envs import resets_itself
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.prepare import Prepared, prepare
 from fppo_jax.run.stop_signals import STOP_SIGNALS, caught
@@ -138,14 +142,15 @@ def tune(
     else the first variant) is the arm whose default the report measures the others' sampled
     settings against. `rungs` limits the rungs this call trains (the same call later goes on;
     0 trains none, but joins the shares recorded). `chunk` is the runs each compiled call
-    trains (default: each rung's runs in one call): a rung's runs, in order, train in groups
-    of that many. ``part=(K, N)`` (with `chunk`) trains the K-th of N shares of those groups of
-    each task's next rung, records it in ``<task>/rung-<r>/part-<K>/`` and returns; a call
-    without `part` joins the shares into the rung trained unsplit with the same `chunk`, bit
-    for bit. `progress` prints each rung's lines on stderr, as a study's, a sweep's and a run's
-    (the command line shows them unless ``--quiet``). `total_steps`, `preset`, `backend` and
-    `settings` (run-shape fields of :class:`~fppo_jax.core.config.TrainConfig`) are every
-    run's.
+    trains (default: :func:`default_chunk`, one trial's seeds where the tasks step in JAX on a
+    CPU, else each rung's runs in one call): a rung's runs, in order, train in groups of that
+    many, the last filled up. ``part=(K, N)`` (with a chunk) trains the K-th of N shares of
+    those groups of each task's next rung, records it in ``<task>/rung-<r>/part-<K>/`` and
+    returns; a call without `part` joins the shares into the rung trained unsplit with the
+    same chunk, bit for bit. `progress` prints each rung's lines on stderr, as a study's, a
+    sweep's and a run's (the command line shows them unless ``--quiet``). `total_steps`,
+    `preset`, `backend` and `settings` (run-shape fields of
+    :class:`~fppo_jax.core.config.TrainConfig`) are every run's.
     """
     _check_places(output, space)
     tasks = names_of_tasks(tasks, "a tune")
@@ -163,7 +168,7 @@ def tune(
         race_level,
     )
     _check_arguments(sampler, sampler_seed, rungs, settings)
-    part = _checked_split(chunk, part, chosen.per_round)
+    _checked_split(chunk, None, chosen.per_round)
     baseline = _baseline(baseline, arms)
     given = read_space_file(space) if isinstance(space, str | Path) else space
     spaces = search_spaces(arms, given)
@@ -174,6 +179,9 @@ def tune(
         )
         for task in tasks
     }
+    if chunk is None:
+        chunk = default_chunk(Path(output), runs, chosen.per_round)
+    part = _checked_split(chunk, part, chosen.per_round)
     axes = {task: task_axes(run, settings, given or {}, scheduler) for task, run in runs.items()}
     task_spaces = {task: with_axes(spaces, axes[task], run) for task, run in runs.items()}
     budgets = {task: chosen.budget_of(run) for task, run in runs.items()}
@@ -323,6 +331,27 @@ def _task_tune(
         prepared, arms, settings, scheduler.updates_per_call, chunk, say, episodes, shaped
     )
     return TaskTune(task, population, scheduler, directory, *optuna_storage)
+
+
+def default_chunk(output: Path, runs: Mapping[str, Prepared], seeds: int) -> int | None:
+    """The runs each compiled call trains where none is given: for a tune planned before, the
+    plan's (None: each rung's runs in one call); else, where every task steps in JAX on a CPU,
+    one trial's `seeds`, so that every rung and the validation race are groups of one size,
+    one program compiled once (on a CPU such groups train as fast as a rung's runs in one call:
+    ``experiments/benchmarks/bench_tune.py``); else None: an accelerator, or environments
+    stepped on the host (native MuJoCo), gain from each rung's runs in one wide call."""
+    try:
+        recorded = json.loads((output / PLAN_FILE).read_text())
+    except FileNotFoundError:
+        recorded = None
+    except (OSError, ValueError):
+        return None  # not a plan this tune can go on from: checking it against ours says why
+    if isinstance(recorded, dict):
+        planned = recorded.get("settings")
+        chunk = planned.get("chunk") if isinstance(planned, dict) else None
+        return chunk if isinstance(chunk, int) else None
+    on_host = any(resets_itself(run.environment) for run in runs.values())
+    return seeds if jax.default_backend() == "cpu" and not on_host else None
 
 
 def _checked_split(chunk: int | None, part: object, seeds: int) -> tuple[int, int] | None:

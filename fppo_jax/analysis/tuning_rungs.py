@@ -326,7 +326,8 @@ class TaskTune:
                 f"{self.task}: rung {rung + 1} of {self.scheduler.rounds}{split}: trials "
                 f"{', '.join(f'{len(t)} {arm}' for arm, t in live.items())} × {seeds} seeds = "
                 f"{len(window.runs)} runs{grouped}, updates {window.start + 1}–{window.end} of "
-                f"{self.population.prepared.config.num_updates}; compiling…"
+                f"{self.population.prepared.config.num_updates}"
+                + ("; compiling…" if self.population.compiles(window, part) else "")
             )
         saved = self._where(rung - 1) / STATE_FILE if window.continues is not None else None
         label = f"{self.task}: rung {rung + 1}"

@@ -76,8 +76,9 @@ def add_tune(commands: argparse._SubParsersAction[Parser]) -> None:
         "--chunk",
         type=count,
         help="runs per compiled call, a multiple of --seeds-per-trial: a rung's runs train in "
-        "groups of that many, the same for every part and the join (default: each rung's runs "
-        "in one call)",
+        "groups of that many, the same for every part and the join (default: the plan's; for a "
+        "new tune, one trial's seeds where the tasks step in JAX on a CPU, so that one program "
+        "trains every rung, else each rung's runs in one call)",
     )
     tuned.add_argument(
         "--part",

@@ -123,6 +123,7 @@ class Population:
         # Every window's groups of one shape and size train by one program, compiled once
         # for the whole population.
         self._programs: dict[tuple[Shape, int], Program] = {}
+        self._states: dict[tuple[int, Any], Any] = {}  # a group's state's shapes, by its size
 
     def shape_of(self, run: Run) -> Shape:
         """The run-shape values of `run`'s setting, as a key (empty: the task's own shape)."""
@@ -300,8 +301,10 @@ class Population:
             return program.init(keys, hps)
         assert saved is not None
         trainer = self.prepared.trainer
-        like = jax.eval_shape(jax.vmap(trainer.init), keys, hps)
-        state = load_state(saved, like, index, len(window.runs))
+        shaped_as = (len(index), jax.tree.structure(hps))
+        if shaped_as not in self._states:  # traced once: the same for every group of a size
+            self._states[shaped_as] = jax.eval_shape(jax.vmap(trainer.init), keys, hps)
+        state = load_state(saved, self._states[shaped_as], index, len(window.runs))
         if resets_itself(trainer.env):  # their state lived outside JAX, in another batch
             state = jax.jit(jax.vmap(trainer.restart_envs))(state)
         return state
@@ -342,8 +345,10 @@ class Population:
         return state, last
 
 
+@jax.jit
 def _rows(hps: Hyperparameters, index: np.ndarray) -> Hyperparameters:
-    """The hyperparameters of runs `index` of a stacked batch."""
+    """The hyperparameters of runs `index` of a stacked batch, in one call: a slice of each
+    leaf apart would be a call of its own, dozens a group."""
     return cast(Hyperparameters, jax.tree.map(lambda x: x[index], hps))
 
 

@@ -398,7 +398,9 @@ def test_the_tune_benchmark_runs_tiny_into_a_temporary_directory(tmp_path):
     done = run_script(script, *flags, "--results", str(tmp_path), cwd=EXPERIMENTS)
     assert done.returncode == 0, done.stdout + done.stderr
     written = (tmp_path / "bench_tune_cartpole.md").read_text()
-    assert "| fppo-jax tune (one program per rung) |" in written and "Wall time" in written
+    assert "| fppo-jax tune (one program) |" in written and "Wall time" in written
+    assert "then the race |" in written  # the usual way trains the tune's race too
+    assert "A first tune, cold (nothing cached):" in written and "compiling at most" in written
 
 
 def test_bench_trust_names_a_tune_going_on_by_its_rounds_runs_and_parts(tmp_path, monkeypatch):

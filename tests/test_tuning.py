@@ -599,16 +599,14 @@ def test_a_tune_planned_before_goes_on_in_the_groups_its_plan_records(tmp_path, 
     assert default_chunk(tmp_path, {"a": _Task(False)}, 2) == chunk
 
 
-def test_a_tune_planned_without_a_chunk_trains_each_rung_whole_and_splits_only_with_one(
-    tmp_path, monkeypatch
+def test_a_tune_planned_without_a_chunk_trains_each_rung_whole_in_any_split(
+    tmp_path, monkeypatch, capsys
 ):
     output = tmp_path / "tune"
     tune("cartpole", ARMS, output=output, rungs=0, **SMALL)
     plan = json.loads((output / "tune.json").read_text())
     del plan["settings"]["chunk"]  # as a tune planned before the default chunk recorded it
     (output / "tune.json").write_text(json.dumps(plan))
-    with pytest.raises(InvalidInput, match="part 1 of 2 needs chunk"):
-        tune("cartpole", ARMS, output=output, part=(1, 2), **SMALL)
     compiled = []
     original = population.compile_program
     monkeypatch.setattr(
@@ -616,5 +614,12 @@ def test_a_tune_planned_without_a_chunk_trains_each_rung_whole_and_splits_only_w
         "compile_program",
         lambda *a, **k: compiled.append(a[1].shape[0]) or original(*a, **k),
     )
-    tune("cartpole", ARMS, output=output, rungs=1, **SMALL)
+    small = {**SMALL, "progress": True}
+    tune("cartpole", ARMS, output=output, part=(2, 2), **small)  # one group: the first part's
+    assert "nothing to train, the rung's 16 runs make 1 group, fewer than the parts" in (
+        capsys.readouterr().err
+    )
+    tune("cartpole", ARMS, output=output, part=(1, 2), **SMALL)
     assert compiled == [2 * 4 * 2]  # the first rung's runs, every arm's, in one call
+    joined = tune("cartpole", ARMS, output=output, rungs=0, **SMALL)
+    assert len(joined.rungs["cartpole"]) == 1

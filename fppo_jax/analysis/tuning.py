@@ -355,8 +355,10 @@ def default_chunk(output: Path, runs: Mapping[str, Prepared], seeds: int) -> int
 
 
 def _checked_split(chunk: int | None, part: object, seeds: int) -> tuple[int, int] | None:
-    """`part` as (K, N), with `chunk` checked before any plan: a chunk of whole trials, and a
-    split only of groups that an unsplit tune with the same chunk trains alike."""
+    """`part` as (K, N), with `chunk` checked before any plan: a chunk of whole trials. A share
+    trains whole groups, as the unsplit tune trains them, so any split is the same tune; without
+    a chunk a rung's groups are its run shapes, one each (a rung of one shape is one group, which
+    one share trains)."""
     if chunk is not None and positive_int("chunk", chunk) % seeds:
         raise InvalidInput(
             f"chunk (runs per compiled call) must be a multiple of the {seeds} seeds per trial, "
@@ -365,15 +367,6 @@ def _checked_split(chunk: int | None, part: object, seeds: int) -> tuple[int, in
     if part is None:
         return None
     k, n = check_part(part)
-    if chunk is None and n > 1:
-        # XLA rounds a vmapped program by its run count: a share trained as its own program
-        # would differ in the last bits from the rung trained whole, and then diverge.
-        raise InvalidInput(
-            f"part {k} of {n} needs chunk (--chunk), the runs per compiled call, the same for "
-            "every share and the join: a rung's runs train in groups of that many and a share "
-            "trains whole groups, so that the joined rung is the one trained unsplit, bit for "
-            "bit"
-        )
     return k, n
 
 

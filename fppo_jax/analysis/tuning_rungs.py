@@ -207,7 +207,7 @@ class TaskTune:
             groups = len(self.population.groups(window))
             self._say(
                 f"{said}: nothing to train, the rung's {len(window.runs)} runs make {groups} "
-                f"group{'s' * (groups > 1)}, fewer than the parts"
+                f"group{'s' * (groups > 1)}, fewer than the parts (a smaller --chunk makes more)"
             )
             return
         where.mkdir(parents=True, exist_ok=True)

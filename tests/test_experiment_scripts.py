@@ -1,5 +1,6 @@
 """experiments/: what the scripts advise when they refuse, and their helpers on every space."""
 
+import argparse
 import datetime
 import importlib
 import json
@@ -423,6 +424,10 @@ def test_bench_trust_names_a_tune_going_on_by_its_rounds_runs_and_parts(tmp_path
     ]
     (tune / "results.json").write_text("{}")
     assert bench_trust.progress_lines(tmp_path) == []
+    # A round goes on in shares of its run-shape groups, each a part of its own.
+    assert bench_trust.share("2/3") == (2, 3)
+    with pytest.raises(argparse.ArgumentTypeError, match="a part is K/N, such as 1/3, got 'x'"):
+        bench_trust.share("x")
 
 
 def test_tuned_v2_writes_each_recorded_rung_its_runs_race_and_what_remains(tmp_path):

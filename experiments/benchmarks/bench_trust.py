@@ -5,6 +5,7 @@ default trained side by side on fresh test seeds, per task.
     python experiments/benchmarks/bench_trust.py --tasks cartpole,acrobot,mountaincar
     python experiments/benchmarks/bench_trust.py --tasks hopper        # a part of its own
     python experiments/benchmarks/bench_trust.py --tasks hopper --rounds 1   # one round of it
+    python experiments/benchmarks/bench_trust.py --tasks hopper --part 1/3   # a third of a round
     python experiments/benchmarks/bench_trust.py --report              # the write-up alone
 
 Per task, in <results>/trust/<task>/: the tune (``tune/``: racing over 9 trials, 2 tuning seeds
@@ -22,6 +23,7 @@ above 0.5 on the MuJoCo ones, tuned PPO at RL Zoo's level. Nothing here is a tes
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import time
@@ -53,10 +55,17 @@ GOAL = {"halfcheetah": 3000.0}  # at least this IQM where RL Zoo's is out of rea
 
 
 def tune_task(
-    task: str, where: Path, budget: int, tiny: dict[str, int], steps: int | None, rounds: int | None
+    task: str,
+    where: Path,
+    budget: int,
+    tiny: dict[str, int],
+    steps: int | None,
+    rounds: int | None,
+    part: tuple[int, int] | None = None,
 ) -> None:
-    """The task's tune, `rounds` rounds of it (all if None): it goes on from what is recorded,
-    and its record adds up the wall time of its parts."""
+    """The task's tune, `rounds` rounds of it (all if None), or `part`'s share of its next
+    round: it goes on from what is recorded, and its record adds up the wall time of its
+    parts."""
     began = time.perf_counter()
     fppo_jax.tune(
         task,
@@ -71,6 +80,7 @@ def tune_task(
         eval_episodes=EVAL_EPISODES,
         total_steps=steps,
         rungs=rounds,
+        part=part,
         **tiny,
     )
     spent = time.perf_counter() - began
@@ -249,6 +259,15 @@ def report(results: Path, output: Path) -> None:
     )
 
 
+def share(text: str) -> tuple[int, int]:
+    """``K/N`` as (K, N); the tune checks 1 <= K <= N."""
+    k, _, n = text.partition("/")
+    try:
+        return int(k), int(n)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a part is K/N, such as 1/3, got {text!r}") from None
+
+
 def main() -> None:
     parser = argument_parser(__doc__)
     parser.add_argument("--tasks", default="", help="tasks to tune and test, e.g. hopper")
@@ -263,6 +282,14 @@ def main() -> None:
     parser.add_argument(
         "--rounds", type=int, default=None, help="rounds of each tune this call trains (a part)"
     )
+    parser.add_argument(
+        "--part",
+        type=share,
+        default=None,
+        metavar="K/N",
+        help="train the K-th of N shares of each tune's next round, then stop; a later call "
+        "without --part joins them (--rounds 0: the join alone)",
+    )
     args = parser.parse_args()
     tiny = (
         {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2} if args.tiny else {}
@@ -270,7 +297,7 @@ def main() -> None:
     for task in [t for t in args.tasks.split(",") if t and not args.report]:
         where = args.results / "trust" / task
         if not (where / "tune" / "results.json").exists():
-            tune_task(task, where / "tune", args.budget, tiny, args.steps, args.rounds)
+            tune_task(task, where / "tune", args.budget, tiny, args.steps, args.rounds, args.part)
         if not (where / "tune" / "results.json").exists():
             print(f"{task}: the tune goes on in a later part (--rounds)")
         elif not (where / "test" / "sweep.json").exists():

@@ -2,8 +2,11 @@
 arm, a resume bit for bit, a changed plan refused, and the chosen settings tested by a study
 on seeds the tune never used."""
 
+import contextlib
+import io
 import itertools
 import json
+import re
 import shutil
 
 import jax.numpy as jnp
@@ -47,12 +50,14 @@ def tuned(tmp_path_factory):
 
         original = population.compile_program
         patch.setattr(population, "compile_program", counting)
-        result = tune("cartpole", ARMS, output=output, **SMALL)
-    return output, result, compiled
+        said = io.StringIO()
+        with contextlib.redirect_stderr(said):
+            result = tune("cartpole", ARMS, output=output, **{**SMALL, "progress": True})
+    return output, result, compiled, said.getvalue().splitlines()
 
 
 def test_a_tune_halves_each_arm_in_one_program_per_rung(tuned):
-    output, result, compiled = tuned
+    output, result, compiled, said = tuned
     assert result.finished
     *scores, race = rung_scores(output)
     for arm in ARMS:
@@ -66,14 +71,17 @@ def test_a_tune_halves_each_arm_in_one_program_per_rung(tuned):
                 "survivors"
             ]
     # On a CPU every rung and the race train in groups of one trial's 2 seeds: one program,
-    # compiled once for the whole tune, which the plan records.
+    # compiled once for the whole tune, which the plan records; only the first rung says it
+    # compiles.
     assert compiled == [2]
     assert result.plan["settings"]["chunk"] == 2
+    headers = [line for line in said if re.match(r"cartpole: rung \d of 4: trials", line)]
+    assert [line.endswith("; compiling…") for line in headers] == [True, False, False, False]
     assert all(seed == TUNING_SEED_START + i for i, seed in enumerate(result.plan["seeds"]))
 
 
 def test_every_arm_spends_the_planned_env_steps(tuned):
-    _output, result, _ = tuned
+    _output, result, _, _ = tuned
     planned = result.plan["budget"]["cartpole"]["env_steps_per_arm"]
     # Halving's 2 seeds × (4 × 2 + 2 × 2 + 1 × 4) updates, then 2 entrants × 4 full runs.
     assert planned == (2 * (4 * 2 + 2 * 2 + 1 * 4) + 2 * 4 * 8) * 128
@@ -81,7 +89,7 @@ def test_every_arm_spends_the_planned_env_steps(tuned):
 
 
 def test_trial_0_is_each_arms_default_and_the_shared_axes_are_the_same_points(tuned):
-    output, result, _ = tuned
+    output, result, _, _ = tuned
     ppo, lp = (
         import_optuna().load_study(
             study_name=f"{result.plan['storage']['studies']}/cartpole/{arm}",
@@ -124,7 +132,7 @@ def test_the_plan_is_written_before_any_run(tmp_path):
 
 
 def test_a_stopped_or_killed_tune_goes_on_bit_for_bit(tuned, tmp_path, monkeypatch):
-    whole, _, _ = tuned
+    whole, _, _, _ = tuned
     # Stopped after its first rung, then killed while recording its second (its survivors'
     # state written, its scores not): the rung in flight is all that is lost.
     tune("cartpole", ARMS, output=tmp_path, rungs=1, **SMALL)
@@ -149,7 +157,7 @@ def test_a_stopped_or_killed_tune_goes_on_bit_for_bit(tuned, tmp_path, monkeypat
 
 
 def test_a_changed_plan_is_refused_naming_the_change(tuned, tmp_path):
-    output, _, _ = tuned
+    output, _, _, _ = tuned
     copy = tmp_path / "tune"
     shutil.copytree(output, copy)
     with pytest.raises(InvalidInput, match="trials = 4, not 8"):
@@ -168,7 +176,7 @@ def test_a_changed_plan_is_refused_naming_the_change(tuned, tmp_path):
 
 
 def test_a_study_tests_the_chosen_settings_on_fresh_seeds_with_the_defaults_beside(tuned, tmp_path):
-    output, result, _ = tuned
+    output, result, _, _ = tuned
     arguments = dict(max_seeds=2, group_size=2, total_steps=8 * 128, progress=False, **TINY)
     found = study(
         "cartpole", "fppo-lp", "ppo", output=tmp_path / "study", tuned=output, **arguments
@@ -261,7 +269,7 @@ def test_a_study_tests_the_chosen_settings_on_fresh_seeds_with_the_defaults_besi
 
 
 def test_a_study_refuses_the_tunes_seeds_and_another_protocol(tuned, tmp_path):
-    output, _, _ = tuned
+    output, _, _, _ = tuned
     copy = tmp_path / "tune"
     shutil.copytree(output, copy)
     plan = json.loads((copy / "tune.json").read_text())
@@ -377,7 +385,7 @@ def test_a_tune_draws_the_same_trials_on_every_task(tmp_path):
 
 
 def test_a_study_across_tasks_takes_each_arms_trial_for_every_task(tuned, tmp_path):
-    output, _, _ = tuned
+    output, _, _, _ = tuned
     arguments = dict(max_seeds=2, group_size=2, total_steps=8 * 128, progress=False, **TINY)
     with pytest.raises(InvalidInput, match="tuned one task \\(cartpole\\): a setting chosen"):
         study(
@@ -541,7 +549,7 @@ def test_the_command_line_plans_tunes_and_refuses_in_one_line(tuned, tmp_path, c
     assert main([*flags, "--output", str(tmp_path / "a"), "--rungs", "0"]) == 0
     assert "the same command goes on" in capsys.readouterr().out
     plan = json.loads((tmp_path / "a/tune.json").read_text())
-    output, _, _ = tuned
+    output, _, _, _ = tuned
     recorded = json.loads((output / "tune.json").read_text())
     # The same plan, but for its run settings' spelling and its studies' names in its storage.
     assert {k: v for k, v in plan.items() if k not in ("settings", "storage")} == {
@@ -560,7 +568,7 @@ def test_the_command_line_plans_tunes_and_refuses_in_one_line(tuned, tmp_path, c
 
 
 def test_a_study_on_a_tune_takes_its_steps_and_refuses_others_by_name(tuned, tmp_path, capsys):
-    output, _, _ = tuned
+    output, _, _, _ = tuned
     arguments = dict(max_seeds=2, group_size=2, groups=0, progress=False, **TINY)
     found = study("cartpole", "fppo-lp", "ppo", output=tmp_path / "s", tuned=output, **arguments)
     assert found.plan["settings"]["total_steps"] == 8 * 128  # the tune's, not the task's

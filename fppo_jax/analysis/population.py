@@ -26,7 +26,7 @@ from fppo_jax.core.policy import make_policy
 from fppo_jax.core.resolution import resolve_hyperparameters
 from fppo_jax.core.shape_space import ChoiceValue, split_setting
 from fppo_jax.core.surrogates import Surrogate
-from fppo_jax.core.trainer import TrainState
+from fppo_jax.core.trainer import Trainer, TrainState
 from fppo_jax.envs import resets_itself
 from fppo_jax.errors import InvalidInput, MissingFile
 from fppo_jax.run.evaluation import evaluation_key, make_evaluator
@@ -119,11 +119,12 @@ class Population:
         self.updates_per_call, self.chunk, self.say = updates_per_call, chunk, say
         self.eval_episodes, self._shaped = eval_episodes, shaped
         self._prepared: dict[Shape, Prepared] = {(): prepared}
-        self._evaluators: dict[int, Callable[..., Any]] = {}  # by the trainer's id
+        # Each program's evaluator, compiled with it (by the program's key).
+        self._evaluators: dict[tuple[Shape, int], Callable[..., Any]] = {}
         # Every window's groups of one shape and size train by one program, compiled once
         # for the whole population.
         self._programs: dict[tuple[Shape, int], Program] = {}
-        self._states: dict[tuple[int, Any], Any] = {}  # a group's state's shapes, by its size
+        self._states: dict[tuple[int, int, Any], Any] = {}  # see _state_shapes
 
     def shape_of(self, run: Run) -> Shape:
         """The run-shape values of `run`'s setting, as a key (empty: the task's own shape)."""
@@ -193,12 +194,15 @@ class Population:
             key = self._program_key(window, index)
             if key not in self._programs:
                 program = self._compile(key[0], window, index, hps)
+                seconds = program.compile_seconds + self._compile_evaluator(
+                    key, program, _rows(hps, index)
+                )
                 self._programs[key] = program
-                compiled += program.compile_seconds
+                compiled += seconds
                 how = "loaded from the compilation cache" if program.loaded else "compiled"
-                self.say(f"{label} {how} in {program.compile_seconds:.1f} s")
+                self.say(f"{label} {how} in {seconds:.1f} s")
             said = label + (f", group {number + 1} of {len(groups)}" if len(groups) > 1 else "")
-            trained.append(self._group(self._programs[key], window, index, hps, saved, keep, said))
+            trained.append(self._group(key, window, index, hps, saved, keep, said))
         return Trained(
             [window.runs[i] for group in trained for i in group.positions],
             np.concatenate([group.last for group in trained]),
@@ -220,6 +224,30 @@ class Population:
         keys = run_keys([window.runs[i][2] for i in index])
         return compile_program(prepared.trainer, keys, _rows(hps, index), jax.vmap, per_call)
 
+    def _compile_evaluator(
+        self, key: tuple[Shape, int], program: Program, hps: Hyperparameters
+    ) -> float:
+        """Where the population evaluates, the evaluator of `program`'s runs (at `hps`, a
+        group's) compiled or loaded from the cache beside it, so that no group waits on it:
+        its seconds."""
+        if self.eval_episodes is None:
+            return 0.0
+        began = time.perf_counter()
+        trainer = program.trainer
+        state = self._state_shapes(trainer, run_keys([0] * program.runs), hps)
+        evaluate = jax.jit(jax.vmap(make_evaluator(trainer.env, self.eval_episodes)))
+        policy = make_policy(trainer, state)
+        self._evaluators[key] = evaluate.lower(policy, _evaluation_keys(program.runs)).compile()
+        return time.perf_counter() - began
+
+    def _state_shapes(self, trainer: Trainer, keys: jax.Array, hps: Hyperparameters) -> Any:
+        """The shapes of a group's state (traced once per trainer, size and hyperparameters'
+        structure: the same for every group of them)."""
+        shaped_as = (id(trainer), keys.shape[0], jax.tree.structure(hps))
+        if shaped_as not in self._states:
+            self._states[shaped_as] = jax.eval_shape(jax.vmap(trainer.init), keys, hps)
+        return self._states[shaped_as]
+
     def _span(self, window: Window, prepared: Prepared) -> tuple[int, int, int]:
         """`window`'s first and last update and the updates per call on `prepared`'s shape:
         the window's own on the task's shape, the whole run on another (so that
@@ -236,7 +264,7 @@ class Population:
 
     def _group(
         self,
-        program: Program,
+        key: tuple[Shape, int],
         window: Window,
         index: np.ndarray,
         hps: Hyperparameters,
@@ -244,7 +272,8 @@ class Population:
         keep: bool,
         said: str,
     ) -> _Group:
-        """A group of `index`'s runs trained by `program` through `window`."""
+        """A group of `index`'s runs trained through `window` by the program of `key`."""
+        program = self._programs[key]
         keys = run_keys([window.runs[i][2] for i in index])
         group_hps = _rows(hps, index)
         state = self._start(program, window, keys, group_hps, index, saved)
@@ -256,22 +285,15 @@ class Population:
             last[:own],
             fetch_diverged(state)[:own],
             [_plain(leaf)[:own] for leaf in jax.tree.leaves(state)] if keep else [],
-            self._evaluate(program, state)[:own] if self.eval_episodes else None,
+            self._evaluate(key, program.trainer, state)[:own] if self.eval_episodes else None,
         )
 
-    def _evaluate(self, program: Program, state: TrainState) -> np.ndarray:
+    def _evaluate(self, key: tuple[Shape, int], trainer: Trainer, state: TrainState) -> np.ndarray:
         """Each run's deterministic policy's mean return over the population's evaluation
         episodes, every run on the same episodes' keys (its own environments)."""
-        assert self.eval_episodes is not None
-        trainer = program.trainer
-        if id(trainer) not in self._evaluators:
-            evaluator = make_evaluator(trainer.env, self.eval_episodes)
-            self._evaluators[id(trainer)] = jax.jit(jax.vmap(evaluator))
-        policy = make_policy(trainer, state)
         runs = state.nonfinite_update.shape[0]
-        key = evaluation_key()
-        keys = jax.numpy.broadcast_to(key, (runs, *key.shape))
-        returns = np.asarray(self._evaluators[id(trainer)](policy, keys), dtype=float)
+        evaluate = self._evaluators[key]
+        returns = np.asarray(evaluate(make_policy(trainer, state), _evaluation_keys(runs)), float)
         return cast(np.ndarray, returns.mean(axis=-1))
 
     def _hyperparameters(self, runs: Sequence[Run]) -> Hyperparameters:
@@ -301,10 +323,8 @@ class Population:
             return program.init(keys, hps)
         assert saved is not None
         trainer = self.prepared.trainer
-        shaped_as = (len(index), jax.tree.structure(hps))
-        if shaped_as not in self._states:  # traced once: the same for every group of a size
-            self._states[shaped_as] = jax.eval_shape(jax.vmap(trainer.init), keys, hps)
-        state = load_state(saved, self._states[shaped_as], index, len(window.runs))
+        like = self._state_shapes(trainer, keys, hps)
+        state = load_state(saved, like, index, len(window.runs))
         if resets_itself(trainer.env):  # their state lived outside JAX, in another batch
             state = jax.jit(jax.vmap(trainer.restart_envs))(state)
         return state
@@ -343,6 +363,13 @@ class Population:
                     f"{rate / (time.perf_counter() - began):,.0f} env steps/s"
                 )
         return state, last
+
+
+def _evaluation_keys(runs: int) -> jax.Array:
+    """:func:`~fppo_jax.run.evaluation.evaluation_key` for each of `runs` runs: the same
+    episodes for every run, each stepping its own environments."""
+    key = evaluation_key()
+    return jax.numpy.broadcast_to(key, (runs, *key.shape))
 
 
 @jax.jit

@@ -7,15 +7,16 @@ compiling against what it spends training.
 
 (a) ``fppo_jax.tune`` on PPO alone: every rung's trials × seeds in groups of one program's
 size (on a CPU, one trial's seeds: one program for the whole tune), the survivors going on from
-their state, then its validation race (the default and one finalist on 5 validation seeds).
+their state, then its validation race (the default and one finalist on 5 validation seeds);
+and beside it the same tune with each rung's runs in one call (a program per rung).
 (b) The usual way (RL Baselines3 Zoo's, Stoix's and CleanRL's tuners): an Optuna study with
 ``SuccessiveHalvingPruner(min_resource=<(a)'s first rung>, reduction_factor=eta)``, the very
 settings (a) drew enqueued, and each trial in a process of its own that trains the trial's seeds
 (``fppo_jax.sweep`` of them, the JAX way) and reports their mean return at every chunk of
 updates, stopping when pruned; then, as RL Zoo retrains its best trials, a process that trains
 (a)'s race: the best trial the pruner let finish and the default on the same validation seeds.
-Both arms run in fresh processes on one compilation cache of the benchmark's own, empty at the
-start: the first tune is cold (a first tune on a new machine; its rungs record what it
+Every arm runs in fresh processes on compilation caches of the benchmark's own, empty at the
+start: each tune's first run is cold (a first tune on a new machine; its rungs record what it
 compiled and trained), then the arms run `--repeats` times each, interleaved, warm, and the
 best wall time of each counts. Each arm's wall time, env steps trained, best score and peak
 memory (the largest resident set of its processes) are recorded, and the ratio of wall times.
@@ -87,9 +88,12 @@ def peak_of(process: subprocess.Popen[Any]) -> tuple[int, int]:
     return process.returncode, usage.ru_maxrss
 
 
-def run_tune(args: Any, where: Path, shape: dict[str, Any]) -> dict[str, Any]:
-    """Arm (a): the tune in a process of its own; with the seconds its rungs record compiling
-    and training."""
+def run_tune(
+    args: Any, where: Path, shape: dict[str, Any], cache: Path, chunk: int | None = None
+) -> dict[str, Any]:
+    """Arm (a): the tune in a process of its own, its programs cached in `cache`, in groups of
+    `chunk` runs (None: the default); with the seconds its rungs record compiling and
+    training."""
     flags = [
         sys.executable,
         "-m",
@@ -121,7 +125,10 @@ def run_tune(args: Any, where: Path, shape: dict[str, Any]) -> dict[str, Any]:
         *shape["flags"],
     ]
     start = time.perf_counter()
-    process = subprocess.Popen(flags, stdout=subprocess.DEVNULL)
+    if chunk is not None:
+        flags += ["--chunk", str(chunk)]
+    cached = {**os.environ, "FPPO_JAX_CACHE_DIR": str(cache)}
+    process = subprocess.Popen(flags, stdout=subprocess.DEVNULL, env=cached)
     status, peak = peak_of(process)
     seconds = time.perf_counter() - start
     if status:
@@ -261,19 +268,26 @@ def main() -> None:
         if args.tiny
         else [],
     }
+    wide = args.trials * args.seeds  # the first rung's runs: each rung's in one call
     with tempfile.TemporaryDirectory() as work:
-        # The benchmark's own cache, empty at the start, for every process it starts.
-        os.environ["FPPO_JAX_CACHE_DIR"] = str(Path(work) / "cache")
-        cold = run_tune(args, Path(work) / "cold" / "tune", shape)
-        tuned_runs, usual_runs = [], []
+        # The benchmark's own caches, empty at the start: the tune's and the usual way's, and
+        # the wide tune's apart, so that each tune's first run compiles all it trains.
+        cache, wide_cache = Path(work) / "cache", Path(work) / "cache-wide"
+        os.environ["FPPO_JAX_CACHE_DIR"] = str(cache)
+        cold = run_tune(args, Path(work) / "cold" / "tune", shape, cache)
+        cold_wide = run_tune(args, Path(work) / "cold-wide" / "tune", shape, wide_cache, wide)
+        tuned_runs, wide_runs, usual_runs = [], [], []
         for repeat in range(args.repeats):  # interleaved, warm
             where = Path(work) / str(repeat)
-            tuned_runs.append(run_tune(args, where / "tune", shape))
+            tuned_runs.append(run_tune(args, where / "tune", shape, cache))
+            wide_runs.append(run_tune(args, where / "wide" / "tune", shape, wide_cache, wide))
             usual_runs.append(run_usual(args, where, where / "tune", shape))
     tuned = min(tuned_runs, key=lambda r: r["seconds"])
+    widest = min(wide_runs, key=lambda r: r["seconds"])
     usual = min(usual_runs, key=lambda r: r["seconds"])
     rows = [
         ("fppo-jax tune (one program)", tuned),
+        (f"fppo-jax tune, each rung's runs in one call (--chunk {wide})", widest),
         ("one process per trial, SuccessiveHalvingPruner, then the race", usual),
     ]
     ratio = usual["seconds"] / tuned["seconds"]
@@ -292,13 +306,19 @@ def main() -> None:
         "",
         f"A first tune, cold (nothing cached): {cold['seconds']:.1f} s, of which "
         f"{cold['compiling']:.1f} s compiling and {cold['training']:.1f} s training (its rungs' "
-        f"records); compiling at most training: **{first}**.",
+        f"records); compiling at most training: **{first}**. With each rung's runs in one "
+        f"call instead (a program per rung, `--chunk {wide}`): {cold_wide['seconds']:.1f} s, "
+        f"{cold_wide['compiling']:.1f} s compiling and {cold_wide['training']:.1f} s training.",
         "",
         f"Then warm, the arms {args.repeats} times each, interleaved, the best wall time of each "
         "counting: "
         + "; ".join(
             f"{name} {_seconds(runs)} s"
-            for name, runs in (("tune", tuned_runs), ("the usual way", usual_runs))
+            for name, runs in (
+                ("tune", tuned_runs),
+                ("tune, each rung in one call", wide_runs),
+                ("the usual way", usual_runs),
+            )
         )
         + ".",
         "",
@@ -318,7 +338,10 @@ def main() -> None:
         f"**{searched:.1f}×** ({'met' if searched >= GOAL_WARM else 'missed'}). "
         f"The warm tune's rungs record {tuned['compiling']:.1f} s loading its program and "
         f"{tuned['training']:.1f} s training; the rest of its {tuned['seconds']:.1f} s starts "
-        "the process, draws the trials and writes the report.",
+        "the process, draws the trials and writes the report. Each rung's runs in one call "
+        f"train in {widest['training']:.1f} s (the one program's groups of one trial's seeds: "
+        f"{tuned['training'] / widest['training']:.2f}× that time) and load "
+        f"{widest['compiling']:.1f} s of programs, one per rung.",
     ]
     write_result(output, lines)
     print("\n".join(lines))

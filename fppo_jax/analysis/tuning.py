@@ -337,9 +337,10 @@ def default_chunk(output: Path, runs: Mapping[str, Prepared], seeds: int) -> int
     """The runs each compiled call trains where none is given: for a tune planned before, the
     plan's (None: each rung's runs in one call); else, where every task steps in JAX on a CPU,
     one trial's `seeds`, so that every rung and the validation race are groups of one size,
-    one program compiled once (on a CPU such groups train as fast as a rung's runs in one call:
-    ``experiments/benchmarks/bench_tune.py``); else None: an accelerator, or environments
-    stepped on the host (native MuJoCo), gain from each rung's runs in one wide call."""
+    one program compiled once: a first tune compiles a fifth as long, and trains about a fifth
+    longer, narrower groups keeping a CPU's cores less busy (``bench_tune.py``, CartPole, two
+    cores); else None: an accelerator, or environments stepped on the host (native MuJoCo),
+    gain most from each rung's runs in one wide call."""
     try:
         recorded = json.loads((output / PLAN_FILE).read_text())
     except FileNotFoundError:

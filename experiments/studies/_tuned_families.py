@@ -269,7 +269,7 @@ def families_lines(results: Path, plan: dict, families: dict[str, Family | str])
         "## The plan's families",
         "",
         f"The plan names {len(named)} families, each at level {plan['study']['level']} "
-        f"(`study.family` in [tuned.json](plans/tuned.json)): {listed(named)}. The decisions "
+        f"(`study.family` in [tuned.json](../plans/tuned.json)): {listed(named)}. The decisions "
         "in this write-up are those families', each decided by the library's rule "
         "(`fppo_jax.stats.sequential.decide`: the group-sequential Mann–Whitney test with "
         "Lan–DeMets O'Brien–Fleming-type spending, Holm's procedure across the family, and "

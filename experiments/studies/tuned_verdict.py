@@ -431,7 +431,7 @@ def main() -> None:
     lines = [
         *header("Tuned against tuned: does a variant beat PPO when every arm is tuned?"),
         "",
-        "The plan: [experiments/plans/tuned.json](plans/tuned.json), committed before any of "
+        "The plan: [experiments/plans/tuned.json](../plans/tuned.json), committed before any of "
         "its runs. Every arm, PPO included, tuned with the same budget by `fppo-jax tune`, then "
         "each arm's chosen setting tested on seeds the tune never used by `fppo-jax study "
         "--tuned`. Intervals here are 95% percentile bootstrap intervals over the runs; they "

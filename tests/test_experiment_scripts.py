@@ -451,3 +451,46 @@ def test_tuned_v2_writes_each_recorded_rung_its_runs_race_and_what_remains(tmp_p
     assert "| ppo: default kept |" in output.read_text()
     assert "- classic: the study not started." in done.stdout
     assert "- mujoco: the tune not started." in done.stdout
+
+
+def test_tuned_v2_writes_a_decided_study_with_tuned_ppo_against_its_concurrent_default(tmp_path):
+    # The second verdict's classic tune, where every race kept its default, with the first
+    # verdict's classic study standing in for its study (the same three tasks, finished). On
+    # CartPole the tune's record is made to say PPO's race chose trial 5, and PPO's default
+    # "trained beside it" on the first group of seeds is that group itself: tuned and default
+    # are the same runs, seed for seed. Elsewhere the default was kept: nothing trains beside.
+    family = tmp_path / "tuned-v2/classic"
+    shutil.copytree(EXPERIMENTS / "results/tuned-v2/classic/tune", family / "tune")
+    shutil.copytree(EXPERIMENTS / "results/tuned/classic/study", family / "study")
+    chosen = json.loads((family / "tune/results.json").read_text())
+    chosen["cartpole"]["ppo"]["chosen"]["trial"] = 5
+    (family / "tune/results.json").write_text(json.dumps(chosen))
+    output = tmp_path / "tuned-v2.md"
+
+    def written() -> str:
+        done = run_script(
+            EXPERIMENTS / "studies/tuned_v2.py",
+            *("--results", str(tmp_path), "--output", str(output)),
+            cwd=EXPERIMENTS,
+        )
+        assert done.returncode == 0, done.stderr
+        return done.stdout
+
+    assert "- classic: PPO's default beside the study goes on." in written()
+    assert "| cartpole | 5 | — | — | not trained yet | — |" in output.read_text()
+    group = family / "study/cartpole/group-1"
+    shutil.copytree(group, family / "study/ppo-default/cartpole/group-1")
+    assert "beside the study goes on" not in written()
+    text = output.read_text()
+    decided = json.loads((family / "study/decisions.json").read_text())["comparisons"]
+    candidates = {c["candidate"] for c in decided}
+    rows = [line.split(" | ")[:4] for line in text.splitlines() if line.startswith("| ")]
+    assert [row for row in rows if row[1] in candidates] == [
+        [f"| {c['task']}", c["candidate"], c["decision"] or "undecided", str(c["seeds"])]
+        for c in decided
+    ]
+    same = "200.0 [200.0, 200.0]"
+    assert f"| cartpole | 5 | 10 | {same} | {same} | 0.50 [0.50, 0.50] |" in text
+    assert "| acrobot | 0, the default | 50 |" in text
+    assert "| acrobot | 0, the default | 50 | -82.1 [-83.6, -80.5] | the same runs | — |" in text
+    assert "| classic | ppo-default/cartpole/group-1 | 60 |" in text

@@ -6,8 +6,12 @@ arm's race where it is decided; the time spent against the plan's estimate; and 
     python experiments/studies/tuned_v2.py              # results/tuned-v2.md
     python experiments/studies/tuned_v2.py --results /tmp/r --output /tmp/tuned-v2.md
 
-Nothing is trained. A family's study is named as going on or not started: no decision is
-written here until the studies' records hold one.
+Once a family's study has decided a look: its decisions as recorded (the family is the study,
+Holm over all of its comparisons), each with P(candidate > PPO) on the primary endpoint and a
+95% percentile bootstrap interval over the seeds the decision holds, and the rule's repeated
+interval; tuned PPO against PPO's default trained beside it on the same test seeds (the plan's
+``ppo_default_beside``: sweeps under <study>/ppo-default/<task>/group-<k>/); and tuned PPO
+beside the published PPO. Nothing is trained.
 """
 
 from __future__ import annotations
@@ -17,9 +21,17 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from fppo_jax import StudyResult, SweepResult, merge
+from fppo_jax.analysis.study_runs import run_scores, runs_of
+from fppo_jax.analysis.study_shapes import TaskRuns, holding
+from fppo_jax.stats import statistics
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
 from common import RESULTS, argument_parser, header, write_result
+from tuned_verdict import CLEANRL, ZOO, capped_lines, decided_study, interval
 
 PLAN = RESULTS.parent / "plans" / "tuned-v2.json"
 
@@ -67,6 +79,144 @@ def task_rows(family: str, task: str, tune: Path, plan: dict[str, Any]) -> tuple
     return rows, seconds
 
 
+def study_lines(
+    results: Path, name: str, where: Path, study: StudyResult, tuned: dict[str, Any]
+) -> list[str]:
+    """The family `name`'s `study`, recorded in `where`: its decisions, tuned PPO against its
+    concurrent default, and against the published PPO. `tuned` is the family's tune's results
+    (each arm's chosen trial)."""
+    plan, runs = study.plan, study.results
+    state = "finished" if study.finished else "**not finished** (some comparisons await seeds)"
+    level, endpoint = plan["level"], plan["primary_endpoint"]
+    lines = [
+        f"### The {name} family's study",
+        "",
+        f"[Its report]({where.relative_to(results)}/report.md), at {plan['commit'][:7]}: "
+        f"{state}. Its {len(plan['comparisons'])} comparisons are the plan's family, whole "
+        f"(Holm over all of them), on the {endpoint} endpoint with margin {plan['margin']}, "
+        f"at level {level} for each of two kinds of error (a wrong better or worse, a wrong "
+        f"equivalent), so a chance up to {2 * level:.2f} of one or the other. P(candidate > "
+        "PPO) is over the seeds the decision holds, with a 95% percentile bootstrap interval "
+        "(descriptive: not adjusted for the looks or the comparisons); the repeated interval is "
+        "the rule's, adjusted for both.",
+        "",
+        "| task | candidate | decision against tuned PPO | seeds | P(candidate > PPO) | "
+        "repeated interval |",
+        "|---|---|---|---|---|---|",
+    ]
+    for row in study.decisions:
+        task, seeds = row["task"], row["seeds"]
+        candidate = run_scores(runs[task], row["candidate"], endpoint)[:seeds]
+        baseline = run_scores(runs[task], row["baseline"], endpoint)[:seeds]
+        p = statistics.compare(candidate, baseline)["probability_of_improvement"]
+        repeated = row.get("interval")
+        bounds = f"[{repeated[0]:.2f}, {repeated[1]:.2f}]" if repeated else "—"
+        lines.append(
+            f"| {task} | {row['candidate']} | {row['decision'] or 'undecided'} | {seeds} | "
+            f"{interval(p)} | {bounds} |"
+        )
+    lines += capped_lines(plan, runs)
+    lines += default_lines(where, study, tuned)
+    lines += published_lines(study)
+    return [*lines, ""]
+
+
+def default_lines(where: Path, study: StudyResult, tuned: dict[str, Any]) -> list[str]:
+    """Tuned PPO against PPO's default trained beside it on the same test seeds: P(tuned >
+    default) on the study's endpoint with its 95% bootstrap interval, untested and outside
+    the family, as the plan reports it. Where PPO's race kept its default, the study's PPO runs
+    are the default's (the plan's amendment): no P there."""
+    plan, runs = study.plan, study.results
+    baseline, endpoint = plan["baseline"], plan["primary_endpoint"]
+    lines = [
+        "",
+        f"What tuning gained: tuned {baseline} against {baseline}'s default trained beside it "
+        f"on the same test seeds (the plan's `ppo_default_beside`), on the {endpoint} endpoint; "
+        "IQMs and P with 95% bootstrap intervals, untested and outside the family. Where the "
+        f"race kept {baseline}'s default, the study's {baseline} runs are the default's (the "
+        "plan's amendment), and there is nothing to compare:",
+        "",
+        "| task | tuned trial | seeds | tuned IQM | default IQM | P(tuned > default) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for task in plan["tasks"]:
+        trial = tuned[task][baseline]["chosen"]["trial"]
+        tuned_scores = seed_scores(runs[task], baseline, endpoint)
+        if trial == 0:
+            mine = np.array(list(tuned_scores.values()))
+            lines.append(
+                f"| {task} | 0, the default | {len(mine)} | "
+                f"{interval(statistics.interval(mine, 'iqm'), 1)} | the same runs | — |"
+            )
+            continue
+        default = concurrent_default(where / "ppo-default" / task)
+        if default is None:
+            lines.append(f"| {task} | {trial} | — | — | not trained yet | — |")
+            continue
+        seeds = [seed for seed in default.seeds if seed in tuned_scores]
+        default_scores = seed_scores(default, baseline, endpoint)
+        mine = np.array([tuned_scores[seed] for seed in seeds])
+        theirs = np.array([default_scores[seed] for seed in seeds])
+        p = statistics.compare(mine, theirs)["probability_of_improvement"]
+        lines.append(
+            f"| {task} | {trial} | {len(seeds)} | "
+            f"{interval(statistics.interval(mine, 'iqm'), 1)} | "
+            f"{interval(statistics.interval(theirs, 'iqm'), 1)} | {interval(p)} |"
+        )
+    return lines
+
+
+def defaults_missing(where: Path, study: StudyResult, tuned: dict[str, Any]) -> bool:
+    """Whether a task of `study` whose race chose another trial than PPO's default has no
+    default runs beside it yet."""
+    baseline = study.plan["baseline"]
+    return any(
+        tuned[task][baseline]["chosen"]["trial"] != 0
+        and concurrent_default(where / "ppo-default" / task) is None
+        for task in study.plan["tasks"]
+    )
+
+
+def concurrent_default(folder: Path) -> SweepResult | None:
+    """PPO's default runs recorded in `folder` (one sweep per group of the study's seeds),
+    merged; None where none is recorded."""
+    groups = sorted(folder.glob("group-*/sweep.json"), key=lambda p: _number(p.parent, "group-"))
+    return merge([SweepResult.read(path.parent) for path in groups]) if groups else None
+
+
+def seed_scores(runs: TaskRuns, variant: str, endpoint: str) -> dict[int, float]:
+    """`variant`'s score per seed in `runs` (a failed run's is −inf)."""
+    held = holding(runs, variant)
+    seeds = [held.runs[i]["seed"] for i in runs_of(held, variant)]
+    return dict(zip(seeds, run_scores(held, variant, endpoint), strict=True))
+
+
+def published_lines(study: StudyResult) -> list[str]:
+    """Tuned PPO's IQM on the study's endpoint beside RL Zoo's tuned PPO and CleanRL's."""
+    plan, runs = study.plan, study.results
+    endpoint = plan["primary_endpoint"]
+    lines = [
+        "",
+        "Tuned PPO beside the published PPO: RL Baselines3 Zoo's tuned PPO (`benchmark.md`, one "
+        "run each, deterministic evaluation) and CleanRL's PPO at OpenAI baselines' settings, "
+        "not tuned per task (3 seeds, mean ± std as CleanRL reports it); each at its own budget "
+        "and task version, so not a comparison at equal budget:",
+        "",
+        f"| task | tuned PPO here, IQM of the {endpoint} return | RL Zoo's tuned PPO | "
+        "CleanRL's PPO |",
+        "|---|---|---|---|",
+    ]
+    for task in plan["tasks"]:
+        scores = run_scores(runs[task], plan["baseline"], endpoint)
+        iqm = interval(statistics.interval(scores[np.isfinite(scores)], "iqm"), 1)
+        lines.append(f"| {task} | {iqm} | {ZOO.get(task, '—')} | {CLEANRL.get(task, '—')} |")
+    return lines
+
+
+def _number(path: Path, prefix: str) -> int:
+    return int(path.name.removeprefix(prefix))
+
+
 def _rung_number(path: Path) -> int:
     return int(path.parent.name.removeprefix("rung-"))
 
@@ -74,6 +224,24 @@ def _rung_number(path: Path) -> int:
 def _recorded(results: Path, output: str) -> Path:
     """Where the plan's `output` (a path from the repository's root) is under `results`."""
     return results / Path(output).relative_to("experiments/results")
+
+
+def study_part_rows(family: str, where: Path) -> tuple[list[str], float]:
+    """A table row per sweep recorded under the study `where` (a group of test seeds of one
+    task, a share of one, or PPO's default beside it), and the seconds they took. The commit
+    each ran at is in the study's decisions.json (groups), its shares' share.json and the
+    commit that recorded it."""
+    rows, seconds = [], 0.0
+    for record in sorted(where.rglob("sweep.json")):
+        sweep = SweepResult.read(record.parent)
+        took = sweep.train_seconds + sweep.compile_seconds
+        seconds += took
+        part = record.parent.relative_to(where)
+        rows.append(
+            f"| {family} | {part} | {len(sweep.runs)} | {took / 60:.1f} | "
+            f"{sweep.compile_seconds / 60:.1f} |"
+        )
+    return rows, seconds
 
 
 def main() -> None:
@@ -84,9 +252,13 @@ def main() -> None:
     args = parser.parse_args()
     plan = json.loads(args.plan.read_text())
     rows: list[str] = []
+    parts: list[str] = []
+    studies: list[str] = []
     remaining: list[str] = []
+    against: list[str] = []
     spent = 0.0
     for name, family in plan["families"].items():
+        tuning = spent
         tune = _recorded(args.results, family["tune_output"])
         tuned = json.loads((tune / "tune.json").read_text()) if tune.exists() else None
         started = []
@@ -101,15 +273,33 @@ def main() -> None:
         elif not (tune / "results.json").exists():
             waiting = f"; no rung of {', '.join(untouched)} recorded yet" if untouched else ""
             remaining.append(f"- {name}: the tune goes on (the same command, --rungs N){waiting}.")
-        study = _recorded(args.results, family["study_output"])
-        remaining.append(f"- {name}: the study {'going on' if study.exists() else 'not started'}.")
+        where = _recorded(args.results, family["study_output"])
+        found, seconds = study_part_rows(name, where)
+        parts += found
+        tuning, spent = spent - tuning, spent + seconds
+        estimates = [v for k, v in plan["compute_estimate"].items() if k.startswith(name)]
+        against.append(
+            f"- {name}: the tune {tuning / 3600:.1f} hours, the study {seconds / 3600:.1f} hours "
+            f"recorded; the plan's estimate: {'; '.join(estimates)}."
+        )
+        study = decided_study(where)
+        chosen = json.loads((tune / "results.json").read_text()) if study is not None else {}
+        if study is not None:
+            studies += study_lines(args.results, name, where, study, chosen)
+        if study is None or not study.finished:
+            state = "going on" if where.exists() else "not started"
+            remaining.append(f"- {name}: the study {state}.")
+        elif defaults_missing(where, study, chosen):
+            remaining.append(f"- {name}: PPO's default beside the study goes on.")
     lines = [
         *header("The tuned verdict again: parts run so far"),
         "",
         "The plan: [experiments/plans/tuned-v2.json](../plans/tuned-v2.json), committed before "
         "any of its runs. Every arm (PPO, FPPO-LP, FPPO-QP, SPO) tuned by racing with a "
         "validation race against its default, over a space that holds the run's shape; then "
-        "each family decided as one study on test seeds. No decision is recorded yet.",
+        "each family decided as one study on test seeds.",
+        "",
+        "## The tunes",
         "",
         *(
             [
@@ -121,8 +311,28 @@ def main() -> None:
             else ["No rung is recorded yet."]
         ),
         "",
+        "## The studies",
+        "",
+        *(studies or ["No study has decided a look yet.", ""]),
+        *(
+            [
+                "Each sweep the studies recorded (a group of test seeds, or PPO's default beside "
+                "it):",
+                "",
+                "| family | sweep | runs | minutes | of them compiling |",
+                "|---|---|---|---|---|",
+                *parts,
+                "",
+            ]
+            if parts
+            else []
+        ),
+        "## Time and what remains",
+        "",
         f"Recorded so far: {spent / 3600:.1f} hours of training and compiling. The plan's "
         f"estimate: {plan['compute_estimate']['in_all']}.",
+        "",
+        *against,
         "",
         "Remaining:",
         "",

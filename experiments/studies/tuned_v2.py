@@ -17,6 +17,7 @@ beside the published PPO. Nothing is trained.
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,7 @@ from common import RESULTS, argument_parser, header, write_result
 from tuned_verdict import CLEANRL, ZOO, capped_lines, decided_study, interval
 
 PLAN = RESULTS.parent / "plans" / "tuned-v2.json"
+PART = re.compile(r"(group|part)-\d+")
 
 
 def rung_runs(rung: dict[str, Any], seeds_per_round: int) -> int:
@@ -232,7 +234,9 @@ def study_part_rows(family: str, where: Path) -> tuple[list[str], float]:
     each ran at is in the study's decisions.json (groups), its shares' share.json and the
     commit that recorded it."""
     rows, seconds = [], 0.0
-    for record in sorted(where.rglob("sweep.json")):
+    # A group's own sweep or its shares'; not the task's runs merged beside the groups.
+    records = [r for r in where.rglob("sweep.json") if PART.fullmatch(r.parent.name)]
+    for record in sorted(records):
         sweep = SweepResult.read(record.parent)
         took = sweep.train_seconds + sweep.compile_seconds
         seconds += took

@@ -10,7 +10,6 @@ from collections.abc import Mapping
 from typing import NotRequired, TypedDict, cast
 
 from fppo_jax.analysis.preregistration import commit
-from fppo_jax.core.config import Setting
 from fppo_jax.core.objectives import identities
 from fppo_jax.core.shape_space import ChoiceValue
 from fppo_jax.core.surrogates import Surrogate
@@ -61,7 +60,9 @@ class TunedChoice(TypedDict):
     protocol: Mapping[str, Mapping[str, object]]  # by task
     selection: NotRequired[str]
     trials: NotRequired[Mapping[str, Mapping[str, object]]]  # by variant
-    settings: dict[str, dict[str, Setting]]  # by task, then variant
+    # By task, then variant: its hyperparameters and, where the tune searched the run's shape,
+    # its run-shape values (some of them booleans, which a Setting's values are not).
+    settings: dict[str, dict[str, dict[str, ChoiceValue]]]
 
 
 class StudyPlan(TypedDict):

@@ -32,7 +32,7 @@ from fppo_jax.stats import statistics
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
 from common import RESULTS, argument_parser, header, write_result
-from tuned_verdict import CLEANRL, ZOO, capped_lines, decided_study, interval
+from tuned_verdict import capped_lines, decided_study, interval, published_lines
 
 PLAN = RESULTS.parent / "plans" / "tuned-v2.json"
 PART = re.compile(r"(group|part)-\d+")
@@ -119,7 +119,7 @@ def study_lines(
         )
     lines += capped_lines(plan, runs)
     lines += default_lines(where, study, tuned)
-    lines += published_lines(study)
+    lines += published_lines(plan, runs, endpoint)
     return [*lines, ""]
 
 
@@ -145,7 +145,7 @@ def default_lines(where: Path, study: StudyResult, tuned: dict[str, Any]) -> lis
         trial = tuned[task][baseline]["chosen"]["trial"]
         tuned_scores = seed_scores(runs[task], baseline, endpoint)
         if trial == 0:
-            mine = np.array(list(tuned_scores.values()))
+            mine = run_scores(runs[task], baseline, endpoint)
             lines.append(
                 f"| {task} | 0, the default | {len(mine)} | "
                 f"{interval(statistics.interval(mine, 'iqm'), 1)} | the same runs | — |"
@@ -191,28 +191,6 @@ def seed_scores(runs: TaskRuns, variant: str, endpoint: str) -> dict[int, float]
     held = holding(runs, variant)
     seeds = [held.runs[i]["seed"] for i in runs_of(held, variant)]
     return dict(zip(seeds, run_scores(held, variant, endpoint), strict=True))
-
-
-def published_lines(study: StudyResult) -> list[str]:
-    """Tuned PPO's IQM on the study's endpoint beside RL Zoo's tuned PPO and CleanRL's."""
-    plan, runs = study.plan, study.results
-    endpoint = plan["primary_endpoint"]
-    lines = [
-        "",
-        "Tuned PPO beside the published PPO: RL Baselines3 Zoo's tuned PPO (`benchmark.md`, one "
-        "run each, deterministic evaluation) and CleanRL's PPO at OpenAI baselines' settings, "
-        "not tuned per task (3 seeds, mean ± std as CleanRL reports it); each at its own budget "
-        "and task version, so not a comparison at equal budget:",
-        "",
-        f"| task | tuned PPO here, IQM of the {endpoint} return | RL Zoo's tuned PPO | "
-        "CleanRL's PPO |",
-        "|---|---|---|---|",
-    ]
-    for task in plan["tasks"]:
-        scores = run_scores(runs[task], plan["baseline"], endpoint)
-        iqm = interval(statistics.interval(scores[np.isfinite(scores)], "iqm"), 1)
-        lines.append(f"| {task} | {iqm} | {ZOO.get(task, '—')} | {CLEANRL.get(task, '—')} |")
-    return lines
 
 
 def _number(path: Path, prefix: str) -> int:

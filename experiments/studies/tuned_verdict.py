@@ -314,8 +314,9 @@ def gain_cells(
     return cells, (gain, default_final)
 
 
-def published_lines(plan: dict, runs: dict[str, SweepResult]) -> list[str]:
-    """Tuned PPO's IQM beside RL Zoo's tuned PPO and CleanRL's."""
+def published_lines(plan: dict, runs: dict[str, SweepResult], endpoint: str = "final") -> list[str]:
+    """Tuned PPO's IQM on `endpoint` (its runs with a finite score) beside RL Zoo's tuned PPO
+    and CleanRL's."""
     lines = [
         "",
         "Tuned PPO beside the published PPO: RL Baselines3 Zoo's tuned PPO (`benchmark.md`, one "
@@ -323,12 +324,13 @@ def published_lines(plan: dict, runs: dict[str, SweepResult]) -> list[str]:
         "mean ± std as CleanRL reports it); each at its own budgets and task versions, so not "
         "a comparison at equal budget:",
         "",
-        "| task | tuned PPO here, IQM of the final return | RL Zoo's tuned PPO | CleanRL's PPO |",
+        f"| task | tuned PPO here, IQM of the {endpoint} return | RL Zoo's tuned PPO | "
+        "CleanRL's PPO |",
         "|---|---|---|---|",
     ]
     for task in plan["tasks"]:
-        final = finite_final(runs[task], plan["baseline"])
-        iqm = interval(statistics.interval(final, "iqm"), 1)
+        scores = run_scores(runs[task], plan["baseline"], endpoint)
+        iqm = interval(statistics.interval(scores[np.isfinite(scores)], "iqm"), 1)
         lines.append(f"| {task} | {iqm} | {ZOO.get(task, '—')} | {CLEANRL.get(task, '—')} |")
     return lines
 

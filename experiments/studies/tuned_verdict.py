@@ -56,23 +56,27 @@ from common import RESULTS, argument_parser, header, recorded_parts, write_resul
 PLAN = RESULTS.parent / "plans" / "tuned.json"
 
 # RL Baselines3 Zoo's tuned PPO (benchmark.md: one run, deterministic evaluation), with the
-# budget it trained; CartPole-v1 there ends episodes at 500 steps, this project's at 200.
+# budget it trained; CartPole-v1 there ends episodes at 500 steps, this project's at 200. It
+# reports no PPO on MuJoCo's Reacher (only on PyBullet's, another task).
 ZOO = {
     "cartpole": "500.0 (CartPole-v1, capped at 500, 100k steps)",
     "acrobot": "−73.5 (1M steps)",
     "mountaincar": "−110.4 (1M steps)",
     "hopper": "2410 (Hopper-v3, 1M steps)",
+    "walker2d": "3479 (Walker2d-v3, 1M steps)",
     "halfcheetah": "5819 (HalfCheetah-v3, 1M steps)",
+    "ant": "1327 (Ant-v3, 1M steps)",
     "swimmer": "282 (Swimmer-v3, 1M steps, γ = 0.9999)",
 }
 # CleanRL's PPO at OpenAI baselines' settings, not tuned per task (docs/rl-algorithms/ppo.md
 # and docs/benchmark/ppo_continuous_action.md: the mean ± std of 3 seeds' episodic returns as
-# reported), with its budget; it reports no Swimmer.
+# reported), with its budget; it reports no Ant, Reacher or Swimmer.
 CLEANRL = {
     "cartpole": "490.04 ± 6.12 (CartPole-v1, capped at 500; 4 × 128, 500k steps)",
     "acrobot": "−86.36 ± 1.32 (4 × 128, 500k steps)",
     "mountaincar": "−200.00 ± 0.00 (4 × 128, 500k steps)",
     "hopper": "2382.86 ± 271.74 (Hopper-v4, 1 × 2,048, 1M steps)",
+    "walker2d": "2287.95 ± 571.78 (Walker2d-v4, 1 × 2,048, 1M steps)",
     "halfcheetah": "1442.64 ± 46.03 (HalfCheetah-v4, 1 × 2,048, 1M steps)",
 }
 # The most a run can return: this project's CartPole ends an episode at 200 steps, each worth

@@ -416,12 +416,18 @@ def test_bench_trust_names_a_tune_going_on_by_its_rounds_runs_and_parts(tmp_path
         (tune / "hopper" / f"rung-{rung}" / "scores.json").write_text(json.dumps(scores))
     plan = {"budget": {"hopper": {"full_runs_per_arm": 94.0}}, "search": {"seeds_per_round": 2}}
     (tune / "tune.json").write_text(json.dumps(plan))
-    record = {"parts": "3", "wall_seconds": 5400.0, "commit": "210407d8b7"}
+    record = {"parts": "3", "wall_seconds": 5400.0, "commit": "210407d8b7", "machine": "B"}
     (tune / "run.json").write_text(json.dumps(record))
+    # A record from before the machines were listed names its last part's machine alone.
     assert bench_trust.progress_lines(tmp_path) == [
         "- hopper: its tune goes on: 2 rounds, 10 of its 94 full runs, 3 parts of 90 minutes "
-        "in all (the last at 210407d)."
+        "in all (the last at 210407d), on B."
     ]
+    (tune / "run.json").write_text(json.dumps({**record, "machines": ["A", "B"]}))
+    assert bench_trust.progress_lines(tmp_path)[0].endswith("(the last at 210407d), on A and B.")
+    tunes = [{"task": "acrobot", "machines": ["A"]}, {"task": "hopper", "machines": ["A", "B"]}]
+    tunes.append({"task": "cartpole", "machines": ["A"]})
+    assert bench_trust.machine_lines(tunes) == ["- acrobot, cartpole: A", "- hopper: A and B"]
     (tune / "results.json").write_text("{}")
     assert bench_trust.progress_lines(tmp_path) == []
     # A round goes on in shares of its run-shape groups, each a part of its own.

@@ -40,6 +40,7 @@ from common import (
     RUN_RECORD,
     argument_parser,
     header,
+    machine,
     read_run_record,
     write_result,
     write_run_record,
@@ -86,7 +87,17 @@ def tune_task(
     spent = time.perf_counter() - began
     before = read_run_record(where) if (where / RUN_RECORD).exists() else {}
     parts = str(int(before.get("parts", 0)) + 1)
-    write_run_record(where, before.get("wall_seconds", 0.0) + spent, parts=parts)
+    # Parts may run on different machines: the record keeps every one, not only the last.
+    here, seen = machine(), tune_machines(before)
+    machines = seen if here in seen else [*seen, here]
+    spent += before.get("wall_seconds", 0.0)
+    write_run_record(where, spent, parts=parts, machines=machines)
+
+
+def tune_machines(record: dict[str, Any]) -> list[str]:
+    """The machines a tune's parts ran on, as its run record names them (a record written
+    before they were listed names its last part's alone)."""
+    return record.get("machines") or ([record["machine"]] if "machine" in record else [])
 
 
 def test_task(task: str, tuned: Path, where: Path, seeds: int, tiny: dict[str, int]) -> None:
@@ -158,7 +169,14 @@ def task_lines(task: str, directory: Path) -> tuple[list[str], dict[str, Any]]:
         f"{p[0]:.2f} [{p[1]:.2f}, {p[2]:.2f}] | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
         f"{statistics.iqm(theirs):.1f} | {zoo} | {runs:.0f} | {spent / 60:.1f} |"
     )
-    facts = {"task": task, "p": p, "iqm": iqm[0], "seeds": len(test.seeds), "kept": kept}
+    facts = {
+        "task": task,
+        "p": p,
+        "iqm": iqm[0],
+        "seeds": len(test.seeds),
+        "kept": kept,
+        "machines": tune_machines(read_run_record(directory / "tune")),
+    }
     return [row], facts
 
 
@@ -196,6 +214,14 @@ def goal_lines(found: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def machine_lines(found: list[dict[str, Any]]) -> list[str]:
+    """A line per set of machines the recorded tunes ran on, naming its tasks."""
+    tasks: dict[tuple[str, ...], list[str]] = {}
+    for f in found:
+        tasks.setdefault(tuple(f["machines"]), []).append(f["task"])
+    return [f"- {', '.join(t)}: {' and '.join(m)}" for m, t in tasks.items()]
+
+
 def progress_lines(results: Path) -> list[str]:
     """A line per tune still going on: the rounds and full runs its parts have recorded of
     its budget, and their wall time."""
@@ -214,7 +240,7 @@ def progress_lines(results: Path) -> list[str]:
             f"- {task}: its tune goes on: {len(rounds)} round{'s' * (len(rounds) != 1)}, {runs} "
             f"of its {budget['full_runs_per_arm']:.0f} full runs, {parts} "
             f"part{'s' * (parts != 1)} of {record['wall_seconds'] / 60:.0f} minutes in all "
-            f"(the last at {record['commit'][:7]})."
+            f"(the last at {record['commit'][:7]}), on {' and '.join(tune_machines(record))}."
         )
     return lines
 
@@ -250,6 +276,11 @@ def report(results: Path, output: Path) -> None:
             "RL Zoo's tuned PPO | full runs in the tune | tune minutes |",
             "|---|---|---|---|---|---|---|---|---|",
             *rows,
+            "",
+            "Tune minutes add up the wall time of each tune's parts, on the machines its record "
+            "names:",
+            "",
+            *machine_lines(found),
             "",
             "Goals:",
             "",

@@ -19,8 +19,6 @@ import csv
 import datetime
 import functools
 import json
-import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -138,23 +136,10 @@ def inside_results(path: Path) -> bool:
 
 
 def machine() -> str:
-    """The processor, its cores (and how many this process may use, if fewer), the accelerator
-    JAX sees and the jax version."""
-    import jax
+    """The machine this script runs on, in words (the library's, which its records keep)."""
+    from fppo_jax.store.machine import describe_machine
 
-    try:
-        with open("/proc/cpuinfo") as f:
-            names = [line.split(":", 1)[1].strip() for line in f if line.startswith("model name")]
-    except OSError:
-        names = []
-    device = jax.devices()[0]
-    accelerator = "no GPU" if device.platform == "cpu" else device.device_kind
-    cpu = names[0] if names else platform.processor() or platform.machine()
-    cores = f"{os.cpu_count()} cores"
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    if usable != os.cpu_count():  # pinned to some of them (taskset, a SLURM job's share)
-        cores += f" ({usable} used)"
-    return f"{cpu}, {cores}, {accelerator}; jax {jax.__version__}"
+    return describe_machine()
 
 
 UNCOMMITTED = "with uncommitted changes to the code"

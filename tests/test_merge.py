@@ -11,6 +11,7 @@ from helpers import two_settings
 from fppo_jax import METRICS, SweepResult, sweep
 from fppo_jax.cli import main
 from fppo_jax.run.merge import merge
+from fppo_jax.store.machine import describe_machine
 
 TINY = {"num_envs": 4, "num_steps": 32, "num_minibatches": 4, "num_epochs": 2, "total_steps": 256}
 
@@ -36,6 +37,8 @@ def test_parts_of_one_sweep_merge_into_the_one_process_sweep(tmp_path):
     merged.write(tmp_path / "merged")
     back = SweepResult.read(tmp_path / "merged")
     assert back.table("iqm") == merged.table("iqm")
+    # Each sweep names the machine its seconds are of; the merge, each of its parts' once.
+    assert whole.machines == merged.machines == back.machines == [describe_machine()]
 
 
 def test_merge_refuses_other_protocols_and_repeated_runs():

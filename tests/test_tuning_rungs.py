@@ -16,6 +16,7 @@ from fppo_jax.analysis.preregistration import commit
 from fppo_jax.analysis.tuning import tune
 from fppo_jax.analysis.tuning_draws import import_optuna
 from fppo_jax.errors import InvalidInput
+from fppo_jax.store.machine import describe_machine
 
 # Runs per compiled call of the split tunes: 3 trials × 2 seeds. Rung 0's 16 runs train in
 # groups of 6, 6 and 4 (filled up to 6), rung 1's 8 in groups of 6 and 2, rung 2's 4 in one,
@@ -82,6 +83,11 @@ def test_a_tune_split_into_parts_joins_into_the_unsplit_tune_bit_for_bit(tmp_pat
     recorded = [json.loads(p.read_text()) for p in (tmp_path / "split").rglob("scores.json")]
     assert len(recorded) == 4 + 3 + 2 + 1 + 3
     assert {found["commit"] for found in recorded} == {commit()}
+    # And the machine its seconds are of: a share its own, a rung each of its shares' once.
+    shares = [found for found in recorded if "part" in found]
+    assert {found["machine"] for found in shares} == {describe_machine()}
+    rungs = [found for found in recorded if "part" not in found]
+    assert all(found["machines"] == [describe_machine()] for found in rungs)
 
 
 def _rungs(directory):
@@ -124,6 +130,16 @@ def test_a_missing_part_is_refused_by_name_and_a_recorded_one_not_trained_again(
     # The join is the tune of its plan: another chunk is refused, naming it.
     with pytest.raises(InvalidInput, match="chunk = 6, not 4"):
         tune("cartpole", ARMS, output=tmp_path, **{**arguments, "chunk": 4})
+    # Shares trained on other machines, or recorded before shares named theirs: the rung
+    # names each machine once, in the parts' order.
+    tune("cartpole", ARMS, output=tmp_path, part=(2, 2), **arguments)
+    first, second = (tmp_path / f"cartpole/rung-0/part-{k}/scores.json" for k in (1, 2))
+    first.write_text(json.dumps({**json.loads(first.read_text()), "machine": "another"}))
+    older = json.loads(second.read_text())
+    second.write_text(json.dumps({k: v for k, v in older.items() if k != "machine"}))
+    tune("cartpole", ARMS, output=tmp_path, rungs=0, **arguments)
+    joined = json.loads((tmp_path / "cartpole/rung-0/scores.json").read_text())
+    assert joined["machines"] == ["another", "not recorded"]
 
 
 def test_a_trial_that_diverges_scores_below_every_other_and_stops(tmp_path):

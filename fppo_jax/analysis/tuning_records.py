@@ -166,13 +166,15 @@ class ArmRung(TypedDict):
 
 class RungScores(TypedDict):
     """A rung's ``scores.json``: each arm's part, the seconds the rung trained and compiled,
-    and the commit of the code that recorded it (rungs recorded before it was kept have
-    none)."""
+    the commit of the code that recorded it and the machines its shares trained on
+    (:func:`~fppo_jax.store.machine.describe_machine`; rungs recorded before these were kept
+    have none)."""
 
     arms: dict[str, ArmRung]
     seconds: float
     compile_seconds: float
     commit: NotRequired[str]
+    machines: NotRequired[list[str]]
 
 
 class Chosen(TypedDict):
@@ -276,7 +278,8 @@ class ShareScores(TypedDict):
     """A share's ``part-<K>/scores.json``: which `part` (K, N) of the rung it is, its runs
     (arm, trial, seed, in the rung's order), each run's score (None where no episode finished)
     and whether it diverged, the seconds it trained and compiled, and the commit of the code
-    that trained it (shares recorded before it was kept have none)."""
+    that trained it and the machine it trained on (shares recorded before these were kept have
+    none)."""
 
     part: list[int]
     runs: Sequence[Sequence[str | int]]
@@ -285,3 +288,4 @@ class ShareScores(TypedDict):
     seconds: float
     compile_seconds: float
     commit: NotRequired[str]
+    machine: NotRequired[str]

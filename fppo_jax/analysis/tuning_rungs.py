@@ -36,6 +36,7 @@ from fppo_jax.analysis.tuning_report import arm_results
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.stop_signals import StoppedAtSafePoint, stop_if_signalled
 from fppo_jax.store.files import write_json
+from fppo_jax.store.machine import describe_machine
 
 
 class TaskTune:
@@ -75,7 +76,7 @@ class TaskTune:
             if (where / SCORES_FILE).exists():
                 self._recorded(read_rung(where / SCORES_FILE))
             elif join and any(where.glob(f"part-*/{SCORES_FILE}")):
-                self._record(window, self._read_shares(window))
+                self._record(window, *self._read_shares(window))
             else:
                 return
 
@@ -94,7 +95,7 @@ class TaskTune:
                 if part is not None:
                     self._train_part(window, part)
                     return 1
-                self._record(window, [self._share(window, (1, 1))])
+                self._record(window, [self._share(window, (1, 1))], [describe_machine()])
                 trained += 1
         except StoppedAtSafePoint as stopped:
             rung, rounds = len(self.scores) + 1, self.scheduler.rounds
@@ -155,9 +156,10 @@ class TaskTune:
             else:
                 study.tell(frozen.number, row["score"])
 
-    def _record(self, window: Window, shares: list[Trained]) -> None:
-        """Records the next rung from its `shares`, in order: its scores and the state the
-        window after it goes on from; then tells Optuna (the join alone writes to it)."""
+    def _record(self, window: Window, shares: list[Trained], machines: list[str]) -> None:
+        """Records the next rung from its `shares`, in order, trained on `machines` (each
+        share's): its scores and the state the window after it goes on from; then tells Optuna
+        (the join alone writes to it)."""
         rung = len(self.scores)
         # A window of several run shapes trains in groups of one shape: back in its order.
         order = np.argsort(np.concatenate([_positions(share) for share in shares]), kind="stable")
@@ -174,6 +176,7 @@ class TaskTune:
             "seconds": seconds,
             "compile_seconds": compile_seconds,
             "commit": commit(),
+            "machines": list(dict.fromkeys(machines)),
         }
         where = self._where(rung)
         where.mkdir(exist_ok=True)
@@ -221,6 +224,7 @@ class TaskTune:
             "seconds": share.seconds,
             "compile_seconds": share.compile_seconds,
             "commit": commit(),
+            "machine": describe_machine(),
         }
         write_json(where / SCORES_FILE, recorded)  # last: a share with its scores is whole
         self._say(f"{said}: {len(share.runs)} runs recorded in {share.seconds:.1f} s")
@@ -239,9 +243,10 @@ class TaskTune:
                     f"split it into {n}"
                 )
 
-    def _read_shares(self, window: Window) -> list[Trained]:
+    def _read_shares(self, window: Window) -> tuple[list[Trained], list[str]]:
         """The next rung's shares that array tasks recorded, every one that has runs to train,
-        each checked to hold its runs; a missing one is refused by name."""
+        each checked to hold its runs (a missing one is refused by name), and the machine each
+        trained on (``not recorded`` where its record predates them)."""
         rung = len(self.scores)
         where = self._where(rung)
         found: dict[tuple[int, ...], ShareScores] = {}
@@ -256,7 +261,7 @@ class TaskTune:
             )
         n = splits[0]
         later = self._keeps_state(rung, window)
-        shares = []
+        shares, machines = [], []
         for k in range(1, n + 1):
             positions = self.population.positions(window, (k, n))
             runs = [window.runs[i] for i in positions]
@@ -270,11 +275,12 @@ class TaskTune:
                 )
             share = self._share_read(where / f"part-{k}", found[k, n], runs, later, k, n)
             shares.append(dataclasses.replace(share, positions=positions))
+            machines.append(found[k, n].get("machine", "not recorded"))
         self._say(
             f"{self.task}: rung {rung + 1}: joining its parts ({len(shares)} of {n} had runs to "
             "train)"
         )
-        return shares
+        return shares, machines
 
     def _share_read(
         self, where: Path, recorded: ShareScores, runs: list[Any], later: bool, k: int, n: int

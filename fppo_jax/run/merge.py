@@ -66,6 +66,7 @@ def merge(parts: Sequence[SweepResult]) -> SweepResult:
         ).to_json(),
         compile_seconds=sum(p.compile_seconds for p in parts),
         train_seconds=sum(p.train_seconds for p in parts),
+        machines=list(dict.fromkeys(m for p in parts for m in p.machines)),
     )
 
 

@@ -36,7 +36,8 @@ def labels(settings: Sequence[Mapping[str, Any]]) -> list[str]:
 @dataclasses.dataclass
 class SweepResult:
     """Every run of a sweep: `runs[i]` is run i's setting and seed, `metrics[name][i]` its
-    per-update values, `diverged[i]` the update (from 1) where it diverged, or 0."""
+    per-update values, `diverged[i]` the update (from 1) where it diverged, or 0; the machines
+    it trained on, whose are its seconds (none in sweeps recorded before they were kept)."""
 
     settings: list[Setting]
     seeds: list[int]
@@ -46,6 +47,7 @@ class SweepResult:
     config: dict[str, Any]
     compile_seconds: float
     train_seconds: float
+    machines: list[str] = dataclasses.field(default_factory=list)
 
     def setting_runs(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Setting `index`'s runs that did not diverge (indices into `runs`), and the update
@@ -225,6 +227,8 @@ class SweepResult:
             "compile_seconds": self.compile_seconds,
             "train_seconds": self.train_seconds,
         }
+        if self.machines:
+            record["machines"] = self.machines
         write_sweep(directory, record, {name: self.metrics[name] for name in metrics})
 
     @classmethod
@@ -241,6 +245,7 @@ class SweepResult:
             config=record["config"],
             compile_seconds=record["compile_seconds"],
             train_seconds=record["train_seconds"],
+            machines=record.get("machines", []),
         )
 
 

@@ -41,6 +41,7 @@ from fppo_jax.run.execution import run_keys
 from fppo_jax.run.plan import Outcome, Plan, part_bounds, part_runs
 from fppo_jax.run.prepare import Prepared, prepare
 from fppo_jax.run.results import SweepResult, labels
+from fppo_jax.store.machine import describe_machine
 from fppo_jax.store.record import RunRecord
 from fppo_jax.store.sweep_files import SweepRun
 
@@ -245,6 +246,7 @@ def _result(
         config=dataclasses.replace(record, runs_per_call=outcome.runs_per_call).to_json(),
         compile_seconds=outcome.compile_seconds,
         train_seconds=outcome.train_seconds,
+        machines=[describe_machine()],
     )
 
 

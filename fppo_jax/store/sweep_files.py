@@ -1,7 +1,8 @@
 """A sweep's files, an artifact (:mod:`fppo_jax.store.artifact`): ``curves.csv`` (one row per
 run and update, a column per metric) and ``sweep.json`` (the settings, seeds, runs,
-configuration and times, with the SHA-256 digest of that ``curves.csv`` and one of each run's
-values, by which a re-sorted or filtered ``curves.csv`` is still known for its sweep's), each
+configuration, times and the machines they were measured on, with the SHA-256 digest of that
+``curves.csv`` and one of each run's values, by which a re-sorted or filtered ``curves.csv`` is
+still known for its sweep's), each
 written whole or not at all, the record last, and read back checked, every flaw named with its
 file. ``sweep.json`` names its layout (:data:`FORMAT`); one of another layout is refused as
 :class:`~fppo_jax.store.files.IncompatibleFormat`, not as damage."""
@@ -49,6 +50,7 @@ class SweepRecord(TypedDict):
     config: dict[str, Any]
     compile_seconds: float
     train_seconds: float
+    machines: NotRequired[list[str]]  # those it trained on, named as describe_machine does
 
 
 class SealedSweepRecord(SweepRecord):
@@ -203,6 +205,10 @@ OPTIONAL_RECORD: dict[str, tuple[str, Callable[[Any, dict[str, Any]], bool]]] = 
     "digest_columns": (
         "a list of metric names",
         lambda v, r: _list_of(v, lambda name: isinstance(name, str)) and "env_steps" in v,
+    ),
+    "machines": (
+        "a list of machines, each named in words",
+        lambda v, r: _list_of(v, lambda name: isinstance(name, str)),
     ),
     "run_digests": (
         "a list of one SHA-256 digest per run",

@@ -57,7 +57,26 @@ def race_outcome(arm: dict[str, Any]) -> str:
     return f"trial {race['chosen']}"
 
 
-def task_rows(family: str, task: str, tune: Path, plan: dict[str, Any]) -> tuple[list[str], float]:
+class Machines:
+    """The machines recorded times were measured on, each named once by a short label (m1,
+    m2, …, in the order first met) that a table's cell gives."""
+
+    def __init__(self) -> None:
+        self.labels: dict[str, str] = {}
+
+    def cell(self, names: list[str]) -> str:
+        """The labels of `names`, or — where the record predates machines."""
+        for name in names:
+            self.labels.setdefault(name, f"m{len(self.labels) + 1}")
+        return ", ".join(self.labels[name] for name in names) or "—"
+
+    def lines(self) -> list[str]:
+        return [f"- {label}: {name}" for name, label in self.labels.items()]
+
+
+def task_rows(
+    family: str, task: str, tune: Path, plan: dict[str, Any], machines: Machines
+) -> tuple[list[str], float]:
     """A table row per rung of `task` recorded in `tune`, and the seconds they took."""
     rows, seconds = [], 0.0
     for path in sorted((tune / task).glob("rung-*/scores.json"), key=_rung_number):
@@ -76,7 +95,8 @@ def task_rows(family: str, task: str, tune: Path, plan: dict[str, Any]) -> tuple
         commit = rung.get("commit", plan["commit"])
         rows.append(
             f"| {family} | {task} | {what} | {runs} | {took / 60:.1f} | "
-            f"{rung['compile_seconds'] / 60:.1f} | {outcome} | {commit[:7]} |"
+            f"{rung['compile_seconds'] / 60:.1f} | {outcome} | {commit[:7]} | "
+            f"{machines.cell(rung.get('machines', []))} |"
         )
     return rows, seconds
 
@@ -206,7 +226,7 @@ def _recorded(results: Path, output: str) -> Path:
     return results / Path(output).relative_to("experiments/results")
 
 
-def study_part_rows(family: str, where: Path) -> tuple[list[str], float]:
+def study_part_rows(family: str, where: Path, machines: Machines) -> tuple[list[str], float]:
     """A table row per sweep recorded under the study `where` (a group of test seeds of one
     task, a share of one, or PPO's default beside it), and the seconds they took. The commit
     each ran at is in the study's decisions.json (groups), its shares' share.json and the
@@ -221,7 +241,7 @@ def study_part_rows(family: str, where: Path) -> tuple[list[str], float]:
         part = record.parent.relative_to(where)
         rows.append(
             f"| {family} | {part} | {len(sweep.runs)} | {took / 60:.1f} | "
-            f"{sweep.compile_seconds / 60:.1f} |"
+            f"{sweep.compile_seconds / 60:.1f} | {machines.cell(sweep.machines)} |"
         )
     return rows, seconds
 
@@ -239,13 +259,14 @@ def main() -> None:
     remaining: list[str] = []
     against: list[str] = []
     spent = 0.0
+    machines = Machines()
     for name, family in plan["families"].items():
         tuning = spent
         tune = _recorded(args.results, family["tune_output"])
         tuned = json.loads((tune / "tune.json").read_text()) if tune.exists() else None
         started = []
         for task in family["tasks"]:
-            found, seconds = task_rows(name, task, tune, tuned) if tuned else ([], 0.0)
+            found, seconds = task_rows(name, task, tune, tuned, machines) if tuned else ([], 0.0)
             rows += found
             spent += seconds
             started += [task] if found else []
@@ -256,7 +277,7 @@ def main() -> None:
             waiting = f"; no rung of {', '.join(untouched)} recorded yet" if untouched else ""
             remaining.append(f"- {name}: the tune goes on (the same command, --rungs N){waiting}.")
         where = _recorded(args.results, family["study_output"])
-        found, seconds = study_part_rows(name, where)
+        found, seconds = study_part_rows(name, where, machines)
         parts += found
         tuning, spent = spent - tuning, spent + seconds
         estimates = [v for k, v in plan["compute_estimate"].items() if k.startswith(name)]
@@ -285,8 +306,9 @@ def main() -> None:
         "",
         *(
             [
-                "| family | task | rung | runs | minutes | of them compiling | race | commit |",
-                "|---|---|---|---|---|---|---|---|",
+                "| family | task | rung | runs | minutes | of them compiling | race | commit | "
+                "machine |",
+                "|---|---|---|---|---|---|---|---|---|",
                 *rows,
             ]
             if rows
@@ -301,8 +323,8 @@ def main() -> None:
                 "Each sweep the studies recorded (a group of test seeds, or PPO's default beside "
                 "it):",
                 "",
-                "| family | sweep | runs | minutes | of them compiling |",
-                "|---|---|---|---|---|",
+                "| family | sweep | runs | minutes | of them compiling | machine |",
+                "|---|---|---|---|---|---|",
                 *parts,
                 "",
             ]
@@ -312,9 +334,14 @@ def main() -> None:
         "## Time and what remains",
         "",
         f"Recorded so far: {spent / 3600:.1f} hours of training and compiling. The plan's "
-        f"estimate: {plan['compute_estimate']['in_all']}.",
+        f"estimate: {plan['compute_estimate']['in_all']}, on the machine it names.",
         "",
         *against,
+        "",
+        "The machines the times were measured on (— in a table: a record from before they were "
+        "kept):",
+        "",
+        *(machines.lines() or ["- none recorded yet"]),
         "",
         "Remaining:",
         "",

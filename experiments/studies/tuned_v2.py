@@ -334,7 +334,8 @@ def main() -> None:
         "## Time and what remains",
         "",
         f"Recorded so far: {spent / 3600:.1f} hours of training and compiling. The plan's "
-        f"estimate: {plan['compute_estimate']['in_all']}, on the machine it names.",
+        f"estimate (for {plan['compute_estimate']['machine']}): "
+        f"{plan['compute_estimate']['in_all']}.",
         "",
         *against,
         "",

@@ -440,8 +440,10 @@ def test_tuned_v2_writes_each_recorded_rung_its_runs_race_and_what_remains(tmp_p
     # The trust benchmark's CartPole tune stands in for the classic family's: one arm, three
     # rounds of 9 trials × 2 seeds, then 3 finalists and the default on 10 validation seeds.
     shutil.copytree(EXPERIMENTS / "results/trust/cartpole/tune", tmp_path / "tuned-v2/classic/tune")
-    # Its rungs predate machines in records: two are made to name theirs, one its shares' two.
-    for rung, machines in ((1, ["X, 2 cores"]), (2, ["Y, 16 cores", "X, 2 cores"])):
+    # Its rungs predate machines in records: two are made to name theirs, one its shares'
+    # (one share's recorded before shares named theirs).
+    machines_of = ((1, ["X, 2 cores"]), (2, ["Y, 16 cores", "not recorded", "X, 2 cores"]))
+    for rung, machines in machines_of:
         path = tmp_path / f"tuned-v2/classic/tune/cartpole/rung-{rung}/scores.json"
         path.write_text(json.dumps({**json.loads(path.read_text()), "machines": machines}))
     output = tmp_path / "tuned-v2.md"
@@ -464,7 +466,7 @@ def test_tuned_v2_writes_each_recorded_rung_its_runs_race_and_what_remains(tmp_p
         for line in output.read_text().splitlines()
         if "| classic |" in line
     ]
-    assert machines == ["— |", "m1 |", "m2, m1 |", "— |"]
+    assert machines == ["— |", "m1 |", "m2, —, m1 |", "— |"]
     assert "- m1: X, 2 cores\n- m2: Y, 16 cores\n" in output.read_text()
     assert "- classic: the study not started." in done.stdout
     assert "- mujoco: the tune not started." in done.stdout

@@ -65,10 +65,11 @@ class Machines:
         self.labels: dict[str, str] = {}
 
     def cell(self, names: list[str]) -> str:
-        """The labels of `names`, or — where the record predates machines."""
+        """The labels of `names`, — for a record (or a joined share's) that predates them."""
         for name in names:
-            self.labels.setdefault(name, f"m{len(self.labels) + 1}")
-        return ", ".join(self.labels[name] for name in names) or "—"
+            if name != "not recorded":
+                self.labels.setdefault(name, f"m{len(self.labels) + 1}")
+        return ", ".join(self.labels.get(name, "—") for name in names) or "—"
 
     def lines(self) -> list[str]:
         return [f"- {label}: {name}" for name, label in self.labels.items()]

@@ -88,8 +88,7 @@ def tune_task(
     before = read_run_record(where) if (where / RUN_RECORD).exists() else {}
     parts = str(int(before.get("parts", 0)) + 1)
     # Parts may run on different machines: the record keeps every one, not only the last.
-    here, seen = machine(), tune_machines(before)
-    machines = seen if here in seen else [*seen, here]
+    machines = list(dict.fromkeys([*tune_machines(before), machine()]))
     spent += before.get("wall_seconds", 0.0)
     write_run_record(where, spent, parts=parts, machines=machines)
 

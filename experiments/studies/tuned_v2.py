@@ -28,6 +28,7 @@ from fppo_jax import StudyResult, SweepResult, merge
 from fppo_jax.analysis.study_runs import run_scores, runs_of
 from fppo_jax.analysis.study_shapes import TaskRuns, holding
 from fppo_jax.stats import statistics
+from fppo_jax.store.machine import NOT_RECORDED
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
 
@@ -67,7 +68,7 @@ class Machines:
     def cell(self, names: list[str]) -> str:
         """The labels of `names`, — for a record (or a joined share's) that predates them."""
         for name in names:
-            if name != "not recorded":
+            if name != NOT_RECORDED:
                 self.labels.setdefault(name, f"m{len(self.labels) + 1}")
         return ", ".join(self.labels.get(name, "—") for name in names) or "—"
 

@@ -36,7 +36,7 @@ from fppo_jax.analysis.tuning_report import arm_results
 from fppo_jax.errors import InvalidInput
 from fppo_jax.run.stop_signals import StoppedAtSafePoint, stop_if_signalled
 from fppo_jax.store.files import write_json
-from fppo_jax.store.machine import describe_machine
+from fppo_jax.store.machine import NOT_RECORDED, describe_machine
 
 
 class TaskTune:
@@ -275,7 +275,7 @@ class TaskTune:
                 )
             share = self._share_read(where / f"part-{k}", found[k, n], runs, later, k, n)
             shares.append(dataclasses.replace(share, positions=positions))
-            machines.append(found[k, n].get("machine", "not recorded"))
+            machines.append(found[k, n].get("machine", NOT_RECORDED))
         self._say(
             f"{self.task}: rung {rung + 1}: joining its parts ({len(shares)} of {n} had runs to "
             "train)"

@@ -8,6 +8,9 @@ import platform
 
 import jax
 
+# What a record that joins parts says of a part whose own record predates machines.
+NOT_RECORDED = "not recorded"
+
 
 def describe_machine() -> str:
     """The processor, its cores (and how many this process may use, if fewer), the accelerator

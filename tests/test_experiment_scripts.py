@@ -436,6 +436,31 @@ def test_bench_trust_names_a_tune_going_on_by_its_rounds_runs_and_parts(tmp_path
         bench_trust.share("x")
 
 
+def test_bench_trust_says_what_stands_in_the_way_of_a_missed_goal(monkeypatch):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    monkeypatch.syspath_prepend(str(EXPERIMENTS / "benchmarks"))
+    bench_trust = importlib.import_module("bench_trust")
+    found = [
+        {"task": "hopper", "p": (0.5, 0.5, 0.5), "iqm": 2866.0, "kept": True},
+        {"task": "swimmer", "p": (0.6, 0.45, 0.75), "iqm": 100.0, "kept": False},
+    ]
+    lines = bench_trust.goal_lines(found)
+    assert "- On the MuJoCo tasks the interval above 0.5: **missed** on hopper, swimmer." in lines
+    # Only where the race kept the default is P ½ by construction; swimmer's is a wide interval.
+    way = [line for line in lines if line.startswith("- What stands in the way")]
+    assert way == [
+        "- What stands in the way on hopper: the race kept the default (no finalist was shown "
+        "better on the validation seeds), so tuned and default are the same runs and P is ½ by "
+        "construction."
+    ]
+    assert "- hopper: IQM 2866 against 2,410: met." in lines
+    assert "- swimmer: IQM 100 against 282: **missed**." in lines
+    assert bench_trust.goal_lines(found[1:])[-2:] == [
+        "- On the MuJoCo tasks the interval above 0.5: **missed** on swimmer.",
+        "- swimmer: IQM 100 against 282: **missed**.",
+    ]
+
+
 def test_tuned_v2_writes_each_recorded_rung_its_runs_race_and_what_remains(tmp_path):
     # The trust benchmark's CartPole tune stands in for the classic family's: one arm, three
     # rounds of 9 trials × 2 seeds, then 3 finalists and the default on 10 validation seeds.

@@ -7,6 +7,7 @@ import json
 import shutil
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import gymnasium
@@ -428,12 +429,62 @@ def test_bench_trust_names_a_tune_going_on_by_its_rounds_runs_and_parts(tmp_path
     tunes = [{"task": "acrobot", "machines": ["A"]}, {"task": "hopper", "machines": ["A", "B"]}]
     tunes.append({"task": "cartpole", "machines": ["A"]})
     assert bench_trust.machine_lines(tunes) == ["- acrobot, cartpole: A", "- hopper: A and B"]
-    (tune / "results.json").write_text("{}")
-    assert bench_trust.progress_lines(tmp_path) == []
     # A round goes on in shares of its run-shape groups, each a part of its own.
     assert bench_trust.share("2/3") == (2, 3)
     with pytest.raises(argparse.ArgumentTypeError, match="a part is K/N, such as 1/3, got 'x'"):
         bench_trust.share("x")
+
+
+def test_bench_trust_goes_on_with_the_test_sweep_a_stopped_call_left(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    monkeypatch.syspath_prepend(str(EXPERIMENTS / "benchmarks"))
+    bench_trust = importlib.import_module("bench_trust")
+    default = {"learning_rate": 3e-4, "num_steps": 256, "num_epochs": 10}
+    chosen = {"learning_rate": 1e-4, "num_steps": 64, "num_epochs": 5}
+    recorded = types.SimpleNamespace(
+        chosen=lambda task, arm: chosen,
+        results={"halfcheetah": {"ppo": {"default": {"setting": default}}}},
+    )
+    monkeypatch.setattr(bench_trust.fppo_jax, "load_tune", lambda where: recorded)
+    task = tmp_path / "trust" / "halfcheetah"
+    (task / "tune").mkdir(parents=True)
+    (task / "tune" / "results.json").write_text("{}")
+    # A run shape of its own: the chosen and the default are two sweeps, each its shape.
+    sweeps = bench_trust.test_sweeps("halfcheetah", task / "tune", task / "test")
+    assert [(where.name, grid, shape) for where, grid, shape in sweeps] == [
+        ("test", [{"variant": "ppo", "learning_rate": 1e-4}], {"num_steps": 64, "num_epochs": 5}),
+        (
+            "test-default",
+            [{"variant": "ppo", "learning_rate": 3e-4}],
+            {"num_steps": 256, "num_epochs": 10},
+        ),
+    ]
+    trained: list[str] = []
+    monkeypatch.setattr(
+        bench_trust,
+        "test_sweep",
+        lambda task, grid, rec, where, seeds, shape: trained.append(where.name),
+    )
+    (task / "test").mkdir()
+    (task / "test" / "sweep.json").write_text("{}")  # the call stopped after the first sweep
+    assert not bench_trust.test_recorded("halfcheetah", task)
+    assert bench_trust.progress_lines(tmp_path) == [
+        "- halfcheetah: its tune is recorded, its test goes on: 1 of its 2 sweeps recorded "
+        "(test-default/ to train)."
+    ]
+    bench_trust.test_task("halfcheetah", task / "tune", task / "test", 20, {})
+    assert trained == ["test-default"]  # the recorded sweep is not trained again
+    (task / "test-default").mkdir()
+    (task / "test-default" / "sweep.json").write_text("{}")
+    assert bench_trust.test_recorded("halfcheetah", task)
+    assert bench_trust.progress_lines(tmp_path) == []
+    # The same shape: one sweep, the chosen beside the default; the default kept: itself alone.
+    chosen = {**default, "learning_rate": 1e-4}
+    [(where, grid, _)] = bench_trust.test_sweeps("halfcheetah", task / "tune", task / "test")
+    assert where.name == "test" and [g["learning_rate"] for g in grid] == [1e-4, 3e-4]
+    chosen = default
+    [(_, grid, _)] = bench_trust.test_sweeps("halfcheetah", task / "tune", task / "test")
+    assert grid == [{"variant": "ppo", "learning_rate": 3e-4}]
 
 
 def test_bench_trust_says_what_stands_in_the_way_of_a_missed_goal(monkeypatch):

@@ -14,7 +14,8 @@ then one sweep of the chosen setting and the default on test seeds 0 … 19, eva
 the end (``test/``: the deterministic policy's mean return over 10 episodes, the study's eval
 endpoint; where the race chose a run shape of its own, the default's runs in ``test-default/``).
 The tune searches the run's shape as racing does by default (``fppo_jax.core.shape_space``).
-A task recorded is not trained again: the same command goes on where it stopped.
+A task recorded is not trained again: the same command goes on where it stopped, with the
+next round or share of the tune, or the test sweep not yet written.
 The write-up, ``bench_trust.md``, gives per task P(tuned > default) with its 95% bootstrap
 interval, the IQM of both on the test seeds beside RL Zoo's tuned PPO, the race's outcome, the
 tune's wall time and its budget in full runs; and the goals: P ≥ 0.5 on every task, its interval
@@ -31,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import fppo_jax
-from fppo_jax.core.shape_space import config_values, split_setting
+from fppo_jax.core.shape_space import ChoiceValue, config_values, split_setting
 from fppo_jax.stats import statistics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # experiments/: shared modules
@@ -99,21 +100,42 @@ def tune_machines(record: dict[str, Any]) -> list[str]:
     return record.get("machines") or ([record["machine"]] if "machine" in record else [])
 
 
-def test_task(task: str, tuned: Path, where: Path, seeds: int, tiny: dict[str, int]) -> None:
-    """The chosen setting and the default, side by side on test seeds 0 … seeds − 1: one
-    sweep, or where the race chose another run shape, the default's apart in ``test-default``."""
+def test_sweeps(
+    task: str, tuned: Path, where: Path
+) -> list[tuple[Path, list[dict[str, Any]], dict[str, ChoiceValue]]]:
+    """The test's sweeps, each (its directory, its grid, its run shape): the chosen setting
+    and the default side by side in `where`, or where the race chose another run shape, the
+    default's apart in ``test-default`` beside it."""
     recorded = fppo_jax.load_tune(tuned)
     chosen, default = recorded.chosen(task, "ppo"), recorded.results[task]["ppo"]["default"]
     (ours, shape), (theirs, own) = split_setting(chosen), split_setting(default["setting"])
-    apart = shape != own
+    if shape != own:
+        return [
+            (where, [{"variant": "ppo", **ours}], shape),
+            (where.parent / "test-default", [{"variant": "ppo", **theirs}], own),
+        ]
     grid = [{"variant": "ppo", **ours}]
-    if chosen != default["setting"] and not apart:
+    if chosen != default["setting"]:
         grid.append({"variant": "ppo", **theirs})
-    test_sweep(task, grid, recorded, where, seeds, {**tiny, **config_values(shape)})
-    if apart:
-        default_where = where.parent / "test-default"
-        grid = [{"variant": "ppo", **theirs}]
-        test_sweep(task, grid, recorded, default_where, seeds, {**tiny, **config_values(own)})
+    return [(where, grid, shape)]
+
+
+def test_task(task: str, tuned: Path, where: Path, seeds: int, tiny: dict[str, int]) -> None:
+    """The test's sweeps on test seeds 0 … seeds − 1, those not yet recorded: each is written
+    as it ends, so a call stopped between them goes on with the next."""
+    recorded = fppo_jax.load_tune(tuned)
+    for directory, grid, shape in test_sweeps(task, tuned, where):
+        if not (directory / "sweep.json").exists():
+            test_sweep(task, grid, recorded, directory, seeds, {**tiny, **config_values(shape)})
+
+
+def test_recorded(task: str, directory: Path) -> bool:
+    """Whether the task's tune and every one of its test's sweeps are recorded."""
+    tune = directory / "tune"
+    return (tune / "results.json").exists() and all(
+        (where / "sweep.json").exists()
+        for where, _, _ in test_sweeps(task, tune, directory / "test")
+    )
 
 
 def test_sweep(
@@ -233,7 +255,17 @@ def progress_lines(results: Path) -> list[str]:
     its budget, and their wall time."""
     lines = []
     for tune in sorted((results / "trust").glob("*/tune")):
-        if (tune / "results.json").exists() or not (tune / RUN_RECORD).exists():
+        if (tune / "results.json").exists():
+            task = tune.parent.name
+            sweeps = test_sweeps(task, tune, tune.parent / "test")
+            left = [where.name for where, _, _ in sweeps if not (where / "sweep.json").exists()]
+            if left:
+                lines.append(
+                    f"- {task}: its tune is recorded, its test goes on: {len(sweeps) - len(left)} "
+                    f"of its {len(sweeps)} sweeps recorded ({', '.join(left)}/ to train)."
+                )
+            continue
+        if not (tune / RUN_RECORD).exists():
             continue
         task, record = tune.parent.name, read_run_record(tune)
         rounds = sorted((tune / task).glob("rung-*/scores.json"))
@@ -255,9 +287,10 @@ def report(results: Path, output: Path) -> None:
     """The write-up of every task recorded under `results`/trust."""
     rows: list[str] = []
     found: list[dict[str, Any]] = []
-    for directory in sorted((results / "trust").glob("*/test")):
-        task = directory.parent.name
-        lines, facts = task_lines(task, directory.parent)
+    for directory in sorted((results / "trust").iterdir()):
+        if not test_recorded(directory.name, directory):
+            continue  # its tune or test goes on (progress_lines)
+        lines, facts = task_lines(directory.name, directory)
         rows += lines
         found.append(facts)
     last_seed = max((f["seeds"] for f in found), default=TEST_SEEDS) - 1
@@ -337,7 +370,7 @@ def main() -> None:
             tune_task(task, where / "tune", args.budget, tiny, args.steps, args.rounds, args.part)
         if not (where / "tune" / "results.json").exists():
             print(f"{task}: the tune goes on in a later part (--rounds)")
-        elif not (where / "test" / "sweep.json").exists():
+        elif not test_recorded(task, where):
             test_task(task, where / "tune", where / "test", args.test_seeds, tiny)
     report(args.results, args.results / "bench_trust.md")
     print((args.results / "bench_trust.md").read_text())

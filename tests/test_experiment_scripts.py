@@ -487,6 +487,36 @@ def test_bench_trust_goes_on_with_the_test_sweep_a_stopped_call_left(tmp_path, m
     assert grid == [{"variant": "ppo", "learning_rate": 3e-4}]
 
 
+def test_bench_trust_reads_the_recorded_protocols_tuned_ppo_on_the_test_seeds(
+    tmp_path, monkeypatch
+):
+    monkeypatch.syspath_prepend(str(EXPERIMENTS))
+    monkeypatch.syspath_prepend(str(EXPERIMENTS / "benchmarks"))
+    bench_trust = importlib.import_module("bench_trust")
+    results = EXPERIMENTS / "results"
+    scores = bench_trust.recorded_protocol(results, "cartpole", [1, 3])
+    assert scores is not None and len(scores) == 2
+    # By seed, in the order asked for.
+    assert np.array_equal(bench_trust.recorded_protocol(results, "cartpole", [3, 1]), scores[::-1])
+    assert bench_trust.recorded_protocol(results, "cartpole", [1, 10**6]) is None  # not scored
+    assert bench_trust.recorded_protocol(results, "walker2d", [1]) is None  # no recorded study
+    assert bench_trust.recorded_protocol(tmp_path, "cartpole", [1]) is None  # not under these
+    found = [{"task": "hopper", "p": (0.5,) * 3, "iqm": 2866.0, "kept": True}]
+    found.append({**found[0], "task": "halfcheetah", "recorded_p": (0.28, 0.12, 0.46)})
+    found.append({**found[0], "task": "cartpole", "recorded_p": (0.57, 0.5, 0.65)})
+    found.append({**found[0], "task": "swimmer", "recorded_p": (0.78, 0.61, 0.92)})
+    lines = bench_trust.goal_lines(found)
+    assert (
+        "- Beside it, the recorded protocol's tuned PPO (9 × 2, η = 3) below the same default "
+        "(P's point below 0.5; its interval in the table): on halfcheetah."
+    ) in lines
+    # Where the race kept a default that the recorded setting beats, the search fell short.
+    assert [line for line in lines if "a better setting" in line] == [
+        "- On swimmer a better setting than the default exists: the recorded protocol's tuned "
+        "PPO beats it, P = 0.78 [0.61, 0.92]; this tune's search found none."
+    ]
+
+
 def test_bench_trust_says_what_stands_in_the_way_of_a_missed_goal(monkeypatch):
     monkeypatch.syspath_prepend(str(EXPERIMENTS))
     monkeypatch.syspath_prepend(str(EXPERIMENTS / "benchmarks"))
